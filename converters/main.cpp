@@ -1,0 +1,55 @@
+// mlfe: multilevel finite elements for volume data (Grosso, Lürig & Ertl, IEEE Vis 1997).
+// Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file).
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <exception>
+#include <memory>
+#include <new>
+
+#include "converters/commands.h"
+#include "core/error.h"
+
+namespace mlfe::cli {
+int& thread_option() {
+  static int threads = 0;
+  return threads;
+}
+}  // namespace mlfe::cli
+
+int main(int argc, char** argv) {
+  CLI::App app{"mlfe: adaptive multilevel finite-element approximation of volume data "
+               "(hierarchies, iso-surfaces, glTF/Draco assets)"};
+  app.set_version_flag("--version", std::string("mlfe ") + MLFE_VERSION);
+  app.add_option("--threads", mlfe::cli::thread_option(),
+                 "worker threads (0: all cores); output does not depend on it")
+      ->check(CLI::NonNegativeNumber);
+  app.require_subcommand(1);
+  auto& registry = mlfe::cli::command_registry();
+  std::stable_sort(registry.begin(), registry.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& entry : registry) entry.second(app);
+
+  std::unique_ptr<tbb::global_control> threads;
+  app.parse_complete_callback([&] {
+    if (mlfe::cli::thread_option() > 0)
+      threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      mlfe::cli::thread_option());
+  });
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const mlfe::Error& e) {
+    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    return 2;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "mlfe: out of memory\n");
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    return 2;
+  }
+  return 0;
+}

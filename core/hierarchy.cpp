@@ -1,0 +1,480 @@
+// Red-green refinement of simplex hierarchies: Bank, Sherman & Weiser (1983) in 2D and
+// Bey, "Tetrahedral grid refinement", Computing 55 (1995) in 3D, with the green closure of
+// Grosso, Lürig & Ertl (IEEE Vis 1997). See hierarchy.h for the local numbering.
+#include "core/hierarchy.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/check.h"
+
+namespace mlfe {
+
+namespace {
+
+int popcount(unsigned m) { return __builtin_popcount(m); }
+
+// Faces of a tetrahedron as masks of their three edges; face i is opposite vertex i.
+constexpr unsigned kTetFaceEdges[4] = {0x38, 0x26, 0x15, 0x0B};
+// Pairs of opposite edges of a tetrahedron.
+constexpr unsigned kTetOppositePairs[3] = {(1u << 0) | (1u << 5), (1u << 1) | (1u << 4),
+                                           (1u << 2) | (1u << 3)};
+
+template <int D>
+double det_measure(const std::array<std::array<double, D>, D + 1>& p) {
+  if constexpr (D == 2) {
+    const double ax = p[1][0] - p[0][0], ay = p[1][1] - p[0][1];
+    const double bx = p[2][0] - p[0][0], by = p[2][1] - p[0][1];
+    return 0.5 * (ax * by - ay * bx);
+  } else {
+    double a[3], b[3], c[3];
+    for (int i = 0; i < 3; ++i) {
+      a[i] = p[1][i] - p[0][i];
+      b[i] = p[2][i] - p[0][i];
+      c[i] = p[3][i] - p[0][i];
+    }
+    return (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+            a[2] * (b[0] * c[1] - b[1] * c[0])) /
+           6.0;
+  }
+}
+
+}  // namespace
+
+int green_type(int dim, unsigned mask) {
+  const int n = popcount(mask);
+  if (n == 0) return 0;
+  if (dim == 2) return n == 1 ? 1 : -1;
+  if (n == 1) return 1;
+  if (n == 2) {
+    for (unsigned pair : kTetOppositePairs)
+      if (mask == pair) return 4;
+    return 2;  // two edges of a tetrahedron that are not opposite share a vertex, hence a face
+  }
+  if (n == 3) {
+    for (unsigned face : kTetFaceEdges)
+      if (mask == face) return 3;
+  }
+  return -1;
+}
+
+template <int D>
+Hierarchy<D> Hierarchy<D>::box(const Point& lo, const Point& hi) {
+  for (int a = 0; a < D; ++a) MLFE_CHECK(lo[a] < hi[a]);
+  std::vector<Point> pts;
+  for (int c = 0; c < (1 << D); ++c) {
+    Point p;
+    for (int a = 0; a < D; ++a) p[a] = (c >> a) & 1 ? hi[a] : lo[a];
+    pts.push_back(p);
+  }
+  std::vector<Cell> cells;
+  if constexpr (D == 2) {
+    cells.push_back({VertexId(0), VertexId(1), VertexId(3)});
+    cells.push_back({VertexId(0), VertexId(3), VertexId(2)});
+  } else {
+    // Kuhn simplices: walk from corner 0 to corner 7 along the axes in the order of a
+    // permutation; the vertex order along the walk is the order Bey's rule needs.
+    int perm[3] = {0, 1, 2};
+    do {
+      const unsigned v1 = 1u << perm[0];
+      const unsigned v2 = v1 | (1u << perm[1]);
+      cells.push_back({VertexId(0), VertexId(v1), VertexId(v2), VertexId(7)});
+    } while (std::next_permutation(perm, perm + 3));
+  }
+  return from_coarse(std::move(pts), std::move(cells));
+}
+
+template <int D>
+Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Cell> cells) {
+  Hierarchy h;
+  h.points_ = std::move(points);
+  h.vertex_parents_.assign(h.points_.size(), {VertexId::invalid(), VertexId::invalid()});
+  h.vertex_level_.assign(h.points_.size(), 0);
+  for (const Cell& c : cells) {
+    for (VertexId v : c) MLFE_CHECK(v.valid() && v.value < h.points_.size());
+    h.add_element(c, ElemId::invalid(), 0, ElemKind::kCoarse);
+    MLFE_CHECK_MSG(h.cell_measure(c) != 0.0, "degenerate coarse element");
+  }
+  h.coarse_count_ = cells.size();
+  return h;
+}
+
+template <int D>
+ElemId Hierarchy<D>::add_element(const Cell& c, ElemId parent, int level, ElemKind kind) {
+  MLFE_CHECK(cells_.size() < ElemId::kInvalidValue);
+  MLFE_CHECK_MSG(level < 255, "refinement level limit (254) reached");
+  ElemId id(static_cast<std::uint32_t>(cells_.size()));
+  cells_.push_back(c);
+  parent_.push_back(parent);
+  first_child_.push_back(ElemId::invalid());
+  num_children_.push_back(0);
+  level_.push_back(static_cast<std::uint8_t>(level));
+  kind_.push_back(kind);
+  return id;
+}
+
+template <int D>
+VertexId Hierarchy<D>::midpoint(VertexId a, VertexId b, int level) {
+  VertexId m = edge_mid_.find(a, b);
+  if (m.valid()) return m;
+  MLFE_CHECK(points_.size() < VertexId::kInvalidValue);
+  m = VertexId(static_cast<std::uint32_t>(points_.size()));
+  Point p;
+  const Point& pa = points_[a.value];
+  const Point& pb = points_[b.value];
+  for (int i = 0; i < D; ++i) p[i] = 0.5 * (pa[i] + pb[i]);
+  points_.push_back(p);
+  // Parents in increasing id order so that the vertex data does not depend on which
+  // element created the midpoint.
+  vertex_parents_.push_back(a < b ? std::array<VertexId, 2>{a, b} : std::array<VertexId, 2>{b, a});
+  vertex_level_.push_back(static_cast<std::uint8_t>(level));
+  edge_mid_.insert(a, b, m);
+  return m;
+}
+
+template <int D>
+void Hierarchy<D>::red_refine(ElemId e) {
+  using T = SimplexTraits<D>;
+  MLFE_CHECK(is_leaf(e) && kind(e) != ElemKind::kGreen);
+  const Cell c = cells_[e.value];
+  const int lvl = level_[e.value] + 1;
+  std::array<VertexId, T::kEdges> m;
+  for (int i = 0; i < T::kEdges; ++i)
+    m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
+  std::array<Cell, T::kRedChildren> kids;
+  if constexpr (D == 2) {
+    // m: x01, x02, x12
+    kids = {{{c[0], m[0], m[1]}, {m[0], c[1], m[2]}, {m[1], m[2], c[2]}, {m[0], m[2], m[1]}}};
+  } else {
+    // m: x01, x02, x03, x12, x13, x23 — Bey's children in Bey's vertex order.
+    const VertexId x01 = m[0], x02 = m[1], x03 = m[2], x12 = m[3], x13 = m[4], x23 = m[5];
+    kids = {{{c[0], x01, x02, x03},
+             {x01, c[1], x12, x13},
+             {x02, x12, c[2], x23},
+             {x03, x13, x23, c[3]},
+             {x01, x02, x03, x13},
+             {x01, x02, x12, x13},
+             {x02, x03, x13, x23},
+             {x02, x12, x13, x23}}};
+  }
+  const ElemId first(static_cast<std::uint32_t>(cells_.size()));
+  for (const Cell& k : kids) add_element(k, e, lvl, ElemKind::kRed);
+  first_child_[e.value] = first;
+  num_children_[e.value] = static_cast<std::uint8_t>(kids.size());
+}
+
+template <int D>
+unsigned Hierarchy<D>::hanging_mask(ElemId e) const {
+  using T = SimplexTraits<D>;
+  const Cell& c = cells_[e.value];
+  unsigned mask = 0;
+  for (int i = 0; i < T::kEdges; ++i)
+    if (edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]).valid()) mask |= 1u << i;
+  return mask;
+}
+
+template <int D>
+void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
+  using T = SimplexTraits<D>;
+  const int type = green_type(D, mask);
+  MLFE_CHECK(type > 0 && is_leaf(e) && kind(e) != ElemKind::kGreen);
+  const Cell c = cells_[e.value];
+  const int lvl = level_[e.value] + 1;
+  auto mid = [&](VertexId a, VertexId b) {
+    VertexId m = edge_mid_.find(a, b);
+    MLFE_CHECK(m.valid());
+    return m;
+  };
+  std::vector<Cell> kids;
+  int edge = 0;
+  while (!(mask & (1u << edge))) ++edge;
+  if (type == 1) {
+    const int la = T::kEdgeVerts[edge][0], lb = T::kEdgeVerts[edge][1];
+    const VertexId m = mid(c[la], c[lb]);
+    Cell k0 = c, k1 = c;
+    k0[lb] = m;  // keeps the vertex order, hence the orientation, of the parent
+    k1[la] = m;
+    kids = {k0, k1};
+  } else if constexpr (D == 3) {
+    if (type == 4) {
+      const int other = 5 - edge;  // opposite edges have indices summing to 5
+      const VertexId a = c[T::kEdgeVerts[edge][0]], b = c[T::kEdgeVerts[edge][1]];
+      const VertexId cc = c[T::kEdgeVerts[other][0]], d = c[T::kEdgeVerts[other][1]];
+      const VertexId m1 = mid(a, b), m2 = mid(cc, d);
+      kids = {{a, m1, cc, m2}, {a, m1, m2, d}, {m1, b, cc, m2}, {m1, b, m2, d}};
+    } else {
+      // Types 2 and 3 split one face (s, p, q) and join it to the apex d.
+      int face = -1;
+      for (int f = 0; f < 4; ++f)
+        if ((mask & ~kTetFaceEdges[f]) == 0) face = f;
+      MLFE_CHECK(face >= 0);
+      const VertexId d = c[face];
+      std::vector<std::array<VertexId, 3>> tris;
+      if (type == 3) {
+        std::array<VertexId, 3> f;
+        int n = 0;
+        for (int i = 0; i < 4; ++i)
+          if (i != face) f[n++] = c[i];
+        const VertexId m01 = mid(f[0], f[1]), m02 = mid(f[0], f[2]), m12 = mid(f[1], f[2]);
+        tris = {{f[0], m01, m02}, {m01, f[1], m12}, {m02, m12, f[2]}, {m01, m12, m02}};
+      } else {
+        // Two hanging edges (s,p), (s,q) sharing s. The quadrilateral m_sp, p, q, m_sq is cut by
+        // a diagonal that the element across the face must choose identically: it starts at
+        // the midpoint of the longer edge, ties broken by global vertex ids.
+        const int e0 = edge;
+        int e1 = e0 + 1;
+        while (!(mask & (1u << e1))) ++e1;
+        const int a0 = T::kEdgeVerts[e0][0], b0 = T::kEdgeVerts[e0][1];
+        const int a1 = T::kEdgeVerts[e1][0], b1 = T::kEdgeVerts[e1][1];
+        const int s = (a0 == a1 || a0 == b1) ? a0 : b0;
+        const VertexId vs = c[s];
+        const VertexId vp = c[a0 == s ? b0 : a0];
+        const VertexId vq = c[a1 == s ? b1 : a1];
+        auto len2 = [&](VertexId x, VertexId y) {
+          double l = 0;
+          for (int i = 0; i < 3; ++i) {
+            const double t = points_[x.value][i] - points_[y.value][i];
+            l += t * t;
+          }
+          return l;
+        };
+        const double lp = len2(vs, vp), lq = len2(vs, vq);
+        const VertexId msp = mid(vs, vp), msq = mid(vs, vq);
+        const bool from_p = lp > lq || (lp == lq && vp < vq);
+        if (from_p)
+          tris = {{vs, msp, msq}, {msp, vp, vq}, {msp, vq, msq}};
+        else
+          tris = {{vs, msp, msq}, {msq, msp, vp}, {msq, vp, vq}};
+      }
+      for (const auto& t : tris) kids.push_back({t[0], t[1], t[2], d});
+    }
+  }
+  const double parent_sign = signed_measure(e) > 0 ? 1.0 : -1.0;
+  const ElemId first(static_cast<std::uint32_t>(cells_.size()));
+  for (Cell k : kids) {
+    // Green children carry no similarity guarantee; give them the parent's orientation.
+    if (cell_measure(k) * parent_sign < 0) std::swap(k[0], k[1]);
+    add_element(k, e, lvl, ElemKind::kGreen);
+  }
+  first_child_[e.value] = first;
+  num_children_[e.value] = static_cast<std::uint8_t>(kids.size());
+}
+
+template <int D>
+void Hierarchy<D>::refine(std::vector<ElemId> marked) {
+  std::vector<ElemId> to_red;
+  to_red.reserve(marked.size());
+  for (ElemId e : marked) {
+    MLFE_CHECK_MSG(e.valid() && e.value < cells_.size() && is_leaf(e), "refine() needs leaf ids");
+    to_red.push_back(kind(e) == ElemKind::kGreen ? parent(e) : e);
+  }
+  std::sort(to_red.begin(), to_red.end());
+  to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
+  if (to_red.empty()) return;
+
+  std::vector<std::uint8_t> dead(cells_.size(), 0);
+  // dirty: endpoints of edges split in this round; touched: in any round of this call.
+  std::vector<std::uint8_t> dirty(points_.size(), 0), touched(points_.size(), 0);
+  std::vector<ElemId> leaf_list = leaves();
+
+  while (!to_red.empty()) {
+    const std::size_t round_first_elem = cells_.size();
+    const std::size_t first_new_vertex = points_.size();
+    for (ElemId e : to_red) {
+      if (!is_leaf(e)) {
+        // e's children are green: they go, and e is refined red instead.
+        for (int i = 0; i < num_children(e); ++i) {
+          const ElemId ch(first_child(e).value + i);
+          MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
+          dead[ch.value] = 1;
+        }
+        num_children_[e.value] = 0;
+        first_child_[e.value] = ElemId::invalid();
+      }
+      red_refine(e);
+      for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
+    }
+    dead.resize(cells_.size(), 0);
+    dirty.resize(points_.size(), 0);
+    touched.resize(points_.size(), 0);
+    for (std::size_t v = first_new_vertex; v < points_.size(); ++v) {
+      for (VertexId p : vertex_parents_[v]) dirty[p.value] = touched[p.value] = 1;
+      dirty[v] = touched[v] = 1;
+    }
+    // Drop refined and removed elements from the leaf list.
+    leaf_list.erase(std::remove_if(leaf_list.begin(), leaf_list.end(),
+                                   [&](ElemId e) { return dead[e.value] || !is_leaf(e); }),
+                    leaf_list.end());
+
+    // Which leaves need red now? Parallel and read-only; the result is sorted, so it does not
+    // depend on scheduling.
+    std::vector<ElemId> request(leaf_list.size(), ElemId::invalid());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaf_list.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const ElemId e = leaf_list[i];
+                          if (e.value < round_first_elem) {
+                            int n = 0;
+                            for (VertexId v : cells_[e.value]) n += dirty[v.value];
+                            if (n < 2) continue;  // no edge of e was split in this round
+                          }
+                          const unsigned mask = hanging_mask(e);
+                          if (mask == 0) continue;
+                          if (kind(e) == ElemKind::kGreen)
+                            request[i] = parent(e);
+                          else if (green_type(D, mask) < 0)
+                            request[i] = e;
+                        }
+                      });
+    to_red.clear();
+    for (ElemId r : request)
+      if (r.valid()) to_red.push_back(r);
+    std::sort(to_red.begin(), to_red.end());
+    to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
+    std::fill(dirty.begin(), dirty.end(), 0);
+  }
+
+  // Green closure: every remaining leaf with hanging midpoints has an admissible pattern.
+  std::vector<unsigned> masks(leaf_list.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaf_list.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        int n = 0;
+                        for (VertexId v : cells_[leaf_list[i].value]) n += touched[v.value];
+                        if (n >= 2) masks[i] = hanging_mask(leaf_list[i]);
+                      }
+                    });
+  for (std::size_t i = 0; i < leaf_list.size(); ++i)
+    if (masks[i] != 0) green_refine(leaf_list[i], masks[i]);
+  dead.resize(cells_.size(), 0);
+  compact(dead);
+}
+
+template <int D>
+void Hierarchy<D>::refine_uniform() {
+  refine(leaves());
+}
+
+template <int D>
+void Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead) {
+  MLFE_CHECK(dead.size() == cells_.size());
+  if (std::find(dead.begin(), dead.end(), 1) == dead.end()) return;
+  std::vector<std::uint32_t> new_id(cells_.size(), ElemId::kInvalidValue);
+  std::uint32_t n = 0;
+  for (std::size_t i = 0; i < cells_.size(); ++i)
+    if (!dead[i]) new_id[i] = n++;
+  auto remap = [&](ElemId e) { return e.valid() ? ElemId(new_id[e.value]) : e; };
+  for (std::size_t i = 0; i < cells_.size(); ++i) {
+    if (dead[i]) continue;
+    const std::size_t j = new_id[i];
+    cells_[j] = cells_[i];
+    parent_[j] = remap(parent_[i]);
+    first_child_[j] = remap(first_child_[i]);
+    MLFE_CHECK(!parent_[i].valid() || !dead[parent_[i].value]);
+    num_children_[j] = num_children_[i];
+    level_[j] = level_[i];
+    kind_[j] = kind_[i];
+  }
+  cells_.resize(n);
+  parent_.resize(n);
+  first_child_.resize(n);
+  num_children_.resize(n);
+  level_.resize(n);
+  kind_.resize(n);
+}
+
+template <int D>
+int Hierarchy<D>::max_level() const {
+  int m = 0;
+  for (auto l : level_) m = std::max<int>(m, l);
+  return m;
+}
+
+template <int D>
+std::vector<ElemId> Hierarchy<D>::leaves() const {
+  std::vector<ElemId> out;
+  out.reserve(cells_.size());
+  for (std::size_t i = 0; i < cells_.size(); ++i)
+    if (num_children_[i] == 0) out.push_back(ElemId(static_cast<std::uint32_t>(i)));
+  return out;
+}
+
+template <int D>
+std::vector<ElemId> Hierarchy<D>::level_elements(int k) const {
+  std::vector<ElemId> out;
+  for (std::size_t i = 0; i < cells_.size(); ++i)
+    if (level_[i] == k || (level_[i] < k && num_children_[i] == 0))
+      out.push_back(ElemId(static_cast<std::uint32_t>(i)));
+  return out;
+}
+
+template <int D>
+std::vector<std::array<std::int32_t, D + 1>> Hierarchy<D>::face_neighbors(
+    const std::vector<ElemId>& elems) const {
+  struct FaceRec {
+    std::array<std::uint32_t, D> key;
+    std::uint32_t elem;
+    std::uint8_t face;
+  };
+  std::vector<FaceRec> faces;
+  faces.reserve(elems.size() * (D + 1));
+  for (std::size_t i = 0; i < elems.size(); ++i) {
+    const Cell& c = cells_[elems[i].value];
+    for (int f = 0; f <= D; ++f) {
+      FaceRec r;
+      int n = 0;
+      for (int j = 0; j <= D; ++j)
+        if (j != f) r.key[n++] = c[j].value;
+      std::sort(r.key.begin(), r.key.end());
+      r.elem = static_cast<std::uint32_t>(i);
+      r.face = static_cast<std::uint8_t>(f);
+      faces.push_back(r);
+    }
+  }
+  std::sort(faces.begin(), faces.end(), [](const FaceRec& a, const FaceRec& b) {
+    return a.key != b.key ? a.key < b.key : a.elem < b.elem;
+  });
+  std::vector<std::array<std::int32_t, D + 1>> nb(elems.size());
+  for (auto& a : nb) a.fill(-1);
+  for (std::size_t i = 0; i + 1 < faces.size(); ++i) {
+    if (faces[i].key == faces[i + 1].key) {
+      nb[faces[i].elem][faces[i].face] = static_cast<std::int32_t>(faces[i + 1].elem);
+      nb[faces[i + 1].elem][faces[i + 1].face] = static_cast<std::int32_t>(faces[i].elem);
+      ++i;
+    }
+  }
+  return nb;
+}
+
+template <int D>
+double Hierarchy<D>::cell_measure(const Cell& c) const {
+  std::array<std::array<double, D>, D + 1> p;
+  for (int i = 0; i <= D; ++i) p[i] = points_[c[i].value];
+  return det_measure<D>(p);
+}
+
+template <int D>
+double Hierarchy<D>::signed_measure(ElemId e) const {
+  return cell_measure(cells_[e.value]);
+}
+
+template <int D>
+double Hierarchy<D>::measure(ElemId e) const {
+  return std::abs(signed_measure(e));
+}
+
+template <int D>
+std::size_t Hierarchy<D>::memory_bytes() const {
+  return points_.capacity() * sizeof(Point) + vertex_parents_.capacity() * sizeof(vertex_parents_[0]) +
+         vertex_level_.capacity() + cells_.capacity() * sizeof(Cell) + parent_.capacity() * 4 +
+         first_child_.capacity() * 4 + num_children_.capacity() + level_.capacity() +
+         kind_.capacity() + edge_mid_.memory_bytes();
+}
+
+template class Hierarchy<2>;
+template class Hierarchy<3>;
+
+}  // namespace mlfe

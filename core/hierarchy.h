@@ -1,0 +1,168 @@
+// Nested simplex hierarchy T0 ⊂ T1 ⊂ … ⊂ Tj with red-green refinement.
+//
+//   2D: R. E. Bank, A. H. Sherman, A. Weiser, "Refinement algorithms and data structures for
+//       regular local mesh refinement", Scientific Computing (1983): red = 4 congruent
+//       triangles from the edge midpoints, green = bisection toward one hanging midpoint.
+//   3D: J. Bey, "Tetrahedral grid refinement", Computing 55 (1995): regular (red) refinement
+//       with the octahedron cut along the diagonal x02–x13 fixed by the vertex order, so all
+//       red descendants of a tetrahedron fall into at most 3 similarity classes; green
+//       closure with the four types kept by Grosso, Lürig & Ertl (IEEE Vis 1997, Fig. 3).
+//
+// Green elements are never refined: when one must be, its parent loses its green children and
+// is red-refined instead, and the closure runs again. So every vertex ever created is the
+// midpoint of an edge of a red-refined element; the edge→midpoint map records both parents,
+// which the hierarchical basis and the BPX preconditioner need.
+//
+// Storage: structure of arrays indexed by VertexId / ElemId. Children of an element are
+// contiguous: [first_child, first_child + num_children). ElemIds are stable between calls to
+// refine() only (refine compacts removed green children away and renumbers).
+//
+// Local numbering (3D tetrahedron, vertices 0..3; edges e0..e5; face f_i is opposite vertex i):
+//
+//            3                 e0 = (0,1)   e3 = (1,2)
+//           /|\                e1 = (0,2)   e4 = (1,3)
+//          / | \               e2 = (0,3)   e5 = (2,3)
+//        e2  e4 e5
+//        /   |   \             red children (xij = midpoint of edge ij):
+//       0----|----2  (e1)        [x0,x01,x02,x03] [x01,x1,x12,x13] [x02,x12,x2,x23] [x03,x13,x23,x3]
+//        \   |   /               [x01,x02,x03,x13] [x01,x02,x12,x13] [x02,x03,x13,x23] [x02,x12,x13,x23]
+//        e0  |  e3
+//          \ | /
+//            1
+// 2D triangle: edges e0 = (0,1), e1 = (0,2), e2 = (1,2); red children
+//   [x0,x01,x02] [x01,x1,x12] [x02,x12,x2] [x01,x12,x02].
+#pragma once
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "core/edge_map.h"
+#include "core/ids.h"
+
+namespace mlfe {
+
+enum class ElemKind : std::uint8_t {
+  kCoarse = 0,  ///< element of T0
+  kRed = 1,     ///< child of a red (regular) refinement
+  kGreen = 2,   ///< child of a green (closure) refinement; never refined itself
+};
+
+template <int D>
+struct SimplexTraits;
+template <>
+struct SimplexTraits<2> {
+  static constexpr int kVerts = 3;
+  static constexpr int kEdges = 3;
+  static constexpr int kFaces = 3;  // faces = edges opposite each vertex
+  static constexpr int kRedChildren = 4;
+  static constexpr int kEdgeVerts[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+};
+template <>
+struct SimplexTraits<3> {
+  static constexpr int kVerts = 4;
+  static constexpr int kEdges = 6;
+  static constexpr int kFaces = 4;
+  static constexpr int kRedChildren = 8;
+  static constexpr int kEdgeVerts[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+};
+
+template <int D>
+class Hierarchy {
+ public:
+  static_assert(D == 2 || D == 3, "2D triangles or 3D tetrahedra");
+  static constexpr int kDim = D;
+  static constexpr int kVerts = D + 1;
+  using Point = std::array<double, D>;
+  using Cell = std::array<VertexId, D + 1>;
+
+  /// T0 of the axis-aligned box [lo, hi]: 2 triangles (2D) or the 6 Kuhn/Freudenthal
+  /// tetrahedra around the main diagonal lo→hi (3D), so that neighbouring boxes would match.
+  /// Requires lo < hi componentwise (checked).
+  static Hierarchy box(const Point& lo, const Point& hi);
+
+  /// Builds T0 from given points and cells (each cell's vertex order is kept; Bey's
+  /// similarity bound assumes the order the cells come in). Indices are checked.
+  static Hierarchy from_coarse(std::vector<Point> points, std::vector<Cell> cells);
+
+  // ---- refinement ----
+  /// Red-refines the given leaf elements (a green leaf red-refines its parent instead), then
+  /// runs the green closure so the leaf triangulation is conforming again. The result does not
+  /// depend on the order of `marked` or on the thread count. Non-leaf ids are a bug (CHECK).
+  /// ElemIds are renumbered (compacted); VertexIds are stable and new vertices are appended.
+  void refine(std::vector<ElemId> marked);
+  /// Red-refines every leaf once.
+  void refine_uniform();
+
+  // ---- vertices ----
+  std::size_t vertex_count() const { return points_.size(); }
+  const Point& point(VertexId v) const { return points_[v.value]; }
+  const std::vector<Point>& points() const { return points_; }
+  /// The endpoints of the edge whose midpoint v is; both invalid for vertices of T0.
+  const std::array<VertexId, 2>& vertex_parents(VertexId v) const { return vertex_parents_[v.value]; }
+  /// 0 for vertices of T0, else 1 + the level of the element whose edge v bisects.
+  int vertex_level(VertexId v) const { return vertex_level_[v.value]; }
+  const EdgeMap& edge_midpoints() const { return edge_mid_; }
+
+  // ---- elements ----
+  std::size_t element_count() const { return cells_.size(); }
+  std::size_t coarse_count() const { return coarse_count_; }
+  const Cell& cell(ElemId e) const { return cells_[e.value]; }
+  ElemId parent(ElemId e) const { return parent_[e.value]; }
+  ElemId first_child(ElemId e) const { return first_child_[e.value]; }
+  int num_children(ElemId e) const { return num_children_[e.value]; }
+  int level(ElemId e) const { return level_[e.value]; }
+  ElemKind kind(ElemId e) const { return kind_[e.value]; }
+  bool is_leaf(ElemId e) const { return num_children_[e.value] == 0; }
+  int max_level() const;
+
+  /// Leaf elements in id order: the finest, conforming triangulation Tj.
+  std::vector<ElemId> leaves() const;
+  /// The triangulation T_k: elements with level == k, plus leaves with level < k.
+  std::vector<ElemId> level_elements(int k) const;
+
+  /// Face neighbours of the given conforming element set: for element i of `elems`, entry
+  /// [i][f] is the index into `elems` of the element across face f (opposite local vertex f),
+  /// or -1 on the boundary.
+  std::vector<std::array<std::int32_t, D + 1>> face_neighbors(const std::vector<ElemId>& elems) const;
+
+  /// Signed measure (area/volume) of element e, and of an arbitrary cell.
+  double signed_measure(ElemId e) const;
+  double measure(ElemId e) const;
+  double cell_measure(const Cell& c) const;
+
+  /// Bytes held by the hierarchy (vertices, elements, links, edge map).
+  std::size_t memory_bytes() const;
+
+ private:
+  ElemId add_element(const Cell& c, ElemId parent, int level, ElemKind kind);
+  VertexId midpoint(VertexId a, VertexId b, int level);
+  void red_refine(ElemId e);
+  void green_refine(ElemId e, unsigned mask);
+  unsigned hanging_mask(ElemId e) const;
+  void compact(const std::vector<std::uint8_t>& dead);
+
+  std::vector<Point> points_;
+  std::vector<std::array<VertexId, 2>> vertex_parents_;
+  std::vector<std::uint8_t> vertex_level_;
+
+  std::vector<Cell> cells_;
+  std::vector<ElemId> parent_;
+  std::vector<ElemId> first_child_;
+  std::vector<std::uint8_t> num_children_;
+  std::vector<std::uint8_t> level_;
+  std::vector<ElemKind> kind_;
+  std::size_t coarse_count_ = 0;
+
+  EdgeMap edge_mid_;
+};
+
+/// The green type of a mask of hanging edges (bit i = local edge i has a midpoint), or -1 when
+/// the pattern must be red-refined. 2D: one edge → bisection. 3D (the paper's Fig. 3): one edge
+/// (2 children), two edges sharing a vertex (3), three edges of one face (4), two opposite
+/// edges (4).
+int green_type(int dim, unsigned mask);
+
+extern template class Hierarchy<2>;
+extern template class Hierarchy<3>;
+
+}  // namespace mlfe
