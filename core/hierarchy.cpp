@@ -264,7 +264,8 @@ void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
 }
 
 template <int D>
-void Hierarchy<D>::refine(std::vector<ElemId> marked) {
+std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
+  const std::size_t old_count = cells_.size();
   std::vector<ElemId> to_red;
   to_red.reserve(marked.size());
   for (ElemId e : marked) {
@@ -273,7 +274,7 @@ void Hierarchy<D>::refine(std::vector<ElemId> marked) {
   }
   std::sort(to_red.begin(), to_red.end());
   to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
-  if (to_red.empty()) return;
+  if (to_red.empty()) return compact(std::vector<std::uint8_t>(cells_.size(), 0), old_count);
 
   std::vector<std::uint8_t> dead(cells_.size(), 0);
   // dirty: endpoints of edges split in this round; touched: in any round of this call.
@@ -350,7 +351,7 @@ void Hierarchy<D>::refine(std::vector<ElemId> marked) {
   for (std::size_t i = 0; i < leaf_list.size(); ++i)
     if (masks[i] != 0) green_refine(leaf_list[i], masks[i]);
   dead.resize(cells_.size(), 0);
-  compact(dead);
+  return compact(dead, old_count);
 }
 
 template <int D>
@@ -359,13 +360,15 @@ void Hierarchy<D>::refine_uniform() {
 }
 
 template <int D>
-void Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead) {
+std::vector<ElemId> Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead, std::size_t old_count) {
   MLFE_CHECK(dead.size() == cells_.size());
-  if (std::find(dead.begin(), dead.end(), 1) == dead.end()) return;
   std::vector<std::uint32_t> new_id(cells_.size(), ElemId::kInvalidValue);
   std::uint32_t n = 0;
   for (std::size_t i = 0; i < cells_.size(); ++i)
     if (!dead[i]) new_id[i] = n++;
+  std::vector<ElemId> old_to_new(old_count);
+  for (std::size_t i = 0; i < old_count; ++i) old_to_new[i] = ElemId(new_id[i]);
+  if (n == cells_.size()) return old_to_new;
   auto remap = [&](ElemId e) { return e.valid() ? ElemId(new_id[e.value]) : e; };
   for (std::size_t i = 0; i < cells_.size(); ++i) {
     if (dead[i]) continue;
@@ -384,6 +387,7 @@ void Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead) {
   num_children_.resize(n);
   level_.resize(n);
   kind_.resize(n);
+  return old_to_new;
 }
 
 template <int D>

@@ -89,7 +89,9 @@ class Hierarchy {
   /// runs the green closure so the leaf triangulation is conforming again. The result does not
   /// depend on the order of `marked` or on the thread count. Non-leaf ids are a bug (CHECK).
   /// ElemIds are renumbered (compacted); VertexIds are stable and new vertices are appended.
-  void refine(std::vector<ElemId> marked);
+  /// Returns, for every element id before the call, its id after the call (invalid for the
+  /// green children that were removed), so callers can carry per-element data across.
+  std::vector<ElemId> refine(std::vector<ElemId> marked);
   /// Red-refines every leaf once.
   void refine_uniform();
 
@@ -139,7 +141,7 @@ class Hierarchy {
   void red_refine(ElemId e);
   void green_refine(ElemId e, unsigned mask);
   unsigned hanging_mask(ElemId e) const;
-  void compact(const std::vector<std::uint8_t>& dead);
+  std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);
 
   std::vector<Point> points_;
   std::vector<std::array<VertexId, 2>> vertex_parents_;

@@ -1,0 +1,254 @@
+// Adaptive multilevel FE approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see
+// approximation.h. Solvers: CG with the BPX preconditioner (Bramble, Pasciak & Xu 1990).
+#include "core/approximation.h"
+
+#include <Eigen/SparseCholesky>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <numeric>
+
+#include "core/bpx.h"
+#include "core/check.h"
+#include "core/fe_assembly.h"
+#include "core/hierarchical_basis.h"
+
+namespace mlfe {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+template <int D>
+double gradient_weight(const Field& f, const ApproximationOptions& o) {
+  return o.h1 ? f.resolution() * f.resolution() : 0.0;
+}
+
+template <int D>
+Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& rhs, const Vector& start,
+                    const ApproximationOptions& opts, double gw, IterationStats& st) {
+  const auto n = m.rows();
+  if (opts.direct_solve_max > 0 && n <= opts.direct_solve_max) {
+    Eigen::SparseMatrix<double> mc = m;  // column major for the factorization
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(mc);
+    MLFE_CHECK_MSG(ldlt.info() == Eigen::Success, "LDLT factorization failed");
+    Vector x = ldlt.solve(rhs);
+    st.cg_iterations = 0;
+    st.cg_residual = 0;
+    return x;
+  }
+  SparseOperator a(m);
+  std::unique_ptr<LinearOperator> pre;
+  switch (opts.preconditioner) {
+    case Preconditioner::kBpx: pre = std::make_unique<BpxPreconditioner<D>>(h, gw); break;
+    case Preconditioner::kJacobi: pre = std::make_unique<JacobiPreconditioner>(m); break;
+    case Preconditioner::kNone: pre = std::make_unique<IdentityOperator>(n); break;
+  }
+  Vector x = start;
+  const CgResult r = conjugate_gradient(a, *pre, rhs, x, opts.cg_tolerance, 5000);
+  st.cg_iterations = r.iterations;
+  st.cg_residual = r.relative_residual;
+  return x;
+}
+
+}  // namespace
+
+template <int D>
+std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field& f,
+                                             const ApproximationOptions& opts,
+                                             const std::vector<double>& warm, IterationStats* stats) {
+  const double gw = gradient_weight<D>(f, opts);
+  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : f.resolution();
+  const auto leaves = h.leaves();
+  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1);
+  const SparseMatrix m = assemble_matrix(h, leaves, gw);
+  const Vector rhs = assemble_load(h, leaves, integrals, gw);
+  Vector start = Vector::Zero(rhs.size());
+  if (warm.size() == h.vertex_count())
+    for (std::size_t i = 0; i < warm.size(); ++i) start[i] = warm[i];
+  IterationStats local;
+  const Vector x = solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local);
+  return std::vector<double>(x.data(), x.data() + x.size());
+}
+
+template <int D>
+Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
+  MLFE_CHECK(f.dim() == D);
+  const auto t0 = Clock::now();
+  Approximation<D> out;
+  typename Hierarchy<D>::Point lo, hi;
+  const auto ext = f.extent();
+  for (int a = 0; a < D; ++a) {
+    lo[a] = 0;
+    hi[a] = ext[a];
+  }
+  out.hierarchy = Hierarchy<D>::box(lo, hi);
+  Hierarchy<D>& h = out.hierarchy;
+  out.domain_measure = 1;
+  for (int a = 0; a < D; ++a) out.domain_measure *= ext[a];
+  const auto range = f.range();
+  out.value_min = range[0];
+  out.value_max = range[1];
+  const double value_span = range[1] > range[0] ? range[1] - range[0] : 1.0;
+  const double gw = gradient_weight<D>(f, opts);
+  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : f.resolution();
+
+  // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
+  // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
+  int start_level = opts.start_level;
+  if (start_level < 0) {
+    double longest = 0;
+    for (int a = 0; a < D; ++a) longest += ext[a] * ext[a];
+    longest = std::sqrt(longest);
+    start_level = 0;
+    while (longest > 16 * f.resolution() && start_level < opts.max_level) {
+      longest *= 0.5;
+      ++start_level;
+    }
+  }
+  for (int l = 0; l < start_level; ++l) {
+    if (opts.max_vertices && h.vertex_count() * (1 << D) > opts.max_vertices) break;
+    h.refine_uniform();
+  }
+
+  // Integrals cached per element id (valid for leaves); refinement remaps them.
+  std::vector<ElementIntegrals<D>> cache;
+  std::vector<std::uint8_t> have;
+  std::vector<double> values;
+
+  for (int it = 0;; ++it) {
+    IterationStats st;
+    st.iteration = it;
+    auto ta = Clock::now();
+    const auto leaves = h.leaves();
+    cache.resize(h.element_count());
+    have.resize(h.element_count(), 0);
+    {
+      std::vector<ElemId> todo;
+      for (ElemId e : leaves)
+        if (!have[e.value]) todo.push_back(e);
+      const auto fresh = compute_element_integrals(h, todo, f, qedge, opts.h1);
+      for (std::size_t i = 0; i < todo.size(); ++i) {
+        cache[todo[i].value] = fresh[i];
+        have[todo[i].value] = 1;
+      }
+    }
+    std::vector<ElementIntegrals<D>> integrals(leaves.size());
+    for (std::size_t i = 0; i < leaves.size(); ++i) integrals[i] = cache[leaves[i].value];
+    const SparseMatrix m = assemble_matrix(h, leaves, gw);
+    const Vector rhs = assemble_load(h, leaves, integrals, gw);
+    st.assembly_seconds = since(ta);
+
+    auto ts = Clock::now();
+    if (values.empty())
+      values.assign(h.vertex_count(), 0.0);
+    else
+      prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
+    Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+    const Vector x = solve_system(h, m, rhs, start, opts, gw, st);
+    values.assign(x.data(), x.data() + x.size());
+    st.solve_seconds = since(ts);
+
+    auto te = Clock::now();
+    const auto err = element_errors(h, leaves, integrals, x, gw);
+    double total = 0;
+    for (double e : err) total += e;  // sequential: deterministic
+    st.level = h.max_level();
+    st.vertices = h.vertex_count();
+    st.elements = leaves.size();
+    st.l2_error = std::sqrt(total);
+    st.rms_error = std::sqrt(total / out.domain_measure);
+    st.rms_percent = 100.0 * st.rms_error / value_span;
+    st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
+
+    // Marking.
+    std::vector<std::pair<double, ElemId>> marked;  // (error density, element)
+    std::string stop;
+    if (opts.target_rms > 0 && st.rms_error <= opts.target_rms) stop = "target RMS error reached";
+    if (stop.empty()) {
+      const double tau2 = opts.target_rms > 0 ? opts.target_rms * opts.target_rms : 0.0;
+      const double thr2 = opts.threshold * opts.threshold;
+      for (std::size_t i = 0; i < leaves.size(); ++i) {
+        const ElemId e = leaves[i];
+        if (h.level(e) >= opts.max_level) continue;
+        const double density = err[i] / h.measure(e);  // mean square error on T
+        bool mark = false;
+        if (opts.threshold > 0) mark |= density > thr2;
+        // Equidistribution: if no element's mean square error exceeds tau², Σ E ≤ tau² |Ω|.
+        if (tau2 > 0) mark |= density > tau2;
+        if (mark) marked.push_back({density, e});
+      }
+      if (marked.empty()) stop = opts.threshold > 0 ? "no element above the threshold" : "maximum level reached";
+    }
+    if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
+    if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
+    st.estimate_seconds = since(te);
+
+    if (!stop.empty()) {
+      st.seconds = since(t0);
+      out.iterations.push_back(st);
+      if (opts.progress) opts.progress(st);
+      out.stop_reason = stop;
+      out.leaf_errors = err;
+      break;
+    }
+
+    // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
+    // the budget, undo it and try half as many.
+    auto tr = Clock::now();
+    std::sort(marked.begin(), marked.end(), [](const auto& a, const auto& b) {
+      return a.first != b.first ? a.first > b.first : a.second < b.second;
+    });
+    std::size_t count = marked.size();
+    std::vector<ElemId> remap;
+    bool refined = false;
+    while (count > 0) {
+      std::unique_ptr<Hierarchy<D>> backup;
+      if (opts.max_vertices) backup = std::make_unique<Hierarchy<D>>(h);
+      std::vector<ElemId> sel;
+      for (std::size_t i = 0; i < count; ++i) sel.push_back(marked[i].second);
+      remap = h.refine(sel);
+      if (!opts.max_vertices || h.vertex_count() <= opts.max_vertices) {
+        refined = true;
+        break;
+      }
+      h = std::move(*backup);
+      count /= 2;
+    }
+    st.marked = refined ? count : 0;
+    st.refine_seconds = since(tr);
+    st.seconds = since(t0);
+    out.iterations.push_back(st);
+    if (opts.progress) opts.progress(st);
+    if (!refined) {
+      // The budget does not allow even one more refinement: keep the last solution.
+      out.stop_reason = "vertex budget";
+      out.leaf_errors = err;
+      break;
+    }
+    std::vector<ElementIntegrals<D>> new_cache(h.element_count());
+    std::vector<std::uint8_t> new_have(h.element_count(), 0);
+    for (std::size_t i = 0; i < remap.size(); ++i)
+      if (remap[i].valid() && have[i]) {
+        new_cache[remap[i].value] = cache[i];
+        new_have[remap[i].value] = 1;
+      }
+    cache.swap(new_cache);
+    have.swap(new_have);
+  }
+  out.values = std::move(values);
+  return out;
+}
+
+template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
+template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
+template std::vector<double> solve_best_approximation<2>(const Hierarchy<2>&, const Field&, const ApproximationOptions&, const std::vector<double>&, IterationStats*);
+template std::vector<double> solve_best_approximation<3>(const Hierarchy<3>&, const Field&, const ApproximationOptions&, const std::vector<double>&, IterationStats*);
+
+}  // namespace mlfe

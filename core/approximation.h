@@ -1,0 +1,82 @@
+// The adaptive multilevel finite-element loop of R. Grosso, C. Lürig, T. Ertl, "The Multilevel
+// Finite Element Method for Adaptive Mesh Optimization and Visualization of Volume Data",
+// IEEE Visualization 1997:
+//
+//   T0 (a box as 2 triangles / 6 tetrahedra) → solve M U = F → E_T = ∫_T (f − u)² per element
+//   → red-green refine the elements whose error is too large → solve again (CG + BPX, warm
+//   started from the previous solution) → … until the global error is small enough.
+//
+// Beyond the paper: stopping by a target RMS error, a vertex budget or a maximum level;
+// optional H1 norm (u,v) + s²(∇u,∇v) with s the voxel spacing (the paper's future work).
+#pragma once
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/field.h"
+#include "core/hierarchy.h"
+
+namespace mlfe {
+
+struct IterationStats {
+  int iteration = 0;
+  int level = 0;                 ///< finest element level
+  std::size_t vertices = 0;
+  std::size_t elements = 0;      ///< leaf elements
+  std::size_t marked = 0;        ///< elements marked for refinement after this solve
+  double l2_error = 0;           ///< sqrt(Σ E_T), data units × length^(D/2)
+  double rms_error = 0;          ///< l2_error / sqrt(|Ω|), data units
+  double rms_percent = 0;        ///< rms_error / value range × 100
+  double psnr_db = 0;            ///< 20 log10(range / rms_error)
+  int cg_iterations = 0;         ///< 0 for a direct solve
+  double cg_residual = 0;
+  double assembly_seconds = 0, solve_seconds = 0, estimate_seconds = 0, refine_seconds = 0;
+  double seconds = 0;            ///< since the start
+};
+
+enum class Preconditioner { kBpx, kJacobi, kNone };
+
+struct ApproximationOptions {
+  double target_rms = 0;          ///< stop when RMS error ≤ this (data units); 0: unused
+  double threshold = 0;           ///< paper's rule: refine T when sqrt(E_T/|T|) > threshold; 0: unused
+  std::size_t max_vertices = 0;   ///< never exceed this many vertices; 0: no limit
+  int max_level = 20;             ///< elements of this level are not refined
+  int max_iterations = 60;        ///< refine-solve cycles
+  int start_level = -1;           ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
+  bool h1 = false;                ///< (u,v) + s²(∇u,∇v) instead of (u,v)
+  double quadrature_edge = 0;     ///< sub-simplex edge for integration; 0: the field's resolution
+  Preconditioner preconditioner = Preconditioner::kBpx;
+  double cg_tolerance = 1e-9;     ///< relative residual
+  int direct_solve_max = 20000;   ///< direct (LDLT) solve while vertices ≤ this; 0: never
+  std::function<void(const IterationStats&)> progress;  ///< called after every solve
+};
+
+template <int D>
+struct Approximation {
+  Hierarchy<D> hierarchy;
+  std::vector<double> values;     ///< u at every vertex of the hierarchy (local frame)
+  std::vector<IterationStats> iterations;
+  std::vector<double> leaf_errors;  ///< E_T per leaf (h.leaves() order) of the final u
+  double domain_measure = 0;
+  double value_min = 0, value_max = 0;
+  std::string stop_reason;
+};
+
+/// Runs the adaptive loop for a field of dimension D (CHECKed) on its domain box
+/// [0, extent] in the field's local frame. Deterministic for any thread count.
+template <int D>
+Approximation<D> approximate(const Field& f, const ApproximationOptions& opts);
+
+/// L2 (or H1) best approximation on a fixed hierarchy's leaves: returns nodal values and the
+/// CG statistics in `stats` (when not null). `warm` (may be empty) is the start value.
+template <int D>
+std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field& f,
+                                             const ApproximationOptions& opts,
+                                             const std::vector<double>& warm,
+                                             IterationStats* stats = nullptr);
+
+extern template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
+extern template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
+
+}  // namespace mlfe

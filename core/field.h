@@ -1,0 +1,55 @@
+// The input as a function f on the domain, evaluated at points of the grid-aligned local frame
+// (physical units: index .* spacing, origin at voxel 0). The finite-element core only sees this
+// interface, so VDB or unstructured inputs plug in the same way.
+#pragma once
+#include <array>
+#include <cstdint>
+
+#include "core/scalar_grid.h"
+
+namespace mlfe {
+
+class Field {
+ public:
+  virtual ~Field() = default;
+  /// 2 or 3.
+  virtual int dim() const = 0;
+  /// f at local point x (x[2] ignored in 2D). Points outside the domain are clamped to it.
+  virtual double value(const std::array<double, 3>& x) const = 0;
+  /// Upper corner of the domain [0, extent] in the local frame.
+  virtual std::array<double, 3> extent() const = 0;
+  /// ∇f at local point x (zero components beyond dim()); piecewise constant across voxels for
+  /// interpolated grids.
+  virtual std::array<double, 3> gradient(const std::array<double, 3>& x) const = 0;
+  /// Length below which f has no detail (the voxel spacing): integration resolves it.
+  virtual double resolution() const = 0;
+  /// Smallest and largest value of f.
+  virtual std::array<double, 2> range() const = 0;
+};
+
+/// Trilinear (3D) / bilinear (2D) interpolation of a ScalarGrid's samples, which sit at the
+/// voxel positions i * spacing. Holds a reference: the grid must outlive the field.
+/// Requires at least 2 samples along every axis of the grid's dimension (CHECK).
+class GridField final : public Field {
+ public:
+  explicit GridField(const ScalarGrid& grid);
+  int dim() const override { return dim_; }
+  double value(const std::array<double, 3>& x) const override;
+  std::array<double, 3> gradient(const std::array<double, 3>& x) const override;
+  std::array<double, 3> extent() const override { return extent_; }
+  double resolution() const override { return resolution_; }
+  std::array<double, 2> range() const override { return range_; }
+  const ScalarGrid& grid() const { return grid_; }
+
+ private:
+  void locate(const std::array<double, 3>& x, std::int64_t& base, double t[3]) const;
+  const ScalarGrid& grid_;
+  int dim_;
+  std::array<std::int64_t, 3> n_;
+  std::array<double, 3> inv_spacing_;
+  std::array<double, 3> extent_;
+  double resolution_;
+  std::array<double, 2> range_;
+};
+
+}  // namespace mlfe
