@@ -1,0 +1,274 @@
+// Marching tetrahedra on the multilevel hierarchy (Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 5).
+#include "core/iso_surface.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+#include "core/check.h"
+#include "core/hierarchical_basis.h"
+#include "core/p1_element.h"
+
+namespace mlfe {
+
+namespace {
+
+using V3 = std::array<double, 3>;
+V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+V3 cross(const V3& a, const V3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+double det3(const std::array<double, 9>& m) {
+  return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
+         m[2] * (m[3] * m[7] - m[4] * m[6]);
+}
+
+std::array<float, 3> to_float_unit(const V3& v) {
+  const double n = std::sqrt(dot(v, v));
+  if (n == 0) return {0.f, 0.f, 1.f};
+  return {float(v[0] / n), float(v[1] / n), float(v[2] / n)};
+}
+
+template <int D>
+P1Element<D> element_of(const Hierarchy<D>& h, ElemId e) {
+  std::array<std::array<double, D>, D + 1> p;
+  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
+  return P1Element<D>(p);
+}
+
+// Depth-first walk over the elements of T_level whose subtree range passes `keep`, in a fixed
+// order (roots by id, children in order).
+template <class Keep, class Emit>
+std::size_t walk_level(const Hierarchy<3>& h, int level, Keep&& keep, Emit&& emit) {
+  std::size_t visited = 0;
+  std::vector<ElemId> stack;
+  for (std::size_t r = h.coarse_count(); r-- > 0;) stack.push_back(ElemId(static_cast<std::uint32_t>(r)));
+  while (!stack.empty()) {
+    const ElemId e = stack.back();
+    stack.pop_back();
+    ++visited;
+    if (!keep(e)) continue;
+    if (h.is_leaf(e) || h.level(e) >= level) {
+      emit(e);
+      continue;
+    }
+    for (int i = h.num_children(e); i-- > 0;) stack.push_back(ElemId(h.first_child(e).value + i));
+  }
+  return visited;
+}
+
+}  // namespace
+
+IsoExtractor::IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values)
+    : h_(h), values_(values) {
+  MLFE_CHECK(values.size() == h.vertex_count());
+  const std::size_t n = h.element_count();
+  lo_.assign(n, 0.f);
+  hi_.assign(n, 0.f);
+  // Children have larger ids than their parent, so one reverse sweep builds subtree ranges.
+  for (std::size_t i = n; i-- > 0;) {
+    const ElemId e(static_cast<std::uint32_t>(i));
+    double lo = 1e300, hi = -1e300;
+    for (VertexId v : h.cell(e)) {
+      lo = std::min(lo, values[v.value]);
+      hi = std::max(hi, values[v.value]);
+    }
+    float flo = static_cast<float>(lo), fhi = static_cast<float>(hi);
+    // Round outward so that the float range always contains the double values.
+    if (double(flo) > lo) flo = std::nextafter(flo, -INFINITY);
+    if (double(fhi) < hi) fhi = std::nextafter(fhi, INFINITY);
+    for (int c = 0; c < h.num_children(e); ++c) {
+      const std::uint32_t ch = h.first_child(e).value + c;
+      MLFE_CHECK(ch > i);
+      flo = std::min(flo, lo_[ch]);
+      fhi = std::max(fhi, hi_[ch]);
+    }
+    lo_[i] = flo;
+    hi_[i] = fhi;
+  }
+}
+
+TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, const IsoOptions& opts) const {
+  const Hierarchy<3>& h = h_;
+  const int level = opts.level < 0 ? h.max_level() : opts.level;
+  std::vector<double> coarse;
+  if (level < h.max_level()) coarse = hierarchical_reconstruct(h, hierarchical_decompose(h, values_), level);
+  const std::vector<double>& u = level < h.max_level() ? coarse : values_;
+
+  // 1. Cut elements, output-sensitively: a cut needs a vertex above (u > iso) and one at or below.
+  std::vector<ElemId> cut;
+  visited_ = walk_level(
+      h, level, [&](ElemId e) { return double(hi_[e.value]) > iso && double(lo_[e.value]) <= iso; },
+      [&](ElemId e) {
+        int above = 0;
+        for (VertexId v : h.cell(e)) above += u[v.value] > iso;
+        if (above > 0 && above < 4) cut.push_back(e);
+      });
+
+  // 2. Output vertices: one per cut edge, or the mesh vertex itself when u equals iso there.
+  struct OutVertex {
+    VertexId a, b;
+    double t;
+  };
+  std::vector<OutVertex> verts;
+  std::unordered_map<std::uint64_t, std::uint32_t> index;
+  index.reserve(cut.size() * 2);
+  auto out_vertex = [&](VertexId a, VertexId b) -> std::uint32_t {
+    // a above, b at or below.
+    const double ua = u[a.value], ub = u[b.value];
+    std::uint64_t key;
+    double t;
+    if (ub == iso) {
+      key = (std::uint64_t(b.value) << 32) | b.value;  // snapped to b; edge keys never have lo == hi
+      t = 1.0;
+    } else {
+      key = EdgeMap::key(a, b);
+      t = (ua - iso) / (ua - ub);
+    }
+    auto [it, inserted] = index.emplace(key, static_cast<std::uint32_t>(verts.size()));
+    if (inserted) verts.push_back({a, b, t});
+    return it->second;
+  };
+
+  TriangleMesh mesh;
+  std::vector<std::array<double, 3>> tri_normal_hint;
+  for (ElemId e : cut) {
+    const auto& c = h.cell(e);
+    int up[4], dn[4], nu = 0, nd = 0;
+    for (int i = 0; i < 4; ++i) (u[c[i].value] > iso ? up[nu++] : dn[nd++]) = i;
+    std::vector<std::uint32_t> poly;
+    if (nu == 1) {
+      for (int k = 0; k < 3; ++k) poly.push_back(out_vertex(c[up[0]], c[dn[k]]));
+    } else if (nu == 3) {
+      for (int k = 0; k < 3; ++k) poly.push_back(out_vertex(c[up[k]], c[dn[0]]));
+    } else {
+      // Quadrilateral in cyclic order around the tetrahedron.
+      poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]),
+              out_vertex(c[up[1]], c[dn[1]]), out_vertex(c[up[1]], c[dn[0]])};
+    }
+    const P1Element<3> el = element_of(h, e);
+    V3 g{0, 0, 0};
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
+    const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
+    auto local_pos = [&](std::uint32_t i) {
+      const auto& ov = verts[i];
+      const auto& pa = h.point(ov.a);
+      const auto& pb = h.point(ov.b);
+      return V3{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]), pa[2] + ov.t * (pb[2] - pa[2])};
+    };
+    auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
+      if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
+      const V3 n = cross(sub(local_pos(i1), local_pos(i0)), sub(local_pos(i2), local_pos(i0)));
+      if (dot(n, want) < 0) std::swap(i1, i2);
+      mesh.triangles.push_back({i0, i1, i2});
+    };
+    emit(poly[0], poly[1], poly[2]);
+    if (poly.size() == 4) emit(poly[0], poly[2], poly[3]);
+  }
+
+  // 3. Vertex normals at the mesh vertices that carry output vertices: volume-weighted mean of
+  // the gradients of all tetrahedra around them. Those tetrahedra have a vertex value inside
+  // [lo, hi] of the needed vertices, so the same range walk finds all of them.
+  std::vector<std::uint8_t> needed(h.vertex_count(), 0);
+  double nlo = 1e300, nhi = -1e300;
+  for (const auto& ov : verts)
+    for (VertexId v : {ov.a, ov.b}) {
+      needed[v.value] = 1;
+      nlo = std::min(nlo, u[v.value]);
+      nhi = std::max(nhi, u[v.value]);
+    }
+  std::unordered_map<std::uint32_t, std::array<double, 4>> acc;  // gradient sum, volume sum
+  if (!verts.empty()) {
+    walk_level(
+        h, level, [&](ElemId e) { return double(hi_[e.value]) >= nlo && double(lo_[e.value]) <= nhi; },
+        [&](ElemId e) {
+          const auto& c = h.cell(e);
+          bool any = false;
+          for (VertexId v : c) any |= needed[v.value] != 0;
+          if (!any) return;
+          const P1Element<3> el = element_of(h, e);
+          V3 g{0, 0, 0};
+          for (int i = 0; i < 4; ++i)
+            for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
+          for (VertexId v : c)
+            if (needed[v.value]) {
+              auto& s = acc[v.value];
+              for (int k = 0; k < 3; ++k) s[k] += el.measure * g[k];
+              s[3] += el.measure;
+            }
+        });
+  }
+  auto vertex_gradient = [&](VertexId v) {
+    const auto& s = acc[v.value];
+    return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
+  };
+
+  // 4. Physical positions and normals.
+  const double sign = opts.normals_toward_higher ? 1.0 : -1.0;
+  mesh.positions.reserve(verts.size());
+  mesh.normals.reserve(verts.size());
+  for (const auto& ov : verts) {
+    const auto& pa = h.point(ov.a);
+    const auto& pb = h.point(ov.b);
+    const V3 local{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]), pa[2] + ov.t * (pb[2] - pa[2])};
+    const V3 p = transform.local_to_physical(local);
+    mesh.positions.push_back({float(p[0]), float(p[1]), float(p[2])});
+    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
+    V3 n{sign * ((1 - ov.t) * ga[0] + ov.t * gb[0]), sign * ((1 - ov.t) * ga[1] + ov.t * gb[1]),
+         sign * ((1 - ov.t) * ga[2] + ov.t * gb[2])};
+    mesh.normals.push_back(to_float_unit(transform.rotate(n)));
+  }
+  // A reflecting transform (det < 0) turns counter-clockwise into clockwise.
+  if (det3(transform.direction) < 0)
+    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+  return mesh;
+}
+
+TriangleMesh height_field_surface(const Hierarchy<2>& h, const std::vector<double>& values,
+                                  const GridTransform& transform, double z_scale, int level) {
+  MLFE_CHECK(values.size() == h.vertex_count());
+  const int lv = level < 0 ? h.max_level() : level;
+  std::vector<double> coarse;
+  if (lv < h.max_level()) coarse = hierarchical_reconstruct(h, hierarchical_decompose(h, values), lv);
+  const std::vector<double>& u = lv < h.max_level() ? coarse : values;
+  const auto elems = lv < h.max_level() ? h.level_elements(lv) : h.leaves();
+  const auto& d = transform.direction;
+  const V3 up{d[2], d[5], d[8]};  // the third axis: heights go along it
+  std::vector<std::uint32_t> remap(h.vertex_count(), ~0u);
+  TriangleMesh mesh;
+  std::vector<V3> pos;
+  auto vertex = [&](VertexId v) {
+    if (remap[v.value] == ~0u) {
+      remap[v.value] = static_cast<std::uint32_t>(pos.size());
+      const auto& p = h.point(v);
+      V3 q = transform.local_to_physical({p[0], p[1], 0.0});
+      for (int k = 0; k < 3; ++k) q[k] += z_scale * u[v.value] * up[k];
+      pos.push_back(q);
+    }
+    return remap[v.value];
+  };
+  for (ElemId e : elems) {
+    const auto& c = h.cell(e);
+    std::array<std::uint32_t, 3> t{vertex(c[0]), vertex(c[1]), vertex(c[2])};
+    if (h.signed_measure(e) < 0) std::swap(t[1], t[2]);  // counter-clockwise seen from above
+    mesh.triangles.push_back(t);
+  }
+  if (det3(transform.direction) < 0)
+    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+  std::vector<V3> nsum(pos.size(), V3{0, 0, 0});
+  for (const auto& t : mesh.triangles) {
+    const V3 n = cross(sub(pos[t[1]], pos[t[0]]), sub(pos[t[2]], pos[t[0]]));  // |n| = 2 area
+    for (auto i : t)
+      for (int k = 0; k < 3; ++k) nsum[i][k] += n[k];
+  }
+  for (std::size_t i = 0; i < pos.size(); ++i) {
+    mesh.positions.push_back({float(pos[i][0]), float(pos[i][1]), float(pos[i][2])});
+    mesh.normals.push_back(to_float_unit(nsum[i]));
+  }
+  return mesh;
+}
+
+}  // namespace mlfe

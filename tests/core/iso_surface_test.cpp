@@ -1,0 +1,218 @@
+#include "core/iso_surface.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "core/approximation.h"
+#include "core/field.h"
+
+namespace mlfe {
+namespace {
+
+ScalarGrid grid3(int n, double spacing, const std::function<double(double, double, double)>& f) {
+  ScalarGrid g;
+  g.dim = 3;
+  g.dims = {n, n, n};
+  g.transform.spacing = {spacing, spacing, spacing};
+  g.values.resize(std::size_t(n) * n * n);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) g.values[i + n * (j + n * k)] = float(f(i * spacing, j * spacing, k * spacing));
+  return g;
+}
+
+// Closed, consistently oriented 2-manifold: every directed edge once, its reverse once.
+void expect_closed_manifold(const TriangleMesh& m, int euler) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
+  for (const auto& t : m.triangles) {
+    ASSERT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) << "degenerate triangle";
+    for (int k = 0; k < 3; ++k) directed[{t[k], t[(k + 1) % 3]}]++;
+  }
+  for (const auto& [e, n] : directed) {
+    ASSERT_EQ(n, 1) << "edge used twice in the same direction: orientation flip or non-manifold";
+    ASSERT_EQ(directed.count({e.second, e.first}), 1u) << "boundary edge: surface not closed";
+  }
+  const long long V = m.positions.size(), F = m.triangles.size(), E = directed.size() / 2;
+  EXPECT_EQ(V - E + F, euler);
+}
+
+TEST(IsoSurface, SphereIsAccurateClosedAndOrientedOutward) {
+  // A bright ball: f = 20 - distance to the centre (voxels of 1 mm).
+  const std::array<double, 3> c{20.3, 19.6, 21.1};
+  const double R = 11.0;
+  const auto g = grid3(41, 1.0, [&](double x, double y, double z) {
+    return 20.0 - std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
+  });
+  GridField f(g);
+  ApproximationOptions o;
+  o.target_rms = 0.02;
+  o.max_level = 7;
+  const auto a = approximate<3>(f, o);
+  IsoExtractor x(a.hierarchy, a.values);
+  const auto m = x.extract(20.0 - R, g.transform);
+  ASSERT_GT(m.triangles.size(), 500u);
+  double worst = 0;
+  for (const auto& p : m.positions) {
+    const double r = std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+    worst = std::max(worst, std::abs(r - R));
+  }
+  std::printf("sphere: %zu triangles, worst distance %.3f voxels, %zu vertices in the hierarchy\n",
+              m.triangles.size(), worst, a.hierarchy.vertex_count());
+  EXPECT_LT(worst, 0.25) << "max distance to the true sphere, voxels";
+  expect_closed_manifold(m, 2);
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    const auto& p = m.positions[i];
+    const auto& n = m.normals[i];
+    const double radial = (p[0] - c[0]) * n[0] + (p[1] - c[1]) * n[1] + (p[2] - c[2]) * n[2];
+    ASSERT_GT(radial, 0.9 * R) << "vertex normal not outward";
+  }
+  // Triangle winding agrees with the vertex normals.
+  for (const auto& t : m.triangles) {
+    const auto& p0 = m.positions[t[0]];
+    const auto& p1 = m.positions[t[1]];
+    const auto& p2 = m.positions[t[2]];
+    const double ux = p1[0] - p0[0], uy = p1[1] - p0[1], uz = p1[2] - p0[2];
+    const double vx = p2[0] - p0[0], vy = p2[1] - p0[1], vz = p2[2] - p0[2];
+    const double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+    const auto& n = m.normals[t[0]];
+    ASSERT_GT(nx * n[0] + ny * n[1] + nz * n[2], 0.0);
+  }
+}
+
+TEST(IsoSurface, LinearFieldGivesAnExactPlane) {
+  const auto g = grid3(17, 0.5, [](double x, double y, double z) { return 0.3 * x - 0.5 * y + 0.8 * z; });
+  GridField f(g);
+  auto h = Hierarchy<3>::box({0, 0, 0}, {8, 8, 8});
+  h.refine_uniform();
+  h.refine_uniform();
+  ApproximationOptions o;
+  const auto u = solve_best_approximation<3>(h, f, o, {});
+  IsoExtractor x(h, u);
+  GridTransform t;
+  t.origin = {10, -5, 3};
+  const auto m = x.extract(0.7, t);
+  ASSERT_GT(m.triangles.size(), 10u);
+  const double nn = std::sqrt(0.09 + 0.25 + 0.64);
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    const auto& p = m.positions[i];
+    EXPECT_NEAR(0.3 * (p[0] - 10) - 0.5 * (p[1] + 5) + 0.8 * (p[2] - 3), 0.7, 1e-5);
+    // Normal toward lower values: -∇f/|∇f|.
+    EXPECT_NEAR(m.normals[i][0], -0.3 / nn, 1e-5);
+    EXPECT_NEAR(m.normals[i][2], -0.8 / nn, 1e-5);
+  }
+}
+
+TEST(IsoSurface, IsoValueExactlyOnVerticesLeavesNoCracksOrDegenerateTriangles) {
+  // f = |x|² has integer values at lattice vertices; iso 25 passes exactly through (5,0,0),
+  // (3,4,0), ... Nodal interpolation on a uniform hierarchy with unit spacing.
+  auto h = Hierarchy<3>::box({-8, -8, -8}, {8, 8, 8});
+  for (int l = 0; l < 4; ++l) h.refine_uniform();  // lattice spacing 1
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(v));
+    u[v] = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+  }
+  IsoExtractor x(h, u);
+  GridTransform t;
+  const auto m = x.extract(25.0, t, {true, -1});
+  expect_closed_manifold(m, 2);
+  int on_vertex = 0;
+  for (const auto& p : m.positions)
+    if (std::abs(p[0] * p[0] + p[1] * p[1] + p[2] * p[2] - 25.0) < 1e-4 && std::abs(p[0] - std::round(p[0])) < 1e-6 &&
+        std::abs(p[1] - std::round(p[1])) < 1e-6 && std::abs(p[2] - std::round(p[2])) < 1e-6)
+      ++on_vertex;
+  EXPECT_GT(on_vertex, 6);  // the surface really passes through mesh vertices
+}
+
+TEST(IsoSurface, ExtractionSkipsSubtreesThatCannotContainTheIsoValue) {
+  auto h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  for (int l = 0; l < 5; ++l) h.refine_uniform();  // 196608 leaves
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(v));
+    u[v] = std::sqrt((p[0] - 0.3) * (p[0] - 0.3) + (p[1] - 0.6) * (p[1] - 0.6) + (p[2] - 0.4) * (p[2] - 0.4));
+  }
+  IsoExtractor x(h, u);
+  const auto small = x.extract(0.05, GridTransform{});
+  const std::size_t visited_small = x.visited_elements();
+  const auto big = x.extract(0.3, GridTransform{});
+  const std::size_t visited_big = x.visited_elements();
+  EXPECT_GT(small.triangles.size(), 50u);
+  EXPECT_LT(visited_small, h.element_count() / 50);
+  // Work grows with the output.
+  EXPECT_GT(visited_big, 5 * visited_small);
+  EXPECT_GT(big.triangles.size(), 5 * small.triangles.size());
+}
+
+TEST(IsoSurface, CoarserLevelsGiveCoarserClosedSurfaces) {
+  auto h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  for (int l = 0; l < 4; ++l) h.refine_uniform();
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(v));
+    u[v] = std::sqrt((p[0] - 0.51) * (p[0] - 0.51) + (p[1] - 0.47) * (p[1] - 0.47) + (p[2] - 0.5) * (p[2] - 0.5));
+  }
+  IsoExtractor x(h, u);
+  std::size_t prev = 0;
+  for (int level = 2; level <= 4; ++level) {
+    const auto m = x.extract(0.31, GridTransform{}, {true, level});
+    expect_closed_manifold(m, 2);
+    EXPECT_GT(m.triangles.size(), prev);
+    prev = m.triangles.size();
+  }
+  const auto a = x.extract(0.31, GridTransform{});
+  const auto b = x.extract(0.31, GridTransform{});
+  EXPECT_EQ(a.positions, b.positions);
+  EXPECT_EQ(a.triangles, b.triangles);
+}
+
+TEST(IsoSurface, ReflectingTransformKeepsWindingConsistentWithNormals) {
+  auto h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  for (int l = 0; l < 3; ++l) h.refine_uniform();
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(v));
+    u[v] = -std::sqrt((p[0] - 0.5) * (p[0] - 0.5) + (p[1] - 0.5) * (p[1] - 0.5) + (p[2] - 0.5) * (p[2] - 0.5));
+  }
+  IsoExtractor x(h, u);
+  GridTransform t;
+  t.direction = {-1, 0, 0, 0, -1, 0, 0, 0, 1};  // a rotation
+  GridTransform r;
+  r.direction = {-1, 0, 0, 0, 1, 0, 0, 0, 1};   // a reflection
+  for (const auto& tr : {t, r}) {
+    const auto m = x.extract(-0.3, tr);
+    expect_closed_manifold(m, 2);
+    for (const auto& tri : m.triangles) {
+      const auto& p0 = m.positions[tri[0]];
+      const auto& p1 = m.positions[tri[1]];
+      const auto& p2 = m.positions[tri[2]];
+      const double ux = p1[0] - p0[0], uy = p1[1] - p0[1], uz = p1[2] - p0[2];
+      const double vx = p2[0] - p0[0], vy = p2[1] - p0[1], vz = p2[2] - p0[2];
+      const double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+      const auto& n = m.normals[tri[0]];
+      ASSERT_GT(nx * n[0] + ny * n[1] + nz * n[2], 0.0);
+    }
+  }
+}
+
+TEST(HeightField, LiftsLeafTrianglesWithUpwardNormals) {
+  auto h = Hierarchy<2>::box({0, 0}, {4, 3});
+  h.refine_uniform();
+  h.refine_uniform();
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) u[v] = 2 + 0.5 * h.point(VertexId(v))[0];
+  GridTransform t;
+  t.origin = {1, 2, 3};
+  const auto m = height_field_surface(h, u, t, 2.0);
+  EXPECT_EQ(m.triangles.size(), h.leaves().size());
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    EXPECT_NEAR(m.positions[i][2], 3 + 2.0 * (2 + 0.5 * (m.positions[i][0] - 1)), 1e-5);
+    EXPECT_GT(m.normals[i][2], 0.0f);
+  }
+}
+
+}  // namespace
+}  // namespace mlfe
