@@ -15,6 +15,7 @@
 #include "core/check.h"
 #include "core/fe_assembly.h"
 #include "core/hierarchical_basis.h"
+#include "core/p1_element.h"
 
 namespace mlfe {
 
@@ -55,6 +56,40 @@ Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& 
   st.cg_iterations = r.iterations;
   st.cg_residual = r.relative_residual;
   return x;
+}
+
+// The iso-aware rule: for an element that an iso-surface crosses (in f or in u), the distance
+// between the surfaces of f and u is about |f - u| / |∇u|; refine while that exceeds the
+// tolerance, or while u misses a crossing that f has, until elements are voxel-sized.
+template <int D>
+bool surface_needs_refinement(const Hierarchy<D>& h, ElemId e, const ElementIntegrals<D>& in, const Vector& u,
+                              double density, const Field& f, const ApproximationOptions& opts) {
+  const double size = std::pow(h.measure(e) * (D == 2 ? 2.0 : 6.0), 1.0 / D);
+  if (size <= f.resolution()) return false;
+  const auto& c = h.cell(e);
+  double umin = 1e300, umax = -1e300;
+  for (VertexId v : c) {
+    umin = std::min(umin, u[v.value]);
+    umax = std::max(umax, u[v.value]);
+  }
+  std::array<std::array<double, D>, D + 1> p;
+  for (int i = 0; i <= D; ++i) p[i] = h.point(c[i]);
+  const P1Element<D> el(p);
+  double g2 = 0;
+  for (int k = 0; k < D; ++k) {
+    double g = 0;
+    for (int i = 0; i <= D; ++i) g += u[c[i].value] * el.grad[i][k];
+    g2 += g * g;
+  }
+  const double rms = std::sqrt(density);
+  for (double iso : opts.iso_values) {
+    const bool f_cuts = in.fmin <= iso && iso <= in.fmax;
+    const bool u_cuts = umin <= iso && iso <= umax;
+    if (!f_cuts && !u_cuts) continue;
+    if (f_cuts && !u_cuts) return true;  // u misses this piece of the surface
+    if (rms > opts.surface_tolerance * f.resolution() * std::sqrt(g2)) return true;
+  }
+  return false;
 }
 
 }  // namespace
@@ -182,6 +217,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         if (opts.threshold > 0) mark |= density > thr2;
         // Equidistribution: if no element's mean square error exceeds tau², Σ E ≤ tau² |Ω|.
         if (tau2 > 0) mark |= density > tau2;
+        if (!mark && !opts.iso_values.empty()) mark = surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
         if (mark) marked.push_back({density, e});
       }
       if (marked.empty()) stop = opts.threshold > 0 ? "no element above the threshold" : "maximum level reached";

@@ -46,6 +46,11 @@ struct ApproximationOptions {
   int start_level = -1;           ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
   bool h1 = false;                ///< (u,v) + s²(∇u,∇v) instead of (u,v)
   double quadrature_edge = 0;     ///< sub-simplex edge for integration; 0: the field's resolution
+  /// Iso-aware refinement: elements where f or u crosses one of these values are also refined
+  /// while the surface's estimated distance error sqrt(E_T/|T|) / |∇u| exceeds
+  /// surface_tolerance voxels (or the surface is missing from u), down to voxel-sized elements.
+  std::vector<double> iso_values;
+  double surface_tolerance = 0.5;
   Preconditioner preconditioner = Preconditioner::kBpx;
   double cg_tolerance = 1e-9;     ///< relative residual
   int direct_solve_max = 20000;   ///< direct (LDLT) solve while vertices ≤ this; 0: never

@@ -43,6 +43,12 @@ struct Integrator {
       for (int i = 0; i <= D; ++i)
         for (int c = 0; c < D; ++c) x[c] += lam[i] * p[i][c];
       const double fv = f.value(x);
+      if (out.points == 0 && q == 0) {
+        out.fmin = out.fmax = float(fv);
+      } else {
+        out.fmin = std::min(out.fmin, float(fv));
+        out.fmax = std::max(out.fmax, float(fv));
+      }
       out.f2 += weight * fv * fv;
       for (int i = 0; i <= D; ++i) out.fphi[i] += weight * fv * lam[i];
       if (gradients) {

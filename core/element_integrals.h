@@ -23,6 +23,7 @@ struct ElementIntegrals {
   std::array<double, D + 1> fphi{};    ///< ∫_T f λ_j
   std::array<double, D> grad{};        ///< ∫_T ∇f        (only with gradients requested)
   double grad2 = 0;                    ///< ∫_T |∇f|²     (only with gradients requested)
+  float fmin = 0, fmax = 0;             ///< range of f at the quadrature points
   std::uint32_t points = 0;            ///< quadrature points used
 };
 

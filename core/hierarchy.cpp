@@ -8,8 +8,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "core/check.h"
+#include "core/error.h"
 
 namespace mlfe {
 
@@ -103,6 +105,156 @@ Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Ce
 }
 
 template <int D>
+Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
+  using T = SimplexTraits<D>;
+  auto fail = [&](const std::string& what) { throw Error(source + ": " + what); };
+  auto vs = [](std::size_t i) { return std::to_string(i); };
+  const std::size_t nv = a.points.size();
+  const std::size_t ne = a.cells.size();
+  // Ids must stay below the invalid marker, or "invalid" could alias a real index.
+  if (nv >= VertexId::kInvalidValue) fail("too many vertices (" + vs(nv) + ")");
+  if (ne >= ElemId::kInvalidValue) fail("too many elements (" + vs(ne) + ")");
+  if (a.vertex_parents.size() != nv || a.vertex_level.size() != nv)
+    fail("vertex arrays differ in size (points " + vs(nv) + ", parents " +
+         vs(a.vertex_parents.size()) + ", levels " + vs(a.vertex_level.size()) + ")");
+  if (a.parent.size() != ne || a.first_child.size() != ne || a.num_children.size() != ne ||
+      a.level.size() != ne || a.kind.size() != ne)
+    fail("element arrays differ in size (cells " + vs(ne) + ")");
+  if (ne == 0) fail("no elements");
+
+  Hierarchy h;
+  // ---- vertices ----
+  h.edge_mid_.reserve(nv);
+  for (std::size_t v = 0; v < nv; ++v) {
+    const Point& p = a.points[v];
+    for (int i = 0; i < D; ++i)
+      if (!std::isfinite(p[i])) fail("vertex " + vs(v) + " has a non-finite coordinate");
+    const auto& par = a.vertex_parents[v];
+    if (!par[0].valid() && !par[1].valid()) {
+      if (a.vertex_level[v] != 0) fail("vertex " + vs(v) + " has no parents but level > 0");
+      continue;
+    }
+    if (!par[0].valid() || !par[1].valid() || !(par[0] < par[1]) || par[1].value >= v)
+      fail("vertex " + vs(v) + " has invalid parents (" + vs(par[0].value) + ", " +
+           vs(par[1].value) + "): need p0 < p1 < vertex");
+    const Point& pa = a.points[par[0].value];
+    const Point& pb = a.points[par[1].value];
+    double scale = 0, err = 0;
+    for (int i = 0; i < D; ++i) {
+      scale = std::max({scale, std::abs(pa[i]), std::abs(pb[i]), std::abs(pa[i] - pb[i])});
+      err = std::max(err, std::abs(p[i] - 0.5 * (pa[i] + pb[i])));
+    }
+    if (!(err <= 1e-9 * scale))
+      fail("vertex " + vs(v) + " is not the midpoint of its parents " + vs(par[0].value) + " and " +
+           vs(par[1].value));
+    if (a.vertex_level[v] == 0 || a.vertex_level[v] <= a.vertex_level[par[0].value] ||
+        a.vertex_level[v] <= a.vertex_level[par[1].value])
+      fail("vertex " + vs(v) + " has level " + vs(a.vertex_level[v]) +
+           ", not above its parents' levels");
+    if (h.edge_mid_.find(par[0], par[1]).valid())
+      fail("edge (" + vs(par[0].value) + ", " + vs(par[1].value) + ") is bisected twice");
+    h.edge_mid_.insert(par[0], par[1], VertexId(static_cast<std::uint32_t>(v)));
+  }
+  h.points_ = std::move(a.points);
+  h.vertex_parents_ = std::move(a.vertex_parents);
+  h.vertex_level_ = std::move(a.vertex_level);
+
+  // ---- elements: local checks ----
+  std::size_t coarse = 0;
+  for (std::size_t e = 0; e < ne; ++e) {
+    const std::string el = "element " + vs(e);
+    const Cell& c = a.cells[e];
+    for (int i = 0; i <= D; ++i) {
+      if (c[i].value >= nv) fail(el + " has vertex index " + vs(c[i].value) + " out of range");
+      for (int j = 0; j < i; ++j)
+        if (c[i] == c[j]) fail(el + " repeats vertex " + vs(c[i].value));
+    }
+    const auto k = static_cast<unsigned>(a.kind[e]);
+    if (k > 2) fail(el + " has invalid kind " + vs(k));
+    if (a.level[e] >= 255) fail(el + " has level " + vs(a.level[e]) + " (limit 254)");
+    if (a.kind[e] == ElemKind::kCoarse) {
+      if (coarse != e) fail(el + " is coarse but follows refined elements");
+      ++coarse;
+      if (a.parent[e].valid() || a.level[e] != 0) fail(el + " is coarse but has a parent or level > 0");
+    } else {
+      const ElemId p = a.parent[e];
+      if (!p.valid() || p.value >= e) fail(el + " has invalid parent " + vs(p.value) + " (need parent < child)");
+      const ElemId f = a.first_child[p.value];
+      const std::size_t n = a.num_children[p.value];
+      if (!f.valid() || e < f.value || e >= f.value + n)
+        fail(el + " is not in the child range of its parent " + vs(p.value));
+      if (a.level[e] != a.level[p.value] + 1)
+        fail(el + " has level " + vs(a.level[e]) + ", not its parent's level + 1");
+      if (a.kind[f.value] != a.kind[e]) fail(el + " differs in kind from its siblings");
+    }
+    const std::size_t n = a.num_children[e];
+    const ElemId f = a.first_child[e];
+    if (n == 0) {
+      if (f.valid()) fail(el + " is a leaf but has a first child");
+      continue;
+    }
+    if (a.kind[e] == ElemKind::kGreen) fail(el + " is green but has children");
+    if (!f.valid() || f.value <= e || f.value + n > ne)
+      fail(el + " has child range [" + vs(f.value) + ", +" + vs(n) + ") out of range");
+    for (std::size_t i = 0; i < n; ++i)
+      if (a.parent[f.value + i].value != e) fail(el + ": child " + vs(f.value + i) + " names another parent");
+  }
+  h.cells_ = std::move(a.cells);
+  h.parent_ = std::move(a.parent);
+  h.first_child_ = std::move(a.first_child);
+  h.num_children_ = std::move(a.num_children);
+  h.level_ = std::move(a.level);
+  h.kind_ = std::move(a.kind);
+  h.coarse_count_ = coarse;
+
+  // ---- elements: geometry of each refinement (links are consistent from here on) ----
+  for (std::size_t e = 0; e < ne; ++e) {
+    const std::string el = "element " + vs(e);
+    const Cell& c = h.cells_[e];
+    const double m = h.cell_measure(c);
+    if (!(m != 0.0) || !std::isfinite(m)) fail(el + " is degenerate");
+    const std::size_t n = h.num_children_[e];
+    if (n == 0) continue;
+    const std::uint32_t f = h.first_child_[e].value;
+    std::array<VertexId, T::kEdges> mid;
+    for (int i = 0; i < T::kEdges; ++i) mid[i] = h.edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]);
+    if (h.kind_[f] == ElemKind::kRed) {
+      if (n != T::kRedChildren) fail(el + " has " + vs(n) + " red children");
+      for (int i = 0; i < T::kEdges; ++i)
+        if (!mid[i].valid()) fail(el + " is red-refined but edge " + vs(i) + " has no midpoint");
+      const auto kids = red_children(c, mid);
+      for (std::size_t i = 0; i < n; ++i)
+        if (h.cells_[f + i] != kids[i]) fail(el + ": red child " + vs(f + i) + " does not match the red pattern");
+      continue;
+    }
+    // Green: every child vertex is a corner or an edge midpoint of e; the split edges form an
+    // admissible pattern with its number of children; the children tile e.
+    unsigned mask = 0;
+    double sum = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Cell& k = h.cells_[f + i];
+      for (VertexId v : k) {
+        bool ok = std::find(c.begin(), c.end(), v) != c.end();
+        for (int j = 0; j < T::kEdges && !ok; ++j)
+          if (mid[j] == v) {
+            mask |= 1u << j;
+            ok = true;
+          }
+        if (!ok) fail(el + ": green child " + vs(f + i) + " uses vertex " + vs(v.value) + " outside its parent");
+      }
+      sum += std::abs(h.cell_measure(k));
+    }
+    const int type = green_type(D, mask);
+    constexpr int kGreenChildren[5] = {0, 2, 3, 4, 4};
+    if (type <= 0 || static_cast<int>(n) != kGreenChildren[type])
+      fail(el + " has an invalid green refinement (" + vs(n) + " children)");
+    if (!(std::abs(sum - std::abs(m)) <= 1e-9 * std::abs(m)))
+      fail(el + ": green children do not tile their parent");
+  }
+  return h;
+}
+
+template <int D>
 ElemId Hierarchy<D>::add_element(const Cell& c, ElemId parent, int level, ElemKind kind) {
   MLFE_CHECK(cells_.size() < ElemId::kInvalidValue);
   MLFE_CHECK_MSG(level < 255, "refinement level limit (254) reached");
@@ -136,14 +288,9 @@ VertexId Hierarchy<D>::midpoint(VertexId a, VertexId b, int level) {
 }
 
 template <int D>
-void Hierarchy<D>::red_refine(ElemId e) {
+std::array<typename Hierarchy<D>::Cell, SimplexTraits<D>::kRedChildren> Hierarchy<D>::red_children(
+    const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m) {
   using T = SimplexTraits<D>;
-  MLFE_CHECK(is_leaf(e) && kind(e) != ElemKind::kGreen);
-  const Cell c = cells_[e.value];
-  const int lvl = level_[e.value] + 1;
-  std::array<VertexId, T::kEdges> m;
-  for (int i = 0; i < T::kEdges; ++i)
-    m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
   std::array<Cell, T::kRedChildren> kids;
   if constexpr (D == 2) {
     // m: x01, x02, x12
@@ -160,6 +307,19 @@ void Hierarchy<D>::red_refine(ElemId e) {
              {x02, x03, x13, x23},
              {x02, x12, x13, x23}}};
   }
+  return kids;
+}
+
+template <int D>
+void Hierarchy<D>::red_refine(ElemId e) {
+  using T = SimplexTraits<D>;
+  MLFE_CHECK(is_leaf(e) && kind(e) != ElemKind::kGreen);
+  const Cell c = cells_[e.value];
+  const int lvl = level_[e.value] + 1;
+  std::array<VertexId, T::kEdges> m;
+  for (int i = 0; i < T::kEdges; ++i)
+    m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
+  const std::array<Cell, T::kRedChildren> kids = red_children(c, m);
   const ElemId first(static_cast<std::uint32_t>(cells_.size()));
   for (const Cell& k : kids) add_element(k, e, lvl, ElemKind::kRed);
   first_child_[e.value] = first;

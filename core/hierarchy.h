@@ -34,6 +34,7 @@
 #pragma once
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "core/edge_map.h"
@@ -84,6 +85,32 @@ class Hierarchy {
   /// similarity bound assumes the order the cells come in). Indices are checked.
   static Hierarchy from_coarse(std::vector<Point> points, std::vector<Cell> cells);
 
+  /// Every array of a hierarchy, as stored (for serialization). Vertex arrays are indexed by
+  /// VertexId, element arrays by ElemId.
+  struct Arrays {
+    std::vector<Point> points;
+    std::vector<std::array<VertexId, 2>> vertex_parents;
+    std::vector<std::uint8_t> vertex_level;
+    std::vector<Cell> cells;
+    std::vector<ElemId> parent;
+    std::vector<ElemId> first_child;
+    std::vector<std::uint8_t> num_children;
+    std::vector<std::uint8_t> level;
+    std::vector<ElemKind> kind;
+  };
+
+  /// Rebuilds a hierarchy from untrusted arrays (e.g. a file), with the edge map rebuilt from
+  /// vertex_parents. Validates everything the other members rely on: equal sizes; finite
+  /// points; vertex parents either both invalid (T0, level 0) or valid with p0 < p1 < v, the
+  /// point equal to their mean within 1e-9 relative, each edge bisected once and vertex level
+  /// above its parents'; every cell index in range and distinct; kinds in range; coarse
+  /// elements (level 0, no parent) first and non-degenerate; parent < child, the child inside
+  /// its parent's contiguous child range and at the parent's level + 1, all siblings of one
+  /// kind; red children exactly the red pattern of the parent (Bey's order); green children a
+  /// valid green pattern covering the parent, and never refined. Throws mlfe::Error with the
+  /// one-line message "<source>: <problem>" on the first violation; never aborts on bad input.
+  static Hierarchy from_arrays(Arrays arrays, const std::string& source = "hierarchy");
+
   // ---- refinement ----
   /// Red-refines the given leaf elements (a green leaf red-refines its parent instead), then
   /// runs the green closure so the leaf triangulation is conforming again. The result does not
@@ -104,6 +131,9 @@ class Hierarchy {
   /// 0 for vertices of T0, else 1 + the level of the element whose edge v bisects.
   int vertex_level(VertexId v) const { return vertex_level_[v.value]; }
   const EdgeMap& edge_midpoints() const { return edge_mid_; }
+  /// Whole per-vertex arrays (see vertex_parents(v), vertex_level(v)), for serialization.
+  const std::vector<std::array<VertexId, 2>>& vertex_parents_array() const { return vertex_parents_; }
+  const std::vector<std::uint8_t>& vertex_level_array() const { return vertex_level_; }
 
   // ---- elements ----
   std::size_t element_count() const { return cells_.size(); }
@@ -115,6 +145,13 @@ class Hierarchy {
   int level(ElemId e) const { return level_[e.value]; }
   ElemKind kind(ElemId e) const { return kind_[e.value]; }
   bool is_leaf(ElemId e) const { return num_children_[e.value] == 0; }
+  /// Whole per-element arrays, indexed by ElemId, for serialization and bulk readers.
+  const std::vector<Cell>& cells() const { return cells_; }
+  const std::vector<ElemId>& parent_array() const { return parent_; }
+  const std::vector<ElemId>& first_child_array() const { return first_child_; }
+  const std::vector<std::uint8_t>& num_children_array() const { return num_children_; }
+  const std::vector<std::uint8_t>& level_array() const { return level_; }
+  const std::vector<ElemKind>& kind_array() const { return kind_; }
   int max_level() const;
 
   /// Leaf elements in id order: the finest, conforming triangulation Tj.
@@ -139,6 +176,8 @@ class Hierarchy {
   ElemId add_element(const Cell& c, ElemId parent, int level, ElemKind kind);
   VertexId midpoint(VertexId a, VertexId b, int level);
   void red_refine(ElemId e);
+  static std::array<Cell, SimplexTraits<D>::kRedChildren> red_children(
+      const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m);
   void green_refine(ElemId e, unsigned mask);
   unsigned hanging_mask(ElemId e) const;
   std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);

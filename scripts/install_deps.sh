@@ -10,7 +10,7 @@ PKGS=(
   libopenmesh-dev libdraco-dev draco libtinygltf-dev
   libopenexr-dev openexr
   libcli11-dev nlohmann-json3-dev libfmt-dev
-  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev
+  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
   googletest libgtest-dev libbenchmark-dev
   clang libclang-rt-14-dev
 )

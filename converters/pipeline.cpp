@@ -1,0 +1,328 @@
+#include "converters/pipeline.h"
+
+#include <fmt/format.h>
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+
+#include "core/error.h"
+#include "core/field.h"
+#include "core/iso_surface.h"
+#include "formats/atomic_file.h"
+#include "formats/draco_io.h"
+#include "formats/gltf_writer.h"
+#include "formats/openmesh_io.h"
+
+namespace mlfe::cli {
+
+namespace {
+std::string lower_ext(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return e;
+}
+}  // namespace
+
+void add_build_options(CLI::App* cmd, BuildParams& p) {
+  cmd->add_option("--rms", p.rms,
+                  "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data units")
+      ->capture_default_str();
+  cmd->add_option("--threshold", p.threshold,
+                  "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--max-vertices", p.max_vertices, "vertex budget (never exceeded)");
+  cmd->add_option("--max-level", p.max_level, "deepest refinement level")->check(CLI::Range(0, 40))->capture_default_str();
+  cmd->add_option("--start-level", p.start_level, "uniform levels before adapting (-1: until edges <= 16 voxels)")
+      ->check(CLI::Range(-1, 12));
+  cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
+      ->check(CLI::IsMember({"l2", "h1"}))
+      ->capture_default_str();
+  cmd->add_option("--preconditioner", p.preconditioner, "CG preconditioner")
+      ->check(CLI::IsMember({"bpx", "jacobi", "none"}))
+      ->capture_default_str();
+  cmd->add_option("--surface-tolerance", p.surface_tolerance,
+                  "with iso-values: refine until surfaces are within this many voxels")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--quiet", p.quiet, "no progress on stderr");
+}
+
+void add_asset_options(CLI::App* cmd, AssetParams& p) {
+  cmd->add_option("--iso", p.iso, "iso-values, comma separated (3D volumes)");
+  cmd->add_option("--tolerance", p.tolerance, "position tolerance in mm for Draco/quantization (default: voxel/10)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--no-draco", p.no_draco, "glTF with plain float buffers");
+  cmd->add_flag("--quantize", p.quantize, "glTF with KHR_mesh_quantization (with --no-draco)");
+  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)")->check(CLI::Range(0, 8));
+  cmd->add_option("--decimate", p.decimate, "reduce every surface to this many triangles (OpenMesh quadric decimater)");
+  cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
+  cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
+  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")->check(CLI::Range(-1, 40));
+}
+
+std::vector<double> parse_values(const std::string& text, const std::string& what) {
+  std::vector<double> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    try {
+      std::size_t used = 0;
+      const double v = std::stod(item, &used);
+      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
+      out.push_back(v);
+    } catch (const std::exception&) {
+      throw Error(fmt::format("{}: not a number: '{}'", what, item));
+    }
+  }
+  return out;
+}
+
+double peak_rss_mb() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+
+Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values) {
+  for (int a = 0; a < grid.dim; ++a)
+    if (grid.dims[a] < 2)
+      throw Error(fmt::format("{}: needs at least 2 samples along every axis (dims {}x{}x{})", grid.source,
+                              grid.dims[0], grid.dims[1], grid.dims[2]));
+  Built b;
+  b.dim = grid.dim;
+  b.transform = grid.transform;
+  b.space = grid.space;
+  const auto range = grid.value_range();
+  b.value_min = range[0];
+  b.value_max = range[1];
+  const double span = range[1] > range[0] ? double(range[1]) - double(range[0]) : 1.0;
+
+  ApproximationOptions o;
+  if (p.threshold > 0) {
+    o.threshold = p.threshold;
+  } else {
+    std::string r = p.rms;
+    const bool percent = !r.empty() && r.back() == '%';
+    if (percent) r.pop_back();
+    const auto v = parse_values(r, "--rms");
+    if (v.size() != 1 || v[0] <= 0) throw Error("--rms: expected one positive value, e.g. 0.5% or 2.0");
+    o.target_rms = percent ? v[0] / 100.0 * span : v[0];
+  }
+  o.max_vertices = p.max_vertices;
+  o.max_level = p.max_level;
+  o.start_level = p.start_level;
+  o.h1 = p.norm == "h1";
+  o.preconditioner = p.preconditioner == "bpx" ? Preconditioner::kBpx
+                     : p.preconditioner == "jacobi" ? Preconditioner::kJacobi
+                                                    : Preconditioner::kNone;
+  o.iso_values = iso_values;
+  o.surface_tolerance = p.surface_tolerance;
+  if (!p.quiet) {
+    std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices", "elements",
+                 "rms", "rms%", "psnr", "cg", "seconds");
+    o.progress = [](const IterationStats& s) {
+      std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level, s.vertices,
+                   s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
+    };
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  GridField f(grid);
+  if (grid.dim == 2)
+    b.a2 = approximate<2>(f, o);
+  else
+    b.a3 = approximate<3>(f, o);
+  b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return b;
+}
+
+Built built_from_file(const std::string& path) {
+  HierarchyFile hf = read_hierarchy(path);
+  Built b;
+  b.dim = hf.dim;
+  b.transform = hf.transform;
+  b.space = hf.space;
+  b.value_min = hf.value_min;
+  b.value_max = hf.value_max;
+  if (hf.values.empty()) throw Error(path + ": the hierarchy stores no values (u) to extract from");
+  if (hf.dim == 2) {
+    Approximation<2> a;
+    a.hierarchy = std::get<Hierarchy<2>>(std::move(hf.hierarchy));
+    a.values = std::move(hf.values);
+    b.a2 = std::move(a);
+  } else {
+    Approximation<3> a;
+    a.hierarchy = std::get<Hierarchy<3>>(std::move(hf.hierarchy));
+    a.values = std::move(hf.values);
+    b.a3 = std::move(a);
+  }
+  return b;
+}
+
+void write_built(const std::string& path, const Built& b, const nlohmann::json& provenance) {
+  HierarchyFileInfo info;
+  info.transform = b.transform;
+  info.space = b.space;
+  info.value_min = b.value_min;
+  info.value_max = b.value_max;
+  info.metadata = provenance;
+  if (b.dim == 2)
+    write_hierarchy(path, b.a2->hierarchy, b.a2->values, info);
+  else
+    write_hierarchy(path, b.a3->hierarchy, b.a3->values, info);
+}
+
+void write_json(const std::string& path, const nlohmann::json& j) {
+  write_file_atomically(path, [&](std::ostream& os) { os << j.dump(2) << "\n"; });
+}
+
+nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b) {
+  nlohmann::json r;
+  r["input"] = input;
+  if (grid) {
+    r["dims"] = {grid->dims[0], grid->dims[1], grid->dims[2]};
+    r["voxels"] = grid->voxel_count();
+    r["spacing"] = grid->transform.spacing;
+  }
+  const auto& its = b.iterations();
+  const auto& last = its.back();
+  r["vertices"] = b.vertices();
+  r["elements"] = b.leaves();
+  r["levels"] = b.levels();
+  r["iterations"] = its.size();
+  r["rms_error"] = last.rms_error;
+  r["rms_error_percent"] = last.rms_percent;
+  r["l2_error"] = last.l2_error;
+  r["psnr_db"] = last.psnr_db;
+  r["value_range"] = {b.value_min, b.value_max};
+  r["stop_reason"] = b.stop_reason();
+  r["seconds"] = b.seconds;
+  r["peak_rss_mb"] = peak_rss_mb();
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& s : its)
+    rows.push_back({{"iteration", s.iteration},
+                    {"level", s.level},
+                    {"vertices", s.vertices},
+                    {"elements", s.elements},
+                    {"marked", s.marked},
+                    {"rms_error", s.rms_error},
+                    {"rms_error_percent", s.rms_percent},
+                    {"psnr_db", s.psnr_db},
+                    {"cg_iterations", s.cg_iterations},
+                    {"assembly_seconds", s.assembly_seconds},
+                    {"solve_seconds", s.solve_seconds},
+                    {"estimate_seconds", s.estimate_seconds},
+                    {"refine_seconds", s.refine_seconds},
+                    {"seconds", s.seconds}});
+  r["per_iteration"] = rows;
+  return r;
+}
+
+namespace {
+
+TriangleMesh merge(const std::vector<TriangleMesh>& parts) {
+  TriangleMesh m;
+  for (const auto& p : parts) {
+    const auto base = static_cast<std::uint32_t>(m.positions.size());
+    m.positions.insert(m.positions.end(), p.positions.begin(), p.positions.end());
+    m.normals.insert(m.normals.end(), p.normals.begin(), p.normals.end());
+    for (auto t : p.triangles) m.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  return m;
+}
+
+double default_tolerance(const GridTransform& t, int dim) {
+  double s = 1e300;
+  for (int a = 0; a < dim; ++a) s = std::min(s, t.spacing[a]);
+  return s / 10.0;
+}
+
+}  // namespace
+
+nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
+                            const nlohmann::json& provenance) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string ext = lower_ext(out);
+  static const std::vector<std::string> known = {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"};
+  if (std::find(known.begin(), known.end(), ext) == known.end())
+    throw Error(fmt::format("{}: unknown output type '{}' (use .glb .gltf .drc .ply .obj .stl .off)", out, ext));
+  const double tol = p.tolerance > 0 ? p.tolerance : default_tolerance(b.transform, b.dim);
+
+  std::vector<GltfSurface> surfaces;
+  std::vector<double> isos;
+  if (b.dim == 3) {
+    if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
+    isos = parse_values(p.iso, "--iso");
+    std::sort(isos.begin(), isos.end());
+    IsoExtractor x(b.a3->hierarchy, b.a3->values);
+    const int finest = b.a3->hierarchy.max_level();
+    const int level = p.level < 0 ? finest : std::min(p.level, finest);
+    for (std::size_t i = 0; i < isos.size(); ++i) {
+      GltfSurface s;
+      s.iso_value = isos[i];
+      s.name = fmt::format("iso {}", isos[i]);
+      s.mesh = x.extract(isos[i], b.transform, {p.normals_toward_higher, level});
+      for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
+        s.lods.push_back(x.extract(isos[i], b.transform, {p.normals_toward_higher, level - 2 * k}));
+      // Surfaces that enclose others are translucent so the inner ones stay visible: with
+      // normals toward lower values the innermost surface is the highest iso-value.
+      const bool innermost = p.normals_toward_higher ? i == 0 : i + 1 == isos.size();
+      static const std::array<std::array<float, 3>, 4> palette{
+          {{0.93f, 0.87f, 0.75f}, {0.85f, 0.45f, 0.40f}, {0.45f, 0.60f, 0.85f}, {0.55f, 0.80f, 0.50f}}};
+      const auto& c = palette[(isos.size() - 1 - i) % palette.size()];
+      s.color = {c[0], c[1], c[2], innermost ? 1.0f : 0.35f};
+      surfaces.push_back(std::move(s));
+    }
+  } else {
+    GltfSurface s;
+    s.name = "height field";
+    s.mesh = height_field_surface(b.a2->hierarchy, b.a2->values, b.transform, p.z_scale, p.level);
+    s.color = {0.70f, 0.72f, 0.60f, 1.0f};
+    surfaces.push_back(std::move(s));
+  }
+  if (p.decimate > 0)
+    for (auto& s : surfaces)
+      if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
+
+  nlohmann::json summary;
+  nlohmann::json per = nlohmann::json::array();
+  std::size_t total = 0;
+  for (const auto& s : surfaces) {
+    per.push_back({{"iso", s.iso_value}, {"triangles", s.mesh.triangles.size()}, {"vertices", s.mesh.positions.size()}});
+    total += s.mesh.triangles.size();
+  }
+  if (ext == ".glb" || ext == ".gltf") {
+    GltfOptions o;
+    o.draco = !p.no_draco;
+    o.quantize = p.quantize;
+    o.tolerance_mm = tol;
+    o.space = b.space;
+    o.extras = provenance;
+    o.extras["tolerance_mm"] = tol;
+    o.extras["iso_values"] = isos;
+    write_gltf(out, surfaces, o);
+  } else if (ext == ".drc") {
+    std::vector<TriangleMesh> parts;
+    for (const auto& s : surfaces) parts.push_back(s.mesh);
+    DracoOptions o;
+    o.tolerance = tol;
+    write_draco_file(out, merge(parts), o);
+  } else {
+    std::vector<TriangleMesh> parts;
+    for (const auto& s : surfaces) parts.push_back(s.mesh);
+    write_mesh_file(out, merge(parts));
+  }
+  summary["output"] = out;
+  summary["surfaces"] = per;
+  summary["triangles"] = total;
+  summary["bytes"] = std::filesystem::file_size(out);
+  summary["tolerance_mm"] = tol;
+  summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return summary;
+}
+
+}  // namespace mlfe::cli

@@ -1,0 +1,93 @@
+// The volume → hierarchy → assets pipeline shared by `mlfe build`, `mlfe iso` and
+// `mlfe convert`: option parsing, the adaptive build with progress and report, iso-surface
+// extraction and writing by output extension.
+#pragma once
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/approximation.h"
+#include "core/scalar_grid.h"
+#include "core/triangle_mesh.h"
+#include "formats/hierarchy_io.h"
+#include "formats/volume_reader.h"
+
+namespace mlfe::cli {
+
+struct BuildParams {
+  std::string rms = "0.5%";   ///< target RMS error: "0.5%" of the value range, or absolute
+  double threshold = 0;       ///< the paper's per-element threshold (data units), 0: off
+  std::size_t max_vertices = 0;
+  int max_level = 20;
+  int start_level = -1;
+  std::string norm = "l2";    ///< "l2" or "h1"
+  std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
+  double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
+  bool quiet = false;
+};
+
+/// Adds --rms, --threshold, --max-vertices, --max-level, --start-level, --norm,
+/// --preconditioner, --surface-tolerance and --quiet.
+void add_build_options(CLI::App* cmd, BuildParams& p);
+
+/// The hierarchy and solution built from a grid (2D or 3D alternative set).
+struct Built {
+  int dim = 3;
+  std::optional<Approximation<2>> a2;
+  std::optional<Approximation<3>> a3;
+  GridTransform transform;
+  std::string space;
+  double value_min = 0, value_max = 0;
+  double seconds = 0;
+  const std::vector<IterationStats>& iterations() const { return dim == 2 ? a2->iterations : a3->iterations; }
+  const std::string& stop_reason() const { return dim == 2 ? a2->stop_reason : a3->stop_reason; }
+  std::size_t vertices() const { return dim == 2 ? a2->hierarchy.vertex_count() : a3->hierarchy.vertex_count(); }
+  std::size_t leaves() const { return dim == 2 ? a2->hierarchy.leaves().size() : a3->hierarchy.leaves().size(); }
+  int levels() const { return (dim == 2 ? a2->hierarchy.max_level() : a3->hierarchy.max_level()) + 1; }
+};
+
+/// Runs the adaptive approximation on `grid` (iso values drive iso-aware refinement).
+/// Throws mlfe::Error for unusable grids (fewer than 2 samples along an axis) or options.
+Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values);
+
+/// Loads a hierarchy file as a Built (values required).
+Built built_from_file(const std::string& path);
+
+/// Writes the hierarchy (.mlfeh) with provenance.
+void write_built(const std::string& path, const Built& b, const nlohmann::json& provenance);
+
+/// The JSON report of a build (input, dims, voxels, vertices, elements, levels, iterations,
+/// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
+nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b);
+
+/// Writes JSON atomically.
+void write_json(const std::string& path, const nlohmann::json& j);
+
+/// Peak resident set size of this process in MiB.
+double peak_rss_mb();
+
+/// Parses "80,150" into numbers; throws mlfe::Error on bad input.
+std::vector<double> parse_values(const std::string& text, const std::string& what);
+
+struct AssetParams {
+  std::string iso;               ///< comma-separated iso-values (3D)
+  double tolerance = 0;          ///< mm; 0: a tenth of the smallest voxel spacing
+  bool no_draco = false;
+  bool quantize = false;
+  int lod = 0;                   ///< coarser levels to add to glTF
+  std::size_t decimate = 0;      ///< triangle budget per surface (OpenMesh quadric decimation)
+  bool normals_toward_higher = false;
+  double z_scale = 1.0;          ///< 2D height fields: height per data unit
+  int level = -1;                ///< extract on this level (-1 finest)
+};
+void add_asset_options(CLI::App* cmd, AssetParams& p);
+
+/// Extracts the surfaces of `b` and writes them to `out` by extension (.glb .gltf .drc .ply
+/// .obj .stl .off). Returns a JSON summary (triangles per surface, bytes, seconds).
+nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
+                            const nlohmann::json& provenance);
+
+}  // namespace mlfe::cli

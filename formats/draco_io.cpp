@@ -1,0 +1,317 @@
+#include "formats/draco_io.h"
+
+#include <draco/compression/decode.h>
+#include <draco/compression/encode.h>
+#include <draco/compression/expert_encode.h>
+#include <draco/mesh/mesh.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <memory>
+#include <unordered_map>
+
+#include "core/error.h"
+#include "formats/atomic_file.h"
+
+namespace mlfe {
+namespace {
+
+constexpr const char* kEncodeWhat = "Draco encoding";
+
+bool finite3(const std::array<float, 3>& p) {
+  return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+}
+
+void check_options(const DracoOptions& o) {
+  if (!(o.tolerance > 0) || !std::isfinite(o.tolerance))
+    throw Error(std::string(kEncodeWhat) + ": tolerance must be a positive number");
+  if (o.normal_bits < 1 || o.normal_bits > 30)
+    throw Error(std::string(kEncodeWhat) + ": normal_bits must be in [1, 30]");
+  if (o.speed < 0 || o.speed > 10) throw Error(std::string(kEncodeWhat) + ": speed must be in [0, 10]");
+  if (!std::isfinite(o.box_range) || !finite3(o.box_min))
+    throw Error(std::string(kEncodeWhat) + ": quantization box is not finite");
+}
+
+// Validates the input and drops degenerate triangles (see the header for why).
+TriangleMesh cleaned_copy(const TriangleMesh& mesh) {
+  const std::size_t n = mesh.positions.size();
+  if (!mesh.normals.empty() && mesh.normals.size() != n)
+    throw Error(std::string(kEncodeWhat) + ": " + std::to_string(mesh.normals.size()) + " normals for " +
+                std::to_string(n) + " positions");
+  for (const auto& p : mesh.positions)
+    if (!finite3(p)) throw Error(std::string(kEncodeWhat) + ": non-finite vertex position");
+  for (const auto& v : mesh.normals)
+    if (!finite3(v)) throw Error(std::string(kEncodeWhat) + ": non-finite vertex normal");
+  if (n > std::numeric_limits<std::int32_t>::max())
+    throw Error(std::string(kEncodeWhat) + ": too many vertices");
+  TriangleMesh out;
+  out.positions = mesh.positions;
+  out.normals = mesh.normals;
+  out.triangles.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    if (t[0] >= n || t[1] >= n || t[2] >= n)
+      throw Error(std::string(kEncodeWhat) + ": triangle index out of range");
+    const auto& a = mesh.positions[t[0]];
+    const auto& b = mesh.positions[t[1]];
+    const auto& c = mesh.positions[t[2]];
+    if (a == b || b == c || a == c) continue;
+    out.triangles.push_back(t);
+  }
+  return out;
+}
+
+// Positions within `tol` per coordinate (Chebyshev distance), the metric of quantization error.
+bool near(const std::array<float, 3>& a, const std::array<float, 3>& b, double tol) {
+  for (int k = 0; k < 3; ++k)
+    if (std::fabs(double(a[k]) - double(b[k])) > tol) return false;
+  return true;
+}
+
+// Checks that every decoded triangle matches an input triangle corner by corner (same cyclic
+// order, i.e. same orientation) within `tol`. Vertex identities are lost in Draco, so the match
+// goes through a uniform hash grid over input positions with cells of size `tol`.
+void verify_decoded(const TriangleMesh& input, const TriangleMesh& decoded, double tol) {
+  if (decoded.triangles.size() != input.triangles.size())
+    throw Error(std::string(kEncodeWhat) + ": verification failed: decoded " +
+                std::to_string(decoded.triangles.size()) + " triangles instead of " +
+                std::to_string(input.triangles.size()));
+  if (input.triangles.empty()) return;
+
+  double max_abs = 0;
+  for (const auto& p : input.positions)
+    for (float c : p) max_abs = std::max(max_abs, double(std::fabs(c)));
+  // Cells of 4*tol: a query box [d-tol, d+tol] touches 1.5 cells per axis on average, and a
+  // cell rarely holds more than one vertex because tolerances are far below edge lengths.
+  // The floor of 2^-50 of the extent keeps cell indices exact in a double.
+  const double cell = std::max(4.0 * tol, max_abs / double(std::int64_t(1) << 50));
+  auto cell_of = [&](double c) { return std::int64_t(std::floor(c / cell)); };
+  auto key_of = [](std::int64_t x, std::int64_t y, std::int64_t z) {
+    // Distinct cells may share a key; that only adds candidates, each checked exactly below.
+    std::uint64_t h = std::uint64_t(x) * 0x9E3779B97F4A7C15ull;
+    h ^= std::uint64_t(y) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
+    h ^= std::uint64_t(z) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
+    return h;
+  };
+
+  // Incident triangles per input vertex (CSR).
+  const std::size_t n = input.positions.size();
+  std::vector<std::uint32_t> first(n + 1, 0);
+  for (const auto& t : input.triangles)
+    for (auto v : t) ++first[v + 1];
+  for (std::size_t i = 0; i < n; ++i) first[i + 1] += first[i];
+  std::vector<std::uint32_t> incident(first[n]);
+  {
+    std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
+    for (std::uint32_t f = 0; f < input.triangles.size(); ++f)
+      for (auto v : input.triangles[f]) incident[fill[v]++] = f;
+  }
+  // Grid of referenced vertices: (key, vertex) sorted by key, and key -> [begin, end).
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> cells;
+  cells.reserve(n);
+  for (std::uint32_t v = 0; v < n; ++v) {
+    if (first[v] == first[v + 1]) continue;
+    const auto& p = input.positions[v];
+    cells.emplace_back(key_of(cell_of(p[0]), cell_of(p[1]), cell_of(p[2])), v);
+  }
+  std::sort(cells.begin(), cells.end());
+  std::unordered_map<std::uint64_t, std::pair<std::uint32_t, std::uint32_t>> grid;
+  grid.reserve(cells.size());
+  for (std::uint32_t i = 0; i < cells.size();) {
+    std::uint32_t j = i;
+    while (j < cells.size() && cells[j].first == cells[i].first) ++j;
+    grid.emplace(cells[i].first, std::make_pair(i, j));
+    i = j;
+  }
+
+  for (std::size_t f = 0; f < decoded.triangles.size(); ++f) {
+    const auto& dt = decoded.triangles[f];
+    const auto& d0 = decoded.positions[dt[0]];
+    const auto& d1 = decoded.positions[dt[1]];
+    const auto& d2 = decoded.positions[dt[2]];
+    std::int64_t lo[3], hi[3];
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = cell_of(double(d0[k]) - tol);
+      hi[k] = cell_of(double(d0[k]) + tol);
+    }
+    bool found = false;
+    for (std::int64_t x = lo[0]; x <= hi[0] && !found; ++x)
+      for (std::int64_t y = lo[1]; y <= hi[1] && !found; ++y)
+        for (std::int64_t z = lo[2]; z <= hi[2] && !found; ++z) {
+          auto it = grid.find(key_of(x, y, z));
+          if (it == grid.end()) continue;
+          for (std::uint32_t c = it->second.first; c < it->second.second && !found; ++c) {
+            const std::uint32_t v = cells[c].second;
+            if (!near(input.positions[v], d0, tol)) continue;
+            for (std::uint32_t i = first[v]; i < first[v + 1] && !found; ++i) {
+              const auto& t = input.triangles[incident[i]];
+              const int k = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+              found = near(input.positions[t[(k + 1) % 3]], d1, tol) &&
+                      near(input.positions[t[(k + 2) % 3]], d2, tol);
+            }
+          }
+        }
+    if (!found)
+      throw Error(std::string(kEncodeWhat) + ": verification failed: decoded triangle " + std::to_string(f) +
+                  " is not within tolerance " + std::to_string(tol) + " of any input triangle");
+  }
+}
+
+}  // namespace
+
+int quantization_bits_for(double tolerance, double box_range) {
+  if (!(tolerance > 0) || !std::isfinite(tolerance) || !std::isfinite(box_range))
+    throw Error("Draco quantization: tolerance must be positive and the box range finite");
+  for (int bits = 8; bits <= 30; ++bits) {
+    const double max_error = box_range / double((std::uint64_t(1) << bits) - 1) / 2.0;
+    if (max_error <= tolerance) return bits;
+  }
+  return 30;
+}
+
+DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions& options) {
+  check_options(options);
+  const TriangleMesh input = cleaned_copy(mesh);
+  const std::size_t n = input.positions.size();
+  if (input.triangles.empty())
+    throw Error(std::string(kEncodeWhat) + ": the mesh has no (non-degenerate) triangles");
+
+  // Quantization box: the caller's shared box, or this mesh's own bounding cube.
+  std::array<float, 3> origin = options.box_min;
+  float range = options.box_range;
+  if (range > 0) {
+    for (const auto& p : input.positions)
+      for (int k = 0; k < 3; ++k) {
+        // The same float subtraction Draco performs, so "inside" here means inside there.
+        const float offset = p[k] - origin[k];
+        if (!(offset >= 0.0f && offset <= range))
+          throw Error(std::string(kEncodeWhat) + ": vertex position outside the quantization box");
+      }
+  } else {
+    std::array<float, 3> hi = input.positions[0];
+    origin = input.positions[0];
+    for (const auto& p : input.positions)
+      for (int k = 0; k < 3; ++k) {
+        origin[k] = std::min(origin[k], p[k]);
+        hi[k] = std::max(hi[k], p[k]);
+      }
+    range = 0;
+    for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - origin[k]);
+    if (!(range > 0)) range = 1.0f;  // cannot happen with a non-degenerate triangle; stay safe
+  }
+  const int bits = quantization_bits_for(options.tolerance, range);
+
+  draco::Mesh dm;
+  dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
+  draco::GeometryAttribute pos_att;
+  pos_att.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+  const int pos_id = dm.AddAttribute(pos_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
+  for (std::size_t i = 0; i < n; ++i)
+    dm.attribute(pos_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)), input.positions[i].data());
+  int nrm_id = -1;
+  if (!input.normals.empty()) {
+    draco::GeometryAttribute nrm_att;
+    nrm_att.Init(draco::GeometryAttribute::NORMAL, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+    nrm_id = dm.AddAttribute(nrm_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
+    for (std::size_t i = 0; i < n; ++i)
+      dm.attribute(nrm_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)), input.normals[i].data());
+  }
+  for (const auto& t : input.triangles)
+    dm.AddFace({draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
+
+  draco::ExpertEncoder encoder(dm);
+  encoder.SetAttributeExplicitQuantization(pos_id, bits, 3, origin.data(), range);
+  if (nrm_id >= 0) encoder.SetAttributeQuantization(nrm_id, options.normal_bits);
+  encoder.SetSpeedOptions(options.speed, options.speed);
+  draco::EncoderBuffer buffer;
+  const draco::Status status = encoder.EncodeToBuffer(&buffer);
+  if (!status.ok()) throw Error(std::string(kEncodeWhat) + ": " + status.error_msg_string());
+
+  DracoEncoding result;
+  result.bytes.assign(buffer.data(), buffer.data() + buffer.size());
+  result.position_unique_id = int(dm.attribute(pos_id)->unique_id());
+  result.normal_unique_id = nrm_id >= 0 ? int(dm.attribute(nrm_id)->unique_id()) : -1;
+  result.quantization_bits = bits;
+  result.decoded = decode_draco(result.bytes.data(), result.bytes.size(), kEncodeWhat);
+
+  // Slack for float arithmetic in Draco's (de)quantization: a few ulps of the coordinates.
+  const double ulp_slack =
+      8.0 * std::numeric_limits<float>::epsilon() *
+      (double(range) + std::max({std::fabs(origin[0]), std::fabs(origin[1]), std::fabs(origin[2])}));
+  verify_decoded(input, result.decoded, options.tolerance + ulp_slack);
+  return result;
+}
+
+std::vector<char> encode_draco(const TriangleMesh& mesh, const DracoOptions& options) {
+  return encode_draco_verified(mesh, options).bytes;
+}
+
+TriangleMesh decode_draco(const char* data, std::size_t size, const std::string& what) {
+  if (data == nullptr || size == 0) throw Error(what + ": empty Draco data");
+  draco::DecoderBuffer buffer;
+  buffer.Init(data, size);
+  auto type = draco::Decoder::GetEncodedGeometryType(&buffer);
+  if (!type.ok()) throw Error(what + ": not Draco data (" + type.status().error_msg_string() + ")");
+  if (type.value() != draco::TRIANGULAR_MESH) throw Error(what + ": Draco data is not a triangle mesh");
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  if (!decoded.ok()) throw Error(what + ": corrupt Draco data (" + decoded.status().error_msg_string() + ")");
+  const draco::Mesh& dm = *decoded.value();
+
+  const std::size_t n = dm.num_points();
+  // Reads one attribute per point, refusing maps that point outside the value array (corrupt
+  // input must not make us read out of bounds).
+  auto read_vec3 = [&](const draco::PointAttribute* att, const char* name) {
+    std::vector<std::array<float, 3>> out(n);
+    if (att->num_components() != 3) throw Error(what + ": Draco " + name + " attribute is not 3-component");
+    if (!att->is_mapping_identity() && att->indices_map_size() < n)
+      throw Error(what + ": corrupt Draco data (" + name + " map too short)");
+    for (std::size_t i = 0; i < n; ++i) {
+      const draco::AttributeValueIndex avi = att->mapped_index(draco::PointIndex(std::uint32_t(i)));
+      if (avi.value() >= att->size() || !att->ConvertValue<float>(avi, 3, out[i].data()))
+        throw Error(what + ": corrupt Draco data (" + name + " index out of range)");
+      if (!finite3(out[i])) throw Error(what + ": corrupt Draco data (non-finite " + name + ")");
+    }
+    return out;
+  };
+
+  const draco::PointAttribute* pos = dm.GetNamedAttribute(draco::GeometryAttribute::POSITION);
+  if (pos == nullptr) throw Error(what + ": Draco mesh has no positions");
+  TriangleMesh mesh;
+  mesh.positions = read_vec3(pos, "POSITION");
+  if (const draco::PointAttribute* nrm = dm.GetNamedAttribute(draco::GeometryAttribute::NORMAL)) {
+    if (nrm->num_components() == 3) mesh.normals = read_vec3(nrm, "NORMAL");
+  }
+  mesh.triangles.resize(dm.num_faces());
+  for (std::uint32_t f = 0; f < dm.num_faces(); ++f) {
+    const auto& face = dm.face(draco::FaceIndex(f));
+    for (int k = 0; k < 3; ++k) {
+      if (face[k].value() >= n) throw Error(what + ": corrupt Draco data (face index out of range)");
+      mesh.triangles[f][k] = face[k].value();
+    }
+  }
+  return mesh;
+}
+
+void write_draco_file(const std::string& path, const TriangleMesh& mesh, const DracoOptions& options) {
+  std::vector<char> bytes;
+  try {
+    bytes = encode_draco(mesh, options);
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  }
+  write_file_atomically(path, [&](std::ostream& out) { out.write(bytes.data(), std::streamsize(bytes.size())); });
+}
+
+TriangleMesh read_draco_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(path + ": cannot open file");
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw Error(path + ": read failed");
+  return decode_draco(bytes.data(), bytes.size(), path);
+}
+
+}  // namespace mlfe

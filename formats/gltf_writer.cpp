@@ -1,0 +1,461 @@
+#include "formats/gltf_writer.h"
+
+// Debian's libtinygltf-dev ships tinygltf as a compiled shared library (libtinygltf.so, linked
+// through TinyGLTF::TinyGLTF), so this file only includes the declarations. Defining
+// TINYGLTF_IMPLEMENTATION here as well would put a second, differently configured copy of every
+// tinygltf symbol into the process (an ODR violation resolved by symbol interposition).
+#include <tiny_gltf.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "core/error.h"
+#include "formats/atomic_file.h"
+#include "formats/draco_io.h"
+
+namespace mlfe {
+namespace {
+
+using Vec3 = std::array<float, 3>;
+
+enum class Encoding { kFloat, kDraco, kQuantized };
+
+std::string lower_extension(const std::string& path) {
+  const auto slash = path.find_last_of('/');
+  const auto dot = path.find_last_of('.');
+  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
+  std::string ext = path.substr(dot);
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext;
+}
+
+tinygltf::Value to_value(const nlohmann::json& j) {
+  switch (j.type()) {
+    case nlohmann::json::value_t::object: {
+      tinygltf::Value::Object o;
+      for (auto it = j.begin(); it != j.end(); ++it) o[it.key()] = to_value(it.value());
+      return tinygltf::Value(std::move(o));
+    }
+    case nlohmann::json::value_t::array: {
+      tinygltf::Value::Array a;
+      for (const auto& e : j) a.push_back(to_value(e));
+      return tinygltf::Value(std::move(a));
+    }
+    case nlohmann::json::value_t::string:
+      return tinygltf::Value(j.get<std::string>());
+    case nlohmann::json::value_t::boolean:
+      return tinygltf::Value(j.get<bool>());
+    case nlohmann::json::value_t::number_integer:
+    case nlohmann::json::value_t::number_unsigned: {
+      // tinygltf integers are 32-bit; larger ones keep their value as a double.
+      const double d = j.get<double>();
+      if (d >= std::numeric_limits<int>::min() && d <= std::numeric_limits<int>::max())
+        return tinygltf::Value(j.get<int>());
+      return tinygltf::Value(d);
+    }
+    case nlohmann::json::value_t::number_float:
+      return tinygltf::Value(j.get<double>());
+    default:
+      return tinygltf::Value();
+  }
+}
+
+// A surface level converted to glTF metres with cleaned triangles and unit normals.
+struct Level {
+  std::string node_name;
+  std::string mesh_name;
+  int lod = 0;
+  TriangleMesh mesh;
+};
+
+Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std::string& path) {
+  const std::size_t n = in.positions.size();
+  if (!in.normals.empty() && in.normals.size() != n)
+    throw Error(path + ": mesh has " + std::to_string(in.normals.size()) + " normals for " + std::to_string(n) +
+                " positions");
+  if (n > std::numeric_limits<std::uint32_t>::max()) throw Error(path + ": mesh too large");
+  Level level;
+  TriangleMesh& out = level.mesh;
+  out.positions.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto& p = in.positions[i];
+    for (int r = 0; r < 3; ++r) {
+      const double v = m[3 * r] * p[0] + m[3 * r + 1] * p[1] + m[3 * r + 2] * p[2];
+      out.positions[i][r] = float(v);
+      if (!std::isfinite(out.positions[i][r])) throw Error(path + ": non-finite vertex position");
+    }
+  }
+  // Degenerate triangles are invisible, and Draco drops them anyway; dropping them everywhere
+  // keeps the three encodings describing the same triangles.
+  out.triangles.reserve(in.triangles.size());
+  for (const auto& t : in.triangles) {
+    if (t[0] >= n || t[1] >= n || t[2] >= n) throw Error(path + ": triangle index out of range");
+    const auto &a = out.positions[t[0]], &b = out.positions[t[1]], &c = out.positions[t[2]];
+    if (a == b || b == c || a == c) continue;
+    out.triangles.push_back(t);
+  }
+
+  // Area-weighted face normals: the fallback for missing or zero normals.
+  std::vector<std::array<double, 3>> face_sum(n, {0.0, 0.0, 0.0});
+  for (const auto& t : out.triangles) {
+    const auto &a = out.positions[t[0]], &b = out.positions[t[1]], &c = out.positions[t[2]];
+    const double u[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
+    const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
+    const double cr[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    for (auto vi : t)
+      for (int k = 0; k < 3; ++k) face_sum[vi][k] += cr[k];
+  }
+  // The rotation part (1000*m) maps normals; it is orthonormal, so no inverse transpose needed.
+  out.normals.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    std::array<double, 3> v{0.0, 0.0, 0.0};
+    if (!in.normals.empty()) {
+      const auto& q = in.normals[i];
+      for (int r = 0; r < 3; ++r) v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
+    }
+    double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(len > 1e-12) || !std::isfinite(len)) {
+      v = face_sum[i];
+      len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    }
+    if (!(len > 0) || !std::isfinite(len)) {
+      v = {0.0, 1.0, 0.0};  // unreferenced or fully degenerate vertex: any unit vector is valid
+      len = 1.0;
+    }
+    for (int k = 0; k < 3; ++k) out.normals[i][k] = float(v[k] / len);
+  }
+  return level;
+}
+
+// Appends bytes to buffer 0 at a 4-byte aligned offset and returns a new bufferView index.
+int add_buffer_view(tinygltf::Model& model, const void* data, std::size_t size, int target, int stride = 0) {
+  auto& buf = model.buffers[0].data;
+  buf.resize((buf.size() + 3) & ~std::size_t(3), 0);
+  tinygltf::BufferView view;
+  view.buffer = 0;
+  view.byteOffset = buf.size();
+  view.byteLength = size;
+  view.target = target;
+  view.byteStride = std::size_t(stride);
+  const auto* bytes = static_cast<const unsigned char*>(data);
+  buf.insert(buf.end(), bytes, bytes + size);
+  model.bufferViews.push_back(view);
+  return int(model.bufferViews.size() - 1);
+}
+
+int add_accessor(tinygltf::Model& model, int view, int component, int type, std::size_t count, bool normalized,
+                 std::vector<double> min = {}, std::vector<double> max = {}) {
+  tinygltf::Accessor a;
+  a.bufferView = view;
+  a.byteOffset = 0;
+  a.componentType = component;
+  a.type = type;
+  a.count = count;
+  a.normalized = normalized;
+  a.minValues = std::move(min);
+  a.maxValues = std::move(max);
+  model.accessors.push_back(a);
+  return int(model.accessors.size() - 1);
+}
+
+void bounds(const std::vector<Vec3>& ps, std::vector<double>& lo, std::vector<double>& hi) {
+  lo.assign(3, std::numeric_limits<double>::infinity());
+  hi.assign(3, -std::numeric_limits<double>::infinity());
+  for (const auto& p : ps)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], double(p[k]));
+      hi[k] = std::max(hi[k], double(p[k]));
+    }
+}
+
+int index_component_for(std::size_t vertex_count) {
+  // 65535 is the primitive-restart value for 16-bit indices, so it must not occur as an index.
+  return vertex_count <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+}
+
+int add_indices(tinygltf::Model& model, const TriangleMesh& mesh, bool with_view) {
+  const int component = index_component_for(mesh.positions.size());
+  const std::size_t count = mesh.triangles.size() * 3;
+  int view = -1;
+  if (with_view) {
+    if (component == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) {
+      std::vector<std::uint16_t> idx;
+      idx.reserve(count);
+      for (const auto& t : mesh.triangles)
+        for (auto v : t) idx.push_back(std::uint16_t(v));
+      view = add_buffer_view(model, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+    } else {
+      view = add_buffer_view(model, mesh.triangles.data(), count * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+    }
+  }
+  return add_accessor(model, view, component, TINYGLTF_TYPE_SCALAR, count, false);
+}
+
+// Scene-wide quantization box in glTF metres (cube; see DracoOptions).
+struct SceneBox {
+  std::array<float, 3> min{0, 0, 0};
+  float range = 0;
+};
+
+struct Writer {
+  const std::string& path;
+  const GltfOptions& options;
+  Encoding encoding;
+  SceneBox box;
+  tinygltf::Model model;
+
+  int add_mesh(const Level& level, int material) {
+    tinygltf::Primitive prim;
+    prim.material = material;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    const TriangleMesh& mesh = level.mesh;
+    if (encoding == Encoding::kDraco) {
+      DracoOptions d;
+      d.tolerance = options.tolerance_mm * 1e-3;
+      d.box_min = box.min;
+      d.box_range = box.range;
+      DracoEncoding enc;
+      try {
+        enc = encode_draco_verified(mesh, d);
+      } catch (const Error& e) {
+        throw Error(path + ": " + level.mesh_name + ": " + e.what());
+      }
+      const TriangleMesh& dec = enc.decoded;
+      const int view = add_buffer_view(model, enc.bytes.data(), enc.bytes.size(), 0);
+      std::vector<double> lo, hi;
+      bounds(dec.positions, lo, hi);
+      prim.attributes["POSITION"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
+                                                 dec.positions.size(), false, lo, hi);
+      prim.attributes["NORMAL"] =
+          add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, dec.positions.size(), false);
+      prim.indices = add_indices(model, dec, false);
+      tinygltf::Value::Object attributes;
+      attributes["POSITION"] = tinygltf::Value(enc.position_unique_id);
+      attributes["NORMAL"] = tinygltf::Value(enc.normal_unique_id);
+      tinygltf::Value::Object ext;
+      ext["bufferView"] = tinygltf::Value(view);
+      ext["attributes"] = tinygltf::Value(std::move(attributes));
+      prim.extensions["KHR_draco_mesh_compression"] = tinygltf::Value(std::move(ext));
+    } else if (encoding == Encoding::kQuantized) {
+      // Normalized SHORT positions relative to the scene box; the root node's translation and
+      // uniform scale map them back to metres (uniform, so normals need no correction).
+      const double half = 0.5 * double(box.range);
+      std::vector<std::int16_t> pos(4 * mesh.positions.size(), 0), nrm(4 * mesh.positions.size(), 0);
+      std::vector<double> lo(3, 32767), hi(3, -32767);
+      for (std::size_t i = 0; i < mesh.positions.size(); ++i)
+        for (int k = 0; k < 3; ++k) {
+          const double center = double(box.min[k]) + half;
+          const double q = std::clamp(std::round((double(mesh.positions[i][k]) - center) / half * 32767.0), -32767.0,
+                                      32767.0);
+          pos[4 * i + k] = std::int16_t(q);
+          lo[k] = std::min(lo[k], q);
+          hi[k] = std::max(hi[k], q);
+          nrm[4 * i + k] = std::int16_t(std::round(std::clamp(double(mesh.normals[i][k]), -1.0, 1.0) * 32767.0));
+        }
+      // Vertex attribute strides must be multiples of 4: pad each SHORT VEC3 to 8 bytes.
+      const int pos_view = add_buffer_view(model, pos.data(), pos.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
+      const int nrm_view = add_buffer_view(model, nrm.data(), nrm.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
+      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_TYPE_VEC3,
+                                                 mesh.positions.size(), true, lo, hi);
+      prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_TYPE_VEC3,
+                                               mesh.positions.size(), true);
+      prim.indices = add_indices(model, mesh, true);
+    } else {
+      std::vector<double> lo, hi;
+      bounds(mesh.positions, lo, hi);
+      const int pos_view = add_buffer_view(model, mesh.positions.data(), mesh.positions.size() * 12,
+                                           TINYGLTF_TARGET_ARRAY_BUFFER);
+      const int nrm_view =
+          add_buffer_view(model, mesh.normals.data(), mesh.normals.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
+      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
+                                                 mesh.positions.size(), false, lo, hi);
+      prim.attributes["NORMAL"] =
+          add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, mesh.normals.size(), false);
+      prim.indices = add_indices(model, mesh, true);
+    }
+    tinygltf::Mesh m;
+    m.name = level.mesh_name;
+    m.primitives.push_back(prim);
+    model.meshes.push_back(m);
+    return int(model.meshes.size() - 1);
+  }
+};
+
+void add_extension(tinygltf::Model& model, const std::string& name, bool required) {
+  model.extensionsUsed.push_back(name);
+  if (required) model.extensionsRequired.push_back(name);
+}
+
+}  // namespace
+
+std::array<double, 9> physical_to_gltf_matrix(const std::string& space) {
+  // Asset right = -X, up = +Y, front = +Z (glTF 2.0 spec, "Coordinate System and Units").
+  if (space.empty() || space == "RAS") return {-1e-3, 0, 0, 0, 0, 1e-3, 0, 1e-3, 0};
+  if (space == "LPS") return {1e-3, 0, 0, 0, 0, 1e-3, 0, -1e-3, 0};
+  throw Error("glTF export: unknown anatomical space '" + space + "' (expected RAS, LPS or empty)");
+}
+
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces, const GltfOptions& options) {
+  const std::string ext = lower_extension(path);
+  if (ext != ".glb" && ext != ".gltf") throw Error(path + ": glTF output needs a .glb or .gltf extension");
+  const bool binary = ext == ".glb";
+  std::array<double, 9> m;
+  try {
+    m = physical_to_gltf_matrix(options.space);
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  }
+  const Encoding encoding =
+      options.draco ? Encoding::kDraco : options.quantize ? Encoding::kQuantized : Encoding::kFloat;
+  if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
+    throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
+
+  // Convert every level first: the shared quantization box needs all of them.
+  std::vector<std::vector<Level>> levels(surfaces.size());
+  for (std::size_t s = 0; s < surfaces.size(); ++s) {
+    const GltfSurface& surface = surfaces[s];
+    const std::string node_name = fmt::format("iso {}", surface.iso_value);
+    const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
+    levels[s].push_back(convert(surface.mesh, m, path));
+    levels[s].back().node_name = node_name;
+    levels[s].back().mesh_name = mesh_name;
+    for (std::size_t k = 0; k < surface.lods.size(); ++k) {
+      levels[s].push_back(convert(surface.lods[k], m, path));
+      levels[s].back().lod = int(k + 1);
+      levels[s].back().node_name = fmt::format("{} lod {}", node_name, k + 1);
+      levels[s].back().mesh_name = fmt::format("{} lod {}", mesh_name, k + 1);
+    }
+  }
+
+  Writer w{path, options, encoding, {}, {}};
+  {
+    std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
+    bool any = false;
+    for (const auto& ls : levels)
+      for (const auto& l : ls)
+        for (const auto& t : l.mesh.triangles)
+          for (auto v : t) {
+            const auto& p = l.mesh.positions[v];
+            for (int k = 0; k < 3; ++k) {
+              lo[k] = any ? std::min(lo[k], p[k]) : p[k];
+              hi[k] = any ? std::max(hi[k], p[k]) : p[k];
+            }
+            any = true;
+          }
+    float range = 0;
+    for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - lo[k]);
+    w.box.min = lo;
+    w.box.range = range > 0 ? range : 1.0f;
+  }
+  if (encoding == Encoding::kQuantized) {
+    const double max_error = 0.5 * double(w.box.range) / 65534.0;
+    if (max_error > options.tolerance_mm * 1e-3)
+      throw Error(path + fmt::format(": 16-bit quantization error {} mm exceeds tolerance {} mm; use Draco",
+                                     max_error * 1e3, options.tolerance_mm));
+  }
+
+  tinygltf::Model& model = w.model;
+  model.asset.version = "2.0";
+  model.asset.generator = options.generator;
+  {
+    nlohmann::json extras = options.extras.is_object() ? options.extras : nlohmann::json::object();
+    if (!options.extras.is_object() && !options.extras.is_null()) extras["provenance"] = options.extras;
+    extras["mlfe"] = {
+        {"physical_to_gltf", std::vector<double>(m.begin(), m.end())},
+        {"input_space", options.space},
+        {"assumed_space", options.space.empty() ? "RAS" : options.space},
+        {"encoding", encoding == Encoding::kDraco ? "draco" : encoding == Encoding::kQuantized ? "quantized" : "float"},
+        {"tolerance_mm", options.tolerance_mm},
+    };
+    model.asset.extras = to_value(extras);
+  }
+  model.buffers.resize(1);
+
+  tinygltf::Scene scene;
+  scene.name = "mlfe";
+  int parent = -1;
+  if (encoding == Encoding::kQuantized) {
+    // Dequantization transform for every surface (normalized SHORT -> metres).
+    tinygltf::Node root;
+    root.name = "mlfe dequantize";
+    const double half = 0.5 * double(w.box.range);
+    root.translation = {double(w.box.min[0]) + half, double(w.box.min[1]) + half, double(w.box.min[2]) + half};
+    root.scale = {half, half, half};
+    model.nodes.push_back(root);
+    parent = 0;
+    scene.nodes.push_back(0);
+  }
+  bool any_lod = false;
+  for (std::size_t s = 0; s < surfaces.size(); ++s) {
+    tinygltf::Material mat;
+    mat.name = levels[s][0].mesh_name;
+    const auto& c = surfaces[s].color;
+    for (float x : c)
+      if (!(x >= 0.0f && x <= 1.0f)) throw Error(path + ": surface color components must be in [0, 1]");
+    // Via the shortest decimal form, so 0.9f is written as 0.9 rather than 0.8999999761581421.
+    auto shortest = [](float x) { return std::stod(fmt::format("{}", x)); };
+    mat.pbrMetallicRoughness.baseColorFactor = {shortest(c[0]), shortest(c[1]), shortest(c[2]), shortest(c[3])};
+    mat.pbrMetallicRoughness.metallicFactor = 0.0;  // tissue is a dielectric
+    mat.pbrMetallicRoughness.roughnessFactor = 0.6;
+    if (c[3] < 1.0f) {
+      mat.alphaMode = "BLEND";
+      mat.doubleSided = true;  // inner structures must stay visible through the back faces
+    }
+    model.materials.push_back(mat);
+    const int material = int(model.materials.size() - 1);
+
+    std::vector<int> lod_nodes;
+    int main_node = -1;
+    for (const Level& level : levels[s]) {
+      tinygltf::Node node;
+      node.name = level.node_name;
+      tinygltf::Value::Object extras;
+      extras["iso_value"] = tinygltf::Value(surfaces[s].iso_value);
+      extras["lod"] = tinygltf::Value(level.lod);
+      extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
+      node.extras = tinygltf::Value(std::move(extras));
+      if (!level.mesh.triangles.empty()) node.mesh = w.add_mesh(level, material);
+      model.nodes.push_back(node);
+      const int id = int(model.nodes.size() - 1);
+      if (level.lod == 0)
+        main_node = id;
+      else
+        lod_nodes.push_back(id);
+    }
+    if (!lod_nodes.empty()) {
+      // MSFT_lod: coarser levels are referenced from the full-resolution node and are not part
+      // of the scene, so viewers without LOD support show only the full surface.
+      tinygltf::Value::Array ids;
+      for (int id : lod_nodes) ids.push_back(tinygltf::Value(id));
+      tinygltf::Value::Object lod_ext;
+      lod_ext["ids"] = tinygltf::Value(std::move(ids));
+      model.nodes[main_node].extensions["MSFT_lod"] = tinygltf::Value(std::move(lod_ext));
+      any_lod = true;
+    }
+    if (parent >= 0)
+      model.nodes[parent].children.push_back(main_node);
+    else
+      scene.nodes.push_back(main_node);
+  }
+  // Only declared when a mesh uses them: a required extension that nothing uses is an error.
+  if (!model.meshes.empty() && encoding == Encoding::kDraco) add_extension(model, "KHR_draco_mesh_compression", true);
+  if (!model.meshes.empty() && encoding == Encoding::kQuantized) add_extension(model, "KHR_mesh_quantization", true);
+  if (any_lod) add_extension(model, "MSFT_lod", false);
+  model.scenes.push_back(scene);
+  model.defaultScene = 0;
+  if (model.buffers[0].data.empty()) model.buffers.clear();  // a buffer must not be empty
+
+  write_file_atomically(path, [&](std::ostream& out) {
+    tinygltf::TinyGLTF gltf;
+    if (!gltf.WriteGltfSceneToStream(&model, out, /*prettyPrint=*/!binary, /*writeBinary=*/binary))
+      throw Error(path + ": glTF serialization failed");
+  });
+}
+
+}  // namespace mlfe

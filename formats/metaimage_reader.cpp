@@ -1,0 +1,250 @@
+#include "formats/metaimage_reader.h"
+
+#include <fmt/format.h>
+#include <zlib.h>
+
+#include <cctype>
+#include <cmath>
+#include <algorithm>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <vector>
+
+#include "formats/raw_reader.h"
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+using namespace volume_detail;
+
+namespace {
+
+std::string trim(const std::string& s) {
+  std::size_t b = 0, e = s.size();
+  while (b < e && std::isspace(static_cast<unsigned char>(s[b]))) ++b;
+  while (e > b && std::isspace(static_cast<unsigned char>(s[e - 1]))) --e;
+  return s.substr(b, e - b);
+}
+
+std::string lower(std::string s) {
+  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::vector<double> numbers(const std::string& path, const std::string& key, const std::string& value,
+                            std::size_t count) {
+  std::vector<double> v;
+  const char* p = value.c_str();
+  while (*p) {
+    while (*p && std::isspace(static_cast<unsigned char>(*p))) ++p;
+    if (!*p) break;
+    char* end = nullptr;
+    double d = std::strtod(p, &end);
+    if (end == p || !std::isfinite(d)) fail(path, fmt::format("MetaImage {} has a bad number in \"{}\"", key, value));
+    v.push_back(d);
+    p = end;
+  }
+  if (v.size() != count) fail(path, fmt::format("MetaImage {} needs {} numbers, has {}", key, count, v.size()));
+  return v;
+}
+
+bool truthy(const std::string& v) {
+  std::string l = lower(v);
+  return l == "true" || l == "1" || l == "yes";
+}
+
+std::optional<ScalarType> met_type(const std::string& t) {
+  if (t == "MET_UCHAR") return ScalarType::U8;
+  if (t == "MET_CHAR") return ScalarType::I8;
+  if (t == "MET_USHORT") return ScalarType::U16;
+  if (t == "MET_SHORT") return ScalarType::I16;
+  if (t == "MET_UINT") return ScalarType::U32;
+  if (t == "MET_INT") return ScalarType::I32;
+  if (t == "MET_FLOAT") return ScalarType::F32;
+  if (t == "MET_DOUBLE") return ScalarType::F64;
+  return std::nullopt;
+}
+
+}  // namespace
+
+ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
+  file_size(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open");
+  // Header: "Key = Value" lines, ended by ElementDataFile.
+  std::map<std::string, std::string> h;
+  std::string line;
+  bool ended = false;
+  std::uint64_t header_end = 0;
+  for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
+    if (line.size() > 65536) fail(path, "MetaImage header line is too long");
+    auto eq = line.find('=');
+    if (eq == std::string::npos) {
+      if (trim(line).empty()) continue;
+      fail(path, fmt::format("bad MetaImage header line {}: no '='", n + 1));
+    }
+    std::string key = trim(line.substr(0, eq));
+    h[key] = trim(line.substr(eq + 1));
+    if (key == "ElementDataFile") {
+      ended = true;
+      header_end = static_cast<std::uint64_t>(in.tellg());
+      break;
+    }
+  }
+  if (!ended) fail(path, "not a MetaImage header or truncated (no ElementDataFile line)");
+  auto get = [&](const char* key) -> const std::string* {
+    auto it = h.find(key);
+    return it == h.end() ? nullptr : &it->second;
+  };
+  if (auto ot = get("ObjectType"); ot && *ot != "Image") fail(path, "MetaImage ObjectType is " + *ot + ", not Image");
+  const std::string* nd = get("NDims");
+  if (!nd) fail(path, "MetaImage header has no NDims");
+  const int ndims = nd->size() == 1 && (*nd)[0] >= '1' && (*nd)[0] <= '9' ? (*nd)[0] - '0' : -1;
+  if (ndims != 2 && ndims != 3) fail(path, "MetaImage NDims must be 2 or 3, not " + *nd);
+  const std::string* ds = get("DimSize");
+  if (!ds) fail(path, "MetaImage header has no DimSize");
+  auto dv = numbers(path, "DimSize", *ds, static_cast<std::size_t>(ndims));
+  std::array<std::int64_t, 3> dims{1, 1, 1};
+  for (int a = 0; a < ndims; ++a) {
+    if (dv[a] != std::floor(dv[a]) || dv[a] < 1 || dv[a] > 2147483647.0)
+      fail(path, fmt::format("MetaImage DimSize {} is not a positive integer", dv[a]));
+    dims[a] = static_cast<std::int64_t>(dv[a]);
+  }
+  const std::int64_t voxels = checked_voxel_count(path, dims);
+  const std::string* et = get("ElementType");
+  if (!et) fail(path, "MetaImage header has no ElementType");
+  auto type = met_type(*et);
+  if (!type) fail(path, "unsupported MetaImage ElementType " + *et);
+  if (auto ch = get("ElementNumberOfChannels"); ch && trim(*ch) != "1")
+    fail(path, "MetaImage with " + *ch + " channels is not supported (scalar images only)");
+  bool msb = false;
+  if (auto b = get("ElementByteOrderMSB")) msb = truthy(*b);
+  if (auto b = get("BinaryDataByteOrderMSB")) msb = truthy(*b);
+  if (auto b = get("BinaryData"); b && !truthy(*b)) fail(path, "ASCII MetaImage data (BinaryData = False) is not supported");
+  const bool compressed = get("CompressedData") && truthy(*get("CompressedData"));
+
+  ScalarGrid grid;
+  GridTransform& t = grid.transform;
+  const std::string* sp = get("ElementSpacing");
+  if (!sp) sp = get("ElementSize");
+  if (sp) {
+    auto s = numbers(path, "ElementSpacing", *sp, static_cast<std::size_t>(ndims));
+    for (int a = 0; a < ndims; ++a) t.spacing[a] = s[a];
+  }
+  for (const char* key : {"Offset", "Origin", "Position"}) {
+    if (auto o = get(key)) {
+      auto v = numbers(path, key, *o, static_cast<std::size_t>(ndims));
+      for (int a = 0; a < ndims; ++a) t.origin[a] = v[a];
+      break;
+    }
+  }
+  for (const char* key : {"TransformMatrix", "Rotation", "Orientation"}) {
+    if (auto m = get(key)) {
+      auto v = numbers(path, key, *m, static_cast<std::size_t>(ndims * ndims));
+      // ITK writes the direction of index axis a as the a-th group of NDims numbers.
+      std::array<std::array<double, 3>, 3> axes{};
+      axes[2] = {0, 0, 1};
+      for (int a = 0; a < ndims; ++a)
+        for (int r = 0; r < ndims; ++r) axes[a][r] = v[a * ndims + r] * t.spacing[a];
+      if (ndims == 2) axes[2][2] = t.spacing[2];
+      if (t.spacing[0] > 0 && t.spacing[1] > 0 && t.spacing[2] > 0) set_axes(path, t, axes);
+      break;
+    }
+  }
+  grid.space = "LPS";
+
+  // Data location.
+  const std::string edf = *get("ElementDataFile");
+  std::string data_file = path;
+  std::uint64_t offset = header_end;
+  if (edf != "LOCAL" && edf != "Local" && edf != "local") {
+    if (edf.empty() || edf.rfind("LIST", 0) == 0 || edf.find('%') != std::string::npos)
+      fail(path, "MetaImage ElementDataFile \"" + edf + "\" is not supported (LOCAL or one file)");
+    data_file = sibling_path(path, edf);
+    offset = 0;
+  }
+  const std::uint64_t dsize = file_size(data_file);
+  const int esize = scalar_type_size(*type);
+  const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
+  if (auto hs = get("HeaderSize")) {
+    char* end = nullptr;
+    long long v = std::strtoll(hs->c_str(), &end, 10);
+    if (end == hs->c_str() || v < -1) fail(path, "bad MetaImage HeaderSize " + *hs);
+    if (v == -1) {
+      if (compressed) fail(path, "HeaderSize = -1 cannot be used with compressed data");
+      if (dsize < bytes) fail(data_file, fmt::format("truncated: needs {} bytes of data, the file has {}", bytes, dsize));
+      offset = dsize - bytes;
+    } else if (data_file != path) {
+      offset = static_cast<std::uint64_t>(v);
+    } else if (__builtin_add_overflow(offset, static_cast<std::uint64_t>(v), &offset)) {
+      fail(path, "bad MetaImage HeaderSize");
+    }
+  }
+  const std::uint64_t avail = dsize > offset ? dsize - offset : 0;
+  std::uint64_t need = checked_bytes(path, voxels, 4);
+  grid.dims = dims;
+  grid.source_type = *type;
+  if (!compressed) {
+    if (avail < bytes)
+      fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}", dims[0],
+                                  dims[1], dims[2], *et, bytes, avail));
+    check_memory(path, need, opts, "the float32 grid");
+    allocate_values(grid);
+    std::ifstream din(data_file, std::ios::binary);
+    if (!din) fail(data_file, "cannot open");
+    din.seekg(static_cast<std::streamoff>(offset));
+    read_raw_values(data_file, din, *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
+    return grid;
+  }
+  // Compressed: a zlib stream that must inflate to exactly `bytes`.
+  if (__builtin_add_overflow(need, bytes, &need) || __builtin_add_overflow(need, avail, &need)) need = UINT64_MAX;
+  check_memory(path, need, opts, "the compressed data, the voxels and the float32 grid");
+  std::string packed(static_cast<std::size_t>(avail), '\0');
+  {
+    std::ifstream din(data_file, std::ios::binary);
+    din.seekg(static_cast<std::streamoff>(offset));
+    din.read(packed.data(), static_cast<std::streamsize>(avail));
+    if (static_cast<std::uint64_t>(din.gcount()) != avail) fail(data_file, "read error");
+  }
+  std::vector<unsigned char> raw(static_cast<std::size_t>(bytes));
+  z_stream zs{};
+  if (inflateInit(&zs) != Z_OK) fail(path, "zlib initialisation failed");
+  std::uint64_t in_pos = 0, out_done = 0;
+  int rc = Z_OK;
+  bool overflow = false;
+  // zlib counts in 32-bit units; feed it in pieces so data over 4 GB works.
+  for (;;) {
+    const uInt ai = static_cast<uInt>(std::min<std::uint64_t>(avail - in_pos, 1u << 30));
+    const uInt ao = static_cast<uInt>(std::min<std::uint64_t>(bytes - out_done, 1u << 30));
+    unsigned char extra = 0;
+    zs.next_in = reinterpret_cast<Bytef*>(packed.data()) + in_pos;
+    zs.avail_in = ai;
+    zs.next_out = ao ? raw.data() + out_done : &extra;  // all voxels there: the stream must end
+    zs.avail_out = ao ? ao : 1;
+    rc = inflate(&zs, Z_NO_FLUSH);
+    const uInt used = ai - zs.avail_in;
+    const uInt made = (ao ? ao : 1) - zs.avail_out;
+    in_pos += used;
+    if (ao == 0 && made > 0) overflow = true;
+    if (ao) out_done += made;
+    if (rc == Z_STREAM_END || overflow) break;
+    if (rc != Z_OK && rc != Z_BUF_ERROR) break;
+    if (used == 0 && made == 0) break;  // no progress: input exhausted
+  }
+  std::string zmsg = zs.msg ? zs.msg : "";
+  inflateEnd(&zs);
+  if (overflow || (rc == Z_STREAM_END && out_done != bytes))
+    fail(path, fmt::format("compressed data does not inflate to the {} bytes of the dimensions", bytes));
+  if (rc != Z_STREAM_END) {
+    if (rc == Z_OK || rc == Z_BUF_ERROR)
+      fail(path, fmt::format("truncated compressed data ({} of {} bytes inflated)", out_done, bytes));
+    fail(path, "corrupt compressed data" + (zmsg.empty() ? std::string() : " (" + zmsg + ")"));
+  }
+  allocate_values(grid);
+  convert_to_float(raw.data(), *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
+  add_note(grid, "zlib-compressed MetaImage");
+  return grid;
+}
+
+}  // namespace mlfe

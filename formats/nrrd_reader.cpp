@@ -1,0 +1,229 @@
+#include "formats/nrrd_reader.h"
+
+#include <fmt/format.h>
+#include <teem/nrrd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <mutex>
+
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+using namespace volume_detail;
+
+namespace {
+
+// biff keeps its messages in global state, so all Teem calls are serialised.
+std::mutex& teem_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+std::string biff_message() {
+  char* err = biffGetDone(NRRD);
+  if (!err) return "unknown Teem error";
+  std::string all(err);
+  std::free(err);
+  // biff lists the outermost caller first; the last line is the root cause.
+  std::string last;
+  std::size_t start = 0;
+  while (start < all.size()) {
+    std::size_t end = all.find('\n', start);
+    if (end == std::string::npos) end = all.size();
+    std::string line = all.substr(start, end - start);
+    if (!line.empty()) last = line;
+    start = end + 1;
+  }
+  if (last.rfind("[nrrd] ", 0) == 0) last = last.substr(7);
+  auto colon = last.find(": ");  // drop the Teem function name
+  if (colon != std::string::npos && colon < 40 && last.find(' ') >= colon) last = last.substr(colon + 2);
+  return last;
+}
+
+struct NrrdDeleter {
+  void operator()(Nrrd* n) const { nrrdNuke(n); }
+};
+struct IoDeleter {
+  void operator()(NrrdIoState* n) const { nrrdIoStateNix(n); }
+};
+
+std::optional<ScalarType> teem_type(int t) {
+  switch (t) {
+    case nrrdTypeChar: return ScalarType::I8;
+    case nrrdTypeUChar: return ScalarType::U8;
+    case nrrdTypeShort: return ScalarType::I16;
+    case nrrdTypeUShort: return ScalarType::U16;
+    case nrrdTypeInt: return ScalarType::I32;
+    case nrrdTypeUInt: return ScalarType::U32;
+    case nrrdTypeFloat: return ScalarType::F32;
+    case nrrdTypeDouble: return ScalarType::F64;
+    default: return std::nullopt;
+  }
+}
+
+// Length of an attached header: up to and including the first empty line.
+std::optional<std::uint64_t> attached_header_length(const std::string& path) {
+  std::string head = read_prefix(path, 1 << 20);
+  std::size_t a = head.find("\n\n");
+  std::size_t b = head.find("\r\n\r\n");
+  if (a == std::string::npos && b == std::string::npos) return std::nullopt;
+  if (b != std::string::npos && (a == std::string::npos || b < a)) return b + 4;
+  return a + 2;
+}
+
+// Teem 1.12 formats some parse errors, quoting the offending header line, into a fixed
+// 1025-byte buffer with vsprintf; a long bad line overflows it and the process aborts
+// (found by fuzzing). Field lines of valid headers are short, so long ones are refused
+// here. Comments and "key:=value" lines are never quoted by Teem and may be long.
+void check_header_lines(const std::string& path) {
+  const std::string head = read_prefix(path, 1 << 20);
+  std::size_t start = 0;
+  int number = 0;
+  while (start < head.size()) {
+    std::size_t end = head.find('\n', start);
+    if (end == std::string::npos) end = head.size();
+    std::string line = head.substr(start, end - start);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    ++number;
+    if (line.empty()) break;  // end of the header
+    if (line[0] != '#' && line.find(":=") == std::string::npos && line.size() > 400)
+      fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (field lines are at most 400)", number,
+                             line.size()));
+    start = end + 1;
+  }
+}
+
+}  // namespace
+
+ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
+  const std::uint64_t fsize = file_size(path);
+  std::string magic = read_prefix(path, 8);
+  if (magic.rfind("NRRD000", 0) != 0) fail(path, "not a NRRD file (no NRRD000x magic)");
+  if (magic.size() < 8 || magic[7] < '1' || magic[7] > '5')
+    fail(path, "unsupported NRRD version " + magic.substr(0, 8));
+
+  check_header_lines(path);
+
+  std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;
+  std::unique_ptr<Nrrd, NrrdDeleter> header(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoDeleter> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  if (nrrdLoad(header.get(), path.c_str(), nio.get())) fail(path, "bad NRRD header: " + biff_message());
+
+  const unsigned dim = header->dim;
+  if (dim != 2 && dim != 3)
+    fail(path, fmt::format("NRRD has {} axes; only 2D height fields and 3D scalar volumes are supported", dim));
+  auto type = teem_type(header->type);
+  if (!type) fail(path, fmt::format("unsupported NRRD type {}", airEnumStr(nrrdType, header->type)));
+  std::array<std::int64_t, 3> dims{1, 1, 1};
+  for (unsigned a = 0; a < dim; ++a) {
+    std::size_t s = header->axis[a].size;
+    dims[a] = s > static_cast<std::size_t>(INT64_MAX) ? -1 : static_cast<std::int64_t>(s);
+  }
+  const std::int64_t voxels = checked_voxel_count(path, dims);
+  const int esize = scalar_type_size(*type);
+  const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
+
+  // Compare raw data with the file size before Teem allocates: Teem would allocate the full
+  // array first and only then find the file short.
+  const bool attached = nio->dataFNArr->len == 0 && !nio->dataFNFormat;
+  const std::string encoding = nio->encoding ? nio->encoding->name : "";
+  if (encoding == "raw" && nio->lineSkip == 0 && nio->byteSkip >= 0) {
+    std::string data_file = attached ? path : (nio->dataFNArr->len == 1 ? std::string(nio->dataFN[0]) : "");
+    if (!data_file.empty()) {
+      std::uint64_t avail = attached ? fsize : file_size(data_file);
+      std::uint64_t skip = static_cast<std::uint64_t>(nio->byteSkip);
+      if (attached) {
+        auto hl = attached_header_length(path);
+        skip += hl ? *hl : fsize;
+      }
+      avail = avail > skip ? avail - skip : 0;
+      if (avail < bytes)
+        fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}",
+                                    dims[0], dims[1], dims[2], scalar_type_name(*type), bytes, avail));
+    }
+  }
+  std::uint64_t need = 0;
+  if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
+  check_memory(path, need, opts, "the NRRD data and the float32 grid");
+
+  std::unique_ptr<Nrrd, NrrdDeleter> nrrd(nrrdNew());
+  if (nrrdLoad(nrrd.get(), path.c_str(), nullptr)) fail(path, biff_message());
+  if (nrrd->dim != dim || nrrd->type != header->type || !nrrd->data)
+    fail(path, "NRRD header changed between reads");
+  for (unsigned a = 0; a < dim; ++a)
+    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a]) fail(path, "NRRD header changed between reads");
+
+  ScalarGrid grid;
+  grid.dims = dims;
+  grid.source_type = *type;
+  allocate_values(grid);
+  convert_to_float(nrrd->data, *type, false, grid.values.data(), grid.values.size());
+
+  // Transform.
+  GridTransform& t = grid.transform;
+  const unsigned sdim = nrrd->spaceDim;
+  if (sdim > 0) {
+    if (sdim > 3) fail(path, fmt::format("space dimension {} is not supported (2 or 3)", sdim));
+    std::array<std::array<double, 3>, 3> axes{};
+    for (unsigned a = 0; a < dim; ++a) {
+      for (unsigned r = 0; r < sdim; ++r) {
+        double v = nrrd->axis[a].spaceDirection[r];
+        if (!std::isfinite(v)) fail(path, fmt::format("axis {} has no space direction", a));
+        axes[a][r] = v;
+      }
+    }
+    if (dim == 2) {
+      // A height field in 3D space: the unused third axis is the unit normal.
+      const auto& u = axes[0];
+      const auto& v = axes[1];
+      std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+      double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      if (len > 0) axes[2] = {n[0] / len, n[1] / len, n[2] / len};
+      else axes[2] = {0, 0, 1};
+    }
+    set_axes(path, t, axes);
+    for (unsigned r = 0; r < sdim; ++r) {
+      double o = nrrd->spaceOrigin[r];
+      t.origin[r] = std::isfinite(o) ? o : 0.0;
+    }
+    switch (nrrd->space) {
+      case nrrdSpaceRightAnteriorSuperior:
+      case nrrdSpaceRightAnteriorSuperiorTime: grid.space = "RAS"; break;
+      case nrrdSpaceLeftPosteriorSuperior:
+      case nrrdSpaceLeftPosteriorSuperiorTime:
+      case nrrdSpaceScannerXYZ: grid.space = "LPS"; break;
+      case nrrdSpaceLeftAnteriorSuperior:
+      case nrrdSpaceLeftAnteriorSuperiorTime:
+        for (int c = 0; c < 3; ++c) t.direction[c] = -t.direction[c];
+        t.origin[0] = -t.origin[0];
+        grid.space = "RAS";
+        add_note(grid, "space left-anterior-superior converted to RAS (x negated)");
+        break;
+      default:
+        if (nrrd->space != nrrdSpaceUnknown)
+          add_note(grid, fmt::format("space \"{}\" is not RAS/LPS; coordinates kept as they are",
+                                     airEnumStr(nrrdSpace, nrrd->space)));
+    }
+  } else {
+    for (unsigned a = 0; a < dim; ++a) {
+      const NrrdAxisInfo& ax = nrrd->axis[a];
+      double s = std::isfinite(ax.spacing) ? ax.spacing : 1.0;
+      if (s == 0.0) fail(path, fmt::format("axis {} has zero spacing", a));
+      double o = std::isfinite(ax.min) ? ax.min : 0.0;
+      if (std::isfinite(ax.min) && ax.center == nrrdCenterCell) o += 0.5 * s;
+      // A negative spacing means the axis runs backwards.
+      t.spacing[a] = std::fabs(s);
+      t.direction[a * 3 + a] = s < 0 ? -1.0 : 1.0;
+      t.origin[a] = o;
+    }
+  }
+  if (encoding != "raw") add_note(grid, "NRRD encoding " + encoding);
+  return grid;
+}
+
+}  // namespace mlfe

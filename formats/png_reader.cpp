@@ -1,0 +1,54 @@
+#include "formats/png_reader.h"
+
+#include <fmt/format.h>
+#include <png.h>
+
+#include <cstring>
+#include <vector>
+
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+using namespace volume_detail;
+
+ScalarGrid read_png(const std::string& path, const VolumeReadOptions& opts) {
+  const std::string data = read_whole_file(path, memory_limit(opts));
+  if (data.size() < 8 || std::memcmp(data.data(), "\x89PNG\r\n\x1a\n", 8) != 0)
+    fail(path, "not a PNG file (wrong signature)");
+  // The simplified libpng API keeps its setjmp handling inside libpng; errors come back as
+  // a return value and image.message.
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_memory(&image, data.data(), data.size()))
+    fail(path, std::string("bad PNG: ") + image.message);
+  struct Guard {
+    png_image* img;
+    ~Guard() { png_image_free(img); }
+  } guard{&image};
+  const bool sixteen = (image.format & PNG_FORMAT_FLAG_LINEAR) != 0;
+  const bool colour = (image.format & PNG_FORMAT_FLAG_COLOR) != 0;
+  const std::array<std::int64_t, 3> dims{image.width, image.height, 1};
+  const std::int64_t voxels = checked_voxel_count(path, dims);
+  const std::uint64_t pixel_bytes = checked_bytes(path, voxels, sixteen ? 2 : 1);
+  std::uint64_t need = 0;
+  if (__builtin_add_overflow(pixel_bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
+  check_memory(path, need, opts, "the PNG pixels and the float32 grid");
+
+  ScalarGrid grid;
+  grid.dim = 2;
+  grid.dims = dims;
+  grid.source_type = sixteen ? ScalarType::U16 : ScalarType::U8;
+  // 16-bit PNG data is linear in libpng's model, so LINEAR_Y leaves grey values unchanged;
+  // 8-bit grey is read as it is stored.
+  image.format = sixteen ? PNG_FORMAT_LINEAR_Y : PNG_FORMAT_GRAY;
+  std::vector<unsigned char> pixels(static_cast<std::size_t>(pixel_bytes));
+  if (!png_image_finish_read(&image, nullptr, pixels.data(), 0, nullptr))
+    fail(path, std::string("bad PNG data: ") + image.message);
+  allocate_values(grid);
+  convert_to_float(pixels.data(), grid.source_type, false, grid.values.data(), grid.values.size());
+  if (colour) add_note(grid, "colour PNG converted to grey by libpng");
+  return grid;
+}
+
+}  // namespace mlfe

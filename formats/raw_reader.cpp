@@ -1,0 +1,183 @@
+#include "formats/raw_reader.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+using namespace volume_detail;
+
+void read_raw_values(const std::string& path, std::istream& in, ScalarType t, bool swap, float* dst,
+                     std::size_t n) {
+  const std::size_t esize = static_cast<std::size_t>(scalar_type_size(t));
+  const std::size_t chunk = (std::size_t(1) << 20) / esize;
+  std::vector<char> buf(std::min(n, chunk) * esize);
+  for (std::size_t done = 0; done < n;) {
+    std::size_t m = std::min(chunk, n - done);
+    in.read(buf.data(), static_cast<std::streamsize>(m * esize));
+    if (static_cast<std::size_t>(in.gcount()) != m * esize)
+      fail(path, fmt::format("truncated: voxel data ends after {} of {} bytes", done * esize + in.gcount(),
+                             n * esize));
+    convert_to_float(buf.data(), t, swap, dst + done, m);
+    done += m;
+  }
+}
+
+namespace {
+
+std::string find_sidecar(const std::string& path) {
+  std::ifstream a(path + ".json");
+  if (a) return path + ".json";
+  auto dot = path.find_last_of('.');
+  auto slash = path.find_last_of('/');
+  if (dot != std::string::npos && (slash == std::string::npos || dot > slash)) {
+    std::string p = path.substr(0, dot) + ".json";
+    std::ifstream b(p);
+    if (b) return p;
+  }
+  return "";
+}
+
+template <std::size_t N>
+std::array<double, N> number_array(const std::string& file, const nlohmann::json& j, const char* key,
+                                   std::size_t min_count, std::size_t* count = nullptr) {
+  const auto& v = j.at(key);
+  if (!v.is_array() || v.size() < min_count || v.size() > N)
+    fail(file, fmt::format("\"{}\" must be an array of {}{} numbers", key, min_count,
+                           min_count == N ? "" : fmt::format(" to {}", N)));
+  std::array<double, N> out{};
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    if (!v[i].is_number()) fail(file, fmt::format("\"{}\"[{}] is not a number", key, i));
+    out[i] = v[i].get<double>();
+    if (!std::isfinite(out[i])) fail(file, fmt::format("\"{}\"[{}] is not finite", key, i));
+  }
+  if (count) *count = v.size();
+  return out;
+}
+
+}  // namespace
+
+ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
+  const std::uint64_t fsize = file_size(path);
+  ScalarGrid grid;
+  std::array<std::int64_t, 3> dims{0, 0, 1};
+  std::optional<ScalarType> type;
+  std::string endian = "little";
+  std::int64_t offset = 0;
+  bool have_dims = false;
+
+  std::string sidecar = find_sidecar(path);
+  if (!sidecar.empty()) {
+    std::string text = read_whole_file(sidecar, 1 << 20);
+    nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+    if (j.is_discarded()) fail(sidecar, "bad JSON in raw sidecar");
+    if (!j.is_object()) fail(sidecar, "raw sidecar must be a JSON object");
+    if (!opts.raw_dims) {
+      if (!j.contains("dims")) fail(sidecar, "raw sidecar is missing \"dims\"");
+      std::size_t n = 0;
+      auto d = number_array<3>(sidecar, j, "dims", 2, &n);
+      for (int a = 0; a < 3; ++a) {
+        if (a < int(n) && (d[a] != std::floor(d[a]) || d[a] < 1 || d[a] > 2147483647.0))
+          fail(sidecar, fmt::format("\"dims\"[{}] = {} is not a positive integer", a, d[a]));
+        dims[a] = a < int(n) ? static_cast<std::int64_t>(d[a]) : 1;
+      }
+      have_dims = true;
+    }
+    if (opts.raw_dtype.empty()) {
+      if (!j.contains("dtype") && !j.contains("type")) fail(sidecar, "raw sidecar is missing \"dtype\"");
+      const auto& t = j.contains("dtype") ? j["dtype"] : j["type"];
+      if (!t.is_string()) fail(sidecar, "\"dtype\" must be a string");
+      type = parse_scalar_type(t.get<std::string>());
+      if (!type) fail(sidecar, "unsupported dtype \"" + t.get<std::string>() + "\" (uint8..float64)");
+    }
+    if (j.contains("endian")) {
+      if (!j["endian"].is_string()) fail(sidecar, "\"endian\" must be \"little\" or \"big\"");
+      endian = j["endian"].get<std::string>();
+    }
+    if (j.contains("spacing")) {
+      std::size_t n = 0;
+      auto s = number_array<3>(sidecar, j, "spacing", 2, &n);
+      for (std::size_t a = 0; a < n; ++a) {
+        if (!(s[a] > 0)) fail(sidecar, "\"spacing\" entries must be positive");
+        grid.transform.spacing[a] = s[a];
+      }
+    }
+    if (j.contains("origin")) {
+      std::size_t n = 0;
+      auto o = number_array<3>(sidecar, j, "origin", 2, &n);
+      for (std::size_t a = 0; a < n; ++a) grid.transform.origin[a] = o[a];
+    }
+    if (j.contains("direction")) grid.transform.direction = number_array<9>(sidecar, j, "direction", 9);
+    if (j.contains("offset")) {
+      const auto& o = j["offset"];
+      if (!o.is_number_integer() || o.get<std::int64_t>() < 0)
+        fail(sidecar, "\"offset\" must be a non-negative integer");
+      offset = o.get<std::int64_t>();
+    }
+    if (j.contains("space")) {
+      std::string s = j["space"].is_string() ? j["space"].get<std::string>() : "";
+      for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+      if (s != "RAS" && s != "LPS" && !s.empty()) fail(sidecar, "\"space\" must be \"RAS\" or \"LPS\"");
+      grid.space = s;
+    }
+  }
+  if (opts.raw_dims) {
+    dims = *opts.raw_dims;
+    if (dims[2] == 0) dims[2] = 1;
+    have_dims = true;
+  }
+  if (!opts.raw_dtype.empty()) {
+    type = parse_scalar_type(opts.raw_dtype);
+    if (!type) fail(path, "unsupported raw type \"" + opts.raw_dtype + "\" (uint8..float64)");
+  }
+  if (sidecar.empty()) {
+    endian = opts.raw_endian.empty() ? "little" : opts.raw_endian;
+    offset = opts.raw_offset;
+  } else {
+    // Flags given explicitly override the sidecar; the defaults do not.
+    if (opts.raw_endian != "little") endian = opts.raw_endian;
+    if (opts.raw_offset != 0) offset = opts.raw_offset;
+  }
+  if (opts.raw_spacing) grid.transform.spacing = *opts.raw_spacing;
+  if (opts.raw_origin) grid.transform.origin = *opts.raw_origin;
+  if (!have_dims || !type)
+    fail(path, "headerless raw data needs a sidecar " + path + ".json or --raw-dims and --raw-type");
+  if (endian != "little" && endian != "big") fail(path, "endian must be \"little\" or \"big\", not \"" + endian + "\"");
+  if (offset < 0) fail(path, "negative raw offset");
+
+  {
+    // Sidecar directions need not be unit length; fold their lengths into the spacing.
+    std::array<std::array<double, 3>, 3> axes{};
+    for (int a = 0; a < 3; ++a)
+      for (int r = 0; r < 3; ++r) axes[a][r] = grid.transform.direction[r * 3 + a] * grid.transform.spacing[a];
+    if (grid.transform.spacing[0] > 0 && grid.transform.spacing[1] > 0 && grid.transform.spacing[2] > 0)
+      set_axes(sidecar.empty() ? path : sidecar, grid.transform, axes);
+  }
+  const std::int64_t voxels = checked_voxel_count(path, dims);
+  const int esize = scalar_type_size(*type);
+  const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
+  std::uint64_t expected = 0;
+  if (__builtin_add_overflow(bytes, static_cast<std::uint64_t>(offset), &expected) || expected != fsize)
+    fail(path, fmt::format("size mismatch: {} x {} x {} {} voxels after a {}-byte offset need {} bytes, the file has {}",
+                           dims[0], dims[1], dims[2], scalar_type_name(*type), offset, bytes + offset, fsize));
+  check_memory(path, checked_bytes(path, voxels, 4), opts, "the float32 grid");
+
+  grid.dims = dims;
+  grid.source_type = *type;
+  allocate_values(grid);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open");
+  in.seekg(offset);
+  bool swap = (endian == "big") == host_is_little_endian();
+  read_raw_values(path, in, *type, swap, grid.values.data(), grid.values.size());
+  if (!sidecar.empty()) add_note(grid, "geometry from sidecar " + sidecar);
+  return grid;
+}
+
+}  // namespace mlfe

@@ -1,0 +1,368 @@
+#include "formats/volume_reader.h"
+
+#include <fmt/format.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <new>
+
+#include "formats/metaimage_reader.h"
+#include "formats/nifti_reader.h"
+#include "formats/nrrd_reader.h"
+#include "formats/pgm_reader.h"
+#include "formats/png_reader.h"
+#include "formats/raw_reader.h"
+#include "formats/vdb_reader.h"
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+namespace volume_detail {
+
+void fail(const std::string& path, const std::string& problem) {
+  // Library messages may span lines or quote garbage read from a corrupt file (OpenVDB quotes
+  // whole strings); the contract is one short line.
+  constexpr std::size_t kMaxLength = 400;
+  std::string one;
+  for (char c : problem) {
+    const unsigned char u = static_cast<unsigned char>(c);
+    if (c == '\n' || c == '\r') {
+      if (!one.empty() && one.back() != ' ') one += "; ";
+    } else if (u < 0x20 || u == 0x7f) {
+      if (!one.empty() && one.back() != ' ') one += ' ';
+    } else if (c == ' ' && !one.empty() && one.back() == ' ') {
+      continue;
+    } else {
+      one += c;
+    }
+    if (one.size() > kMaxLength) {
+      one += "...";
+      break;
+    }
+  }
+  while (!one.empty() && (one.back() == ' ' || one.back() == ';')) one.pop_back();
+  throw Error(path + ": " + one);
+}
+
+std::uint64_t file_size(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
+  if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
+  return static_cast<std::uint64_t>(st.st_size);
+}
+
+std::string read_prefix(const std::string& path, std::size_t n) {
+  file_size(path);  // names missing files and folders clearly
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
+  std::string s(n, '\0');
+  in.read(s.data(), static_cast<std::streamsize>(n));
+  s.resize(static_cast<std::size_t>(in.gcount()));
+  return s;
+}
+
+std::string read_whole_file(const std::string& path, std::uint64_t limit) {
+  std::uint64_t size = file_size(path);
+  if (size > limit)
+    fail(path, fmt::format("file has {} bytes but only {} bytes of memory are available", size, limit));
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
+  std::string s(static_cast<std::size_t>(size), '\0');
+  in.read(s.data(), static_cast<std::streamsize>(size));
+  if (static_cast<std::uint64_t>(in.gcount()) != size) fail(path, "read error (file changed while reading?)");
+  return s;
+}
+
+std::optional<ScalarType> parse_scalar_type(const std::string& name) {
+  std::string n;
+  for (char c : name) n += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (n == "uint8" || n == "u8" || n == "uchar" || n == "unsigned char") return ScalarType::U8;
+  if (n == "int8" || n == "i8" || n == "char" || n == "signed char") return ScalarType::I8;
+  if (n == "uint16" || n == "u16" || n == "ushort") return ScalarType::U16;
+  if (n == "int16" || n == "i16" || n == "short") return ScalarType::I16;
+  if (n == "uint32" || n == "u32" || n == "uint") return ScalarType::U32;
+  if (n == "int32" || n == "i32" || n == "int") return ScalarType::I32;
+  if (n == "float32" || n == "f32" || n == "float") return ScalarType::F32;
+  if (n == "float64" || n == "f64" || n == "double") return ScalarType::F64;
+  return std::nullopt;
+}
+
+bool host_is_little_endian() {
+  const std::uint16_t one = 1;
+  unsigned char b;
+  std::memcpy(&b, &one, 1);
+  return b == 1;
+}
+
+std::int64_t checked_voxel_count(const std::string& path, const std::array<std::int64_t, 3>& dims) {
+  constexpr std::int64_t kMaxDim = std::numeric_limits<std::int32_t>::max();
+  for (int a = 0; a < 3; ++a) {
+    if (dims[a] < 1 || dims[a] > kMaxDim)
+      fail(path, fmt::format("invalid dimensions {} x {} x {} (each must be 1..{})", dims[0], dims[1],
+                             dims[2], kMaxDim));
+  }
+  std::int64_t n = 0;
+  // 2^60 voxels of 8 bytes still fit a signed 64-bit byte count.
+  constexpr std::int64_t kMaxVoxels = std::int64_t(1) << 59;
+  if (__builtin_mul_overflow(dims[0], dims[1], &n) || __builtin_mul_overflow(n, dims[2], &n) || n > kMaxVoxels)
+    fail(path, fmt::format("dimensions {} x {} x {} are too large", dims[0], dims[1], dims[2]));
+  return n;
+}
+
+std::uint64_t checked_bytes(const std::string& path, std::int64_t voxels, std::uint64_t element_size) {
+  std::uint64_t b = 0;
+  if (voxels < 0 || __builtin_mul_overflow(static_cast<std::uint64_t>(voxels), element_size, &b))
+    fail(path, fmt::format("{} voxels of {} bytes overflow a 64-bit size", voxels, element_size));
+  return b;
+}
+
+std::uint64_t memory_limit(const VolumeReadOptions& opts) {
+  return opts.max_bytes ? opts.max_bytes : default_memory_limit();
+}
+
+void check_memory(const std::string& path, std::uint64_t bytes, const VolumeReadOptions& opts,
+                  const std::string& what) {
+  std::uint64_t limit = memory_limit(opts);
+  if (bytes > limit)
+    fail(path, fmt::format("needs {} bytes for {} but only {} bytes of memory are available", bytes, what, limit));
+}
+
+namespace {
+template <typename T>
+void convert_typed(const unsigned char* src, bool swap, float* dst, std::size_t n) {
+  unsigned char tmp[sizeof(T)];
+  for (std::size_t i = 0; i < n; ++i) {
+    const unsigned char* p = src + i * sizeof(T);
+    if (swap) {
+      for (std::size_t b = 0; b < sizeof(T); ++b) tmp[b] = p[sizeof(T) - 1 - b];
+      p = tmp;
+    }
+    T v;
+    std::memcpy(&v, p, sizeof(T));
+    dst[i] = static_cast<float>(v);
+  }
+}
+}  // namespace
+
+void convert_to_float(const void* src, ScalarType t, bool swap, float* dst, std::size_t n) {
+  auto s = static_cast<const unsigned char*>(src);
+  switch (t) {
+    case ScalarType::U8: convert_typed<std::uint8_t>(s, false, dst, n); break;
+    case ScalarType::I8: convert_typed<std::int8_t>(s, false, dst, n); break;
+    case ScalarType::U16: convert_typed<std::uint16_t>(s, swap, dst, n); break;
+    case ScalarType::I16: convert_typed<std::int16_t>(s, swap, dst, n); break;
+    case ScalarType::U32: convert_typed<std::uint32_t>(s, swap, dst, n); break;
+    case ScalarType::I32: convert_typed<std::int32_t>(s, swap, dst, n); break;
+    case ScalarType::F32: convert_typed<float>(s, swap, dst, n); break;
+    case ScalarType::F64: convert_typed<double>(s, swap, dst, n); break;
+  }
+}
+
+void set_axes(const std::string& path, GridTransform& t, const std::array<std::array<double, 3>, 3>& axes) {
+  for (int a = 0; a < 3; ++a) {
+    const auto& v = axes[a];
+    double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!std::isfinite(len) || len <= 0.0)
+      fail(path, fmt::format("axis {} has a zero or non-finite physical step ({}, {}, {})", a, v[0], v[1], v[2]));
+    t.spacing[a] = len;
+    for (int r = 0; r < 3; ++r) t.direction[r * 3 + a] = v[r] / len;
+  }
+}
+
+void allocate_values(ScalarGrid& grid) {
+  grid.values.assign(static_cast<std::size_t>(grid.voxel_count()), 0.0f);
+}
+
+void add_note(ScalarGrid& grid, const std::string& note) {
+  if (!grid.notes.empty()) grid.notes += '\n';
+  grid.notes += note;
+}
+
+std::string sibling_path(const std::string& base, const std::string& name) {
+  if (!name.empty() && name[0] == '/') return name;
+  auto slash = base.find_last_of('/');
+  return slash == std::string::npos ? name : base.substr(0, slash + 1) + name;
+}
+
+}  // namespace volume_detail
+
+namespace {
+using namespace volume_detail;
+
+std::string lower(std::string s) {
+  for (auto& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+bool file_exists(const std::string& p) {
+  struct stat st {};
+  return ::stat(p.c_str(), &st) == 0 && S_ISREG(st.st_mode);
+}
+
+std::string format_by_extension(const std::string& path) {
+  std::string p = lower(path);
+  if (ends_with(p, ".gz")) p.resize(p.size() - 3);
+  if (ends_with(p, ".nrrd") || ends_with(p, ".nhdr")) return "nrrd";
+  if (ends_with(p, ".nii") || ends_with(p, ".hdr") || ends_with(p, ".img")) return "nifti";
+  if (ends_with(p, ".vdb")) return "vdb";
+  if (ends_with(p, ".mha") || ends_with(p, ".mhd")) return "metaimage";
+  if (ends_with(p, ".pgm")) return "pgm";
+  if (ends_with(p, ".png")) return "png";
+  if (ends_with(p, ".raw") || ends_with(p, ".bin") || ends_with(p, ".dat")) return "raw";
+  return "";
+}
+
+std::int32_t le32(const std::string& s, std::size_t at) {
+  std::uint32_t v = 0;
+  for (int b = 3; b >= 0; --b) v = (v << 8) | static_cast<unsigned char>(s[at + b]);
+  return static_cast<std::int32_t>(v);
+}
+
+std::string format_by_magic(const std::string& head) {
+  auto starts = [&](const char* m, std::size_t n) { return head.size() >= n && std::memcmp(head.data(), m, n) == 0; };
+  if (starts("NRRD000", 7)) return "nrrd";
+  if (starts("\x20\x42\x44\x56\0\0\0\0", 8)) return "vdb";  // OpenVDB magic 0x56444220 as int64 LE
+  if (starts("\x89PNG\r\n\x1a\n", 8)) return "png";
+  if (head.size() >= 3 && head[0] == 'P' && head[1] == '5' && std::isspace(static_cast<unsigned char>(head[2])))
+    return "pgm";
+  if (head.size() >= 348) {
+    std::int32_t sz = le32(head, 0);
+    bool n1 = (sz == 348 || sz == 0x5c010000) &&
+              (std::memcmp(head.data() + 344, "n+1\0", 4) == 0 || std::memcmp(head.data() + 344, "ni1\0", 4) == 0);
+    bool n2 = (sz == 540 || sz == 0x1c020000) && (std::memcmp(head.data() + 4, "n+2\0", 4) == 0 ||
+                                                  std::memcmp(head.data() + 4, "ni2\0", 4) == 0);
+    if (n1 || n2) return "nifti";
+  }
+  // MetaImage headers are "Key = Value" lines that begin with one of a few keys.
+  std::size_t i = 0;
+  while (i < head.size() && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
+  for (const char* key : {"ObjectType", "NDims", "Comment", "ObjectSubType", "DimSize"}) {
+    std::size_t n = std::strlen(key);
+    if (head.compare(i, n, key) == 0) {
+      std::size_t j = i + n;
+      while (j < head.size() && (head[j] == ' ' || head[j] == '\t')) ++j;
+      if (j < head.size() && head[j] == '=') return "metaimage";
+    }
+  }
+  return "";
+}
+
+void convert_space(ScalarGrid& grid, const std::string& requested) {
+  std::string want = lower(requested);
+  if (want.empty()) return;
+  if (want != "ras" && want != "lps")
+    throw Error(grid.source + ": unknown space '" + requested + "' (use ras or lps)");
+  std::string target = want == "ras" ? "RAS" : "LPS";
+  if (grid.space.empty()) {
+    add_note(grid, "the file names no space; its coordinates are taken as " + target);
+  } else if (grid.space != target) {
+    // RAS and LPS differ by the sign of x and y.
+    // "+ 0.0" keeps zeros positive, so output does not show "-0".
+    for (int c = 0; c < 6; ++c) grid.transform.direction[c] = -grid.transform.direction[c] + 0.0;
+    grid.transform.origin[0] = -grid.transform.origin[0] + 0.0;
+    grid.transform.origin[1] = -grid.transform.origin[1] + 0.0;
+    add_note(grid, "converted " + grid.space + " to " + target + " (x and y negated)");
+  }
+  grid.space = target;
+}
+
+void check_finite_values(ScalarGrid& grid, const VolumeReadOptions& opts) {
+  std::int64_t bad = 0, first = -1;
+  for (std::size_t i = 0; i < grid.values.size(); ++i) {
+    if (!std::isfinite(grid.values[i])) {
+      if (first < 0) first = static_cast<std::int64_t>(i);
+      ++bad;
+      if (opts.nan_as) grid.values[i] = static_cast<float>(*opts.nan_as);
+    }
+  }
+  if (bad == 0) return;
+  const std::int64_t nx = grid.dims[0], ny = grid.dims[1];
+  std::int64_t fi = first % nx, fj = (first / nx) % ny, fk = first / (nx * ny);
+  if (!opts.nan_as)
+    throw Error(fmt::format("{}: {} voxels are NaN or infinite (first at index {},{},{}); use --nan-as VALUE "
+                            "to replace them",
+                            grid.source, bad, fi, fj, fk));
+  add_note(grid, fmt::format("{} NaN/Inf voxels replaced by {}", bad, *opts.nan_as));
+}
+
+void check_transform(const ScalarGrid& grid) {
+  const auto& t = grid.transform;
+  bool ok = true;
+  for (double v : t.spacing) ok = ok && std::isfinite(v) && v > 0;
+  for (double v : t.origin) ok = ok && std::isfinite(v);
+  for (double v : t.direction) ok = ok && std::isfinite(v);
+  if (!ok) throw Error(grid.source + ": the index-to-physical transform has zero, negative or non-finite entries");
+}
+
+}  // namespace
+
+std::size_t default_memory_limit() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  std::uint64_t kb = 0;
+  std::string unit;
+  while (in >> key >> kb >> unit) {
+    if (key == "MemAvailable:") return static_cast<std::size_t>(kb * 1024);
+  }
+  return std::size_t(16) << 30;
+}
+
+std::string detect_volume_format(const std::string& path) {
+  std::string head = read_prefix(path, 512);
+  std::string by_magic = format_by_magic(head);
+  if (!by_magic.empty()) return by_magic;
+  if (file_exists(path + ".json")) return "raw";
+  std::string by_ext = format_by_extension(path);
+  // A gzip stream: only the extension can say what is inside.
+  return by_ext;
+}
+
+ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
+  std::string format = detect_volume_format(path);
+  if (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty())) format = "raw";
+  if (format.empty()) {
+    std::string head = read_prefix(path, 8);
+    std::string hex;
+    for (unsigned char c : head) hex += fmt::format("{:02x}", c);
+    fail(path, fmt::format("unrecognised volume format (magic bytes {}; extension unknown); give --raw-dims "
+                           "and --raw-type for headerless raw data",
+                           hex.empty() ? "none: empty file" : hex));
+  }
+  ScalarGrid grid;
+  try {
+    if (format == "raw") grid = read_raw(path, opts);
+    else if (format == "nrrd") grid = read_nrrd(path, opts);
+    else if (format == "nifti") grid = read_nifti(path, opts);
+    else if (format == "vdb") grid = read_vdb(path, opts);
+    else if (format == "metaimage") grid = read_metaimage(path, opts);
+    else if (format == "pgm") grid = read_pgm(path, opts);
+    else if (format == "png") grid = read_png(path, opts);
+    else fail(path, "unsupported format " + format);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    fail(path, "out of memory while reading");
+  } catch (const std::exception& e) {
+    fail(path, e.what());
+  }
+  grid.format = format;
+  grid.source = path;
+  if (grid.dims[2] == 1) grid.dim = 2;
+  if (static_cast<std::int64_t>(grid.values.size()) != grid.voxel_count())
+    fail(path, "internal error: voxel count does not match dimensions");
+  check_transform(grid);
+  check_finite_values(grid, opts);
+  convert_space(grid, opts.space);
+  return grid;
+}
+
+}  // namespace mlfe

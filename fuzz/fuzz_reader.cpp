@@ -1,0 +1,66 @@
+// libFuzzer entry point for one reader: writes the input to a temporary file with the
+// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume. mlfe::Error is the expected
+// outcome for bad input; anything else (a crash, a sanitizer report, another exception, an
+// exit from inside a library) is a finding.
+#include <unistd.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+
+#include "core/error.h"
+#include "formats/volume_reader.h"
+
+namespace {
+
+const std::string& work_dir() {
+  static const std::string dir = [] {
+    char tmpl[] = "/tmp/mlfe_fuzz_XXXXXX";
+    if (!mkdtemp(tmpl)) std::abort();
+    return std::string(tmpl) + "/";
+  }();
+  return dir;
+}
+
+void write_file(const std::string& path, const std::uint8_t* data, std::size_t size) {
+  std::remove(path.c_str());
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string kind = MLFE_FUZZ_KIND;
+  std::string ext = MLFE_FUZZ_EXT;
+  // One target covers both variants where the first bytes tell them apart.
+  if (kind == "nifti" && size >= 2 && data[0] == 0x1f && data[1] == 0x8b) ext = ".nii.gz";
+  if (kind == "image" && size >= 1 && data[0] == 0x89) ext = ".png";
+  const std::string path = work_dir() + "input" + ext;
+  mlfe::VolumeReadOptions opts;
+  opts.max_bytes = std::size_t(256) << 20;  // well below the fuzzer's RSS limit
+  if (kind == "raw") {
+    // The input is the JSON sidecar of a fixed 512-byte data file.
+    static const std::string raw = [] {
+      const std::string p = work_dir() + "input.raw";
+      std::string bytes(512, '\0');
+      for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<char>(i * 37);
+      write_file(p, reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
+      return p;
+    }();
+    write_file(raw + ".json", data, size);
+    try {
+      mlfe::read_volume(raw, opts);
+    } catch (const mlfe::Error&) {
+    }
+    return 0;
+  }
+  write_file(path, data, size);
+  try {
+    mlfe::read_volume(path, opts);
+  } catch (const mlfe::Error&) {
+  }
+  return 0;
+}

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# README command (b): install what is missing, build, and run every test:
+#   1. Release build, all GoogleTest suites through ctest (unit, format round trips, CLI,
+#      golden files, Khronos glTF validator verdicts);
+#   2. the core tests again under AddressSanitizer + UBSan (Debug);
+#   3. a consumer project that does find_package(mlfe) and links mlfe::core;
+#   4. bounded libFuzzer runs of every parser (MLFE_FUZZ_SECONDS each, default 30).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+JOBS="${MLFE_JOBS:-$(nproc)}"
+bash "$ROOT/scripts/install_deps.sh"
+
+echo "== release build and tests"
+bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON
+(cd "$ROOT/build" && ctest -j "$JOBS" --output-on-failure --timeout 600)
+
+echo "== core tests under ASan + UBSan"
+cmake -S "$ROOT" -B "$ROOT/build-asan" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DMLFE_SANITIZE=ON \
+  -DMLFE_BUILD_FORMATS=OFF -DMLFE_BUILD_BENCH=OFF >/dev/null
+cmake --build "$ROOT/build-asan" -j "$JOBS" --target mlfe_core_tests
+# The rate test runs big uniform meshes; it is covered by the release run.
+"$ROOT/build-asan/tests/mlfe_core_tests" --gtest_filter='-*ConvergesWithRateTwo*:*SphereIsAccurate*'
+
+echo "== find_package(mlfe) consumer"
+PREFIX="$ROOT/build/install-test"
+rm -rf "$PREFIX" "$ROOT/build/consumer"
+cmake --install "$ROOT/build" --prefix "$PREFIX" >/dev/null
+cmake -S "$ROOT/tests/consumer" -B "$ROOT/build/consumer" -DCMAKE_PREFIX_PATH="$PREFIX" >/dev/null
+cmake --build "$ROOT/build/consumer" -j "$JOBS"
+"$ROOT/build/consumer/mlfe_consumer"
+
+echo "== bounded fuzzing"
+bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"
+
+echo "== all test stages passed"

@@ -1,0 +1,138 @@
+// Small synthetic meshes and helpers shared by the mesh-writer tests (openmesh_io, draco_io,
+// gltf_writer). Header-only so the tests/formats glob needs nothing new.
+#pragma once
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include "core/triangle_mesh.h"
+
+namespace mlfe::test {
+
+/// Icosphere of `subdivisions` levels (20 * 4^s triangles), outward normals, CCW from outside.
+inline TriangleMesh icosphere(int subdivisions, float radius, std::array<float, 3> center = {0, 0, 0}) {
+  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+  std::vector<std::array<double, 3>> v = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<std::array<std::uint32_t, 3>> f = {
+      {0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+      {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8}, {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
+  auto unit = [](std::array<double, 3> p) {
+    const double l = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    return std::array<double, 3>{p[0] / l, p[1] / l, p[2] / l};
+  };
+  for (auto& p : v) p = unit(p);
+  for (int s = 0; s < subdivisions; ++s) {
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> mid;
+    auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
+      auto key = std::minmax(a, b);
+      auto it = mid.find(key);
+      if (it != mid.end()) return it->second;
+      v.push_back(unit({(v[a][0] + v[b][0]) / 2, (v[a][1] + v[b][1]) / 2, (v[a][2] + v[b][2]) / 2}));
+      return mid[key] = std::uint32_t(v.size() - 1);
+    };
+    std::vector<std::array<std::uint32_t, 3>> g;
+    for (const auto& tri : f) {
+      const auto a = midpoint(tri[0], tri[1]), b = midpoint(tri[1], tri[2]), c = midpoint(tri[2], tri[0]);
+      g.push_back({tri[0], a, c});
+      g.push_back({tri[1], b, a});
+      g.push_back({tri[2], c, b});
+      g.push_back({a, b, c});
+    }
+    f = g;
+  }
+  TriangleMesh m;
+  for (const auto& p : v) {
+    m.positions.push_back({float(center[0] + radius * p[0]), float(center[1] + radius * p[1]),
+                           float(center[2] + radius * p[2])});
+    m.normals.push_back({float(p[0]), float(p[1]), float(p[2])});
+  }
+  m.triangles = f;
+  return m;
+}
+
+/// UV sphere (poles shared), `rings` x `segments`, outward normals.
+inline TriangleMesh uv_sphere(int rings, int segments, float radius, std::array<float, 3> center = {0, 0, 0}) {
+  const double pi = 3.14159265358979323846;
+  TriangleMesh m;
+  auto add = [&](double theta, double phi) {
+    const double n[3] = {std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta)};
+    m.positions.push_back({float(center[0] + radius * n[0]), float(center[1] + radius * n[1]),
+                           float(center[2] + radius * n[2])});
+    m.normals.push_back({float(n[0]), float(n[1]), float(n[2])});
+    return std::uint32_t(m.positions.size() - 1);
+  };
+  const std::uint32_t north = add(0, 0);
+  std::vector<std::vector<std::uint32_t>> ring(rings - 1);
+  for (int r = 1; r < rings; ++r)
+    for (int s = 0; s < segments; ++s) ring[r - 1].push_back(add(pi * r / rings, 2 * pi * s / segments));
+  const std::uint32_t south = add(pi, 0);
+  for (int s = 0; s < segments; ++s) {
+    const int s1 = (s + 1) % segments;
+    m.triangles.push_back({north, ring[0][s], ring[0][s1]});
+    for (int r = 0; r + 1 < rings - 1; ++r) {
+      m.triangles.push_back({ring[r][s], ring[r + 1][s], ring[r + 1][s1]});
+      m.triangles.push_back({ring[r][s], ring[r + 1][s1], ring[r][s1]});
+    }
+    m.triangles.push_back({ring[rings - 2][s], south, ring[rings - 2][s1]});
+  }
+  return m;
+}
+
+/// Reads a whole file (empty when missing).
+inline std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+inline bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
+
+/// A fresh scratch folder per test binary run, removed when the binary exits.
+inline std::string scratch_dir() {
+  struct Dir {
+    std::filesystem::path path;
+    Dir() : path(std::filesystem::path(::testing::TempDir()) / ("mlfe_writers_" + std::to_string(::getpid()))) {
+      std::filesystem::create_directories(path);
+    }
+    ~Dir() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  };
+  static const Dir dir;
+  return dir.path.string();
+}
+
+/// Corner-wise oriented match of every triangle of `b` against some triangle of `a` within
+/// `tol` per coordinate; returns the number of unmatched triangles (brute force on vertex
+/// lists: test meshes are small).
+inline std::size_t unmatched_triangles(const TriangleMesh& a, const TriangleMesh& b, double tol) {
+  auto near = [&](const std::array<float, 3>& p, const std::array<float, 3>& q) {
+    return std::fabs(p[0] - q[0]) <= tol && std::fabs(p[1] - q[1]) <= tol && std::fabs(p[2] - q[2]) <= tol;
+  };
+  std::size_t missing = 0;
+  for (const auto& tb : b.triangles) {
+    bool found = false;
+    for (const auto& ta : a.triangles) {
+      for (int r = 0; r < 3 && !found; ++r)
+        found = near(a.positions[ta[r]], b.positions[tb[0]]) && near(a.positions[ta[(r + 1) % 3]], b.positions[tb[1]]) &&
+                near(a.positions[ta[(r + 2) % 3]], b.positions[tb[2]]);
+      if (found) break;
+    }
+    if (!found) ++missing;
+  }
+  return missing;
+}
+
+}  // namespace mlfe::test
