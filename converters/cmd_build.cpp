@@ -18,6 +18,8 @@ struct BuildState {
 };
 
 void run_build(const BuildState& s) {
+  check_output_path(s.output, {".mlfeh"});
+  if (!s.report.empty()) check_output_path(s.report, {});
   const ScalarGrid grid = read_volume(s.input, s.read);
   const Built b = build_from_grid(grid, s.params, {});
   nlohmann::json prov = {{"input", s.input}, {"tool", std::string("mlfe ") + MLFE_VERSION}};

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <filesystem>
+#include <fstream>
 #include <memory>
 
 #include "converters/commands.h"
@@ -30,6 +31,10 @@ bool is_hierarchy_file(const std::string& path) {
 void run(const IsoState& s, bool convert) {
   nlohmann::json prov = {{"input", std::filesystem::path(s.input).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
+  check_output_path(s.output, {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"});
+  if (!s.hierarchy.empty()) check_output_path(s.hierarchy, {".mlfeh"});
+  if (!s.report.empty()) check_output_path(s.report, {});
+  if (!s.asset.iso.empty()) parse_values(s.asset.iso, "--iso");
   std::optional<ScalarGrid> grid;
   Built b;
   if (!convert && is_hierarchy_file(s.input)) {

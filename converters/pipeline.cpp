@@ -20,6 +20,8 @@
 
 namespace mlfe::cli {
 
+namespace fs = std::filesystem;
+
 namespace {
 std::string lower_ext(const std::string& path) {
   std::string e = std::filesystem::path(path).extension().string();
@@ -27,6 +29,18 @@ std::string lower_ext(const std::string& path) {
   return e;
 }
 }  // namespace
+
+void check_output_path(const std::string& path, const std::vector<std::string>& extensions) {
+  const std::string ext = lower_ext(path);
+  if (!extensions.empty() && std::find(extensions.begin(), extensions.end(), ext) == extensions.end()) {
+    std::string list;
+    for (const auto& e : extensions) list += (list.empty() ? "" : " ") + e;
+    throw Error(fmt::format("{}: unknown output type '{}' (use {})", path, ext, list));
+  }
+  const fs::path parent = fs::path(path).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent))
+    throw Error(fmt::format("{}: cannot create file: folder {} does not exist", path, parent.string()));
+}
 
 void add_build_options(CLI::App* cmd, BuildParams& p) {
   cmd->add_option("--rms", p.rms,

@@ -63,6 +63,10 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
 /// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
 nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b);
 
+/// Checks before any work that `path` has one of `extensions` (lower case, with the dot) and
+/// that its folder exists; throws mlfe::Error naming the path otherwise.
+void check_output_path(const std::string& path, const std::vector<std::string>& extensions);
+
 /// Writes JSON atomically.
 void write_json(const std::string& path, const nlohmann::json& j);
 

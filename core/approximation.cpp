@@ -242,6 +242,12 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       return a.first != b.first ? a.first > b.first : a.second < b.second;
     });
     std::size_t count = marked.size();
+    if (opts.max_vertices) {
+      // A red refinement adds at most 3 (2D) / 6 (3D) midpoints, shared with neighbours: about
+      // 2 per element in practice; start near the budget instead of halving down to it.
+      const std::size_t room = opts.max_vertices - h.vertex_count();
+      count = std::min(count, std::max<std::size_t>(1, room / 2));
+    }
     std::vector<ElemId> remap;
     bool refined = false;
     while (count > 0) {

@@ -53,7 +53,7 @@ struct ApproximationOptions {
   double surface_tolerance = 0.5;
   Preconditioner preconditioner = Preconditioner::kBpx;
   double cg_tolerance = 1e-9;     ///< relative residual
-  int direct_solve_max = 20000;   ///< direct (LDLT) solve while vertices ≤ this; 0: never
+  int direct_solve_max = 3000;    ///< direct (LDLT) solve while vertices ≤ this; 0: never
   std::function<void(const IterationStats&)> progress;  ///< called after every solve
 };
 

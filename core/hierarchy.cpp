@@ -439,7 +439,50 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   std::vector<std::uint8_t> dead(cells_.size(), 0);
   // dirty: endpoints of edges split in this round; touched: in any round of this call.
   std::vector<std::uint8_t> dirty(points_.size(), 0), touched(points_.size(), 0);
+  std::vector<VertexId> dirty_list, touched_list;
   std::vector<ElemId> leaf_list = leaves();
+  const auto alive_leaf = [&](ElemId e) { return !dead[e.value] && is_leaf(e); };
+
+  // The closure usually needs a few rounds, but a local refinement can need dozens (a wave of
+  // green→red upgrades travelling along the refined region). Scanning every leaf each round
+  // made that O(leaves × rounds); from the second round on, candidates are found through a
+  // vertex → element incidence (singly linked lists in flat arrays) instead, so a round costs
+  // what it touches. The candidate set is the same (elements created this round, and leaves
+  // with ≥ 2 dirty vertices), so the result does not change.
+  constexpr std::uint32_t kNone = ~std::uint32_t(0);
+  bool use_incidence = false;
+  std::vector<std::uint32_t> inc_head;  // per vertex: first slot or kNone
+  std::vector<std::uint32_t> inc_next;  // per slot (= element index * (D + 1) + corner)
+  std::vector<ElemId> inc_elem;         // per element index
+  const auto add_incidence = [&](ElemId e) {
+    const auto idx = static_cast<std::uint32_t>(inc_elem.size());
+    inc_elem.push_back(e);
+    const Cell& c = cells_[e.value];
+    for (int k = 0; k <= D; ++k) {
+      const std::uint32_t slot = idx * (D + 1) + static_cast<std::uint32_t>(k);
+      inc_next.push_back(inc_head[c[k].value]);
+      inc_head[c[k].value] = slot;
+    }
+  };
+  // Alive leaves incident to any vertex of `verts` with ≥ 2 vertices flagged in `flag`
+  // (sorted, unique).
+  const auto incident_candidates = [&](const std::vector<VertexId>& verts, const std::vector<std::uint8_t>& flag,
+                                       std::size_t below) {
+    std::vector<ElemId> out;
+    for (VertexId v : verts) {
+      if (v.value >= inc_head.size()) continue;
+      for (std::uint32_t s = inc_head[v.value]; s != kNone; s = inc_next[s]) {
+        const ElemId e = inc_elem[s / (D + 1)];
+        if (e.value >= below || !alive_leaf(e)) continue;
+        int n = 0;
+        for (VertexId w : cells_[e.value]) n += flag[w.value];
+        if (n >= 2) out.push_back(e);
+      }
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    return out;
+  };
 
   while (!to_red.empty()) {
     const std::size_t round_first_elem = cells_.size();
@@ -456,27 +499,49 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
         first_child_[e.value] = ElemId::invalid();
       }
       red_refine(e);
-      for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
+      if (!use_incidence)
+        for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
     }
     dead.resize(cells_.size(), 0);
     dirty.resize(points_.size(), 0);
     touched.resize(points_.size(), 0);
+    const auto mark = [&](VertexId v) {
+      if (!dirty[v.value]) {
+        dirty[v.value] = 1;
+        dirty_list.push_back(v);
+      }
+      if (!touched[v.value]) {
+        touched[v.value] = 1;
+        touched_list.push_back(v);
+      }
+    };
     for (std::size_t v = first_new_vertex; v < points_.size(); ++v) {
-      for (VertexId p : vertex_parents_[v]) dirty[p.value] = touched[p.value] = 1;
-      dirty[v] = touched[v] = 1;
+      for (VertexId p : vertex_parents_[v]) mark(p);
+      mark(VertexId(static_cast<std::uint32_t>(v)));
     }
-    // Drop refined and removed elements from the leaf list.
-    leaf_list.erase(std::remove_if(leaf_list.begin(), leaf_list.end(),
-                                   [&](ElemId e) { return dead[e.value] || !is_leaf(e); }),
-                    leaf_list.end());
 
-    // Which leaves need red now? Parallel and read-only; the result is sorted, so it does not
-    // depend on scheduling.
-    std::vector<ElemId> request(leaf_list.size(), ElemId::invalid());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaf_list.size(), 4096),
+    // Candidates: every element created in this round, and older leaves with ≥ 2 dirty vertices.
+    std::vector<ElemId> candidates;
+    if (use_incidence) {
+      inc_head.resize(points_.size(), kNone);
+      for (std::size_t e = round_first_elem; e < cells_.size(); ++e) add_incidence(ElemId(static_cast<std::uint32_t>(e)));
+      candidates = incident_candidates(dirty_list, dirty, round_first_elem);
+      for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
+        candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
+    } else {
+      // Drop refined and removed elements from the leaf list.
+      leaf_list.erase(std::remove_if(leaf_list.begin(), leaf_list.end(), [&](ElemId e) { return !alive_leaf(e); }),
+                      leaf_list.end());
+      candidates.swap(leaf_list);  // borrowed; given back below
+    }
+
+    // Which candidates need red now? Parallel and read-only; the result is sorted, so it does
+    // not depend on scheduling.
+    std::vector<ElemId> request(candidates.size(), ElemId::invalid());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          const ElemId e = leaf_list[i];
+                          const ElemId e = candidates[i];
                           if (e.value < round_first_elem) {
                             int n = 0;
                             for (VertexId v : cells_[e.value]) n += dirty[v.value];
@@ -495,21 +560,41 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
       if (r.valid()) to_red.push_back(r);
     std::sort(to_red.begin(), to_red.end());
     to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
-    std::fill(dirty.begin(), dirty.end(), 0);
+    for (VertexId v : dirty_list) dirty[v.value] = 0;
+    dirty_list.clear();
+
+    if (!use_incidence) {
+      leaf_list.swap(candidates);
+      if (!to_red.empty()) {
+        // Another round follows: switch to the incidence from here on.
+        use_incidence = true;
+        inc_head.assign(points_.size(), kNone);
+        inc_elem.reserve(leaf_list.size());
+        inc_next.reserve(leaf_list.size() * (D + 1));
+        for (ElemId e : leaf_list) add_incidence(e);
+        std::vector<ElemId>().swap(leaf_list);
+      }
+    }
   }
 
   // Green closure: every remaining leaf with hanging midpoints has an admissible pattern.
-  std::vector<unsigned> masks(leaf_list.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaf_list.size(), 4096),
+  // Leaves are visited in id order either way (the leaf list is sorted by id).
+  std::vector<ElemId> closure;
+  if (use_incidence)
+    closure = incident_candidates(touched_list, touched, cells_.size());
+  else
+    closure.swap(leaf_list);
+  std::vector<unsigned> masks(closure.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         int n = 0;
-                        for (VertexId v : cells_[leaf_list[i].value]) n += touched[v.value];
-                        if (n >= 2) masks[i] = hanging_mask(leaf_list[i]);
+                        for (VertexId v : cells_[closure[i].value]) n += touched[v.value];
+                        if (n >= 2) masks[i] = hanging_mask(closure[i]);
                       }
                     });
-  for (std::size_t i = 0; i < leaf_list.size(); ++i)
-    if (masks[i] != 0) green_refine(leaf_list[i], masks[i]);
+  for (std::size_t i = 0; i < closure.size(); ++i)
+    if (masks[i] != 0) green_refine(closure[i], masks[i]);
   dead.resize(cells_.size(), 0);
   return compact(dead, old_count);
 }

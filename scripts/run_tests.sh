@@ -15,11 +15,11 @@ bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON
 (cd "$ROOT/build" && ctest -j "$JOBS" --output-on-failure --timeout 600)
 
 echo "== core tests under ASan + UBSan"
-cmake -S "$ROOT" -B "$ROOT/build-asan" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DMLFE_SANITIZE=ON \
+cmake -S "$ROOT" -B "$ROOT/build-asan" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-g -O1" -DMLFE_SANITIZE=ON \
   -DMLFE_BUILD_FORMATS=OFF -DMLFE_BUILD_BENCH=OFF >/dev/null
 cmake --build "$ROOT/build-asan" -j "$JOBS" --target mlfe_core_tests
 # The rate test runs big uniform meshes; it is covered by the release run.
-"$ROOT/build-asan/tests/mlfe_core_tests" --gtest_filter='-*ConvergesWithRateTwo*:*SphereIsAccurate*'
+"$ROOT/build-asan/tests/mlfe_core_tests" --gtest_filter='-*ConvergesWithRateTwo*:*SphereIsAccurate*:*ThresholdLoop*'
 
 echo "== find_package(mlfe) consumer"
 PREFIX="$ROOT/build/install-test"

@@ -1,0 +1,182 @@
+// iso_tools_bench: the C++ side of bench/iso_bench.py. All meshes are written in voxel index
+// coordinates (x = i, y = j, z = k), the frame in which iso_bench.py measures distances.
+//
+//   iso_tools_bench dump VOL OUT.raw             float32 voxels (x fastest) + prints JSON
+//                                                {dims, spacing, range}
+//   iso_tools_bench vdb VOL ISO ADAPTIVITY OUT.ply
+//       OpenVDB: dense volume -> FloatGrid (copyFromDense, all voxels active) ->
+//       tools::volumeToMesh(grid, points, triangles, quads, ISO, ADAPTIVITY); quads split in two.
+//   iso_tools_bench mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%] [--surface-tolerance S]
+//       The in-process mlfe convert pipeline: read, approximate<3> with iso-aware refinement
+//       (iso_values = {ISO}), IsoExtractor::extract on the finest level.
+//   iso_tools_bench extract HIER.mlfeh ISO OUT.ply
+//       Extraction only, from a stored hierarchy (IsoExtractor construction and extract timed
+//       separately; extract repeated 5 times, best reported).
+// Every mode prints one JSON line on stdout with counts and seconds. --threads N (default 2)
+// may precede the mode.
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/Dense.h>
+#include <openvdb/tools/VolumeToMesh.h>
+#include <tbb/global_control.h>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/approximation.h"
+#include "core/field.h"
+#include "core/iso_surface.h"
+#include "formats/hierarchy_io.h"
+#include "formats/openmesh_io.h"
+#include "formats/volume_reader.h"
+
+using namespace mlfe;
+using Clock = std::chrono::steady_clock;
+static double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+static double peak_rss_mb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::atof(line.c_str() + 6) / 1024.0;
+  return 0;
+}
+
+// Local frame (index .* spacing) -> index coordinates.
+static void to_index(TriangleMesh& m, const std::array<double, 3>& sp) {
+  for (auto& p : m.positions)
+    for (int a = 0; a < 3; ++a) p[a] = float(p[a] / sp[a]);
+}
+
+static int usage() {
+  std::fprintf(stderr,
+               "usage: iso_tools_bench [--threads N] dump VOL OUT.raw\n"
+               "       iso_tools_bench [--threads N] vdb VOL ISO ADAPTIVITY OUT.ply\n"
+               "       iso_tools_bench [--threads N] mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%%] "
+               "[--surface-tolerance S]\n"
+               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply\n");
+  return 1;
+}
+
+int main(int argc, char** argv) {
+  std::vector<std::string> args(argv + 1, argv + argc);
+  int threads = 2;
+  if (args.size() >= 2 && args[0] == "--threads") {
+    threads = std::atoi(args[1].c_str());
+    args.erase(args.begin(), args.begin() + 2);
+  }
+  if (args.empty()) return usage();
+  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, std::size_t(std::max(1, threads)));
+  nlohmann::json out;
+  try {
+    const std::string mode = args[0];
+    if (mode == "dump" && args.size() == 3) {
+      ScalarGrid g = read_volume(args[1]);
+      std::ofstream f(args[2], std::ios::binary);
+      f.write(reinterpret_cast<const char*>(g.values.data()), std::streamsize(g.values.size() * sizeof(float)));
+      if (!f) throw std::runtime_error(args[2] + ": write failed");
+      const auto r = g.value_range();
+      out = {{"dims", g.dims}, {"spacing", g.transform.spacing}, {"range", {r[0], r[1]}}, {"dim", g.dim},
+             {"space", g.space}, {"direction", g.transform.direction}, {"origin", g.transform.origin}};
+    } else if (mode == "vdb" && args.size() == 5) {
+      ScalarGrid g = read_volume(args[1]);
+      const double iso = std::atof(args[2].c_str());
+      const double adaptivity = std::atof(args[3].c_str());
+      openvdb::initialize();
+      const auto t0 = Clock::now();
+      const auto r = g.value_range();
+      openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(r[0]);
+      const openvdb::CoordBBox bbox(openvdb::Coord(0, 0, 0),
+                                    openvdb::Coord(int(g.dims[0] - 1), int(g.dims[1] - 1), int(g.dims[2] - 1)));
+      openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(bbox, g.values.data());
+      openvdb::tools::copyFromDense(dense, *grid, /*tolerance=*/-1.0f);  // keep every voxel active
+      const double t_grid = since(t0);
+      std::vector<openvdb::Vec3s> pts;
+      std::vector<openvdb::Vec3I> tris;
+      std::vector<openvdb::Vec4I> quads;
+      const auto t1 = Clock::now();
+      openvdb::tools::volumeToMesh(*grid, pts, tris, quads, iso, adaptivity);
+      const double t_mesh = since(t1);
+      TriangleMesh m;
+      m.positions.reserve(pts.size());
+      for (const auto& p : pts) m.positions.push_back({p[0], p[1], p[2]});
+      for (const auto& t : tris) m.triangles.push_back({t[0], t[1], t[2]});
+      for (const auto& q : quads) {
+        m.triangles.push_back({q[0], q[1], q[2]});
+        m.triangles.push_back({q[0], q[2], q[3]});
+      }
+      write_mesh_file(args[4], m);
+      out = {{"method", "openvdb"}, {"adaptivity", adaptivity}, {"iso", iso},
+             {"active_voxels", grid->activeVoxelCount()}, {"grid_seconds", t_grid}, {"mesh_seconds", t_mesh},
+             {"seconds", t_grid + t_mesh}, {"vertices", m.positions.size()}, {"triangles", m.triangles.size()},
+             {"quads", quads.size()}, {"peak_rss_mb", peak_rss_mb()}};
+    } else if (mode == "mlfe" && args.size() >= 4) {
+      ApproximationOptions o;
+      std::string rms = "0.5%";
+      for (std::size_t i = 4; i + 1 < args.size(); i += 2) {
+        if (args[i] == "--max-vertices") o.max_vertices = std::size_t(std::atoll(args[i + 1].c_str()));
+        else if (args[i] == "--rms") rms = args[i + 1];
+        else if (args[i] == "--surface-tolerance") o.surface_tolerance = std::atof(args[i + 1].c_str());
+        else return usage();
+      }
+      const auto t0 = Clock::now();
+      ScalarGrid g = read_volume(args[1]);
+      const double t_read = since(t0);
+      const double iso = std::atof(args[2].c_str());
+      const auto r = g.value_range();
+      const double span = double(r[1]) - double(r[0]);
+      const bool pct = !rms.empty() && rms.back() == '%';
+      o.target_rms = pct ? std::atof(rms.substr(0, rms.size() - 1).c_str()) / 100.0 * span : std::atof(rms.c_str());
+      o.iso_values = {iso};
+      const auto t1 = Clock::now();
+      GridField f(g);
+      Approximation<3> a = approximate<3>(f, o);
+      const double t_build = since(t1);
+      const auto t2 = Clock::now();
+      IsoExtractor x(a.hierarchy, a.values);
+      GridTransform local;  // identity: positions stay in the local frame
+      TriangleMesh m = x.extract(iso, local);
+      const double t_extract = since(t2);
+      to_index(m, g.transform.spacing);
+      write_mesh_file(args[3], m);
+      out = {{"method", "mlfe"}, {"iso", iso}, {"read_seconds", t_read}, {"build_seconds", t_build},
+             {"extract_seconds", t_extract}, {"seconds", t_read + t_build + t_extract},
+             {"hierarchy_vertices", a.hierarchy.vertex_count()}, {"iterations", a.iterations.size()},
+             {"stop", a.stop_reason}, {"psnr_db", a.iterations.back().psnr_db},
+             {"vertices", m.positions.size()}, {"triangles", m.triangles.size()}, {"peak_rss_mb", peak_rss_mb()}};
+    } else if (mode == "extract" && args.size() == 4) {
+      HierarchyFile hf = read_hierarchy(args[1]);
+      if (hf.dim != 3 || hf.values.empty()) throw std::runtime_error(args[1] + ": needs a 3D hierarchy with values");
+      const Hierarchy<3>& h = std::get<Hierarchy<3>>(hf.hierarchy);
+      const double iso = std::atof(args[2].c_str());
+      const auto t0 = Clock::now();
+      IsoExtractor x(h, hf.values);
+      const double t_setup = since(t0);
+      GridTransform local;
+      TriangleMesh m;
+      double best = 1e300;
+      for (int rep = 0; rep < 5; ++rep) {
+        const auto t1 = Clock::now();
+        m = x.extract(iso, local);
+        best = std::min(best, since(t1));
+      }
+      to_index(m, hf.transform.spacing);
+      write_mesh_file(args[3], m);
+      out = {{"method", "mlfe-extract"}, {"iso", iso}, {"setup_seconds", t_setup}, {"extract_seconds", best},
+             {"hierarchy_vertices", h.vertex_count()}, {"leaves", h.leaves().size()},
+             {"vertices", m.positions.size()}, {"triangles", m.triangles.size()}};
+    } else {
+      return usage();
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "iso_tools_bench: %s\n", e.what());
+    return 2;
+  }
+  std::printf("%s\n", out.dump().c_str());
+  return 0;
+}

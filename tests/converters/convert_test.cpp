@@ -1,0 +1,279 @@
+// End-to-end tests of `mlfe convert / build / iso`: validator verdicts, physical placement,
+// determinism across thread counts, golden files, and bad input (exit 2, one line, no output).
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "formats/draco_io.h"
+#include "formats/gltf_writer.h"
+#include "formats/openmesh_io.h"
+#include "formats/volume_reader.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace mlfe {
+namespace {
+
+const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.nrrd";
+const std::string kGolden = std::string(MLFE_SOURCE_DIR) + "/tests/golden";
+
+struct RunResult {
+  int status;
+  std::string err;
+};
+
+std::string scratch() {
+  static const std::string dir = [] {
+    std::string d = (fs::temp_directory_path() / ("mlfe_cli_test_" + std::to_string(::getpid()))).string();
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+RunResult run(const std::string& args) {
+  const std::string errfile = scratch() + "/stderr.txt";
+  const std::string cmd = std::string(MLFE_BINARY) + " " + args + " > /dev/null 2> " + errfile;
+  const int rc = std::system(cmd.c_str());
+  std::ifstream in(errfile);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
+}
+
+std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+bool validator_accepts(const std::string& path, std::string* report) {
+  const std::string out = scratch() + "/validator.txt";
+  const std::string cmd = "node " + std::string(MLFE_SOURCE_DIR) + "/tools/validate_gltf.js " + path + " > " + out + " 2>&1";
+  const int rc = std::system(cmd.c_str());
+  *report = read_bytes(out);
+  return rc == 0;
+}
+
+struct Glb {
+  json gltf;
+  std::string bin;
+};
+Glb parse_glb(const std::string& b) {
+  Glb g;
+  EXPECT_GE(b.size(), 20u);
+  EXPECT_EQ(b.substr(0, 4), "glTF");
+  std::uint32_t json_len;
+  std::memcpy(&json_len, b.data() + 12, 4);
+  g.gltf = json::parse(b.substr(20, json_len));
+  const std::size_t bin_at = 20 + json_len;
+  if (bin_at + 8 <= b.size()) {
+    std::uint32_t bin_len;
+    std::memcpy(&bin_len, b.data() + bin_at, 4);
+    g.bin = b.substr(bin_at + 8, bin_len);
+  }
+  return g;
+}
+
+// Bounding box of all POSITION accessors (metres, glTF frame).
+std::array<double, 6> glb_bbox(const Glb& g) {
+  std::array<double, 6> bb{1e30, 1e30, 1e30, -1e30, -1e30, -1e30};
+  for (const auto& mesh : g.gltf["meshes"])
+    for (const auto& prim : mesh["primitives"]) {
+      const auto& acc = g.gltf["accessors"][prim["attributes"]["POSITION"].get<int>()];
+      for (int k = 0; k < 3; ++k) {
+        bb[k] = std::min(bb[k], acc["min"][k].get<double>());
+        bb[3 + k] = std::max(bb[3 + k], acc["max"][k].get<double>());
+      }
+    }
+  return bb;
+}
+
+TEST(Cli, HelpWorksForEveryCommand) {
+  EXPECT_EQ(run("--help").status, 0);
+  for (const char* c : {"info", "build", "iso", "convert", "refine"}) EXPECT_EQ(run(std::string(c) + " --help").status, 0) << c;
+}
+
+TEST(Convert, GlbPassesTheValidatorAndLandsWhereTheScanIs) {
+  const std::string glb = scratch() + "/skull.glb", ply = scratch() + "/skull.ply";
+  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
+  ASSERT_EQ(run("convert " + common + " -o " + glb).status, 0);
+  ASSERT_EQ(run("convert " + common + " -o " + ply).status, 0);
+  std::string report;
+  EXPECT_TRUE(validator_accepts(glb, &report)) << report;
+  const json r = json::parse(report.substr(report.find('{')));
+  EXPECT_EQ(r["numErrors"], 0);
+  EXPECT_EQ(r["numWarnings"], 0);
+
+  // The PLY is in physical millimetres (RAS): its box, converted to glTF metres, is the glb's.
+  const TriangleMesh m = read_mesh_file(ply);
+  std::array<double, 6> mm{1e30, 1e30, 1e30, -1e30, -1e30, -1e30};
+  for (const auto& p : m.positions)
+    for (int k = 0; k < 3; ++k) {
+      mm[k] = std::min(mm[k], double(p[k]));
+      mm[3 + k] = std::max(mm[3 + k], double(p[k]));
+    }
+  const auto bb = glb_bbox(parse_glb(read_bytes(glb)));
+  const auto M = physical_to_gltf_matrix("RAS");
+  for (int r2 = 0; r2 < 3; ++r2) {
+    double lo = 0, hi = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double a = M[3 * r2 + c] * mm[c], b = M[3 * r2 + c] * mm[3 + c];
+      lo += std::min(a, b);
+      hi += std::max(a, b);
+    }
+    EXPECT_NEAR(bb[r2], lo, 1e-3) << "axis " << r2;
+    EXPECT_NEAR(bb[3 + r2], hi, 1e-3) << "axis " << r2;
+  }
+  // And the surface's box is the box of the voxels above the iso-value, in the scan's frame.
+  const ScalarGrid g = read_volume(kSkull);
+  std::array<double, 6> vb{1e30, 1e30, 1e30, -1e30, -1e30, -1e30};
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i)
+        if (g.at(i, j, k) > 1.5) {
+          const auto p = g.transform.index_to_physical(i, j, k);
+          for (int a = 0; a < 3; ++a) {
+            vb[a] = std::min(vb[a], p[a]);
+            vb[3 + a] = std::max(vb[3 + a], p[a]);
+          }
+        }
+  for (int a = 0; a < 6; ++a) EXPECT_NEAR(mm[a], vb[a], 1.5 * g.transform.spacing[a % 3]) << "bound " << a;
+}
+
+TEST(Convert, OutputIsByteIdenticalWhateverTheThreadCount) {
+  const std::string h1 = scratch() + "/t1.mlfeh", h2 = scratch() + "/t2.mlfeh";
+  const std::string args = " convert " + kSkull + " --iso 1.5,3 --max-vertices 6000 --quiet";
+  ASSERT_EQ(run("--threads 1" + args + " -o " + scratch() + "/t1.glb --hierarchy " + h1).status, 0);
+  ASSERT_EQ(run("--threads 2" + args + " -o " + scratch() + "/t2.glb --hierarchy " + h2).status, 0);
+  EXPECT_EQ(read_bytes(scratch() + "/t1.glb"), read_bytes(scratch() + "/t2.glb"));
+  EXPECT_EQ(read_bytes(h1), read_bytes(h2));
+  for (const char* ext : {".drc", ".ply"}) {
+    const std::string a = scratch() + "/t1" + ext, b = scratch() + "/t2" + ext;
+    ASSERT_EQ(run("--threads 1 iso " + h1 + " --iso 1.5,3 --quiet -o " + a).status, 0);
+    ASSERT_EQ(run("--threads 2 iso " + h2 + " --iso 1.5,3 --quiet -o " + b).status, 0);
+    EXPECT_EQ(read_bytes(a), read_bytes(b)) << ext;
+  }
+}
+
+TEST(Convert, HierarchyRoundTripGivesTheSameSurfaces) {
+  const std::string h = scratch() + "/rt.mlfeh", a = scratch() + "/rt_a.ply", b = scratch() + "/rt_b.ply";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 3 --max-vertices 6000 --quiet -o " + a + " --hierarchy " + h).status, 0);
+  ASSERT_EQ(run("iso " + h + " --iso 3 --quiet -o " + b).status, 0);
+  EXPECT_EQ(read_bytes(a), read_bytes(b));
+}
+
+// Golden files: tests/golden holds the expected outputs of small conversions. The PLY is
+// compared byte for byte (the pipeline is deterministic); the glb's Draco geometry is decoded
+// and compared semantically (counts, box, every vertex near the golden surface), since Draco
+// reorders vertices. Regenerate with MLFE_UPDATE_GOLDEN=1 after an intended change.
+TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
+  const std::string ply = scratch() + "/golden.ply", glb = scratch() + "/golden.glb";
+  const std::string args = kSkull + " --iso 2.5 --max-vertices 3000 --quiet";
+  ASSERT_EQ(run("convert " + args + " -o " + ply).status, 0);
+  ASSERT_EQ(run("convert " + args + " -o " + glb).status, 0);
+  const std::string golden_ply = kGolden + "/ct_skull_iso2.5_3000.ply";
+  if (std::getenv("MLFE_UPDATE_GOLDEN")) fs::copy_file(ply, golden_ply, fs::copy_options::overwrite_existing);
+  ASSERT_TRUE(fs::exists(golden_ply)) << "missing golden file " << golden_ply;
+  EXPECT_EQ(read_bytes(ply), read_bytes(golden_ply)) << "PLY differs from the golden file";
+
+  const TriangleMesh golden = read_mesh_file(golden_ply);
+  const Glb g = parse_glb(read_bytes(glb));
+  ASSERT_EQ(g.gltf["meshes"].size(), 1u);
+  const auto& prim = g.gltf["meshes"][0]["primitives"][0];
+  const auto& view = g.gltf["bufferViews"][prim["extensions"]["KHR_draco_mesh_compression"]["bufferView"].get<int>()];
+  const std::string bytes = g.bin.substr(view.value("byteOffset", 0), view["byteLength"].get<std::size_t>());
+  const TriangleMesh dec = decode_draco(bytes.data(), bytes.size(), "golden glb");
+  EXPECT_EQ(dec.triangles.size(), golden.triangles.size());
+  EXPECT_EQ(dec.positions.size(), golden.positions.size());
+  // Every decoded vertex (metres, glTF frame) near a golden vertex: Hausdorff bound = the
+  // Draco tolerance (a tenth of the smallest voxel spacing, 0.3651 mm).
+  const auto M = physical_to_gltf_matrix("RAS");
+  std::vector<std::array<double, 3>> gm;
+  for (const auto& p : golden.positions) {
+    std::array<double, 3> q{};
+    for (int r = 0; r < 3; ++r) q[r] = M[3 * r] * p[0] + M[3 * r + 1] * p[1] + M[3 * r + 2] * p[2];
+    gm.push_back(q);
+  }
+  std::sort(gm.begin(), gm.end());
+  double worst = 0;
+  for (const auto& p : dec.positions) {
+    double best = 1e30;
+    // Sorted by x: scan the window of x within the current best.
+    auto it = std::lower_bound(gm.begin(), gm.end(), std::array<double, 3>{p[0] - 1e-3, -1e30, -1e30});
+    for (; it != gm.end() && (*it)[0] <= p[0] + 1e-3; ++it) {
+      const double d = std::sqrt((p[0] - (*it)[0]) * (p[0] - (*it)[0]) + (p[1] - (*it)[1]) * (p[1] - (*it)[1]) +
+                                 (p[2] - (*it)[2]) * (p[2] - (*it)[2]));
+      best = std::min(best, d);
+    }
+    worst = std::max(worst, best);
+  }
+  EXPECT_LE(worst, 0.3651e-3 * std::sqrt(3.0)) << "decoded Draco geometry too far from the golden surface (m)";
+}
+
+TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
+  const std::string dem = std::string(MLFE_SOURCE_DIR) + "/tests/data/dem_jacksboro.nrrd";
+  const std::string glb = scratch() + "/dem.glb", rep = scratch() + "/dem.json";
+  ASSERT_EQ(run("convert " + dem + " --rms 1% --z-scale 0.00001 --quiet -o " + glb + " --report " + rep).status, 0);
+  std::string report;
+  EXPECT_TRUE(validator_accepts(glb, &report)) << report;
+  const json r = json::parse(read_bytes(rep));
+  EXPECT_LE(r["rms_error_percent"].get<double>(), 1.0);
+  EXPECT_LT(r["vertices"].get<double>(), 403.0 * 344.0 / 4);
+}
+
+TEST(Build, ReportHasTheDocumentedFields) {
+  const std::string h = scratch() + "/b.mlfeh", rep = scratch() + "/b.json";
+  ASSERT_EQ(run("build " + kSkull + " --rms 2% --quiet -o " + h + " --report " + rep).status, 0);
+  const json r = json::parse(read_bytes(rep));
+  for (const char* k : {"input", "dims", "voxels", "vertices", "elements", "levels", "iterations", "rms_error",
+                        "rms_error_percent", "psnr_db", "value_range", "seconds", "peak_rss_mb", "per_iteration"})
+    EXPECT_TRUE(r.contains(k)) << k;
+  EXPECT_LE(r["rms_error_percent"].get<double>(), 2.0);
+  EXPECT_EQ(r["voxels"].get<long>(), 64 * 64 * 64);
+  EXPECT_EQ(r["per_iteration"].size(), r["iterations"].get<std::size_t>());
+}
+
+TEST(BadInput, ExitsWithStatusTwoOneLineAndNoOutput) {
+  // Truncated volume.
+  const std::string bad = scratch() + "/truncated.nrrd";
+  {
+    const std::string b = read_bytes(kSkull);
+    std::ofstream(bad, std::ios::binary) << b.substr(0, b.size() / 2);
+  }
+  struct Case {
+    std::string args, out, must_mention;
+  };
+  const std::vector<Case> cases = {
+      {"convert " + bad + " --iso 1 -o " + scratch() + "/x1.glb", scratch() + "/x1.glb", "truncated.nrrd"},
+      {"convert " + kSkull + " --iso 1 -o " + scratch() + "/x2.xyz", scratch() + "/x2.xyz", "x2.xyz"},
+      {"convert " + kSkull + " --iso abc -o " + scratch() + "/x3.glb", scratch() + "/x3.glb", "--iso"},
+      {"convert " + kSkull + " -o " + scratch() + "/x4.glb", scratch() + "/x4.glb", "--iso"},
+      {"iso " + bad + " --iso 1 -o " + scratch() + "/x5.ply", scratch() + "/x5.ply", "truncated.nrrd"},
+      {"convert " + kSkull + " --iso 1 -o /nonexistent/dir/x6.glb", "/nonexistent/dir/x6.glb", "x6.glb"},
+      {"build " + std::string(MLFE_SOURCE_DIR) + "/README.md -o " + scratch() + "/x7.mlfeh", scratch() + "/x7.mlfeh", "README.md"},
+  };
+  for (const auto& c : cases) {
+    const RunResult r = run(c.args);
+    EXPECT_EQ(r.status, 2) << c.args << "\n" << r.err;
+    EXPECT_NE(r.err.find(c.must_mention), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "not one line: " << r.err;
+    EXPECT_FALSE(fs::exists(c.out)) << c.out;
+  }
+  // No temporaries left next to the outputs.
+  for (const auto& e : fs::directory_iterator(scratch()))
+    EXPECT_EQ(e.path().filename().string().rfind(".tmp-", 0), std::string::npos) << e.path();
+}
+
+}  // namespace
+}  // namespace mlfe
