@@ -7,6 +7,8 @@
 //                     MLFE_SHARED_DATA_DIR); a 2D grid runs the Table 1 experiment instead
 //     --dem PATH      2D height field for Table 1 (default: dem_jacksboro.nrrd); "none" skips it
 //     --threshold T   Table 1 threshold in data units (metres; default 0.3)
+//     --dem-start-level L  uniform levels before the Table 1 loop (default 0: T0 = 2 triangles,
+//                     as in the paper; -1: mlfe's default, edges <= 16 samples)
 //     --budgets a,b   vertex budgets as fractions of the voxel count (default 1/512,1/128,1/64,1/32,1/16)
 //     --rms a,b       additional --rms targets in % of the value range (default 1,0.5)
 //     --threads N     worker threads (default: 2)
@@ -391,7 +393,7 @@ void bench_volume(const std::string& path, const std::vector<double>& budgets, c
   std::fflush(stdout);
 }
 
-void bench_dem(const std::string& path, double threshold) {
+void bench_dem(const std::string& path, double threshold, int start_level) {
   ScalarGrid g = read_volume(path);
   const auto range = g.value_range();
   std::printf("\n=== Table 1 (2D): %s ===\n", path.c_str());
@@ -400,6 +402,8 @@ void bench_dem(const std::string& path, double threshold) {
               g.transform.spacing[1], range[0], range[1], threshold);
   ApproximationOptions o;
   o.threshold = threshold;
+  o.start_level = start_level;
+  std::printf("start level %d%s\n", start_level, start_level == 0 ? " (T0 = 2 triangles, as in the paper)" : "");
   const auto t0 = Clock::now();
   GridField f(g);
   Approximation<2> a = approximate<2>(f, o);
@@ -423,6 +427,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> volumes;
   std::string dem = std::string(MLFE_SHARED_DATA_DIR) + "/dem_jacksboro.nrrd";
   double threshold = 0.3;
+  int dem_start_level = 0;
   std::vector<double> budgets = {1.0 / 512, 1.0 / 128, 1.0 / 64, 1.0 / 32, 1.0 / 16};
   std::vector<double> rms = {1.0, 0.5};
   int threads = 2;
@@ -437,11 +442,12 @@ int main(int argc, char** argv) {
     };
     if (a == "--dem") dem = next();
     else if (a == "--threshold") threshold = std::atof(next().c_str());
+    else if (a == "--dem-start-level") dem_start_level = std::atoi(next().c_str());
     else if (a == "--budgets") budgets = parse_list(next());
     else if (a == "--rms") rms = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
     else if (a == "--threads") threads = std::atoi(next().c_str());
     else if (a == "-h" || a == "--help") {
-      std::printf("usage: approximation_bench [--dem PATH|none] [--threshold T] [--budgets f,..] [--rms p,..|none] "
+      std::printf("usage: approximation_bench [--dem PATH|none] [--threshold T] [--dem-start-level L] [--budgets f,..] [--rms p,..|none] "
                   "[--threads N] [VOLUME...]\n");
       return 0;
     } else volumes.push_back(a);
@@ -455,13 +461,13 @@ int main(int argc, char** argv) {
   try {
     for (const auto& v : volumes) {
       ScalarGrid probe = read_volume(v);
-      if (probe.dim == 2) bench_dem(v, threshold);
+      if (probe.dim == 2) bench_dem(v, threshold, dem_start_level);
       else {
         probe = ScalarGrid{};
         bench_volume(v, budgets, rms);
       }
     }
-    if (dem != "none") bench_dem(dem, threshold);
+    if (dem != "none") bench_dem(dem, threshold, dem_start_level);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "approximation_bench: %s\n", e.what());
     return 2;

@@ -169,7 +169,7 @@ class Surface:
     """A triangle mesh prepared for point-to-surface distance queries: a KD-tree over dense
     samples (vertices, centroids and area samples, each tagged with its triangle); a query
     computes the exact distance to the triangles of the K nearest samples."""
-    K = 12
+    K = 24
 
     def __init__(self, poly, rng, nsamples, density=4.0):
         self.pts, self.tris = tri_arrays(poly)

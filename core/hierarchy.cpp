@@ -424,6 +424,31 @@ void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
 }
 
 template <int D>
+void Hierarchy<D>::reserve_for(std::size_t red_count) {
+  // Growing the parallel arrays geometrically would copy them about twice per refine() of a
+  // big mesh; reserve what the red refinements need (closure adds little beyond).
+  using T = SimplexTraits<D>;
+  const std::size_t ne = cells_.size() + T::kRedChildren * red_count;
+  const std::size_t nv = points_.size() + T::kEdges * red_count / 2;
+  if (ne > cells_.capacity()) {
+    const std::size_t cap = std::max(ne, cells_.size() + cells_.size() / 4);
+    cells_.reserve(cap);
+    parent_.reserve(cap);
+    first_child_.reserve(cap);
+    num_children_.reserve(cap);
+    level_.reserve(cap);
+    kind_.reserve(cap);
+  }
+  if (nv > points_.capacity()) {
+    const std::size_t cap = std::max(nv, points_.size() + points_.size() / 4);
+    points_.reserve(cap);
+    vertex_parents_.reserve(cap);
+    vertex_level_.reserve(cap);
+  }
+  edge_mid_.reserve(edge_mid_.size() + T::kEdges * red_count / 2);
+}
+
+template <int D>
 std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   const std::size_t old_count = cells_.size();
   std::vector<ElemId> to_red;
@@ -487,6 +512,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   while (!to_red.empty()) {
     const std::size_t round_first_elem = cells_.size();
     const std::size_t first_new_vertex = points_.size();
+    reserve_for(to_red.size());
     for (ElemId e : to_red) {
       if (!is_leaf(e)) {
         // e's children are green: they go, and e is refined red instead.

@@ -176,6 +176,7 @@ class Hierarchy {
   ElemId add_element(const Cell& c, ElemId parent, int level, ElemKind kind);
   VertexId midpoint(VertexId a, VertexId b, int level);
   void red_refine(ElemId e);
+  void reserve_for(std::size_t red_count);
   static std::array<Cell, SimplexTraits<D>::kRedChildren> red_children(
       const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m);
   void green_refine(ElemId e, unsigned mask);
