@@ -205,9 +205,10 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // Marking.
     std::vector<std::pair<double, ElemId>> marked;  // (error density, element)
     std::string stop;
-    if (opts.target_rms > 0 && st.rms_error <= opts.target_rms) stop = "target RMS error reached";
-    if (stop.empty()) {
-      const double tau2 = opts.target_rms > 0 ? opts.target_rms * opts.target_rms : 0.0;
+    const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
+    {
+      // Once the RMS target is met only the iso-aware rule (if any) still marks.
+      const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
       const double thr2 = opts.threshold * opts.threshold;
       for (std::size_t i = 0; i < leaves.size(); ++i) {
         const ElemId e = leaves[i];
@@ -220,7 +221,10 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         if (!mark && !opts.iso_values.empty()) mark = surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
         if (mark) marked.push_back({density, e});
       }
-      if (marked.empty()) stop = opts.threshold > 0 ? "no element above the threshold" : "maximum level reached";
+      if (marked.empty())
+        stop = target_met ? "target RMS error reached"
+               : opts.threshold > 0 ? "no element above the threshold"
+                                    : "maximum level reached";
     }
     if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
     if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
