@@ -12,7 +12,7 @@ shift || true
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${MLFE_FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
 TARGETS=("$@")
-if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image); fi
+if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image hierarchy draco); fi
 
 command -v clang++ >/dev/null || { echo "run_fuzzers: clang++ not found (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 
@@ -33,6 +33,8 @@ seed_patterns() {
     raw) echo "*.raw.json *.json" ;;
     metaimage) echo "*.mha *.mhd" ;;
     image) echo "*.pgm *.png" ;;
+    hierarchy) echo "*.mlfeh" ;;
+    draco) echo "*.drc" ;;
   esac
 }
 

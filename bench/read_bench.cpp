@@ -1,0 +1,72 @@
+// Importer benchmark (issue: reading is I/O and decompression bound).
+//   read_bench make-vdb FILE N       writes an N^3 float fog volume with OpenVDB (dense, smooth)
+//   read_bench vdb-native FILE       OpenVDB's own read of every grid (what vdb_print -l does)
+//   read_bench mlfe FILE             mlfe::read_volume of the same file (dense float grid)
+// Each mode prints seconds and the process's peak RSS, so run each in its own process.
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <sys/resource.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "formats/volume_reader.h"
+
+namespace {
+double peak_rss_mb() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(stderr, "usage: read_bench make-vdb|vdb-native|mlfe FILE [N]\n");
+    return 1;
+  }
+  const std::string mode = argv[1], path = argv[2];
+  openvdb::initialize();
+  const auto t0 = std::chrono::steady_clock::now();
+  double voxels = 0;
+  if (mode == "make-vdb") {
+    const int n = argc > 3 ? std::atoi(argv[3]) : 512;
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setName("density");
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    auto acc = grid->getAccessor();
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+          acc.setValue({i, j, k}, 1.0f + std::sin(i * 0.05f) * std::cos(j * 0.04f) * std::sin(k * 0.03f));
+    openvdb::io::File(path).write({grid});
+    voxels = double(n) * n * n;
+  } else if (mode == "vdb-native") {
+    openvdb::io::File file(path);
+    file.open();
+    for (auto it = file.beginName(); it != file.endName(); ++it) {
+      auto g = file.readGrid(it.gridName());
+      // Delayed loading maps the file; touch every leaf buffer so the voxels are really read.
+      if (auto fg = openvdb::gridPtrCast<openvdb::FloatGrid>(g)) {
+        double sum = 0;
+        for (auto leaf = fg->tree().cbeginLeaf(); leaf; ++leaf) sum += leaf->buffer().data()[0];
+        if (sum == -1.2345) std::printf("(unlikely)\n");
+      }
+      voxels += double(g->activeVoxelCount());
+    }
+    file.close();
+  } else if (mode == "mlfe") {
+    const mlfe::ScalarGrid g = mlfe::read_volume(path);
+    voxels = double(g.voxel_count());
+  } else {
+    std::fprintf(stderr, "unknown mode %s\n", mode.c_str());
+    return 1;
+  }
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("| %s | %s | %.0f | %.3f | %.0f | %.2f |\n", mode.c_str(), path.c_str(), voxels, s, peak_rss_mb(),
+              peak_rss_mb() * 1048576.0 / (voxels * 4.0));
+  return 0;
+}

@@ -1,0 +1,31 @@
+// libFuzzer entry point for mlfe's own decoders: the hierarchy file reader (read_hierarchy,
+// through a temporary file) and the Draco payload decoder (decode_draco). mlfe::Error is the
+// expected outcome for bad input; anything else is a finding.
+#include <unistd.h>
+
+#include <cstdint>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+
+#include "core/error.h"
+#include "formats/draco_io.h"
+#include "formats/hierarchy_io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string kind = MLFE_FUZZ_KIND;
+  try {
+    if (kind == "draco") {
+      mlfe::decode_draco(reinterpret_cast<const char*>(data), size, "fuzz input");
+    } else {
+      static const std::string path = "/tmp/mlfe_fuzz_hierarchy_" + std::to_string(::getpid()) + ".mlfeh";
+      {
+        std::ofstream out(path, std::ios::binary | std::ios::trunc);
+        out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
+      }
+      mlfe::read_hierarchy(path);
+    }
+  } catch (const mlfe::Error&) {
+  }
+  return 0;
+}
