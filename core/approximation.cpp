@@ -99,7 +99,7 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
                                              const ApproximationOptions& opts,
                                              const std::vector<double>& warm, IterationStats* stats) {
   const double gw = gradient_weight<D>(f, opts);
-  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : f.resolution();
+  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : 2.0 * f.resolution();
   const auto leaves = h.leaves();
   const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1);
   const SparseMatrix m = assemble_matrix(h, leaves, gw);
@@ -132,7 +132,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
   out.value_max = range[1];
   const double value_span = range[1] > range[0] ? range[1] - range[0] : 1.0;
   const double gw = gradient_weight<D>(f, opts);
-  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : f.resolution();
+  const double qedge = opts.quadrature_edge > 0 ? opts.quadrature_edge : 2.0 * f.resolution();
 
   // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
   // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
@@ -246,11 +246,25 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       return a.first != b.first ? a.first > b.first : a.second < b.second;
     });
     std::size_t count = marked.size();
+    if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {
+      // Bulk criterion (Dörfler-like): refine only the worst elements that together carry
+      // 60% of the excess error Σ E − τ²|Ω|, so the last step does not overshoot the target
+      // by a whole level (noisy scans would otherwise double their vertex count for nothing).
+      const double excess = total - opts.target_rms * opts.target_rms * out.domain_measure;
+      std::vector<double> e_of(h.element_count(), 0.0);
+      for (std::size_t i = 0; i < leaves.size(); ++i) e_of[leaves[i].value] = err[i];
+      double acc = 0;
+      std::size_t k = 0;
+      while (k < count && acc < 0.6 * excess) acc += e_of[marked[k++].second.value];
+      count = std::max<std::size_t>(k, 1);
+    }
     if (opts.max_vertices) {
       // A red refinement adds at most 3 (2D) / 6 (3D) midpoints, shared with neighbours: about
       // 2 per element in practice; start near the budget instead of halving down to it.
       const std::size_t room = opts.max_vertices - h.vertex_count();
       count = std::min(count, std::max<std::size_t>(1, room / 2));
+      // Within half a percent of the budget, further attempts would mostly be undone.
+      if (room < std::max<std::size_t>(8, opts.max_vertices / 200)) count = 0;
     }
     std::vector<ElemId> remap;
     bool refined = false;

@@ -45,7 +45,7 @@ struct ApproximationOptions {
   int max_iterations = 60;        ///< refine-solve cycles
   int start_level = -1;           ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
   bool h1 = false;                ///< (u,v) + s²(∇u,∇v) instead of (u,v)
-  double quadrature_edge = 0;     ///< sub-simplex edge for integration; 0: the field's resolution
+  double quadrature_edge = 0;     ///< sub-simplex size for integration; 0: 2 × the field's resolution
   /// Iso-aware refinement: elements where f or u crosses one of these values are also refined
   /// while the surface's estimated distance error sqrt(E_T/|T|) / |∇u| exceeds
   /// surface_tolerance voxels (or the surface is missing from u), down to voxel-sized elements.

@@ -115,7 +115,8 @@ TEST(Approximation, GalerkinOrthogonalityHoldsToSolverTolerance) {
   const auto u = solve_best_approximation<3>(h, f, o, {}, &st);
   EXPECT_GT(st.cg_iterations, 0);
   const auto leaves = h.leaves();
-  const auto in = compute_element_integrals(h, leaves, f, f.resolution(), false);
+  // The same discrete integrals as the solver (default quadrature size: 2 voxels).
+  const auto in = compute_element_integrals(h, leaves, f, 2.0 * f.resolution(), false);
   const SparseMatrix m = assemble_matrix(h, leaves, 0.0);
   const Vector rhs = assemble_load(h, leaves, in, 0.0);
   const Vector uv = Eigen::Map<const Vector>(u.data(), u.size());
