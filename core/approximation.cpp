@@ -203,7 +203,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
 
     // Marking.
-    std::vector<std::pair<double, ElemId>> marked;  // (error density, element)
+    std::vector<std::pair<double, ElemId>> marked;  // (E_T, element)
     std::string stop;
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     {
@@ -219,7 +219,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         // Equidistribution: if no element's mean square error exceeds tau², Σ E ≤ tau² |Ω|.
         if (tau2 > 0) mark |= density > tau2;
         if (!mark && !opts.iso_values.empty()) mark = surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
-        if (mark) marked.push_back({density, e});
+        if (mark) marked.push_back({err[i], e});  // worst absolute error first: most error removed per new vertex
       }
       if (marked.empty())
         stop = target_met ? "target RMS error reached"
