@@ -6,6 +6,8 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -278,8 +280,13 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         refined = true;
         break;
       }
+      // Overshot: scale the selection by the room left over the vertices this attempt added
+      // (with a margin), so a second attempt nearly always fits.
+      const std::size_t added = h.vertex_count() - backup->vertex_count();
+      const std::size_t room = opts.max_vertices - backup->vertex_count();
       h = std::move(*backup);
-      count /= 2;
+      const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.85 * double(room) / double(added));
+      count = std::min(count / 2, scaled);
     }
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);

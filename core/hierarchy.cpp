@@ -337,6 +337,17 @@ unsigned Hierarchy<D>::hanging_mask(ElemId e) const {
 }
 
 template <int D>
+bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
+  using T = SimplexTraits<D>;
+  const Cell& c = cells_[e.value];
+  const Cell& pc = cells_[parent(e).value];
+  auto corner = [&](VertexId v) { return std::find(pc.begin(), pc.end(), v) != pc.end(); };
+  for (int i = 0; i < T::kEdges; ++i)
+    if ((mask & (1u << i)) && !(corner(c[T::kEdgeVerts[i][0]]) && corner(c[T::kEdgeVerts[i][1]]))) return false;
+  return true;
+}
+
+template <int D>
 void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
   using T = SimplexTraits<D>;
   const int type = green_type(D, mask);
@@ -509,10 +520,29 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     return out;
   };
 
-  while (!to_red.empty()) {
+  // Parents of green leaves whose new hanging midpoints all lie on the parent's own edges,
+  // with an admissible combined pattern: their green children are replaced by a new green
+  // closure instead of refining the parent red. (Green elements are still never refined.)
+  // Without this, one new midpoint on a ring of green-refined elements turns the whole ring
+  // red, whose neighbours then turn red, ... — a local mark could add 10^5 vertices.
+  std::vector<ElemId> to_regreen;
+  while (!to_red.empty() || !to_regreen.empty()) {
     const std::size_t round_first_elem = cells_.size();
     const std::size_t first_new_vertex = points_.size();
     reserve_for(to_red.size());
+    for (ElemId e : to_regreen) {
+      for (int i = 0; i < num_children(e); ++i) {
+        const ElemId ch(first_child(e).value + i);
+        MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
+        dead[ch.value] = 1;
+      }
+      num_children_[e.value] = 0;
+      first_child_[e.value] = ElemId::invalid();
+      if (use_incidence)
+        add_incidence(e);
+      else
+        leaf_list.push_back(e);
+    }
     for (ElemId e : to_red) {
       if (!is_leaf(e)) {
         // e's children are green: they go, and e is refined red instead.
@@ -564,6 +594,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     // Which candidates need red now? Parallel and read-only; the result is sorted, so it does
     // not depend on scheduling.
     std::vector<ElemId> request(candidates.size(), ElemId::invalid());
+    std::vector<ElemId> regreen(candidates.size(), ElemId::invalid());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {
@@ -575,10 +606,15 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
                           }
                           const unsigned mask = hanging_mask(e);
                           if (mask == 0) continue;
-                          if (kind(e) == ElemKind::kGreen)
-                            request[i] = parent(e);
-                          else if (green_type(D, mask) < 0)
+                          if (kind(e) == ElemKind::kGreen) {
+                            const ElemId p = parent(e);
+                            if (hanging_on_parent_edges(e, mask) && green_type(D, hanging_mask(p)) > 0)
+                              regreen[i] = p;
+                            else
+                              request[i] = p;
+                          } else if (green_type(D, mask) < 0) {
                             request[i] = e;
+                          }
                         }
                       });
     to_red.clear();
@@ -586,12 +622,17 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
       if (r.valid()) to_red.push_back(r);
     std::sort(to_red.begin(), to_red.end());
     to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
+    to_regreen.clear();
+    for (ElemId r : regreen)
+      if (r.valid() && !std::binary_search(to_red.begin(), to_red.end(), r)) to_regreen.push_back(r);
+    std::sort(to_regreen.begin(), to_regreen.end());
+    to_regreen.erase(std::unique(to_regreen.begin(), to_regreen.end()), to_regreen.end());
     for (VertexId v : dirty_list) dirty[v.value] = 0;
     dirty_list.clear();
 
     if (!use_incidence) {
       leaf_list.swap(candidates);
-      if (!to_red.empty()) {
+      if (!to_red.empty() || !to_regreen.empty()) {
         // Another round follows: switch to the incidence from here on.
         use_incidence = true;
         inc_head.assign(points_.size(), kNone);
@@ -610,6 +651,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     closure = incident_candidates(touched_list, touched, cells_.size());
   else
     closure.swap(leaf_list);
+  std::sort(closure.begin(), closure.end());  // id order: deterministic child numbering
   std::vector<unsigned> masks(closure.size(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
