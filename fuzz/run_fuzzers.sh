@@ -38,6 +38,8 @@ seed_patterns() {
   esac
 }
 
+# A fixed mutation seed (MLFE_FUZZ_SEED, default 1) makes a CI run replay what was fuzzed
+# before; set another seed (or 0 for a random one) to explore further.
 # Huge allocations (e.g. a corrupt OpenVDB string length) fail like on a small machine
 # instead of exhausting the fuzzer's RSS limit.
 export ASAN_OPTIONS="allocator_may_return_null=1:max_allocation_size_mb=1024:detect_leaks=1"
@@ -61,7 +63,7 @@ for t in "${TARGETS[@]}"; do
   # -max_len keeps executions fast; large seeds are cut to their first 64 KiB, which still
   # holds every header.
   if ! (cd "$BUILD" && "$BUILD/fuzz/fuzz_$t" "$corpus" -max_total_time="$SECONDS_EACH" -max_len=65536 \
-        -timeout=20 -rss_limit_mb=2560 -artifact_prefix="$artifacts" -print_final_stats=1 \
+        -timeout=20 -rss_limit_mb=2560 -seed="${MLFE_FUZZ_SEED:-1}" -artifact_prefix="$artifacts" -print_final_stats=1 \
         >"$BUILD/fuzz_$t.log" 2>&1); then
     failed+=("$t")
     echo "!! fuzz_$t failed; see $BUILD/fuzz_$t.log and $artifacts" >&2
