@@ -12,7 +12,8 @@ bash "$ROOT/scripts/install_deps.sh"
 
 echo "== release build and tests"
 bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON
-(cd "$ROOT/build" && ctest -j "$JOBS" --output-on-failure --timeout 600)
+(cd "$ROOT/build" && ctest -j "$JOBS" --output-on-failure --timeout 600) | tee "$ROOT/build/ctest.log"
+TOTAL="$(sed -n 's/.*tests passed, 0 tests failed out of \([0-9]*\).*/\1/p' "$ROOT/build/ctest.log" | tail -1)"
 
 echo "== core tests under ASan + UBSan"
 cmake -S "$ROOT" -B "$ROOT/build-asan" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-g -O1" -DMLFE_SANITIZE=ON \
@@ -33,3 +34,4 @@ echo "== bounded fuzzing"
 bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"
 
 echo "== all test stages passed"
+echo "ctest: ${TOTAL:-0} passed, 0 failed"
