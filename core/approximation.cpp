@@ -205,7 +205,15 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
 
     // Marking.
-    std::vector<std::pair<double, ElemId>> marked;  // (E_T, element)
+    // Marks: with iso-values, elements the surfaces need come first (an asset's accuracy is
+    // its surfaces'), then the worst absolute errors (most error removed per new vertex).
+    struct Mark {
+      bool surface;
+      double e;
+      ElemId id;
+    };
+    std::vector<Mark> marked;
+    std::size_t surface_marks = 0;
     std::string stop;
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     {
@@ -220,8 +228,10 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         if (opts.threshold > 0) mark |= density > thr2;
         // Equidistribution: if no element's mean square error exceeds tau², Σ E ≤ tau² |Ω|.
         if (tau2 > 0) mark |= density > tau2;
-        if (!mark && !opts.iso_values.empty()) mark = surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
-        if (mark) marked.push_back({err[i], e});  // worst absolute error first: most error removed per new vertex
+        const bool surface =
+            !opts.iso_values.empty() && surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
+        if (mark || surface) marked.push_back({surface, err[i], e});
+        surface_marks += surface;
       }
       if (marked.empty())
         stop = target_met ? "target RMS error reached"
@@ -244,8 +254,9 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
     // the budget, undo it and try half as many.
     auto tr = Clock::now();
-    std::sort(marked.begin(), marked.end(), [](const auto& a, const auto& b) {
-      return a.first != b.first ? a.first > b.first : a.second < b.second;
+    std::sort(marked.begin(), marked.end(), [](const Mark& a, const Mark& b) {
+      if (a.surface != b.surface) return a.surface;
+      return a.e != b.e ? a.e > b.e : a.id < b.id;
     });
     std::size_t count = marked.size();
     if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {
@@ -257,7 +268,8 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       for (std::size_t i = 0; i < leaves.size(); ++i) e_of[leaves[i].value] = err[i];
       double acc = 0;
       std::size_t k = 0;
-      while (k < count && acc < 0.6 * excess) acc += e_of[marked[k++].second.value];
+      for (; k < surface_marks; ++k) acc += e_of[marked[k].id.value];  // surfaces always go
+      while (k < count && acc < 0.6 * excess) acc += e_of[marked[k++].id.value];
       count = std::max<std::size_t>(k, 1);
     }
     if (opts.max_vertices) {
@@ -274,7 +286,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       std::unique_ptr<Hierarchy<D>> backup;
       if (opts.max_vertices) backup = std::make_unique<Hierarchy<D>>(h);
       std::vector<ElemId> sel;
-      for (std::size_t i = 0; i < count; ++i) sel.push_back(marked[i].second);
+      for (std::size_t i = 0; i < count; ++i) sel.push_back(marked[i].id);
       remap = h.refine(sel);
       if (!opts.max_vertices || h.vertex_count() <= opts.max_vertices) {
         refined = true;
