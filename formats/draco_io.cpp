@@ -12,6 +12,7 @@
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <new>
 #include <unordered_map>
 
 #include "core/error.h"
@@ -257,7 +258,16 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
   if (!type.ok()) throw Error(what + ": not Draco data (" + type.status().error_msg_string() + ")");
   if (type.value() != draco::TRIANGULAR_MESH) throw Error(what + ": Draco data is not a triangle mesh");
   draco::Decoder decoder;
-  auto decoded = decoder.DecodeMeshFromBuffer(&buffer);
+  // Draco sizes its buffers from counts in the data: a corrupt count can ask for gigabytes
+  // (found by fuzzing), which surfaces here as bad_alloc.
+  auto decode = [&] {
+    try {
+      return decoder.DecodeMeshFromBuffer(&buffer);
+    } catch (const std::bad_alloc&) {
+      throw Error(what + ": corrupt Draco data (declared sizes exceed the memory available)");
+    }
+  };
+  auto decoded = decode();
   if (!decoded.ok()) throw Error(what + ": corrupt Draco data (" + decoded.status().error_msg_string() + ")");
   const draco::Mesh& dm = *decoded.value();
 
@@ -267,6 +277,15 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
   auto read_vec3 = [&](const draco::PointAttribute* att, const char* name) {
     std::vector<std::array<float, 3>> out(n);
     if (att->num_components() != 3) throw Error(what + ": Draco " + name + " attribute is not 3-component");
+    // Only numeric types: Draco's converter reads DT_BOOL bytes as C++ bool, which is undefined
+    // for bytes other than 0/1 (found by fuzzing).
+    switch (att->data_type()) {
+      case draco::DT_INT8: case draco::DT_UINT8: case draco::DT_INT16: case draco::DT_UINT16:
+      case draco::DT_INT32: case draco::DT_UINT32: case draco::DT_FLOAT32: case draco::DT_FLOAT64:
+        break;
+      default:
+        throw Error(what + ": corrupt Draco data (" + name + " attribute has a non-numeric type)");
+    }
     if (!att->is_mapping_identity() && att->indices_map_size() < n)
       throw Error(what + ": corrupt Draco data (" + name + " map too short)");
     for (std::size_t i = 0; i < n; ++i) {

@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "core/error.h"
+#include "formats/draco_io.h"
 #include "formats/volume_reader.h"
 
 namespace mlfe {
@@ -22,6 +23,16 @@ TEST(FuzzRegressions, EveryRecordedCrashIsNowAnError) {
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(entry.path().filename().string()), std::string::npos) << e.what();
     }
+  }
+  EXPECT_GE(n, 1);
+}
+
+TEST(FuzzRegressions, CorruptDracoPayloadsAreErrors) {
+  const std::filesystem::path dir = std::filesystem::path(MLFE_SOURCE_DIR) / "tests/data/fuzz_regressions_draco";
+  int n = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    ++n;
+    EXPECT_THROW(read_draco_file(entry.path().string()), Error) << entry.path();
   }
   EXPECT_GE(n, 1);
 }
