@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 #include "converters/commands.h"
@@ -21,17 +20,10 @@ struct IsoState {
   VolumeReadOptions read;
 };
 
-bool is_hierarchy_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  char magic[8] = {};
-  in.read(magic, 8);
-  return in.gcount() == 8 && std::string(magic, 8) == "MLFEHIER";
-}
-
 void run(const IsoState& s, bool convert) {
   nlohmann::json prov = {{"input", std::filesystem::path(s.input).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
-  check_output_path(s.output, {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"});
+  check_output_path(s.output, kAssetExtensions);
   if (!s.hierarchy.empty()) check_output_path(s.hierarchy, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
   if (!s.asset.iso.empty()) parse_values(s.asset.iso, "--iso");

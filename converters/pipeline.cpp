@@ -14,6 +14,7 @@
 #include "core/field.h"
 #include "core/iso_surface.h"
 #include "formats/atomic_file.h"
+#include "formats/file_names.h"
 #include "formats/draco_io.h"
 #include "formats/gltf_writer.h"
 #include "formats/openmesh_io.h"
@@ -22,16 +23,10 @@ namespace mlfe::cli {
 
 namespace fs = std::filesystem;
 
-namespace {
-std::string lower_ext(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return e;
-}
-}  // namespace
+const std::vector<std::string> kAssetExtensions = {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"};
 
 void check_output_path(const std::string& path, const std::vector<std::string>& extensions) {
-  const std::string ext = lower_ext(path);
+  const std::string ext = lower_extension(path);
   if (!extensions.empty() && std::find(extensions.begin(), extensions.end(), ext) == extensions.end()) {
     std::string list;
     for (const auto& e : extensions) list += (list.empty() ? "" : " ") + e;
@@ -238,9 +233,10 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
 
 namespace {
 
-TriangleMesh merge(const std::vector<TriangleMesh>& parts) {
+TriangleMesh merge(const std::vector<GltfSurface>& surfaces) {
   TriangleMesh m;
-  for (const auto& p : parts) {
+  for (const auto& s : surfaces) {
+    const TriangleMesh& p = s.mesh;
     const auto base = static_cast<std::uint32_t>(m.positions.size());
     m.positions.insert(m.positions.end(), p.positions.begin(), p.positions.end());
     m.normals.insert(m.normals.end(), p.normals.begin(), p.normals.end());
@@ -260,10 +256,8 @@ double default_tolerance(const GridTransform& t, int dim) {
 nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
                             const nlohmann::json& provenance) {
   const auto t0 = std::chrono::steady_clock::now();
-  const std::string ext = lower_ext(out);
-  static const std::vector<std::string> known = {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"};
-  if (std::find(known.begin(), known.end(), ext) == known.end())
-    throw Error(fmt::format("{}: unknown output type '{}' (use .glb .gltf .drc .ply .obj .stl .off)", out, ext));
+  check_output_path(out, kAssetExtensions);
+  const std::string ext = lower_extension(out);
   const double tol = p.tolerance > 0 ? p.tolerance : default_tolerance(b.transform, b.dim);
 
   std::vector<GltfSurface> surfaces;
@@ -319,16 +313,16 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["tolerance_mm"] = tol;
     o.extras["iso_values"] = isos;
     write_gltf(out, surfaces, o);
-  } else if (ext == ".drc") {
-    std::vector<TriangleMesh> parts;
-    for (const auto& s : surfaces) parts.push_back(s.mesh);
-    DracoOptions o;
-    o.tolerance = tol;
-    write_draco_file(out, merge(parts), o);
   } else {
-    std::vector<TriangleMesh> parts;
-    for (const auto& s : surfaces) parts.push_back(s.mesh);
-    write_mesh_file(out, merge(parts));
+    // Single-mesh formats: all surfaces in one mesh.
+    const TriangleMesh all = merge(surfaces);
+    if (ext == ".drc") {
+      DracoOptions o;
+      o.tolerance = tol;
+      write_draco_file(out, all, o);
+    } else {
+      write_mesh_file(out, all);
+    }
   }
   summary["output"] = out;
   summary["surfaces"] = per;

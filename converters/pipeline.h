@@ -67,6 +67,9 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
 /// that its folder exists; throws mlfe::Error naming the path otherwise.
 void check_output_path(const std::string& path, const std::vector<std::string>& extensions);
 
+/// The output types of write_assets.
+extern const std::vector<std::string> kAssetExtensions;
+
 /// Writes JSON atomically.
 void write_json(const std::string& path, const nlohmann::json& j);
 

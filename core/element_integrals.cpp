@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/check.h"
+#include "core/p1_element.h"
 
 namespace mlfe {
 
@@ -90,23 +91,6 @@ struct Integrator {
   }
 };
 
-template <int D>
-double simplex_measure(const std::array<std::array<double, D>, D + 1>& p) {
-  if constexpr (D == 2) {
-    return 0.5 * std::abs((p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]));
-  } else {
-    double a[3], b[3], c[3];
-    for (int i = 0; i < 3; ++i) {
-      a[i] = p[1][i] - p[0][i];
-      b[i] = p[2][i] - p[0][i];
-      c[i] = p[3][i] - p[0][i];
-    }
-    return std::abs(a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-                    a[2] * (b[0] * c[1] - b[1] * c[0])) /
-           6.0;
-  }
-}
-
 }  // namespace
 
 int integration_depth(double size, double max_sub_size) {
@@ -124,7 +108,7 @@ ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D 
                                       const Field& f, double max_sub_edge, bool gradients) {
   // Size = side of the cube that D! copies of the simplex would fill (Kuhn simplices of a
   // voxel-sized cube have size one voxel), so sub-simplices hold ~D! samples per voxel.
-  const double measure = simplex_measure<D>(p);
+  const double measure = P1Element<D>(p).measure;
   const double size = std::pow(measure * (D == 2 ? 2.0 : 6.0), 1.0 / D);
   const int depth = integration_depth(size, max_sub_edge);
   const double subs = std::pow(double(1 << D), depth);

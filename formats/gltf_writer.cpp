@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "formats/atomic_file.h"
+#include "formats/file_names.h"
 #include "formats/draco_io.h"
 
 namespace mlfe {
@@ -25,15 +26,6 @@ namespace {
 using Vec3 = std::array<float, 3>;
 
 enum class Encoding { kFloat, kDraco, kQuantized };
-
-std::string lower_extension(const std::string& path) {
-  const auto slash = path.find_last_of('/');
-  const auto dot = path.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string ext = path.substr(dot);
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return ext;
-}
 
 tinygltf::Value to_value(const nlohmann::json& j) {
   switch (j.type()) {

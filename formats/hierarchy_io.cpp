@@ -319,4 +319,11 @@ template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const 
 template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,
                                  const HierarchyFileInfo&, const HierarchyWriteOptions&);
 
+bool is_hierarchy_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char magic[8] = {};
+  in.read(magic, 8);
+  return in.gcount() == 8 && std::memcmp(magic, kMagic, 8) == 0;
+}
+
 }  // namespace mlfe

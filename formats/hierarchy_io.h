@@ -96,6 +96,10 @@ void write_hierarchy(const std::string& path, const HierarchyFile& file,
 /// crashes or aborts on a malformed file.
 HierarchyFile read_hierarchy(const std::string& path);
 
+/// True when `path` starts with the hierarchy file's magic (nothing else is checked; an
+/// unreadable or short file gives false).
+bool is_hierarchy_file(const std::string& path);
+
 extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&,
                                         const std::vector<double>&, const HierarchyFileInfo&,
                                         const HierarchyWriteOptions&);

@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "formats/atomic_file.h"
+#include "formats/file_names.h"
 
 namespace mlfe {
 namespace {
@@ -40,15 +41,6 @@ class QuietOpenMesh {
  private:
   bool log_, err_;
 };
-
-std::string lower_extension(const std::string& path) {
-  const auto slash = path.find_last_of('/');
-  const auto dot = path.find_last_of('.');
-  if (dot == std::string::npos || (slash != std::string::npos && dot < slash)) return "";
-  std::string ext = path.substr(dot);
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  return ext;
-}
 
 void check_mesh(const TriangleMesh& mesh, const std::string& what) {
   const std::size_t n = mesh.positions.size();

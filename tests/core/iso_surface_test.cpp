@@ -39,6 +39,21 @@ void expect_closed_manifold(const TriangleMesh& m, int euler) {
   EXPECT_EQ(V - E + F, euler);
 }
 
+// Every triangle's geometric normal (counter-clockwise) points to the side of its first
+// vertex's normal.
+void expect_winding_follows_normals(const TriangleMesh& m) {
+  for (const auto& t : m.triangles) {
+    const auto& p0 = m.positions[t[0]];
+    const auto& p1 = m.positions[t[1]];
+    const auto& p2 = m.positions[t[2]];
+    const double ux = p1[0] - p0[0], uy = p1[1] - p0[1], uz = p1[2] - p0[2];
+    const double vx = p2[0] - p0[0], vy = p2[1] - p0[1], vz = p2[2] - p0[2];
+    const double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+    const auto& n = m.normals[t[0]];
+    ASSERT_GT(nx * n[0] + ny * n[1] + nz * n[2], 0.0);
+  }
+}
+
 TEST(IsoSurface, SphereIsAccurateClosedAndOrientedOutward) {
   // A bright ball: f = 20 - distance to the centre (voxels of 1 mm).
   const std::array<double, 3> c{20.3, 19.6, 21.1};
@@ -69,17 +84,7 @@ TEST(IsoSurface, SphereIsAccurateClosedAndOrientedOutward) {
     const double radial = (p[0] - c[0]) * n[0] + (p[1] - c[1]) * n[1] + (p[2] - c[2]) * n[2];
     ASSERT_GT(radial, 0.9 * R) << "vertex normal not outward";
   }
-  // Triangle winding agrees with the vertex normals.
-  for (const auto& t : m.triangles) {
-    const auto& p0 = m.positions[t[0]];
-    const auto& p1 = m.positions[t[1]];
-    const auto& p2 = m.positions[t[2]];
-    const double ux = p1[0] - p0[0], uy = p1[1] - p0[1], uz = p1[2] - p0[2];
-    const double vx = p2[0] - p0[0], vy = p2[1] - p0[1], vz = p2[2] - p0[2];
-    const double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
-    const auto& n = m.normals[t[0]];
-    ASSERT_GT(nx * n[0] + ny * n[1] + nz * n[2], 0.0);
-  }
+  expect_winding_follows_normals(m);
 }
 
 TEST(IsoSurface, LinearFieldGivesAnExactPlane) {
@@ -185,16 +190,7 @@ TEST(IsoSurface, ReflectingTransformKeepsWindingConsistentWithNormals) {
   for (const auto& tr : {t, r}) {
     const auto m = x.extract(-0.3, tr);
     expect_closed_manifold(m, 2);
-    for (const auto& tri : m.triangles) {
-      const auto& p0 = m.positions[tri[0]];
-      const auto& p1 = m.positions[tri[1]];
-      const auto& p2 = m.positions[tri[2]];
-      const double ux = p1[0] - p0[0], uy = p1[1] - p0[1], uz = p1[2] - p0[2];
-      const double vx = p2[0] - p0[0], vy = p2[1] - p0[1], vz = p2[2] - p0[2];
-      const double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
-      const auto& n = m.normals[tri[0]];
-      ASSERT_GT(nx * n[0] + ny * n[1] + nz * n[2], 0.0);
-    }
+    expect_winding_follows_normals(m);
   }
 }
 
