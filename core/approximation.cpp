@@ -2,14 +2,14 @@
 // approximation.h. Solvers: CG with the BPX preconditioner (Bramble, Pasciak & Xu 1990).
 #include "core/approximation.h"
 
-#include <Eigen/SparseCholesky>
 #include <tbb/parallel_sort.h>
 
+#include <Eigen/SparseCholesky>
 #include <algorithm>
-#include <cstdio>
-#include <cstdlib>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <numeric>
 
@@ -24,9 +24,7 @@ namespace mlfe {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 template <int D>
 double gradient_weight(const Field& f, const ApproximationOptions& o) {
@@ -49,9 +47,15 @@ Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& 
   SparseOperator a(m);
   std::unique_ptr<LinearOperator> pre;
   switch (opts.preconditioner) {
-    case Preconditioner::kBpx: pre = std::make_unique<BpxPreconditioner<D>>(h, gw); break;
-    case Preconditioner::kJacobi: pre = std::make_unique<JacobiPreconditioner>(m); break;
-    case Preconditioner::kNone: pre = std::make_unique<IdentityOperator>(n); break;
+    case Preconditioner::kBpx:
+      pre = std::make_unique<BpxPreconditioner<D>>(h, gw);
+      break;
+    case Preconditioner::kJacobi:
+      pre = std::make_unique<JacobiPreconditioner>(m);
+      break;
+    case Preconditioner::kNone:
+      pre = std::make_unique<IdentityOperator>(n);
+      break;
   }
   Vector x = start;
   const CgResult r = conjugate_gradient(a, *pre, rhs, x, opts.cg_tolerance, 5000);
@@ -234,7 +238,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         surface_marks += surface;
       }
       if (marked.empty())
-        stop = target_met ? "target RMS error reached"
+        stop = target_met           ? "target RMS error reached"
                : opts.threshold > 0 ? "no element above the threshold"
                                     : "maximum level reached";
     }
@@ -254,11 +258,16 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
     // the budget, undo it and try half as many.
     auto tr = Clock::now();
-    std::sort(marked.begin(), marked.end(), [](const Mark& a, const Mark& b) {
+    // With a budget at most `cap` marks can be refined: order only that prefix.
+    const std::size_t cap =
+        opts.max_vertices
+            ? std::min(marked.size(), std::max<std::size_t>(1, (opts.max_vertices - h.vertex_count()) / 2))
+            : marked.size();
+    std::partial_sort(marked.begin(), marked.begin() + cap, marked.end(), [](const Mark& a, const Mark& b) {
       if (a.surface != b.surface) return a.surface;
       return a.e != b.e ? a.e > b.e : a.id < b.id;
     });
-    std::size_t count = marked.size();
+    std::size_t count = cap;
     if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {
       // Bulk criterion (Dörfler-like): refine only the worst elements that together carry
       // 60% of the excess error Σ E − τ²|Ω|, so the last step does not overshoot the target
@@ -297,7 +306,8 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       const std::size_t added = h.vertex_count() - backup->vertex_count();
       const std::size_t room = opts.max_vertices - backup->vertex_count();
       h = std::move(*backup);
-      const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.85 * double(room) / double(added));
+      const std::size_t scaled =
+          static_cast<std::size_t>(double(count) * 0.85 * double(room) / double(added));
       count = std::min(count / 2, scaled);
     }
     st.marked = refined ? count : 0;
@@ -311,15 +321,17 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       out.leaf_errors = err;
       break;
     }
-    std::vector<ElementIntegrals<D>> new_cache(h.element_count());
-    std::vector<std::uint8_t> new_have(h.element_count(), 0);
-    for (std::size_t i = 0; i < remap.size(); ++i)
-      if (remap[i].valid() && have[i]) {
-        new_cache[remap[i].value] = cache[i];
-        new_have[remap[i].value] = 1;
-      }
-    cache.swap(new_cache);
-    have.swap(new_have);
+    // In place: compaction only moves elements down (remap[i] <= i), so a forward pass never
+    // overwrites an entry it still has to read.
+    // Surviving old elements get the ids 0..kept-1 in order; everything after is new.
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < remap.size(); ++i) {
+      if (!remap[i].valid()) continue;
+      MLFE_CHECK(remap[i].value == kept);
+      if (have[i]) cache[kept] = cache[i];
+      have[kept++] = have[i];
+    }
+    std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
   }
   out.values = std::move(values);
   return out;
@@ -327,7 +339,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
 
 template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
 template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
-template std::vector<double> solve_best_approximation<2>(const Hierarchy<2>&, const Field&, const ApproximationOptions&, const std::vector<double>&, IterationStats*);
-template std::vector<double> solve_best_approximation<3>(const Hierarchy<3>&, const Field&, const ApproximationOptions&, const std::vector<double>&, IterationStats*);
+template std::vector<double> solve_best_approximation<2>(const Hierarchy<2>&, const Field&,
+                                                         const ApproximationOptions&,
+                                                         const std::vector<double>&, IterationStats*);
+template std::vector<double> solve_best_approximation<3>(const Hierarchy<3>&, const Field&,
+                                                         const ApproximationOptions&,
+                                                         const std::vector<double>&, IterationStats*);
 
 }  // namespace mlfe

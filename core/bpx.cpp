@@ -22,57 +22,69 @@ BpxPreconditioner<D>::BpxPreconditioner(const Hierarchy<D>& h, double gradient_w
     MLFE_CHECK(lv < levels);
     new_vertices_[lv].push_back(static_cast<std::uint32_t>(v));
   }
-  // Per element: its diagonal contributions (mass + weighted stiffness, and stiffness alone).
-  const std::size_t ne = h.element_count();
-  std::vector<std::array<double, D + 1>> dm(ne), ds(ne);
-  for (std::size_t i = 0; i < ne; ++i) {
-    const ElemId e(static_cast<std::uint32_t>(i));
-    const auto& c = h.cell(e);
-    std::array<std::array<double, D>, D + 1> p;
-    for (int j = 0; j <= D; ++j) p[j] = h.point(c[j]);
-    const P1Element<D> el(p);
-    for (int j = 0; j <= D; ++j) {
-      ds[i][j] = gradient_weight * el.stiffness(j, j);
-      dm[i][j] = el.mass(j, j) + ds[i][j];
-      if (h.is_leaf(e)) fine_diag_[c[j].value] += dm[i][j];
-    }
-  }
   // V_k = vertices of level-k elements; a(φ_v^k, φ_v^k) is summed over T_k (level-k elements
   // plus coarser leaves), on which φ_v^k is the exact hat function — a vertex on the rim of a
   // refined region has a hat reaching into the coarser leaves, and leaving those out would
-  // over-weight it.
-  level_entries_.resize(levels);
-  std::vector<double> dsum(h.vertex_count(), 0.0), ssum(h.vertex_count(), 0.0);
-  std::vector<std::uint8_t> in_vk(h.vertex_count(), 0);
-  for (int k = 0; k < levels; ++k) {
-    std::vector<std::uint32_t> vk;
+  // over-weight it. One pass over the elements bucketed by level: the coarser leaves'
+  // share is carried in running per-vertex sums instead of rescanning all elements per level.
+  const std::size_t ne = h.element_count(), nv = h.vertex_count();
+  std::vector<std::uint32_t> level_start(levels + 1, 0), by_level(ne);
+  for (std::size_t i = 0; i < ne; ++i) ++level_start[h.level(ElemId(static_cast<std::uint32_t>(i))) + 1];
+  for (int k = 0; k < levels; ++k) level_start[k + 1] += level_start[k];
+  {
+    std::vector<std::uint32_t> pos(level_start.begin(), level_start.end() - 1);
     for (std::size_t i = 0; i < ne; ++i)
-      if (h.level(ElemId(static_cast<std::uint32_t>(i))) == k)
-        for (VertexId v : h.cell(ElemId(static_cast<std::uint32_t>(i))))
-          if (!in_vk[v.value]) {
-            in_vk[v.value] = 1;
-            vk.push_back(v.value);
-          }
-    for (std::size_t i = 0; i < ne; ++i) {
-      const ElemId e(static_cast<std::uint32_t>(i));
-      if (!(h.level(e) == k || (h.level(e) < k && h.is_leaf(e)))) continue;
+      by_level[pos[h.level(ElemId(static_cast<std::uint32_t>(i)))]++] = static_cast<std::uint32_t>(i);
+  }
+  level_entries_.resize(levels);
+  std::vector<double> dsum(nv, 0.0), ssum(nv, 0.0), coarse_d(nv, 0.0), coarse_s(nv, 0.0);
+  std::vector<std::uint8_t> in_vk(nv, 0);
+  std::vector<std::array<double, D + 1>> dm, ds;  // diagonal contributions of this level's elements
+  for (int k = 0; k < levels; ++k) {
+    const std::uint32_t* first = by_level.data() + level_start[k];
+    const std::size_t count = level_start[k + 1] - level_start[k];
+    dm.resize(count);
+    ds.resize(count);
+    std::vector<std::uint32_t> vk;
+    for (std::size_t n = 0; n < count; ++n) {
+      const ElemId e(first[n]);
       const auto& c = h.cell(e);
-      for (int j = 0; j <= D; ++j)
-        if (in_vk[c[j].value]) {
-          dsum[c[j].value] += dm[i][j];
-          ssum[c[j].value] += ds[i][j];
+      std::array<std::array<double, D>, D + 1> p;
+      for (int j = 0; j <= D; ++j) p[j] = h.point(c[j]);
+      const P1Element<D> el(p);
+      for (int j = 0; j <= D; ++j) {
+        ds[n][j] = gradient_weight * el.stiffness(j, j);
+        dm[n][j] = el.mass(j, j) + ds[n][j];
+        const std::uint32_t v = c[j].value;
+        if (!in_vk[v]) {
+          in_vk[v] = 1;
+          vk.push_back(v);
         }
+        dsum[v] += dm[n][j];
+        ssum[v] += ds[n][j];
+      }
     }
     std::sort(vk.begin(), vk.end());
     for (std::uint32_t v : vk) {
-      MLFE_CHECK(dsum[v] > 0);
+      const double d = dsum[v] + coarse_d[v], s = ssum[v] + coarse_s[v];
+      MLFE_CHECK(d > 0);
       // Only the stiffness part of a level needs the multilevel correction: where the mass
       // dominates (elements coarse against the gradient length scale), the level-k hat
       // functions would just add a multiple of the identity on smooth modes and slow CG down.
-      const double weight = ssum[v] / dsum[v];
-      if (weight > 1e-3) level_entries_[k].push_back({v, weight / dsum[v]});
+      const double weight = s / d;
+      if (weight > 1e-3) level_entries_[k].push_back({v, weight / d});
       dsum[v] = ssum[v] = 0;
       in_vk[v] = 0;
+    }
+    for (std::size_t n = 0; n < count; ++n) {
+      const ElemId e(first[n]);
+      if (!h.is_leaf(e)) continue;
+      const auto& c = h.cell(e);
+      for (int j = 0; j <= D; ++j) {
+        coarse_d[c[j].value] += dm[n][j];
+        coarse_s[c[j].value] += ds[n][j];
+        fine_diag_[c[j].value] += dm[n][j];
+      }
     }
   }
   for (double& d : fine_diag_) {

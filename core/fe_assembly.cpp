@@ -2,11 +2,14 @@
 #include "core/fe_assembly.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <limits>
+#include <utility>
 
 #include "core/check.h"
 #include "core/p1_element.h"
@@ -25,15 +28,14 @@ std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, E
 
 template <int D>
 std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
-                                                           const std::vector<ElemId>& elems,
-                                                           const Field& f, double max_sub_edge,
-                                                           bool gradients) {
+                                                           const std::vector<ElemId>& elems, const Field& f,
+                                                           double max_sub_edge, bool gradients) {
   std::vector<ElementIntegrals<D>> out(elems.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, elems.size(), 16),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i)
-                        out[i] = integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, elems.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i)
+          out[i] = integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
+      });
   return out;
 }
 
@@ -57,51 +59,95 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
       for (int a = 0; a <= D; ++a) inc[pos[c[a].value]++] = static_cast<std::uint32_t>(i * (D + 1) + a);
     }
   }
-  auto neighbours = [&](std::size_t v, std::vector<int>& out) {
-    out.clear();
-    for (std::uint32_t k = start[v]; k < start[v + 1]; ++k)
-      for (VertexId w : h.cell(leaves[inc[k] / (D + 1)])) out.push_back(int(w.value));
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
+  // Element data once per element (not once per corner row), in leaf order so the row pass
+  // reads it without going through the hierarchy: the corners, and for the pure mass matrix
+  // only |T|, with a gradient term the (D+1)² entries.
+  constexpr int kLocal = (D + 1) * (D + 1);
+  const bool with_grad = gradient_weight != 0;
+  std::vector<double> local(with_grad ? ne * kLocal : ne);
+  std::vector<std::array<std::uint32_t, D + 1>> corners(ne);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, ne, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const auto& c = h.cell(leaves[i]);
+          for (int a = 0; a <= D; ++a) corners[i][a] = c[a].value;
+          const P1Element<D> el(element_points(h, leaves[i]));
+          if (!with_grad) {
+            local[i] = el.measure;
+            continue;
+          }
+          for (int a = 0; a <= D; ++a)
+            for (int b = 0; b <= D; ++b)
+              local[i * kLocal + a * (D + 1) + b] = el.mass(a, b) + gradient_weight * el.stiffness(a, b);
+        }
+      });
+  // Rows in blocks, one pass: a per-thread slot array maps a column to its place in the
+  // current row (no sort of all incidences, no binary search per entry); the blocks' rows are
+  // then copied into the matrix in order.
+  constexpr std::size_t kBlock = 2048;
+  constexpr double kMassFactor = P1Element<D>::mass_factor();
+  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  const std::size_t nblocks = (nv + kBlock - 1) / kBlock;
+  struct Block {
+    std::vector<int> cols;
+    std::vector<double> vals;
   };
-  std::vector<int> outer(nv + 1, 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-    std::vector<int> nb;
-    for (std::size_t v = r.begin(); v != r.end(); ++v) {
-      neighbours(v, nb);
-      outer[v + 1] = static_cast<int>(nb.size());
-    }
-  });
-  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] += outer[v];
+  std::vector<Block> blocks(nblocks);
+  std::vector<int> row_len(nv, 0);
+  tbb::enumerable_thread_specific<std::vector<std::uint32_t>> slots_tls;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nblocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        auto& slot = slots_tls.local();
+        if (slot.size() != nv) slot.assign(nv, kNone);
+        std::vector<std::pair<int, double>> row;
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+          auto& blk = blocks[b];
+          for (std::size_t v = b * kBlock, vend = std::min(nv, v + kBlock); v < vend; ++v) {
+            row.clear();
+            for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
+              const std::size_t i = inc[k] / (D + 1);
+              const int a = static_cast<int>(inc[k] % (D + 1));
+              const auto& c = corners[i];
+              for (int bb = 0; bb <= D; ++bb) {
+                const double x = with_grad ? local[i * kLocal + a * (D + 1) + bb]
+                                           : local[i] * kMassFactor * (a == bb ? 2.0 : 1.0);
+                std::uint32_t& s = slot[c[bb]];
+                if (s == kNone) {
+                  s = static_cast<std::uint32_t>(row.size());
+                  row.emplace_back(int(c[bb]), x);
+                } else {
+                  row[s].second += x;
+                }
+              }
+            }
+            for (const auto& e : row) slot[e.first] = kNone;
+            std::sort(row.begin(), row.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
+            for (const auto& e : row) {
+              blk.cols.push_back(e.first);
+              blk.vals.push_back(e.second);
+            }
+            row_len[v] = static_cast<int>(row.size());
+          }
+        }
+      });
   const int n = static_cast<int>(nv);
   SparseMatrix m(n, n);
+  int* outer = m.outerIndexPtr();
+  outer[0] = 0;
+  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] = outer[v] + row_len[v];
   m.resizeNonZeros(outer[nv]);
-  std::copy(outer.begin(), outer.end(), m.outerIndexPtr());
   int* inner = m.innerIndexPtr();
   double* val = m.valuePtr();
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-    std::vector<int> nb;
-    for (std::size_t v = r.begin(); v != r.end(); ++v) {
-      neighbours(v, nb);
-      int* row = inner + outer[v];
-      double* rv = val + outer[v];
-      std::copy(nb.begin(), nb.end(), row);
-      std::fill(rv, rv + nb.size(), 0.0);
-      for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
-        const std::size_t i = inc[k] / (D + 1);
-        const int a = static_cast<int>(inc[k] % (D + 1));
-        const auto& c = h.cell(leaves[i]);
-        const P1Element<D> el(element_points(h, leaves[i]));
-        for (int b = 0; b <= D; ++b) {
-          double x = el.mass(a, b);
-          if (gradient_weight != 0) x += gradient_weight * el.stiffness(a, b);
-          const int col = static_cast<int>(c[b].value);
-          const int at = static_cast<int>(std::lower_bound(row, row + nb.size(), col) - row);
-          rv[at] += x;
-        }
-      }
-    }
-  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nblocks, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                        const int at = outer[b * kBlock];
+                        std::copy(blocks[b].cols.begin(), blocks[b].cols.end(), inner + at);
+                        std::copy(blocks[b].vals.begin(), blocks[b].vals.end(), val + at);
+                        std::vector<int>().swap(blocks[b].cols);
+                        std::vector<double>().swap(blocks[b].vals);
+                      }
+                    });
   m.finalize();
   return m;
 }
@@ -130,8 +176,8 @@ Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
 
 template <int D>
 std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                                   const std::vector<ElementIntegrals<D>>& integrals,
-                                   const Vector& u, double gradient_weight) {
+                                   const std::vector<ElementIntegrals<D>>& integrals, const Vector& u,
+                                   double gradient_weight) {
   MLFE_CHECK(integrals.size() == leaves.size());
   std::vector<double> err(leaves.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 1024),
@@ -154,7 +200,8 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
                           for (int a = 0; a <= D; ++a)
                             for (int k = 0; k < D; ++k) gu[k] += uu[a] * el.grad[a][k];
                           double g = in.grad2;
-                          for (int k = 0; k < D; ++k) g += -2 * gu[k] * in.grad[k] + gu[k] * gu[k] * el.measure;
+                          for (int k = 0; k < D; ++k)
+                            g += -2 * gu[k] * in.grad[k] + gu[k] * gu[k] * el.measure;
                           e += gradient_weight * std::max(g, 0.0);
                         }
                         err[i] = std::max(e, 0.0);
@@ -163,13 +210,23 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
   return err;
 }
 
-template std::vector<ElementIntegrals<2>> compute_element_integrals<2>(const Hierarchy<2>&, const std::vector<ElemId>&, const Field&, double, bool);
-template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hierarchy<3>&, const std::vector<ElemId>&, const Field&, double, bool);
+template std::vector<ElementIntegrals<2>> compute_element_integrals<2>(const Hierarchy<2>&,
+                                                                       const std::vector<ElemId>&,
+                                                                       const Field&, double, bool);
+template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hierarchy<3>&,
+                                                                       const std::vector<ElemId>&,
+                                                                       const Field&, double, bool);
 template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double);
 template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double);
-template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&, const std::vector<ElementIntegrals<2>>&, double);
-template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&, const std::vector<ElementIntegrals<3>>&, double);
-template std::vector<double> element_errors<2>(const Hierarchy<2>&, const std::vector<ElemId>&, const std::vector<ElementIntegrals<2>>&, const Vector&, double);
-template std::vector<double> element_errors<3>(const Hierarchy<3>&, const std::vector<ElemId>&, const std::vector<ElementIntegrals<3>>&, const Vector&, double);
+template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
+                                 const std::vector<ElementIntegrals<2>>&, double);
+template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
+                                 const std::vector<ElementIntegrals<3>>&, double);
+template std::vector<double> element_errors<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
+                                               const std::vector<ElementIntegrals<2>>&, const Vector&,
+                                               double);
+template std::vector<double> element_errors<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
+                                               const std::vector<ElementIntegrals<3>>&, const Vector&,
+                                               double);
 
 }  // namespace mlfe

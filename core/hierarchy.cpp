@@ -115,8 +115,8 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
   if (nv >= VertexId::kInvalidValue) fail("too many vertices (" + vs(nv) + ")");
   if (ne >= ElemId::kInvalidValue) fail("too many elements (" + vs(ne) + ")");
   if (a.vertex_parents.size() != nv || a.vertex_level.size() != nv)
-    fail("vertex arrays differ in size (points " + vs(nv) + ", parents " +
-         vs(a.vertex_parents.size()) + ", levels " + vs(a.vertex_level.size()) + ")");
+    fail("vertex arrays differ in size (points " + vs(nv) + ", parents " + vs(a.vertex_parents.size()) +
+         ", levels " + vs(a.vertex_level.size()) + ")");
   if (a.parent.size() != ne || a.first_child.size() != ne || a.num_children.size() != ne ||
       a.level.size() != ne || a.kind.size() != ne)
     fail("element arrays differ in size (cells " + vs(ne) + ")");
@@ -135,8 +135,8 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
       continue;
     }
     if (!par[0].valid() || !par[1].valid() || !(par[0] < par[1]) || par[1].value >= v)
-      fail("vertex " + vs(v) + " has invalid parents (" + vs(par[0].value) + ", " +
-           vs(par[1].value) + "): need p0 < p1 < vertex");
+      fail("vertex " + vs(v) + " has invalid parents (" + vs(par[0].value) + ", " + vs(par[1].value) +
+           "): need p0 < p1 < vertex");
     const Point& pa = a.points[par[0].value];
     const Point& pb = a.points[par[1].value];
     double scale = 0, err = 0;
@@ -149,8 +149,7 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
            vs(par[1].value));
     if (a.vertex_level[v] == 0 || a.vertex_level[v] <= a.vertex_level[par[0].value] ||
         a.vertex_level[v] <= a.vertex_level[par[1].value])
-      fail("vertex " + vs(v) + " has level " + vs(a.vertex_level[v]) +
-           ", not above its parents' levels");
+      fail("vertex " + vs(v) + " has level " + vs(a.vertex_level[v]) + ", not above its parents' levels");
     if (h.edge_mid_.find(par[0], par[1]).valid())
       fail("edge (" + vs(par[0].value) + ", " + vs(par[1].value) + ") is bisected twice");
     h.edge_mid_.insert(par[0], par[1], VertexId(static_cast<std::uint32_t>(v)));
@@ -178,7 +177,8 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
       if (a.parent[e].valid() || a.level[e] != 0) fail(el + " is coarse but has a parent or level > 0");
     } else {
       const ElemId p = a.parent[e];
-      if (!p.valid() || p.value >= e) fail(el + " has invalid parent " + vs(p.value) + " (need parent < child)");
+      if (!p.valid() || p.value >= e)
+        fail(el + " has invalid parent " + vs(p.value) + " (need parent < child)");
       const ElemId f = a.first_child[p.value];
       const std::size_t n = a.num_children[p.value];
       if (!f.valid() || e < f.value || e >= f.value + n)
@@ -217,14 +217,16 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
     if (n == 0) continue;
     const std::uint32_t f = h.first_child_[e].value;
     std::array<VertexId, T::kEdges> mid;
-    for (int i = 0; i < T::kEdges; ++i) mid[i] = h.edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]);
+    for (int i = 0; i < T::kEdges; ++i)
+      mid[i] = h.edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]);
     if (h.kind_[f] == ElemKind::kRed) {
       if (n != T::kRedChildren) fail(el + " has " + vs(n) + " red children");
       for (int i = 0; i < T::kEdges; ++i)
         if (!mid[i].valid()) fail(el + " is red-refined but edge " + vs(i) + " has no midpoint");
       const auto kids = red_children(c, mid);
       for (std::size_t i = 0; i < n; ++i)
-        if (h.cells_[f + i] != kids[i]) fail(el + ": red child " + vs(f + i) + " does not match the red pattern");
+        if (h.cells_[f + i] != kids[i])
+          fail(el + ": red child " + vs(f + i) + " does not match the red pattern");
       continue;
     }
     // Green: every child vertex is a corner or an edge midpoint of e; the split edges form an
@@ -240,7 +242,8 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
             mask |= 1u << j;
             ok = true;
           }
-        if (!ok) fail(el + ": green child " + vs(f + i) + " uses vertex " + vs(v.value) + " outside its parent");
+        if (!ok)
+          fail(el + ": green child " + vs(f + i) + " uses vertex " + vs(v.value) + " outside its parent");
       }
       sum += std::abs(h.cell_measure(k));
     }
@@ -317,8 +320,7 @@ void Hierarchy<D>::red_refine(ElemId e) {
   const Cell c = cells_[e.value];
   const int lvl = level_[e.value] + 1;
   std::array<VertexId, T::kEdges> m;
-  for (int i = 0; i < T::kEdges; ++i)
-    m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
+  for (int i = 0; i < T::kEdges; ++i) m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
   const std::array<Cell, T::kRedChildren> kids = red_children(c, m);
   const ElemId first(static_cast<std::uint32_t>(cells_.size()));
   for (const Cell& k : kids) add_element(k, e, lvl, ElemKind::kRed);
@@ -343,7 +345,8 @@ bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
   const Cell& pc = cells_[parent(e).value];
   auto corner = [&](VertexId v) { return std::find(pc.begin(), pc.end(), v) != pc.end(); };
   for (int i = 0; i < T::kEdges; ++i)
-    if ((mask & (1u << i)) && !(corner(c[T::kEdgeVerts[i][0]]) && corner(c[T::kEdgeVerts[i][1]]))) return false;
+    if ((mask & (1u << i)) && !(corner(c[T::kEdgeVerts[i][0]]) && corner(c[T::kEdgeVerts[i][1]])))
+      return false;
   return true;
 }
 
@@ -502,21 +505,38 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   };
   // Alive leaves incident to any vertex of `verts` with ≥ 2 vertices flagged in `flag`
   // (sorted, unique).
-  const auto incident_candidates = [&](const std::vector<VertexId>& verts, const std::vector<std::uint8_t>& flag,
-                                       std::size_t below) {
+  // An element reached through several of its vertices is taken once (a flag per element
+  // instead of sorting the duplicates away); a long list is put in id order by a scan of the
+  // flags rather than a sort.
+  std::vector<std::uint8_t> seen;
+  const auto incident_candidates = [&](const std::vector<VertexId>& verts,
+                                       const std::vector<std::uint8_t>& flag, std::size_t below) {
     std::vector<ElemId> out;
+    seen.resize(cells_.size(), 0);
     for (VertexId v : verts) {
       if (v.value >= inc_head.size()) continue;
       for (std::uint32_t s = inc_head[v.value]; s != kNone; s = inc_next[s]) {
         const ElemId e = inc_elem[s / (D + 1)];
-        if (e.value >= below || !alive_leaf(e)) continue;
+        if (e.value >= below || seen[e.value] || !alive_leaf(e)) continue;
         int n = 0;
         for (VertexId w : cells_[e.value]) n += flag[w.value];
-        if (n >= 2) out.push_back(e);
+        if (n >= 2) {
+          seen[e.value] = 1;
+          out.push_back(e);
+        }
       }
     }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
+    if (out.size() > cells_.size() / 32) {
+      out.clear();
+      for (std::size_t i = 0; i < below && i < seen.size(); ++i)
+        if (seen[i]) {
+          out.push_back(ElemId(static_cast<std::uint32_t>(i)));
+          seen[i] = 0;
+        }
+    } else {
+      std::sort(out.begin(), out.end());
+      for (ElemId e : out) seen[e.value] = 0;
+    }
     return out;
   };
 
@@ -580,14 +600,16 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     std::vector<ElemId> candidates;
     if (use_incidence) {
       inc_head.resize(points_.size(), kNone);
-      for (std::size_t e = round_first_elem; e < cells_.size(); ++e) add_incidence(ElemId(static_cast<std::uint32_t>(e)));
+      for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
+        add_incidence(ElemId(static_cast<std::uint32_t>(e)));
       candidates = incident_candidates(dirty_list, dirty, round_first_elem);
       for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
         candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {
       // Drop refined and removed elements from the leaf list.
-      leaf_list.erase(std::remove_if(leaf_list.begin(), leaf_list.end(), [&](ElemId e) { return !alive_leaf(e); }),
-                      leaf_list.end());
+      leaf_list.erase(
+          std::remove_if(leaf_list.begin(), leaf_list.end(), [&](ElemId e) { return !alive_leaf(e); }),
+          leaf_list.end());
       candidates.swap(leaf_list);  // borrowed; given back below
     }
 
@@ -651,7 +673,8 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     closure = incident_candidates(touched_list, touched, cells_.size());
   else
     closure.swap(leaf_list);
-  std::sort(closure.begin(), closure.end());  // id order: deterministic child numbering
+  // id order: deterministic child numbering (the leaf list is nearly always sorted already)
+  if (!std::is_sorted(closure.begin(), closure.end())) std::sort(closure.begin(), closure.end());
   std::vector<unsigned> masks(closure.size(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -787,8 +810,8 @@ template <int D>
 std::size_t Hierarchy<D>::memory_bytes() const {
   return points_.capacity() * sizeof(Point) + vertex_parents_.capacity() * sizeof(vertex_parents_[0]) +
          vertex_level_.capacity() + cells_.capacity() * sizeof(Cell) + parent_.capacity() * 4 +
-         first_child_.capacity() * 4 + num_children_.capacity() + level_.capacity() +
-         kind_.capacity() + edge_mid_.memory_bytes();
+         first_child_.capacity() * 4 + num_children_.capacity() + level_.capacity() + kind_.capacity() +
+         edge_mid_.memory_bytes();
 }
 
 template class Hierarchy<2>;
