@@ -243,6 +243,9 @@ def main():
     ap.add_argument("--work", default="/tmp/mlfe_iso_bench")
     ap.add_argument("--samples", type=int, default=60000, help="area samples per surface")
     ap.add_argument("--json", default=None, help="also write all rows as JSON here")
+    ap.add_argument("--simplify", default="0",
+                    help="comma-separated `mlfe convert --simplify` tolerances in voxels to run per budget (0: none)")
+    ap.add_argument("--mlfe-args", default="", help="extra arguments for every mlfe convert (space separated)")
     ap.add_argument("cases", nargs="*", help="VOL:iso1,iso2:maxv1,maxv2")
     args = ap.parse_args()
     cases = args.cases or [
@@ -281,23 +284,37 @@ def main():
 
             # mlfe first: its triangle counts are decimation targets.
             mlfe_rows = []
+            extra = args.mlfe_args.split()
             for mv in budgets:
-                glb, hier, rep = W(f"mlfe{mv}.glb"), W(f"mlfe{mv}.mlfeh"), W(f"mlfe{mv}.json")
-                cmd = [mlfe, "--threads", str(THREADS), "convert", path, "--iso", f"{iso:g}", "--max-vertices", str(mv),
-                       "-o", glb, "--hierarchy", hier, "--report", rep, "--quiet"]
-                log("  ", " ".join(cmd))
-                t0 = time.perf_counter()
-                subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-                t_conv = time.perf_counter() - t0
-                report = json.load(open(rep))
-                ex, _ = run_json([tools, "--threads", str(THREADS), "extract", hier, f"{iso:g}", W(f"mlfe{mv}.ply")])
-                r = dict(method=f"mlfe convert --max-vertices {mv}", triangles=ex["triangles"], seconds=t_conv,
-                         extract_seconds=ex["extract_seconds"], extract_setup_seconds=ex["setup_seconds"],
-                         build_seconds=report["seconds"], hierarchy_vertices=report["vertices"],
-                         psnr_db=report["psnr_db"], peak_rss_mb=report["peak_rss_mb"],
-                         cli_glb_bytes=os.path.getsize(glb), ply=W(f"mlfe{mv}.ply"), budget=mv,
-                         cli_triangles=report["asset"]["triangles"])
-                mlfe_rows.append(r)
+                for simp in [float(x) for x in args.simplify.split(",")]:
+                    key = f"{mv}" + (f"s{simp:g}" if simp > 0 else "")
+                    glb, hier, rep = W(f"mlfe{key}.glb"), W(f"mlfe{key}.mlfeh"), W(f"mlfe{key}.json")
+                    cmd = [mlfe, "--threads", str(THREADS), "convert", path, "--iso", f"{iso:g}"]
+                    if mv > 0:
+                        cmd += ["--max-vertices", str(mv)]
+                    if simp > 0:
+                        cmd += ["--simplify", f"{simp:g}"]
+                    cmd += extra + ["-o", glb, "--hierarchy", hier, "--report", rep, "--quiet"]
+                    log("  ", " ".join(cmd))
+                    t0 = time.perf_counter()
+                    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+                    t_conv = time.perf_counter() - t0
+                    report = json.load(open(rep))
+                    ecmd = [tools, "--threads", str(THREADS), "extract", hier, f"{iso:g}", W(f"mlfe{key}.ply")]
+                    if simp > 0:
+                        ecmd.append(f"{simp:g}")
+                    ex, _ = run_json(ecmd)
+                    label = "mlfe convert" + (f" --max-vertices {mv}" if mv > 0 else "") + \
+                        (f" --simplify {simp:g}" if simp > 0 else "") + (" " + args.mlfe_args if extra else "")
+                    r = dict(method=label, triangles=ex["triangles"], seconds=t_conv,
+                             extract_seconds=ex["extract_seconds"], extract_setup_seconds=ex["setup_seconds"],
+                             simplify_seconds=ex.get("simplify_seconds", 0.0),
+                             extracted_triangles=ex.get("extracted_triangles", ex["triangles"]),
+                             build_seconds=report["seconds"], hierarchy_vertices=report["vertices"],
+                             psnr_db=report["psnr_db"], peak_rss_mb=report["peak_rss_mb"],
+                             cli_glb_bytes=os.path.getsize(glb), ply=W(f"mlfe{key}.ply"), budget=key,
+                             cli_triangles=report["asset"]["triangles"])
+                    mlfe_rows.append(r)
 
             targets = [("10%", max(1, n_mc // 10)), ("2%", max(1, n_mc // 50))]
             for r in mlfe_rows:
@@ -338,7 +355,10 @@ def print_table(name, iso, meta, rows):
     for r in rows:
         extra = ""
         if "extract_seconds" in r:
-            extra = f" (build {r['build_seconds']:.2f}, extract {r['extract_seconds']:.3f})"
+            extra = f" (build {r['build_seconds']:.2f}, extract {r['extract_seconds']:.3f}"
+            if r.get("simplify_seconds", 0) > 0:
+                extra += f", simplify {r['simplify_seconds']:.2f} from {r['extracted_triangles']} triangles"
+            extra += ")"
         elif "decimation_seconds" in r:
             extra = f" (decimation {r['decimation_seconds']:.2f})"
         glb = f"{r['glb_bytes']}"

@@ -19,12 +19,12 @@
 #include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/global_control.h>
 
-#include <nlohmann/json.hpp>
-
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -59,7 +59,7 @@ static int usage() {
                "       iso_tools_bench [--threads N] vdb VOL ISO ADAPTIVITY OUT.ply\n"
                "       iso_tools_bench [--threads N] mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%%] "
                "[--surface-tolerance S]\n"
-               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply\n");
+               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS]\n");
   return 1;
 }
 
@@ -78,11 +78,17 @@ int main(int argc, char** argv) {
     if (mode == "dump" && args.size() == 3) {
       ScalarGrid g = read_volume(args[1]);
       std::ofstream f(args[2], std::ios::binary);
-      f.write(reinterpret_cast<const char*>(g.values.data()), std::streamsize(g.values.size() * sizeof(float)));
+      f.write(reinterpret_cast<const char*>(g.values.data()),
+              std::streamsize(g.values.size() * sizeof(float)));
       if (!f) throw std::runtime_error(args[2] + ": write failed");
       const auto r = g.value_range();
-      out = {{"dims", g.dims}, {"spacing", g.transform.spacing}, {"range", {r[0], r[1]}}, {"dim", g.dim},
-             {"space", g.space}, {"direction", g.transform.direction}, {"origin", g.transform.origin}};
+      out = {{"dims", g.dims},
+             {"spacing", g.transform.spacing},
+             {"range", {r[0], r[1]}},
+             {"dim", g.dim},
+             {"space", g.space},
+             {"direction", g.transform.direction},
+             {"origin", g.transform.origin}};
     } else if (mode == "vdb" && args.size() == 5) {
       ScalarGrid g = read_volume(args[1]);
       const double iso = std::atof(args[2].c_str());
@@ -91,8 +97,9 @@ int main(int argc, char** argv) {
       const auto t0 = Clock::now();
       const auto r = g.value_range();
       openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(r[0]);
-      const openvdb::CoordBBox bbox(openvdb::Coord(0, 0, 0),
-                                    openvdb::Coord(int(g.dims[0] - 1), int(g.dims[1] - 1), int(g.dims[2] - 1)));
+      const openvdb::CoordBBox bbox(
+          openvdb::Coord(0, 0, 0),
+          openvdb::Coord(int(g.dims[0] - 1), int(g.dims[1] - 1), int(g.dims[2] - 1)));
       openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(bbox, g.values.data());
       openvdb::tools::copyFromDense(dense, *grid, /*tolerance=*/-1.0f);  // keep every voxel active
       const double t_grid = since(t0);
@@ -111,18 +118,29 @@ int main(int argc, char** argv) {
         m.triangles.push_back({q[0], q[2], q[3]});
       }
       write_mesh_file(args[4], m);
-      out = {{"method", "openvdb"}, {"adaptivity", adaptivity}, {"iso", iso},
-             {"active_voxels", grid->activeVoxelCount()}, {"grid_seconds", t_grid}, {"mesh_seconds", t_mesh},
-             {"seconds", t_grid + t_mesh}, {"vertices", m.positions.size()}, {"triangles", m.triangles.size()},
-             {"quads", quads.size()}, {"peak_rss_mb", peak_rss_mb()}};
+      out = {{"method", "openvdb"},
+             {"adaptivity", adaptivity},
+             {"iso", iso},
+             {"active_voxels", grid->activeVoxelCount()},
+             {"grid_seconds", t_grid},
+             {"mesh_seconds", t_mesh},
+             {"seconds", t_grid + t_mesh},
+             {"vertices", m.positions.size()},
+             {"triangles", m.triangles.size()},
+             {"quads", quads.size()},
+             {"peak_rss_mb", peak_rss_mb()}};
     } else if (mode == "mlfe" && args.size() >= 4) {
       ApproximationOptions o;
       std::string rms = "0.5%";
       for (std::size_t i = 4; i + 1 < args.size(); i += 2) {
-        if (args[i] == "--max-vertices") o.max_vertices = std::size_t(std::atoll(args[i + 1].c_str()));
-        else if (args[i] == "--rms") rms = args[i + 1];
-        else if (args[i] == "--surface-tolerance") o.surface_tolerance = std::atof(args[i + 1].c_str());
-        else return usage();
+        if (args[i] == "--max-vertices")
+          o.max_vertices = std::size_t(std::atoll(args[i + 1].c_str()));
+        else if (args[i] == "--rms")
+          rms = args[i + 1];
+        else if (args[i] == "--surface-tolerance")
+          o.surface_tolerance = std::atof(args[i + 1].c_str());
+        else
+          return usage();
       }
       const auto t0 = Clock::now();
       ScalarGrid g = read_volume(args[1]);
@@ -131,7 +149,8 @@ int main(int argc, char** argv) {
       const auto r = g.value_range();
       const double span = double(r[1]) - double(r[0]);
       const bool pct = !rms.empty() && rms.back() == '%';
-      o.target_rms = pct ? std::atof(rms.substr(0, rms.size() - 1).c_str()) / 100.0 * span : std::atof(rms.c_str());
+      o.target_rms =
+          pct ? std::atof(rms.substr(0, rms.size() - 1).c_str()) / 100.0 * span : std::atof(rms.c_str());
       o.iso_values = {iso};
       const auto t1 = Clock::now();
       GridField f(g);
@@ -144,14 +163,23 @@ int main(int argc, char** argv) {
       const double t_extract = since(t2);
       to_index(m, g.transform.spacing);
       write_mesh_file(args[3], m);
-      out = {{"method", "mlfe"}, {"iso", iso}, {"read_seconds", t_read}, {"build_seconds", t_build},
-             {"extract_seconds", t_extract}, {"seconds", t_read + t_build + t_extract},
-             {"hierarchy_vertices", a.hierarchy.vertex_count()}, {"iterations", a.iterations.size()},
-             {"stop", a.stop_reason}, {"psnr_db", a.iterations.back().psnr_db},
-             {"vertices", m.positions.size()}, {"triangles", m.triangles.size()}, {"peak_rss_mb", peak_rss_mb()}};
-    } else if (mode == "extract" && args.size() == 4) {
+      out = {{"method", "mlfe"},
+             {"iso", iso},
+             {"read_seconds", t_read},
+             {"build_seconds", t_build},
+             {"extract_seconds", t_extract},
+             {"seconds", t_read + t_build + t_extract},
+             {"hierarchy_vertices", a.hierarchy.vertex_count()},
+             {"iterations", a.iterations.size()},
+             {"stop", a.stop_reason},
+             {"psnr_db", a.iterations.back().psnr_db},
+             {"vertices", m.positions.size()},
+             {"triangles", m.triangles.size()},
+             {"peak_rss_mb", peak_rss_mb()}};
+    } else if (mode == "extract" && (args.size() == 4 || args.size() == 5)) {
       HierarchyFile hf = read_hierarchy(args[1]);
-      if (hf.dim != 3 || hf.values.empty()) throw std::runtime_error(args[1] + ": needs a 3D hierarchy with values");
+      if (hf.dim != 3 || hf.values.empty())
+        throw std::runtime_error(args[1] + ": needs a 3D hierarchy with values");
       const Hierarchy<3>& h = std::get<Hierarchy<3>>(hf.hierarchy);
       const double iso = std::atof(args[2].c_str());
       const auto t0 = Clock::now();
@@ -165,11 +193,28 @@ int main(int argc, char** argv) {
         m = x.extract(iso, local);
         best = std::min(best, since(t1));
       }
+      // As `mlfe convert --simplify S`: S voxels of the smallest spacing, in the local frame.
+      double t_simplify = 0;
+      const std::size_t extracted = m.triangles.size();
+      if (args.size() == 5) {
+        const double s = std::atof(args[4].c_str());
+        const auto& sp = hf.transform.spacing;
+        const auto t3 = Clock::now();
+        m = simplify_within(m, s * std::min({sp[0], sp[1], sp[2]}));
+        t_simplify = since(t3);
+      }
       to_index(m, hf.transform.spacing);
       write_mesh_file(args[3], m);
-      out = {{"method", "mlfe-extract"}, {"iso", iso}, {"setup_seconds", t_setup}, {"extract_seconds", best},
-             {"hierarchy_vertices", h.vertex_count()}, {"leaves", h.leaves().size()},
-             {"vertices", m.positions.size()}, {"triangles", m.triangles.size()}};
+      out = {{"method", "mlfe-extract"},
+             {"iso", iso},
+             {"setup_seconds", t_setup},
+             {"extract_seconds", best},
+             {"simplify_seconds", t_simplify},
+             {"extracted_triangles", extracted},
+             {"hierarchy_vertices", h.vertex_count()},
+             {"leaves", h.leaves().size()},
+             {"vertices", m.positions.size()},
+             {"triangles", m.triangles.size()}};
     } else {
       return usage();
     }

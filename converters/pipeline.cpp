@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <sys/resource.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -14,8 +15,8 @@
 #include "core/field.h"
 #include "core/iso_surface.h"
 #include "formats/atomic_file.h"
-#include "formats/file_names.h"
 #include "formats/draco_io.h"
+#include "formats/file_names.h"
 #include "formats/gltf_writer.h"
 #include "formats/openmesh_io.h"
 
@@ -38,15 +39,20 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
 }
 
 void add_build_options(CLI::App* cmd, BuildParams& p) {
-  cmd->add_option("--rms", p.rms,
-                  "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data units")
+  cmd->add_option(
+         "--rms", p.rms,
+         "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data units")
       ->capture_default_str();
-  cmd->add_option("--threshold", p.threshold,
-                  "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
+  cmd->add_option(
+         "--threshold", p.threshold,
+         "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--max-vertices", p.max_vertices, "vertex budget (never exceeded)");
-  cmd->add_option("--max-level", p.max_level, "deepest refinement level")->check(CLI::Range(0, 40))->capture_default_str();
-  cmd->add_option("--start-level", p.start_level, "uniform levels before adapting (-1: until edges <= 16 voxels)")
+  cmd->add_option("--max-level", p.max_level, "deepest refinement level")
+      ->check(CLI::Range(0, 40))
+      ->capture_default_str();
+  cmd->add_option("--start-level", p.start_level,
+                  "uniform levels before adapting (-1: until edges <= 16 voxels)")
       ->check(CLI::Range(-1, 12));
   cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
       ->check(CLI::IsMember({"l2", "h1"}))
@@ -63,15 +69,24 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
 
 void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option("--iso", p.iso, "iso-values, comma separated (3D volumes)");
-  cmd->add_option("--tolerance", p.tolerance, "position tolerance in mm for Draco/quantization (default: voxel/10)")
+  cmd->add_option("--tolerance", p.tolerance,
+                  "position tolerance in mm for Draco/quantization (default: voxel/10)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--no-draco", p.no_draco, "glTF with plain float buffers");
   cmd->add_flag("--quantize", p.quantize, "glTF with KHR_mesh_quantization (with --no-draco)");
-  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)")->check(CLI::Range(0, 8));
-  cmd->add_option("--decimate", p.decimate, "reduce every surface to this many triangles (OpenMesh quadric decimater)");
+  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)")
+      ->check(CLI::Range(0, 8));
+  cmd->add_option("--decimate", p.decimate,
+                  "reduce every surface to this many triangles (OpenMesh quadric decimater)");
+  cmd->add_option(
+         "--simplify", p.simplify,
+         "simplify every surface while it stays within this many voxels of the extracted one (0: off)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
-  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")->check(CLI::Range(-1, 40));
+  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
+      ->check(CLI::Range(-1, 40));
 }
 
 std::vector<double> parse_values(const std::string& text, const std::string& what) {
@@ -126,7 +141,7 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
   o.max_level = p.max_level;
   o.start_level = p.start_level;
   o.h1 = p.norm == "h1";
-  o.preconditioner = p.preconditioner == "bpx" ? Preconditioner::kBpx
+  o.preconditioner = p.preconditioner == "bpx"      ? Preconditioner::kBpx
                      : p.preconditioner == "jacobi" ? Preconditioner::kJacobi
                                                     : Preconditioner::kNone;
   o.iso_values = iso_values;
@@ -135,8 +150,8 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
     std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices", "elements",
                  "rms", "rms%", "psnr", "cg", "seconds");
     o.progress = [](const IterationStats& s) {
-      std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level, s.vertices,
-                   s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
+      std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level,
+                   s.vertices, s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
     };
   }
   const auto t0 = std::chrono::steady_clock::now();
@@ -292,6 +307,15 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     s.color = {0.70f, 0.72f, 0.60f, 1.0f};
     surfaces.push_back(std::move(s));
   }
+  if (p.simplify > 0) {
+    double voxel = 1e300;
+    for (int a = 0; a < b.dim; ++a) voxel = std::min(voxel, b.transform.spacing[a]);
+    // Surfaces are independent: one task each (the decimater itself is sequential).
+    tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
+      auto& m = surfaces[i].mesh;
+      if (!m.triangles.empty()) m = simplify_within(m, p.simplify * voxel);
+    });
+  }
   if (p.decimate > 0)
     for (auto& s : surfaces)
       if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
@@ -300,7 +324,9 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   nlohmann::json per = nlohmann::json::array();
   std::size_t total = 0;
   for (const auto& s : surfaces) {
-    per.push_back({{"iso", s.iso_value}, {"triangles", s.mesh.triangles.size()}, {"vertices", s.mesh.positions.size()}});
+    per.push_back({{"iso", s.iso_value},
+                   {"triangles", s.mesh.triangles.size()},
+                   {"vertices", s.mesh.positions.size()}});
     total += s.mesh.triangles.size();
   }
   if (ext == ".glb" || ext == ".gltf") {

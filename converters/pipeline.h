@@ -4,7 +4,6 @@
 #pragma once
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
-
 #include <optional>
 #include <string>
 #include <vector>
@@ -18,12 +17,12 @@
 namespace mlfe::cli {
 
 struct BuildParams {
-  std::string rms = "0.5%";   ///< target RMS error: "0.5%" of the value range, or absolute
-  double threshold = 0;       ///< the paper's per-element threshold (data units), 0: off
+  std::string rms = "0.5%";  ///< target RMS error: "0.5%" of the value range, or absolute
+  double threshold = 0;      ///< the paper's per-element threshold (data units), 0: off
   std::size_t max_vertices = 0;
   int max_level = 20;
   int start_level = -1;
-  std::string norm = "l2";    ///< "l2" or "h1"
+  std::string norm = "l2";             ///< "l2" or "h1"
   std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
   double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
   bool quiet = false;
@@ -44,8 +43,12 @@ struct Built {
   double seconds = 0;
   const std::vector<IterationStats>& iterations() const { return dim == 2 ? a2->iterations : a3->iterations; }
   const std::string& stop_reason() const { return dim == 2 ? a2->stop_reason : a3->stop_reason; }
-  std::size_t vertices() const { return dim == 2 ? a2->hierarchy.vertex_count() : a3->hierarchy.vertex_count(); }
-  std::size_t leaves() const { return dim == 2 ? a2->hierarchy.leaves().size() : a3->hierarchy.leaves().size(); }
+  std::size_t vertices() const {
+    return dim == 2 ? a2->hierarchy.vertex_count() : a3->hierarchy.vertex_count();
+  }
+  std::size_t leaves() const {
+    return dim == 2 ? a2->hierarchy.leaves().size() : a3->hierarchy.leaves().size();
+  }
   int levels() const { return (dim == 2 ? a2->hierarchy.max_level() : a3->hierarchy.max_level()) + 1; }
 };
 
@@ -80,15 +83,16 @@ double peak_rss_mb();
 std::vector<double> parse_values(const std::string& text, const std::string& what);
 
 struct AssetParams {
-  std::string iso;               ///< comma-separated iso-values (3D)
-  double tolerance = 0;          ///< mm; 0: a tenth of the smallest voxel spacing
+  std::string iso;       ///< comma-separated iso-values (3D)
+  double tolerance = 0;  ///< mm; 0: a tenth of the smallest voxel spacing
   bool no_draco = false;
   bool quantize = false;
-  int lod = 0;                   ///< coarser levels to add to glTF
-  std::size_t decimate = 0;      ///< triangle budget per surface (OpenMesh quadric decimation)
+  int lod = 0;               ///< coarser levels to add to glTF
+  std::size_t decimate = 0;  ///< triangle budget per surface (OpenMesh quadric decimation)
+  double simplify = 0;       ///< error-bounded simplification tolerance in voxels (0: off)
   bool normals_toward_higher = false;
-  double z_scale = 1.0;          ///< 2D height fields: height per data unit
-  int level = -1;                ///< extract on this level (-1 finest)
+  double z_scale = 1.0;  ///< 2D height fields: height per data unit
+  int level = -1;        ///< extract on this level (-1 finest)
 };
 void add_asset_options(CLI::App* cmd, AssetParams& p);
 

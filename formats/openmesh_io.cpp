@@ -6,9 +6,9 @@
 #include "formats/openmesh_io.h"
 
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModHausdorffT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
-
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -150,7 +150,8 @@ void write_mesh_file(const std::string& path, const TriangleMesh& mesh) {
   }
   const QuietOpenMesh quiet;
   // 9 significant digits round-trip every float exactly in the text formats.
-  write_path_atomically(path, [&](const std::string& tmp) { return OpenMesh::IO::write_mesh(om, tmp, opt, 9); });
+  write_path_atomically(path,
+                        [&](const std::string& tmp) { return OpenMesh::IO::write_mesh(om, tmp, opt, 9); });
 }
 
 TriangleMesh read_mesh_file(const std::string& path) {
@@ -189,6 +190,42 @@ TriangleMesh decimate_to(const TriangleMesh& mesh, std::size_t target_triangles)
     if (!decimater.initialize()) throw Error("decimation: OpenMesh decimater failed to initialize");
     decimater.decimate_to_faces(0, target_triangles);
     // Inside the scope: the decimater releases the status flags that mark deleted elements.
+    om.garbage_collection();
+  }
+  TriangleMesh out = from_openmesh(om);
+  recompute_normals(out);
+  return out;
+}
+
+TriangleMesh simplify_within(const TriangleMesh& mesh, double tolerance, std::size_t min_triangles) {
+  if (!(tolerance > 0) || !std::isfinite(tolerance))
+    throw Error("simplification: the tolerance must be positive");
+  OpenMeshTriMesh om = convert(mesh, "simplification");
+  if (om.has_vertex_normals()) om.release_vertex_normals();  // recomputed below
+  om.request_face_normals();
+  om.update_face_normals();
+  using Decimater = OpenMesh::Decimater::DecimaterT<OpenMeshTriMesh>;
+  using ModQuadric = OpenMesh::Decimater::ModQuadricT<OpenMeshTriMesh>;
+  using ModNormalFlipping = OpenMesh::Decimater::ModNormalFlippingT<OpenMeshTriMesh>;
+  {
+    // Quadrics order the collapses (cheapest first); the Hausdorff module is the bound: it
+    // keeps every removed vertex attached to the face that now covers it and refuses a
+    // collapse that would leave any of them farther than `tolerance` from the surface. Small
+    // closed parts therefore survive (collapsing them would move their points too far),
+    // which is what a count-driven quadric decimation loses.
+    using ModHausdorff = OpenMesh::Decimater::ModHausdorffT<OpenMeshTriMesh>;
+    Decimater decimater(om);
+    ModQuadric::Handle quadric;
+    decimater.add(quadric);
+    decimater.module(quadric).unset_max_err();
+    ModHausdorff::Handle hausdorff;
+    decimater.add(hausdorff);
+    decimater.module(hausdorff).set_tolerance(static_cast<float>(tolerance));
+    ModNormalFlipping::Handle flipping;
+    decimater.add(flipping);
+    decimater.module(flipping).set_max_normal_deviation(45.0);
+    if (!decimater.initialize()) throw Error("simplification: OpenMesh decimater failed to initialize");
+    decimater.decimate_to_faces(0, min_triangles);
     om.garbage_collection();
   }
   TriangleMesh out = from_openmesh(om);

@@ -4,7 +4,6 @@
 // OpenMesh registers its readers/writers only when MeshIO.hh is seen before a mesh kernel.
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-
 #include <cstddef>
 #include <string>
 
@@ -42,8 +41,17 @@ TriangleMesh read_mesh_file(const std::string& path);
 /// to `target_triangles`. Collapses remove two triangles each, so the result is target or
 /// target-1, or more when topology or the normal limit blocks further collapses (tiny or
 /// very jagged meshes); callers that need a hard bound must check triangle_count().
-/// A mesh already at or below the target is returned unchanged. Otherwise normals are recomputed (area-weighted) from the decimated geometry.
-/// Throws mlfe::Error like to_openmesh.
+/// A mesh already at or below the target is returned unchanged. Otherwise normals are recomputed
+/// (area-weighted) from the decimated geometry. Throws mlfe::Error like to_openmesh.
 TriangleMesh decimate_to(const TriangleMesh& mesh, std::size_t target_triangles);
+
+/// Error-bounded simplification (OpenMesh Decimater: ModQuadric orders the edge collapses,
+/// ModHausdorff refuses any collapse after which a vertex of the input would lie farther than
+/// `tolerance` (in the mesh's units) from the simplified surface, ModNormalFlipping refuses
+/// face normals turning by more than 45 degrees). Stops when no collapse is allowed or at
+/// `min_triangles`. Small closed parts are kept (removing them would break the bound).
+/// Normals are recomputed (area-weighted). Deterministic for the same input.
+/// Throws mlfe::Error like to_openmesh, or for a tolerance that is not positive and finite.
+TriangleMesh simplify_within(const TriangleMesh& mesh, double tolerance, std::size_t min_triangles = 0);
 
 }  // namespace mlfe

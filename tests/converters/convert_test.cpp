@@ -1,14 +1,15 @@
 // End-to-end tests of `mlfe convert / build / iso`: validator verdicts, physical placement,
 // determinism across thread counts, golden files, and bad input (exit 2, one line, no output).
 #include <gtest/gtest.h>
-#include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 
@@ -59,7 +60,8 @@ std::string read_bytes(const std::string& path) {
 
 bool validator_accepts(const std::string& path, std::string* report) {
   const std::string out = scratch() + "/validator.txt";
-  const std::string cmd = "node " + std::string(MLFE_SOURCE_DIR) + "/tools/validate_gltf.js " + path + " > " + out + " 2>&1";
+  const std::string cmd =
+      "node " + std::string(MLFE_SOURCE_DIR) + "/tools/validate_gltf.js " + path + " > " + out + " 2>&1";
   const int rc = std::system(cmd.c_str());
   *report = read_bytes(out);
   return rc == 0;
@@ -101,7 +103,8 @@ std::array<double, 6> glb_bbox(const Glb& g) {
 
 TEST(Cli, HelpWorksForEveryCommand) {
   EXPECT_EQ(run("--help").status, 0);
-  for (const char* c : {"info", "build", "iso", "convert", "refine"}) EXPECT_EQ(run(std::string(c) + " --help").status, 0) << c;
+  for (const char* c : {"info", "build", "iso", "convert", "refine"})
+    EXPECT_EQ(run(std::string(c) + " --help").status, 0) << c;
 }
 
 TEST(Convert, GlbPassesTheValidatorAndLandsWhereTheScanIs) {
@@ -168,9 +171,75 @@ TEST(Convert, OutputIsByteIdenticalWhateverTheThreadCount) {
 
 TEST(Convert, HierarchyRoundTripGivesTheSameSurfaces) {
   const std::string h = scratch() + "/rt.mlfeh", a = scratch() + "/rt_a.ply", b = scratch() + "/rt_b.ply";
-  ASSERT_EQ(run("convert " + kSkull + " --iso 3 --max-vertices 6000 --quiet -o " + a + " --hierarchy " + h).status, 0);
+  ASSERT_EQ(
+      run("convert " + kSkull + " --iso 3 --max-vertices 6000 --quiet -o " + a + " --hierarchy " + h).status,
+      0);
   ASSERT_EQ(run("iso " + h + " --iso 3 --quiet -o " + b).status, 0);
   EXPECT_EQ(read_bytes(a), read_bytes(b));
+}
+
+TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
+  const std::string full = scratch() + "/simp_full.ply", simp = scratch() + "/simp.ply",
+                    glb = scratch() + "/simp.glb";
+  const std::string common = kSkull + " --iso 3 --max-vertices 8000 --quiet";
+  ASSERT_EQ(run("convert " + common + " -o " + full).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + simp).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + glb).status, 0);
+  const TriangleMesh a = read_mesh_file(full), b = read_mesh_file(simp);
+  EXPECT_LT(b.triangle_count(), a.triangle_count() / 2);
+  // Every vertex of the extracted surface stays within 0.3 of the smallest voxel spacing of
+  // the simplified one (checked at the vertices of b's nearest triangles, brute force).
+  const ScalarGrid g = read_volume(kSkull);
+  const double tol = 0.3 * std::min({g.transform.spacing[0], g.transform.spacing[1], g.transform.spacing[2]});
+  double worst = 0;
+  for (std::size_t i = 0; i < a.positions.size(); i += 7) {
+    double best = 1e300;
+    for (const auto& t : b.triangles) {
+      // Distance to the triangle's plane when the projection falls inside, else to its edges.
+      const auto &p0 = b.positions[t[0]], &p1 = b.positions[t[1]], &p2 = b.positions[t[2]];
+      const std::array<double, 3> q{a.positions[i][0], a.positions[i][1], a.positions[i][2]};
+      auto seg = [&](const std::array<float, 3>& u, const std::array<float, 3>& v) {
+        double d[3], w[3], dd = 0, dw = 0;
+        for (int k = 0; k < 3; ++k) {
+          d[k] = double(v[k]) - u[k];
+          w[k] = q[k] - u[k];
+          dd += d[k] * d[k];
+          dw += d[k] * w[k];
+        }
+        const double s = dd > 0 ? std::clamp(dw / dd, 0.0, 1.0) : 0.0;
+        double r = 0;
+        for (int k = 0; k < 3; ++k) r += (w[k] - s * d[k]) * (w[k] - s * d[k]);
+        return std::sqrt(r);
+      };
+      double e1[3], e2[3], n[3], w[3];
+      for (int k = 0; k < 3; ++k) {
+        e1[k] = double(p1[k]) - p0[k];
+        e2[k] = double(p2[k]) - p0[k];
+        w[k] = q[k] - p0[k];
+      }
+      n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+      n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+      n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+      const double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+      double dist = std::min({seg(p0, p1), seg(p1, p2), seg(p2, p0)});
+      if (nn > 0) {
+        const double h = (w[0] * n[0] + w[1] * n[1] + w[2] * n[2]) / nn;
+        double f[3];
+        for (int k = 0; k < 3; ++k) f[k] = w[k] - h * n[k];  // projection, relative to p0
+        auto cross_dot = [&](const double* x, const double* y) {
+          return (x[1] * y[2] - x[2] * y[1]) * n[0] + (x[2] * y[0] - x[0] * y[2]) * n[1] +
+                 (x[0] * y[1] - x[1] * y[0]) * n[2];
+        };
+        const double l1 = cross_dot(f, e2) / nn, l2 = cross_dot(e1, f) / nn;
+        if (l1 >= 0 && l2 >= 0 && l1 + l2 <= 1) dist = std::abs(h) * std::sqrt(nn);
+      }
+      best = std::min(best, dist);
+    }
+    worst = std::max(worst, best);
+  }
+  EXPECT_LE(worst, tol * 1.01);
+  std::string report;
+  EXPECT_TRUE(validator_accepts(glb, &report)) << report;
 }
 
 // Golden files: tests/golden holds the expected outputs of small conversions. The PLY is
@@ -191,7 +260,8 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
   const Glb g = parse_glb(read_bytes(glb));
   ASSERT_EQ(g.gltf["meshes"].size(), 1u);
   const auto& prim = g.gltf["meshes"][0]["primitives"][0];
-  const auto& view = g.gltf["bufferViews"][prim["extensions"]["KHR_draco_mesh_compression"]["bufferView"].get<int>()];
+  const auto& view =
+      g.gltf["bufferViews"][prim["extensions"]["KHR_draco_mesh_compression"]["bufferView"].get<int>()];
   const std::string bytes = g.bin.substr(view.value("byteOffset", 0), view["byteLength"].get<std::size_t>());
   const TriangleMesh dec = decode_draco(bytes.data(), bytes.size(), "golden glb");
   EXPECT_EQ(dec.triangles.size(), golden.triangles.size());
@@ -212,19 +282,22 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
     // Sorted by x: scan the window of x within the current best.
     auto it = std::lower_bound(gm.begin(), gm.end(), std::array<double, 3>{p[0] - 1e-3, -1e30, -1e30});
     for (; it != gm.end() && (*it)[0] <= p[0] + 1e-3; ++it) {
-      const double d = std::sqrt((p[0] - (*it)[0]) * (p[0] - (*it)[0]) + (p[1] - (*it)[1]) * (p[1] - (*it)[1]) +
-                                 (p[2] - (*it)[2]) * (p[2] - (*it)[2]));
+      const double d =
+          std::sqrt((p[0] - (*it)[0]) * (p[0] - (*it)[0]) + (p[1] - (*it)[1]) * (p[1] - (*it)[1]) +
+                    (p[2] - (*it)[2]) * (p[2] - (*it)[2]));
       best = std::min(best, d);
     }
     worst = std::max(worst, best);
   }
-  EXPECT_LE(worst, 0.3651e-3 * std::sqrt(3.0)) << "decoded Draco geometry too far from the golden surface (m)";
+  EXPECT_LE(worst, 0.3651e-3 * std::sqrt(3.0))
+      << "decoded Draco geometry too far from the golden surface (m)";
 }
 
 TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
   const std::string dem = std::string(MLFE_SOURCE_DIR) + "/tests/data/dem_jacksboro.nrrd";
   const std::string glb = scratch() + "/dem.glb", rep = scratch() + "/dem.json";
-  ASSERT_EQ(run("convert " + dem + " --rms 1% --z-scale 0.00001 --quiet -o " + glb + " --report " + rep).status, 0);
+  ASSERT_EQ(
+      run("convert " + dem + " --rms 1% --z-scale 0.00001 --quiet -o " + glb + " --report " + rep).status, 0);
   std::string report;
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
   const json r = json::parse(read_bytes(rep));
@@ -236,8 +309,9 @@ TEST(Build, ReportHasTheDocumentedFields) {
   const std::string h = scratch() + "/b.mlfeh", rep = scratch() + "/b.json";
   ASSERT_EQ(run("build " + kSkull + " --rms 2% --quiet -o " + h + " --report " + rep).status, 0);
   const json r = json::parse(read_bytes(rep));
-  for (const char* k : {"input", "dims", "voxels", "vertices", "elements", "levels", "iterations", "rms_error",
-                        "rms_error_percent", "psnr_db", "value_range", "seconds", "peak_rss_mb", "per_iteration"})
+  for (const char* k :
+       {"input", "dims", "voxels", "vertices", "elements", "levels", "iterations", "rms_error",
+        "rms_error_percent", "psnr_db", "value_range", "seconds", "peak_rss_mb", "per_iteration"})
     EXPECT_TRUE(r.contains(k)) << k;
   EXPECT_LE(r["rms_error_percent"].get<double>(), 2.0);
   EXPECT_EQ(r["voxels"].get<long>(), 64 * 64 * 64);
@@ -261,7 +335,8 @@ TEST(BadInput, ExitsWithStatusTwoOneLineAndNoOutput) {
       {"convert " + kSkull + " -o " + scratch() + "/x4.glb", scratch() + "/x4.glb", "--iso"},
       {"iso " + bad + " --iso 1 -o " + scratch() + "/x5.ply", scratch() + "/x5.ply", "truncated.nrrd"},
       {"convert " + kSkull + " --iso 1 -o /nonexistent/dir/x6.glb", "/nonexistent/dir/x6.glb", "x6.glb"},
-      {"build " + std::string(MLFE_SOURCE_DIR) + "/README.md -o " + scratch() + "/x7.mlfeh", scratch() + "/x7.mlfeh", "README.md"},
+      {"build " + std::string(MLFE_SOURCE_DIR) + "/README.md -o " + scratch() + "/x7.mlfeh",
+       scratch() + "/x7.mlfeh", "README.md"},
   };
   for (const auto& c : cases) {
     const RunResult r = run(c.args);

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "core/error.h"
@@ -98,6 +100,99 @@ TEST(Decimation, LeavesMeshesAtOrBelowTheTargetAlone) {
   const TriangleMesh out = decimate_to(in, in.triangle_count());
   EXPECT_EQ(out.positions, in.positions);
   EXPECT_EQ(out.triangles, in.triangles);
+}
+
+// Distance from p to triangle (a, b, c) (Ericson, Real-Time Collision Detection, 5.1.5).
+double point_triangle_distance(const std::array<double, 3>& p, const std::array<float, 3>& fa,
+                               const std::array<float, 3>& fb, const std::array<float, 3>& fc) {
+  using V = std::array<double, 3>;
+  auto sub = [](const V& x, const V& y) { return V{x[0] - y[0], x[1] - y[1], x[2] - y[2]}; };
+  auto dot = [](const V& x, const V& y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
+  auto along = [](const V& o, const V& d, double t) {
+    return V{o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+  };
+  const V a{fa[0], fa[1], fa[2]}, b{fb[0], fb[1], fb[2]}, c{fc[0], fc[1], fc[2]};
+  const V ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+  V q;
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  const V bp = sub(p, b), cp = sub(p, c);
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp), d5 = dot(ab, cp), d6 = dot(ac, cp);
+  const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+  if (d1 <= 0 && d2 <= 0)
+    q = a;
+  else if (d3 >= 0 && d4 <= d3)
+    q = b;
+  else if (d6 >= 0 && d5 <= d6)
+    q = c;
+  else if (vc <= 0 && d1 >= 0 && d3 <= 0)
+    q = along(a, ab, d1 / (d1 - d3));
+  else if (vb <= 0 && d2 >= 0 && d6 <= 0)
+    q = along(a, ac, d2 / (d2 - d6));
+  else if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+    q = along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  else {
+    const double den = 1.0 / (va + vb + vc);
+    const double v = vb * den, w = vc * den;
+    q = V{a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w};
+  }
+  const V d = sub(p, q);
+  return std::sqrt(dot(d, d));
+}
+
+// Largest distance from a vertex of `from` to the surface `to` (brute force).
+double one_sided_hausdorff(const TriangleMesh& from, const TriangleMesh& to) {
+  double worst = 0;
+  for (const auto& fp : from.positions) {
+    const std::array<double, 3> p{fp[0], fp[1], fp[2]};
+    double best = 1e300;
+    for (const auto& t : to.triangles)
+      best = std::min(best,
+                      point_triangle_distance(p, to.positions[t[0]], to.positions[t[1]], to.positions[t[2]]));
+    worst = std::max(worst, best);
+  }
+  return worst;
+}
+
+TEST(Simplification, KeepsEveryInputVertexWithinTheTolerance) {
+  const TriangleMesh in = icosphere(5, 50.0f);  // 20480 triangles, edges ~2.4
+  for (double tol : {0.05, 0.5}) {
+    const TriangleMesh out = simplify_within(in, tol);
+    EXPECT_LT(out.triangle_count(), in.triangle_count() / (tol > 0.1 ? 8 : 2)) << tol;
+    EXPECT_LE(one_sided_hausdorff(in, out), tol * 1.001) << tol;
+    EXPECT_EQ(out.vertex_count(), out.triangle_count() / 2 + 2);  // still closed, genus 0
+    ASSERT_EQ(out.normals.size(), out.positions.size());
+    for (std::size_t i = 0; i < out.positions.size(); ++i) {
+      const auto &p = out.positions[i], &n = out.normals[i];
+      const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+      ASSERT_GT((n[0] * p[0] + n[1] * p[1] + n[2] * p[2]) / r, 0.9);
+    }
+  }
+}
+
+TEST(Simplification, KeepsSmallPartsAndIsDeterministic) {
+  // A big sphere and a small one 3 tolerances in radius: a count-driven decimation may spend
+  // the small part; the error bound may not, since collapsing it moves its points too far.
+  TriangleMesh in = icosphere(4, 50.0f);
+  const TriangleMesh small = icosphere(2, 1.5f, {80.0f, 0.0f, 0.0f});
+  const auto offset = static_cast<std::uint32_t>(in.positions.size());
+  in.positions.insert(in.positions.end(), small.positions.begin(), small.positions.end());
+  in.normals.insert(in.normals.end(), small.normals.begin(), small.normals.end());
+  for (auto t : small.triangles) in.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  const TriangleMesh out = simplify_within(in, 0.5);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.5 * 1.001);
+  std::size_t near_small = 0;
+  for (const auto& p : out.positions) near_small += std::abs(p[0] - 80.0f) < 2.0f;
+  EXPECT_GE(near_small, 4u);  // at least a tetrahedron is left of the small sphere
+  const TriangleMesh again = simplify_within(in, 0.5);
+  EXPECT_EQ(again.positions, out.positions);
+  EXPECT_EQ(again.triangles, out.triangles);
+}
+
+TEST(Simplification, RejectsABadTolerance) {
+  const TriangleMesh in = icosphere(1, 1.0f);
+  EXPECT_THROW(simplify_within(in, 0.0), Error);
+  EXPECT_THROW(simplify_within(in, -1.0), Error);
+  EXPECT_THROW(simplify_within(in, std::nan("")), Error);
 }
 
 }  // namespace
