@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <vector>
 
 #include "core/check.h"
 #include "core/p1_element.h"
@@ -11,83 +13,165 @@ namespace mlfe {
 namespace {
 
 template <int D>
+using Bary = std::array<double, D + 1>;
+
+template <int D>
 struct SubSimplex {
-  std::array<std::array<double, D + 1>, D + 1> bary;  // barycentric coordinates of its vertices
+  std::array<Bary<D>, D + 1> bary;  // barycentric coordinates of its vertices
 };
 
 template <int D>
-std::array<double, D + 1> mid_bary(const std::array<double, D + 1>& a, const std::array<double, D + 1>& b) {
-  std::array<double, D + 1> m;
+constexpr int kChildren = 1 << D;
+
+// The bottom levels of the refinement are expanded into one batch of quadrature points, which
+// is evaluated with a single Field::values call and then accumulated. 64 leaves per batch keeps
+// the buffers on the stack and in L1 (~22 KB in 3D); deeper elements are cut into such batches.
+template <int D>
+constexpr int kBatchLevels = D == 2 ? 3 : 2;
+template <int D>
+constexpr std::size_t kBatchPoints = (std::size_t(1) << (D * kBatchLevels<D>)) * (D + 1);
+
+template <int D>
+Bary<D> mid_bary(const Bary<D>& a, const Bary<D>& b) {
+  Bary<D> m;
   for (int i = 0; i <= D; ++i) m[i] = 0.5 * (a[i] + b[i]);
   return m;
 }
 
+// One red refinement step. The child order fixes the order in which the points are summed,
+// and with it every bit of the result.
+template <int D>
+void red_children(const SubSimplex<D>& s, SubSimplex<D>* child) {
+  const auto& x = s.bary;
+  if constexpr (D == 2) {
+    const auto m01 = mid_bary<D>(x[0], x[1]), m02 = mid_bary<D>(x[0], x[2]), m12 = mid_bary<D>(x[1], x[2]);
+    child[0] = {{x[0], m01, m02}};
+    child[1] = {{m01, x[1], m12}};
+    child[2] = {{m02, m12, x[2]}};
+    child[3] = {{m01, m12, m02}};
+  } else {
+    const auto x01 = mid_bary<D>(x[0], x[1]), x02 = mid_bary<D>(x[0], x[2]), x03 = mid_bary<D>(x[0], x[3]);
+    const auto x12 = mid_bary<D>(x[1], x[2]), x13 = mid_bary<D>(x[1], x[3]), x23 = mid_bary<D>(x[2], x[3]);
+    // Bey's children keep at most 3 shapes, so the longest edge halves every level.
+    child[0] = {{x[0], x01, x02, x03}};
+    child[1] = {{x01, x[1], x12, x13}};
+    child[2] = {{x02, x12, x[2], x23}};
+    child[3] = {{x03, x13, x23, x[3]}};
+    child[4] = {{x01, x02, x03, x13}};
+    child[5] = {{x01, x02, x12, x13}};
+    child[6] = {{x02, x03, x13, x23}};
+    child[7] = {{x02, x12, x13, x23}};
+  }
+}
+
+// Degree-2 rule: points (a, b, ..., b) and permutations in the sub-simplex's barycentrics,
+// written to lam[0..D]; returns lam + D + 1.
+template <int D>
+Bary<D>* leaf_points(const SubSimplex<D>& s, Bary<D>* lam) {
+  constexpr double a = D == 2 ? 2.0 / 3.0 : 0.5854101966249685;
+  constexpr double b = D == 2 ? 1.0 / 6.0 : 0.1381966011250105;
+  for (int q = 0; q <= D; ++q) {
+    Bary<D> l{};
+    for (int k = 0; k <= D; ++k) {
+      const double w = k == q ? a : b;
+      for (int i = 0; i <= D; ++i) l[i] += w * s.bary[k][i];
+    }
+    lam[q] = l;
+  }
+  return lam + D + 1;
+}
+
+// Quadrature points of the leaves of s refined `levels` times, in depth-first order.
+template <int D>
+Bary<D>* emit_points(const SubSimplex<D>& s, int levels, Bary<D>* lam) {
+  if (levels == 0) return leaf_points<D>(s, lam);
+  SubSimplex<D> child[kChildren<D>];
+  red_children<D>(s, child);
+  for (const auto& c : child) lam = emit_points<D>(c, levels - 1, lam);
+  return lam;
+}
+
+template <int D>
+SubSimplex<D> root_simplex() {
+  SubSimplex<D> root;
+  for (int i = 0; i <= D; ++i)
+    for (int k = 0; k <= D; ++k) root.bary[i][k] = i == k ? 1.0 : 0.0;
+  return root;
+}
+
+// The barycentrics of the points depend only on the depth, not on the element: elements up to
+// one batch deep (nearly all of them) read them from a table built once.
+template <int D>
+const std::vector<Bary<D>>& root_points(int depth) {
+  static const auto tables = [] {
+    std::array<std::vector<Bary<D>>, kBatchLevels<D> + 1> t;
+    for (int d = 0; d <= kBatchLevels<D>; ++d) {
+      t[d].resize((std::size_t(1) << (D * d)) * (D + 1));
+      emit_points<D>(root_simplex<D>(), d, t[d].data());
+    }
+    return t;
+  }();
+  return tables[depth];
+}
+
 template <int D>
 struct Integrator {
-  const std::array<std::array<double, D>, D + 1>& p;
+  std::array<std::array<double, D>, D + 1> p;
   const Field& f;
   double weight;  // measure of a sub-simplex / number of points
   bool gradients;
   ElementIntegrals<D> out;
 
-  void leaf(const SubSimplex<D>& s) {
-    // Degree-2 rule: points (a, b, ..., b) and permutations in the sub-simplex's barycentrics.
-    constexpr double a = D == 2 ? 2.0 / 3.0 : 0.5854101966249685;
-    constexpr double b = D == 2 ? 1.0 / 6.0 : 0.1381966011250105;
-    for (int q = 0; q <= D; ++q) {
-      std::array<double, D + 1> lam{};
-      for (int k = 0; k <= D; ++k) {
-        const double w = k == q ? a : b;
-        for (int i = 0; i <= D; ++i) lam[i] += w * s.bary[k][i];
-      }
-      std::array<double, 3> x{0, 0, 0};
+  // Evaluates f at the points lam[0..n) (n <= kBatchPoints) in one batch, then adds them to the
+  // sums in order, with the same operations per point as a point-by-point loop.
+  void integrate_points(const Bary<D>* lam, std::size_t n) {
+    std::array<double, 3> x[kBatchPoints<D>];
+    double fv[kBatchPoints<D>];
+    for (std::size_t j = 0; j < n; ++j) {
+      std::array<double, 3> y{0, 0, 0};
       for (int i = 0; i <= D; ++i)
-        for (int c = 0; c < D; ++c) x[c] += lam[i] * p[i][c];
-      const double fv = f.value(x);
-      if (out.points == 0 && q == 0) {
-        out.fmin = out.fmax = float(fv);
-      } else {
-        out.fmin = std::min(out.fmin, float(fv));
-        out.fmax = std::max(out.fmax, float(fv));
-      }
-      out.f2 += weight * fv * fv;
-      for (int i = 0; i <= D; ++i) out.fphi[i] += weight * fv * lam[i];
-      if (gradients) {
-        const auto g = f.gradient(x);
+        for (int c = 0; c < D; ++c) y[c] += lam[j][i] * p[i][c];
+      x[j] = y;
+    }
+    f.values(x, fv, n);
+    // A local copy stays in registers; stores into `out` could alias lam as far as the
+    // compiler knows.
+    ElementIntegrals<D> s = out;
+    if (s.points == 0) s.fmin = s.fmax = float(fv[0]);
+    for (std::size_t j = 0; j < n; ++j) {
+      const double v = fv[j];
+      s.fmin = std::min(s.fmin, float(v));
+      s.fmax = std::max(s.fmax, float(v));
+      const double wv = weight * v;
+      s.f2 += wv * v;
+      for (int i = 0; i <= D; ++i) s.fphi[i] += wv * lam[j][i];
+    }
+    if (gradients) {
+      std::array<double, 3> g[kBatchPoints<D>];
+      f.gradients(x, g, n);
+      for (std::size_t j = 0; j < n; ++j) {
         for (int c = 0; c < D; ++c) {
-          out.grad[c] += weight * g[c];
-          out.grad2 += weight * g[c] * g[c];
+          const double wg = weight * g[j][c];
+          s.grad[c] += wg;
+          s.grad2 += wg * g[j][c];
         }
       }
     }
-    out.points += D + 1;
+    s.points += static_cast<std::uint32_t>(n);
+    out = s;
   }
 
+  // Refines down to sub-simplices one batch deep, in depth-first order.
   void recurse(const SubSimplex<D>& s, int depth) {
-    if (depth == 0) {
-      leaf(s);
+    if (depth <= kBatchLevels<D>) {
+      Bary<D> lam[kBatchPoints<D>];
+      const Bary<D>* end = emit_points<D>(s, depth, lam);
+      integrate_points(lam, std::size_t(end - lam));
       return;
     }
-    const auto& x = s.bary;
-    if constexpr (D == 2) {
-      const auto m01 = mid_bary<D>(x[0], x[1]), m02 = mid_bary<D>(x[0], x[2]), m12 = mid_bary<D>(x[1], x[2]);
-      recurse({{x[0], m01, m02}}, depth - 1);
-      recurse({{m01, x[1], m12}}, depth - 1);
-      recurse({{m02, m12, x[2]}}, depth - 1);
-      recurse({{m01, m12, m02}}, depth - 1);
-    } else {
-      const auto x01 = mid_bary<D>(x[0], x[1]), x02 = mid_bary<D>(x[0], x[2]), x03 = mid_bary<D>(x[0], x[3]);
-      const auto x12 = mid_bary<D>(x[1], x[2]), x13 = mid_bary<D>(x[1], x[3]), x23 = mid_bary<D>(x[2], x[3]);
-      // Bey's children keep at most 3 shapes, so the longest edge halves every level.
-      recurse({{x[0], x01, x02, x03}}, depth - 1);
-      recurse({{x01, x[1], x12, x13}}, depth - 1);
-      recurse({{x02, x12, x[2], x23}}, depth - 1);
-      recurse({{x03, x13, x23, x[3]}}, depth - 1);
-      recurse({{x01, x02, x03, x13}}, depth - 1);
-      recurse({{x01, x02, x12, x13}}, depth - 1);
-      recurse({{x02, x03, x13, x23}}, depth - 1);
-      recurse({{x02, x12, x13, x23}}, depth - 1);
-    }
+    SubSimplex<D> child[kChildren<D>];
+    red_children<D>(s, child);
+    for (const auto& c : child) recurse(c, depth - 1);
   }
 };
 
@@ -104,8 +188,8 @@ int integration_depth(double size, double max_sub_size) {
 }
 
 template <int D>
-ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D + 1>& p,
-                                      const Field& f, double max_sub_edge, bool gradients) {
+ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D + 1>& p, const Field& f,
+                                      double max_sub_edge, bool gradients) {
   // Size = side of the cube that D! copies of the simplex would fill (Kuhn simplices of a
   // voxel-sized cube have size one voxel), so sub-simplices hold ~D! samples per voxel.
   const double measure = P1Element<D>(p).measure;
@@ -113,14 +197,18 @@ ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D 
   const int depth = integration_depth(size, max_sub_edge);
   const double subs = std::pow(double(1 << D), depth);
   Integrator<D> it{p, f, measure / subs / (D + 1), gradients, {}};
-  SubSimplex<D> root;
-  for (int i = 0; i <= D; ++i)
-    for (int k = 0; k <= D; ++k) root.bary[i][k] = i == k ? 1.0 : 0.0;
-  it.recurse(root, depth);
+  if (depth <= kBatchLevels<D>) {
+    const auto& lam = root_points<D>(depth);
+    it.integrate_points(lam.data(), lam.size());
+  } else {
+    it.recurse(root_simplex<D>(), depth);
+  }
   return it.out;
 }
 
-template ElementIntegrals<2> integrate_element<2>(const std::array<std::array<double, 2>, 3>&, const Field&, double, bool);
-template ElementIntegrals<3> integrate_element<3>(const std::array<std::array<double, 3>, 4>&, const Field&, double, bool);
+template ElementIntegrals<2> integrate_element<2>(const std::array<std::array<double, 2>, 3>&, const Field&,
+                                                  double, bool);
+template ElementIntegrals<3> integrate_element<3>(const std::array<std::array<double, 3>, 4>&, const Field&,
+                                                  double, bool);
 
 }  // namespace mlfe

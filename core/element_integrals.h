@@ -10,6 +10,11 @@
 //     E_T = ∫_T (f - u)² = ∫_T f² - 2 Σ_j U_j ∫_T f λ_j + Uᵀ M_T U.
 // The same rule gives the load vector, so Galerkin orthogonality holds for the discrete
 // integrals exactly (to the solver tolerance).
+//
+// The points are evaluated in batches through Field::values (the bottom refinement levels at
+// once; shallow elements take their barycentrics from a per-depth table), but every sum is
+// accumulated point by point in the fixed depth-first order of the sub-simplices, so the
+// result does not depend on the batching, bit for bit.
 #pragma once
 #include <array>
 
@@ -19,12 +24,12 @@ namespace mlfe {
 
 template <int D>
 struct ElementIntegrals {
-  double f2 = 0;                       ///< ∫_T f²
-  std::array<double, D + 1> fphi{};    ///< ∫_T f λ_j
-  std::array<double, D> grad{};        ///< ∫_T ∇f        (only with gradients requested)
-  double grad2 = 0;                    ///< ∫_T |∇f|²     (only with gradients requested)
-  float fmin = 0, fmax = 0;             ///< range of f at the quadrature points
-  std::uint32_t points = 0;            ///< quadrature points used
+  double f2 = 0;                     ///< ∫_T f²
+  std::array<double, D + 1> fphi{};  ///< ∫_T f λ_j
+  std::array<double, D> grad{};      ///< ∫_T ∇f        (only with gradients requested)
+  double grad2 = 0;                  ///< ∫_T |∇f|²     (only with gradients requested)
+  float fmin = 0, fmax = 0;          ///< range of f at the quadrature points
+  std::uint32_t points = 0;          ///< quadrature points used
 };
 
 /// Integrals over the simplex with vertices p (local frame, units of the field's spacing).
@@ -32,8 +37,8 @@ struct ElementIntegrals {
 /// max_sub_edge > 0 (a Kuhn simplex of a voxel-sized cube has size one voxel); the depth is
 /// capped at 12 levels.
 template <int D>
-ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D + 1>& p,
-                                      const Field& f, double max_sub_edge, bool gradients = false);
+ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D + 1>& p, const Field& f,
+                                      double max_sub_edge, bool gradients = false);
 
 /// Subdivision depth for an element of the given size.
 int integration_depth(double size, double max_sub_size);
