@@ -260,10 +260,11 @@ TriangleMesh merge(const std::vector<GltfSurface>& surfaces) {
   return m;
 }
 
-double default_tolerance(const GridTransform& t, int dim) {
+// The voxel size tolerances are expressed in: the smallest spacing of the data's axes (mm).
+double smallest_spacing(const GridTransform& t, int dim) {
   double s = 1e300;
   for (int a = 0; a < dim; ++a) s = std::min(s, t.spacing[a]);
-  return s / 10.0;
+  return s;
 }
 
 }  // namespace
@@ -273,7 +274,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
   const std::string ext = lower_extension(out);
-  const double tol = p.tolerance > 0 ? p.tolerance : default_tolerance(b.transform, b.dim);
+  const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim) / 10.0;
 
   std::vector<GltfSurface> surfaces;
   std::vector<double> isos;
@@ -308,8 +309,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     surfaces.push_back(std::move(s));
   }
   if (p.simplify > 0) {
-    double voxel = 1e300;
-    for (int a = 0; a < b.dim; ++a) voxel = std::min(voxel, b.transform.spacing[a]);
+    const double voxel = smallest_spacing(b.transform, b.dim);
     // Surfaces are independent: one task each (the decimater itself is sequential).
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;

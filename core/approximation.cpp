@@ -258,11 +258,12 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
     // the budget, undo it and try half as many.
     auto tr = Clock::now();
-    // With a budget at most `cap` marks can be refined: order only that prefix.
+    // A red refinement adds at most 3 (2D) / 6 (3D) midpoints, shared with neighbours: about
+    // 2 per element in practice. With a budget, at most `cap` marks can go (start near the
+    // budget instead of halving down to it), so only that prefix is put in order.
+    const std::size_t room = opts.max_vertices ? opts.max_vertices - h.vertex_count() : 0;
     const std::size_t cap =
-        opts.max_vertices
-            ? std::min(marked.size(), std::max<std::size_t>(1, (opts.max_vertices - h.vertex_count()) / 2))
-            : marked.size();
+        opts.max_vertices ? std::min(marked.size(), std::max<std::size_t>(1, room / 2)) : marked.size();
     std::partial_sort(marked.begin(), marked.begin() + cap, marked.end(), [](const Mark& a, const Mark& b) {
       if (a.surface != b.surface) return a.surface;
       return a.e != b.e ? a.e > b.e : a.id < b.id;
@@ -273,22 +274,14 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       // 60% of the excess error Σ E − τ²|Ω|, so the last step does not overshoot the target
       // by a whole level (noisy scans would otherwise double their vertex count for nothing).
       const double excess = total - opts.target_rms * opts.target_rms * out.domain_measure;
-      std::vector<double> e_of(h.element_count(), 0.0);
-      for (std::size_t i = 0; i < leaves.size(); ++i) e_of[leaves[i].value] = err[i];
       double acc = 0;
       std::size_t k = 0;
-      for (; k < surface_marks; ++k) acc += e_of[marked[k].id.value];  // surfaces always go
-      while (k < count && acc < 0.6 * excess) acc += e_of[marked[k++].id.value];
+      for (; k < std::min(surface_marks, cap); ++k) acc += marked[k].e;  // surfaces always go
+      while (k < cap && acc < 0.6 * excess) acc += marked[k++].e;
       count = std::max<std::size_t>(k, 1);
     }
-    if (opts.max_vertices) {
-      // A red refinement adds at most 3 (2D) / 6 (3D) midpoints, shared with neighbours: about
-      // 2 per element in practice; start near the budget instead of halving down to it.
-      const std::size_t room = opts.max_vertices - h.vertex_count();
-      count = std::min(count, std::max<std::size_t>(1, room / 2));
-      // Within half a percent of the budget, further attempts would mostly be undone.
-      if (room < std::max<std::size_t>(8, opts.max_vertices / 200)) count = 0;
-    }
+    // Within half a percent of the budget, further attempts would mostly be undone.
+    if (opts.max_vertices && room < std::max<std::size_t>(8, opts.max_vertices / 200)) count = 0;
     std::vector<ElemId> remap;
     bool refined = false;
     while (count > 0) {

@@ -550,7 +550,8 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     const std::size_t round_first_elem = cells_.size();
     const std::size_t first_new_vertex = points_.size();
     reserve_for(to_red.size());
-    for (ElemId e : to_regreen) {
+    // A parent whose green children go becomes a leaf again.
+    const auto drop_green_children = [&](ElemId e) {
       for (int i = 0; i < num_children(e); ++i) {
         const ElemId ch(first_child(e).value + i);
         MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
@@ -558,22 +559,16 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
       }
       num_children_[e.value] = 0;
       first_child_[e.value] = ElemId::invalid();
+    };
+    for (ElemId e : to_regreen) {
+      drop_green_children(e);
       if (use_incidence)
         add_incidence(e);
       else
         leaf_list.push_back(e);
     }
     for (ElemId e : to_red) {
-      if (!is_leaf(e)) {
-        // e's children are green: they go, and e is refined red instead.
-        for (int i = 0; i < num_children(e); ++i) {
-          const ElemId ch(first_child(e).value + i);
-          MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
-          dead[ch.value] = 1;
-        }
-        num_children_[e.value] = 0;
-        first_child_[e.value] = ElemId::invalid();
-      }
+      if (!is_leaf(e)) drop_green_children(e);  // e's green children go; e is refined red instead
       red_refine(e);
       if (!use_incidence)
         for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));

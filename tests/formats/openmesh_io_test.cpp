@@ -13,6 +13,7 @@ namespace mlfe {
 namespace {
 
 using test::icosphere;
+using test::one_sided_hausdorff;
 using test::scratch_dir;
 using test::unmatched_triangles;
 
@@ -100,57 +101,6 @@ TEST(Decimation, LeavesMeshesAtOrBelowTheTargetAlone) {
   const TriangleMesh out = decimate_to(in, in.triangle_count());
   EXPECT_EQ(out.positions, in.positions);
   EXPECT_EQ(out.triangles, in.triangles);
-}
-
-// Distance from p to triangle (a, b, c) (Ericson, Real-Time Collision Detection, 5.1.5).
-double point_triangle_distance(const std::array<double, 3>& p, const std::array<float, 3>& fa,
-                               const std::array<float, 3>& fb, const std::array<float, 3>& fc) {
-  using V = std::array<double, 3>;
-  auto sub = [](const V& x, const V& y) { return V{x[0] - y[0], x[1] - y[1], x[2] - y[2]}; };
-  auto dot = [](const V& x, const V& y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
-  auto along = [](const V& o, const V& d, double t) {
-    return V{o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
-  };
-  const V a{fa[0], fa[1], fa[2]}, b{fb[0], fb[1], fb[2]}, c{fc[0], fc[1], fc[2]};
-  const V ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
-  V q;
-  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
-  const V bp = sub(p, b), cp = sub(p, c);
-  const double d3 = dot(ab, bp), d4 = dot(ac, bp), d5 = dot(ab, cp), d6 = dot(ac, cp);
-  const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
-  if (d1 <= 0 && d2 <= 0)
-    q = a;
-  else if (d3 >= 0 && d4 <= d3)
-    q = b;
-  else if (d6 >= 0 && d5 <= d6)
-    q = c;
-  else if (vc <= 0 && d1 >= 0 && d3 <= 0)
-    q = along(a, ab, d1 / (d1 - d3));
-  else if (vb <= 0 && d2 >= 0 && d6 <= 0)
-    q = along(a, ac, d2 / (d2 - d6));
-  else if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-    q = along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
-  else {
-    const double den = 1.0 / (va + vb + vc);
-    const double v = vb * den, w = vc * den;
-    q = V{a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w};
-  }
-  const V d = sub(p, q);
-  return std::sqrt(dot(d, d));
-}
-
-// Largest distance from a vertex of `from` to the surface `to` (brute force).
-double one_sided_hausdorff(const TriangleMesh& from, const TriangleMesh& to) {
-  double worst = 0;
-  for (const auto& fp : from.positions) {
-    const std::array<double, 3> p{fp[0], fp[1], fp[2]};
-    double best = 1e300;
-    for (const auto& t : to.triangles)
-      best = std::min(best,
-                      point_triangle_distance(p, to.positions[t[0]], to.positions[t[1]], to.positions[t[2]]));
-    worst = std::max(worst, best);
-  }
-  return worst;
 }
 
 TEST(Simplification, KeepsEveryInputVertexWithinTheTolerance) {
