@@ -210,7 +210,13 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
   const std::string golden_ply = kGolden + "/ct_skull_iso2.5_3000.ply";
   if (std::getenv("MLFE_UPDATE_GOLDEN")) fs::copy_file(ply, golden_ply, fs::copy_options::overwrite_existing);
   ASSERT_TRUE(fs::exists(golden_ply)) << "missing golden file " << golden_ply;
-  EXPECT_EQ(read_bytes(ply), read_bytes(golden_ply)) << "PLY differs from the golden file";
+  const std::string got = read_bytes(ply), want = read_bytes(golden_ply);
+  // Not EXPECT_EQ on the strings: a failure would print megabytes of binary.
+  std::size_t first_diff = 0;
+  while (first_diff < std::min(got.size(), want.size()) && got[first_diff] == want[first_diff]) ++first_diff;
+  EXPECT_TRUE(got == want) << "PLY differs from the golden file: " << got.size() << " vs " << want.size()
+                           << " bytes, first difference at byte " << first_diff << "; header now:\n"
+                           << got.substr(0, got.find("end_header"));
 
   const TriangleMesh golden = read_mesh_file(golden_ply);
   const Glb g = parse_glb(read_bytes(glb));
