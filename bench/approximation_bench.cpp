@@ -443,7 +443,7 @@ int main(int argc, char** argv) {
     if (a == "--dem") dem = next();
     else if (a == "--threshold") threshold = std::atof(next().c_str());
     else if (a == "--dem-start-level") dem_start_level = std::atoi(next().c_str());
-    else if (a == "--budgets") budgets = parse_list(next());
+    else if (a == "--budgets") budgets = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
     else if (a == "--rms") rms = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
     else if (a == "--threads") threads = std::atoi(next().c_str());
     else if (a == "-h" || a == "--help") {

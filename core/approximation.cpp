@@ -266,7 +266,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     const std::size_t cap =
         opts.max_vertices
             ? std::min(marked.size(),
-                       std::max<std::size_t>(1, static_cast<std::size_t>(0.95 * double(room) / vertices_per_mark)))
+                       std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
             : marked.size();
     std::partial_sort(marked.begin(), marked.begin() + cap, marked.end(), [](const Mark& a, const Mark& b) {
       if (a.surface != b.surface) return a.surface;

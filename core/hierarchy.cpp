@@ -339,6 +339,21 @@ unsigned Hierarchy<D>::hanging_mask(ElemId e) const {
 }
 
 template <int D>
+unsigned Hierarchy<D>::leaf_hanging_mask(ElemId e, const std::vector<std::uint8_t>& touched) const {
+  // The leaves were conforming when refine() began, so a midpoint on a leaf's edge is one this
+  // call created, and both its endpoints are flagged: probe the edge map only for those edges
+  // (most candidates have two or three flagged corners, so 1-3 probes instead of 6).
+  using T = SimplexTraits<D>;
+  const Cell& c = cells_[e.value];
+  unsigned mask = 0;
+  for (int i = 0; i < T::kEdges; ++i) {
+    const VertexId a = c[T::kEdgeVerts[i][0]], b = c[T::kEdgeVerts[i][1]];
+    if (touched[a.value] && touched[b.value] && edge_mid_.find(a, b).valid()) mask |= 1u << i;
+  }
+  return mask;
+}
+
+template <int D>
 bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
   using T = SimplexTraits<D>;
   const Cell& c = cells_[e.value];
@@ -476,9 +491,10 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   if (to_red.empty()) return compact(std::vector<std::uint8_t>(cells_.size(), 0), old_count);
 
   std::vector<std::uint8_t> dead(cells_.size(), 0);
-  // dirty: endpoints of edges split in this round; touched: in any round of this call.
+  // dirty: endpoints of edges split in this round; touched: in any round of this call (and the
+  // corners of parents whose green children go, which have older midpoints on their edges).
   std::vector<std::uint8_t> dirty(points_.size(), 0), touched(points_.size(), 0);
-  std::vector<VertexId> dirty_list, touched_list;
+  std::vector<VertexId> dirty_list;
   std::vector<ElemId> leaf_list = leaves();
   const auto alive_leaf = [&](ElemId e) { return !dead[e.value] && is_leaf(e); };
 
@@ -562,6 +578,9 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     };
     for (ElemId e : to_regreen) {
       drop_green_children(e);
+      // e is a leaf again, with midpoints from earlier calls on its edges: flag its corners so
+      // leaf_hanging_mask() probes all of its edges.
+      for (VertexId v : cells_[e.value]) touched[v.value] = 1;
       if (use_incidence)
         add_incidence(e);
       else
@@ -581,15 +600,12 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
         dirty[v.value] = 1;
         dirty_list.push_back(v);
       }
-      if (!touched[v.value]) {
-        touched[v.value] = 1;
-        touched_list.push_back(v);
-      }
+      touched[v.value] = 1;
     };
-    for (std::size_t v = first_new_vertex; v < points_.size(); ++v) {
+    // Only the endpoints of split edges: a new vertex starts with no split edge around it, and
+    // an older leaf cannot contain it, so flagging it would only add candidates and probes.
+    for (std::size_t v = first_new_vertex; v < points_.size(); ++v)
       for (VertexId p : vertex_parents_[v]) mark(p);
-      mark(VertexId(static_cast<std::uint32_t>(v)));
-    }
 
     // Candidates: every element created in this round, and older leaves with ≥ 2 dirty vertices.
     std::vector<ElemId> candidates;
@@ -621,7 +637,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
                             for (VertexId v : cells_[e.value]) n += dirty[v.value];
                             if (n < 2) continue;  // no edge of e was split in this round
                           }
-                          const unsigned mask = hanging_mask(e);
+                          const unsigned mask = leaf_hanging_mask(e, touched);
                           if (mask == 0) continue;
                           if (kind(e) == ElemKind::kGreen) {
                             const ElemId p = parent(e);
@@ -662,25 +678,29 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   }
 
   // Green closure: every remaining leaf with hanging midpoints has an admissible pattern.
-  // Leaves are visited in id order either way (the leaf list is sorted by id).
-  std::vector<ElemId> closure;
-  if (use_incidence)
-    closure = incident_candidates(touched_list, touched, cells_.size());
-  else
-    closure.swap(leaf_list);
-  // id order: deterministic child numbering (the leaf list is nearly always sorted already)
-  if (!std::is_sorted(closure.begin(), closure.end())) std::sort(closure.begin(), closure.end());
-  std::vector<unsigned> masks(closure.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 4096),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                        int n = 0;
-                        for (VertexId v : cells_[closure[i].value]) n += touched[v.value];
-                        if (n >= 2) masks[i] = hanging_mask(closure[i]);
-                      }
-                    });
-  for (std::size_t i = 0; i < closure.size(); ++i)
-    if (masks[i] != 0) green_refine(closure[i], masks[i]);
+  // Candidates: leaves with ≥ 2 flagged corners, in id order (deterministic child numbering).
+  // One parallel pass over the element arrays (streamed; the flags fit in cache) costs less
+  // than walking the incidence lists of every flagged vertex, which misses at every step.
+  std::vector<std::pair<ElemId, unsigned>> closure;
+  {
+    constexpr std::size_t kChunk = 1 << 15;
+    const std::size_t n = cells_.size(), nchunks = (n + kChunk - 1) / kChunk;
+    dead.resize(n, 0);
+    std::vector<std::vector<std::pair<ElemId, unsigned>>> found(nchunks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nchunks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t k = r.begin(); k != r.end(); ++k)
+        for (std::size_t i = k * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+          if (num_children_[i] != 0 || dead[i]) continue;
+          int m = 0;
+          for (VertexId v : cells_[i]) m += touched[v.value];
+          if (m < 2) continue;
+          const ElemId e(static_cast<std::uint32_t>(i));
+          if (const unsigned mask = leaf_hanging_mask(e, touched)) found[k].emplace_back(e, mask);
+        }
+    });
+    for (auto& f : found) closure.insert(closure.end(), f.begin(), f.end());
+  }
+  for (const auto& [e, mask] : closure) green_refine(e, mask);
   dead.resize(cells_.size(), 0);
   return compact(dead, old_count);
 }

@@ -181,6 +181,7 @@ class Hierarchy {
       const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m);
   void green_refine(ElemId e, unsigned mask);
   unsigned hanging_mask(ElemId e) const;
+  unsigned leaf_hanging_mask(ElemId e, const std::vector<std::uint8_t>& touched) const;
   bool hanging_on_parent_edges(ElemId e, unsigned mask) const;
   std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);
 
