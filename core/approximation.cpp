@@ -2,7 +2,8 @@
 // approximation.h. Solvers: CG with the BPX preconditioner (Bramble, Pasciak & Xu 1990).
 #include "core/approximation.h"
 
-#include <tbb/parallel_sort.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -181,10 +182,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         have[todo[i].value] = 1;
       }
     }
-    std::vector<ElementIntegrals<D>> integrals(leaves.size());
-    for (std::size_t i = 0; i < leaves.size(); ++i) integrals[i] = cache[leaves[i].value];
+    // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
+    // every iteration.
+    constexpr IntegralIndex kById = IntegralIndex::kElementId;
     const SparseMatrix m = assemble_matrix(h, leaves, gw);
-    const Vector rhs = assemble_load(h, leaves, integrals, gw);
+    const Vector rhs = assemble_load(h, leaves, cache, gw, kById);
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
@@ -198,7 +200,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
-    const auto err = element_errors(h, leaves, integrals, x, gw);
+    const auto err = element_errors(h, leaves, cache, x, gw, kById);
     double total = 0;
     for (double e : err) total += e;  // sequential: deterministic
     st.level = h.max_level();
@@ -225,17 +227,28 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       // Once the RMS target is met only the iso-aware rule (if any) still marks.
       const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
       const double thr2 = opts.threshold * opts.threshold;
+      // Decided in parallel (bit 0: mark, bit 1: surface), collected in leaf order.
+      std::vector<std::uint8_t> decision(leaves.size(), 0);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 4096),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                            const ElemId e = leaves[i];
+                            if (h.level(e) >= opts.max_level) continue;
+                            const double density = err[i] / h.measure(e);  // mean square error on T
+                            bool mark = false;
+                            if (opts.threshold > 0) mark |= density > thr2;
+                            // Equidistribution: if no element's mean square error exceeds tau²,
+                            // Σ E ≤ tau² |Ω|.
+                            if (tau2 > 0) mark |= density > tau2;
+                            const bool surface = !opts.iso_values.empty() &&
+                                                 surface_needs_refinement(h, e, cache[e.value], x, density, f, opts);
+                            decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
+                          }
+                        });
       for (std::size_t i = 0; i < leaves.size(); ++i) {
-        const ElemId e = leaves[i];
-        if (h.level(e) >= opts.max_level) continue;
-        const double density = err[i] / h.measure(e);  // mean square error on T
-        bool mark = false;
-        if (opts.threshold > 0) mark |= density > thr2;
-        // Equidistribution: if no element's mean square error exceeds tau², Σ E ≤ tau² |Ω|.
-        if (tau2 > 0) mark |= density > tau2;
-        const bool surface =
-            !opts.iso_values.empty() && surface_needs_refinement(h, e, integrals[i], x, density, f, opts);
-        if (mark || surface) marked.push_back({surface, err[i], e});
+        if (!decision[i]) continue;
+        const bool surface = decision[i] & 2;
+        marked.push_back({surface, err[i], leaves[i]});
         surface_marks += surface;
       }
       if (marked.empty())
@@ -268,10 +281,14 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
             ? std::min(marked.size(),
                        std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
             : marked.size();
-    std::partial_sort(marked.begin(), marked.begin() + cap, marked.end(), [](const Mark& a, const Mark& b) {
+    // A strict total order (ties by id), so selecting the prefix first and then sorting it gives
+    // the same prefix as a full sort, in O(n + cap log cap) instead of O(n log cap).
+    const auto worse_first = [](const Mark& a, const Mark& b) {
       if (a.surface != b.surface) return a.surface;
       return a.e != b.e ? a.e > b.e : a.id < b.id;
-    });
+    };
+    if (cap < marked.size()) std::nth_element(marked.begin(), marked.begin() + cap, marked.end(), worse_first);
+    std::sort(marked.begin(), marked.begin() + cap, worse_first);
     std::size_t count = cap;
     if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {
       // Bulk criterion (Dörfler-like): refine only the worst elements that together carry

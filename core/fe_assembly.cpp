@@ -71,11 +71,11 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
           const auto& c = h.cell(leaves[i]);
           for (int a = 0; a <= D; ++a) corners[i][a] = c[a].value;
-          const P1Element<D> el(element_points(h, leaves[i]));
           if (!with_grad) {
-            local[i] = el.measure;
+            local[i] = P1Element<D>::measure_of(element_points(h, leaves[i]));
             continue;
           }
+          const P1Element<D> el(element_points(h, leaves[i]));
           for (int a = 0; a <= D; ++a)
             for (int b = 0; b <= D; ++b)
               local[i * kLocal + a * (D + 1) + b] = el.mass(a, b) + gradient_weight * el.stiffness(a, b);
@@ -152,10 +152,32 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
   return m;
 }
 
+namespace {
+// integrals[i] or integrals[leaves[i]], after checking that every index is in range.
+template <int D>
+struct IntegralAccess {
+  const std::vector<ElementIntegrals<D>>& integrals;
+  const std::vector<ElemId>& leaves;
+  IntegralIndex index;
+  IntegralAccess(const std::vector<ElementIntegrals<D>>& in, const std::vector<ElemId>& l, IntegralIndex ix,
+                 std::size_t element_count)
+      : integrals(in), leaves(l), index(ix) {
+    if (index == IntegralIndex::kLeafOrder)
+      MLFE_CHECK(integrals.size() == leaves.size());
+    else
+      MLFE_CHECK(integrals.size() >= element_count);
+  }
+  const ElementIntegrals<D>& operator[](std::size_t i) const {
+    return integrals[index == IntegralIndex::kLeafOrder ? i : leaves[i].value];
+  }
+};
+}  // namespace
+
 template <int D>
 Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                     const std::vector<ElementIntegrals<D>>& integrals, double gradient_weight) {
-  MLFE_CHECK(integrals.size() == leaves.size());
+                     const std::vector<ElementIntegrals<D>>& integrals_in, double gradient_weight,
+                     IntegralIndex index) {
+  const IntegralAccess<D> integrals(integrals_in, leaves, index, h.element_count());
   Vector f = Vector::Zero(static_cast<Eigen::Index>(h.vertex_count()));
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     const auto& c = h.cell(leaves[i]);
@@ -176,26 +198,30 @@ Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
 
 template <int D>
 std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                                   const std::vector<ElementIntegrals<D>>& integrals, const Vector& u,
-                                   double gradient_weight) {
-  MLFE_CHECK(integrals.size() == leaves.size());
+                                   const std::vector<ElementIntegrals<D>>& integrals_in, const Vector& u,
+                                   double gradient_weight, IntegralIndex index) {
+  const IntegralAccess<D> integrals(integrals_in, leaves, index, h.element_count());
   std::vector<double> err(leaves.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const auto& c = h.cell(leaves[i]);
                         const auto& in = integrals[i];
-                        const P1Element<D> el(element_points(h, leaves[i]));
+                        const auto pts = element_points(h, leaves[i]);
+                        // The gradients (a 3×3 inverse) only for the H1 term.
+                        const double measure = P1Element<D>::measure_of(pts);
                         double uu[D + 1];
                         for (int a = 0; a <= D; ++a) uu[a] = u[c[a].value];
                         double cross = 0, quad = 0;
+                        constexpr double mf = P1Element<D>::mass_factor();
                         for (int a = 0; a <= D; ++a) {
                           cross += uu[a] * in.fphi[a];
-                          for (int b = 0; b <= D; ++b) quad += uu[a] * uu[b] * el.mass(a, b);
+                          for (int b = 0; b <= D; ++b) quad += uu[a] * uu[b] * (measure * mf * (a == b ? 2.0 : 1.0));
                         }
                         // ∫(f-u)² = ∫f² - 2∫fu + ∫u²; cancellation can leave a tiny negative.
                         double e = in.f2 - 2 * cross + quad;
                         if (gradient_weight != 0) {
+                          const P1Element<D> el(pts);
                           double gu[D] = {};
                           for (int a = 0; a <= D; ++a)
                             for (int k = 0; k < D; ++k) gu[k] += uu[a] * el.grad[a][k];
@@ -219,14 +245,14 @@ template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hie
 template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double);
 template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double);
 template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
-                                 const std::vector<ElementIntegrals<2>>&, double);
+                                 const std::vector<ElementIntegrals<2>>&, double, IntegralIndex);
 template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
-                                 const std::vector<ElementIntegrals<3>>&, double);
+                                 const std::vector<ElementIntegrals<3>>&, double, IntegralIndex);
 template std::vector<double> element_errors<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                                const std::vector<ElementIntegrals<2>>&, const Vector&,
-                                               double);
+                                               double, IntegralIndex);
 template std::vector<double> element_errors<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                                const std::vector<ElementIntegrals<3>>&, const Vector&,
-                                               double);
+                                               double, IntegralIndex);
 
 }  // namespace mlfe

@@ -27,15 +27,22 @@ template <int D>
 SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                              double gradient_weight);
 
-/// Load vector F_j = (f, φ_j) + gradient_weight (∇f, ∇φ_j); integrals[i] belongs to leaves[i].
+/// How `integrals` lines up with `leaves`: integrals[i] belongs to leaves[i] (kLeafOrder), or
+/// integrals is a per-element cache and integrals[leaves[i].value] belongs to leaves[i]
+/// (kElementId; saves gathering a copy of a cache that already exists). Sizes are CHECKed.
+enum class IntegralIndex { kLeafOrder, kElementId };
+
+/// Load vector F_j = (f, φ_j) + gradient_weight (∇f, ∇φ_j).
 template <int D>
 Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                     const std::vector<ElementIntegrals<D>>& integrals, double gradient_weight);
+                     const std::vector<ElementIntegrals<D>>& integrals, double gradient_weight,
+                     IntegralIndex index = IntegralIndex::kLeafOrder);
 
 /// E_T for each leaf, from the cached integrals and nodal values U (never negative).
 template <int D>
 std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                                    const std::vector<ElementIntegrals<D>>& integrals,
-                                   const Vector& u, double gradient_weight);
+                                   const Vector& u, double gradient_weight,
+                                   IntegralIndex index = IntegralIndex::kLeafOrder);
 
 }  // namespace mlfe

@@ -53,6 +53,22 @@ struct P1Element {
       }
   }
 
+  /// |T| alone, bit-identical to P1Element(p).measure (the same determinant expression), for
+  /// the loops that need no gradients (pure L2 mass matrices, error densities).
+  static double measure_of(const std::array<Point, D + 1>& p) {
+    double j[D][D];
+    for (int i = 0; i < D; ++i)
+      for (int a = 0; a < D; ++a) j[a][i] = p[i + 1][a] - p[0][a];
+    if constexpr (D == 2) {
+      return std::abs(j[0][0] * j[1][1] - j[0][1] * j[1][0]) / 2;
+    } else {
+      const double det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1]) -
+                         j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0]) +
+                         j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
+      return std::abs(det) / 6;
+    }
+  }
+
   static constexpr double mass_factor() { return 1.0 / ((D + 1) * (D + 2)); }
   double mass(int i, int k) const { return measure * mass_factor() * (i == k ? 2.0 : 1.0); }
   double stiffness(int i, int k) const {

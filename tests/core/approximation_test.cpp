@@ -122,6 +122,15 @@ TEST(Approximation, GalerkinOrthogonalityHoldsToSolverTolerance) {
   const Vector uv = Eigen::Map<const Vector>(u.data(), u.size());
   const Vector r = rhs - m * uv;  // (f - u, φ_i) for every i
   EXPECT_LE(r.norm(), 1e-9 * rhs.norm());
+
+  // The solver reads a per-element cache in place (IntegralIndex::kElementId): scattered by
+  // element id, the same integrals must give the same load and errors bit for bit.
+  std::vector<ElementIntegrals<3>> by_id(h.element_count());
+  for (std::size_t i = 0; i < leaves.size(); ++i) by_id[leaves[i].value] = in[i];
+  const Vector rhs_by_id = assemble_load(h, leaves, by_id, 0.0, IntegralIndex::kElementId);
+  EXPECT_TRUE(rhs_by_id == rhs);
+  EXPECT_EQ(element_errors(h, leaves, by_id, uv, 0.0, IntegralIndex::kElementId),
+            element_errors(h, leaves, in, uv, 0.0));
 }
 
 TEST(Approximation, UniformRefinementConvergesWithRateTwo) {
