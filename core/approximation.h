@@ -45,7 +45,7 @@ struct ApproximationOptions {
   int max_iterations = 60;        ///< refine-solve cycles
   int start_level = -1;           ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
   bool h1 = false;                ///< (u,v) + s²(∇u,∇v) instead of (u,v)
-  double quadrature_edge = 0;     ///< sub-simplex size for integration; 0: 2 × the field's resolution
+  double quadrature_edge = 0;     ///< sub-simplex size for integration; 0: 2 × Field::voxel_size()
   /// Iso-aware refinement: elements where f or u crosses one of these values are also refined
   /// while the surface's estimated distance error sqrt(E_T/|T|) / |∇u| exceeds
   /// surface_tolerance voxels (or the surface is missing from u), down to voxel-sized elements.
@@ -53,7 +53,8 @@ struct ApproximationOptions {
   double surface_tolerance = 0.5;
   Preconditioner preconditioner = Preconditioner::kBpx;
   double cg_tolerance = 1e-9;     ///< relative residual
-  int direct_solve_max = 3000;    ///< direct (LDLT) solve while vertices ≤ this; 0: never
+  int direct_solve_max = 1000;    ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
+                                  ///< uniform levels; beyond, 3D fill-in makes BPX-CG cheaper); 0: never
   std::function<void(const IterationStats&)> progress;  ///< called after every solve
 };
 

@@ -107,15 +107,18 @@ GridField::GridField(const ScalarGrid& grid) : grid_(grid), dim_(grid.dim), n_(g
   MLFE_CHECK(dim_ == 2 || dim_ == 3);
   MLFE_CHECK(grid.values.size() == static_cast<std::size_t>(grid.voxel_count()));
   resolution_ = 1e300;
+  double voxel_volume = 1;
   for (int a = 0; a < 3; ++a) {
     if (a < dim_) {
       MLFE_CHECK(n_[a] >= 2 && grid.transform.spacing[a] > 0);
       inv_spacing_[a] = 1.0 / grid.transform.spacing[a];
       resolution_ = std::min(resolution_, grid.transform.spacing[a]);
+      voxel_volume *= grid.transform.spacing[a];
     } else {
       inv_spacing_[a] = 0.0;
     }
   }
+  voxel_size_ = std::pow(voxel_volume, 1.0 / dim_);
   extent_ = grid.local_extent();
   const auto r = grid.value_range();
   range_ = {r[0], r[1]};

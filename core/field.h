@@ -28,8 +28,12 @@ class Field {
   virtual std::array<double, 3> gradient(const std::array<double, 3>& x) const = 0;
   /// out[j] = gradient(x[j]) for j < n, bit for bit (see values()).
   virtual void gradients(const std::array<double, 3>* x, std::array<double, 3>* out, std::size_t n) const;
-  /// Length below which f has no detail (the voxel spacing): integration resolves it.
+  /// Length below which f has no detail (the smallest voxel spacing).
   virtual double resolution() const = 0;
+  /// Side of the cube (square in 2D) with the volume of one voxel: the length the element
+  /// integration compares its sub-simplex size with (same kind of measure). Defaults to
+  /// resolution().
+  virtual double voxel_size() const { return resolution(); }
   /// Smallest and largest value of f.
   virtual std::array<double, 2> range() const = 0;
 };
@@ -47,6 +51,7 @@ class GridField final : public Field {
   void gradients(const std::array<double, 3>* x, std::array<double, 3>* out, std::size_t n) const override;
   std::array<double, 3> extent() const override { return extent_; }
   double resolution() const override { return resolution_; }
+  double voxel_size() const override { return voxel_size_; }
   std::array<double, 2> range() const override { return range_; }
   const ScalarGrid& grid() const { return grid_; }
 
@@ -57,6 +62,7 @@ class GridField final : public Field {
   std::array<double, 3> inv_spacing_;
   std::array<double, 3> extent_;
   double resolution_;
+  double voxel_size_;
   std::array<double, 2> range_;
 };
 

@@ -116,7 +116,7 @@ TEST(Approximation, GalerkinOrthogonalityHoldsToSolverTolerance) {
   EXPECT_GT(st.cg_iterations, 0);
   const auto leaves = h.leaves();
   // The same discrete integrals as the solver (default quadrature size: 2 voxels).
-  const auto in = compute_element_integrals(h, leaves, f, 2.0 * f.resolution(), false);
+  const auto in = compute_element_integrals(h, leaves, f, 2.0 * f.voxel_size(), false);
   const SparseMatrix m = assemble_matrix(h, leaves, 0.0);
   const Vector rhs = assemble_load(h, leaves, in, 0.0);
   const Vector uv = Eigen::Map<const Vector>(u.data(), u.size());
