@@ -247,8 +247,9 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
                             // Equidistribution: if no element's mean square error exceeds tau²,
                             // Σ E ≤ tau² |Ω|.
                             if (tau2 > 0) mark |= density > tau2;
-                            const bool surface = !opts.iso_values.empty() &&
-                                                 surface_needs_refinement(h, e, cache[e.value], x, density, f, opts);
+                            const bool surface =
+                                !opts.iso_values.empty() &&
+                                surface_needs_refinement(h, e, cache[e.value], x, density, f, opts);
                             decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
                           }
                         });
@@ -284,17 +285,18 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     auto tr = Clock::now();
     const std::size_t room = opts.max_vertices ? opts.max_vertices - h.vertex_count() : 0;
     const std::size_t cap =
-        opts.max_vertices
-            ? std::min(marked.size(),
-                       std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
-            : marked.size();
+        opts.max_vertices ? std::min(marked.size(),
+                                     std::max<std::size_t>(
+                                         1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
+                          : marked.size();
     // A strict total order (ties by id), so selecting the prefix first and then sorting it gives
     // the same prefix as a full sort, in O(n + cap log cap) instead of O(n log cap).
     const auto worse_first = [](const Mark& a, const Mark& b) {
       if (a.surface != b.surface) return a.surface;
       return a.e != b.e ? a.e > b.e : a.id < b.id;
     };
-    if (cap < marked.size()) std::nth_element(marked.begin(), marked.begin() + cap, marked.end(), worse_first);
+    if (cap < marked.size())
+      std::nth_element(marked.begin(), marked.begin() + cap, marked.end(), worse_first);
     std::sort(marked.begin(), marked.begin() + cap, worse_first);
     std::size_t count = cap;
     if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {

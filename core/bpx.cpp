@@ -49,26 +49,27 @@ BpxPreconditioner<D>::BpxPreconditioner(const Hierarchy<D>& h, double gradient_w
     dm.resize(count);
     ds.resize(count);
     // The element matrices in parallel (a 3×3 inverse each), the sums below in element order.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t n = r.begin(); n != r.end(); ++n) {
-        const auto& c = h.cell(ElemId(first[n]));
-        std::array<std::array<double, D>, D + 1> p;
-        for (int j = 0; j <= D; ++j) p[j] = h.point(c[j]);
-        if (gradient_weight == 0) {  // pure L2: no gradients (a 3×3 inverse) needed
-          const double m = P1Element<D>::measure_of(p) * P1Element<D>::mass_factor() * 2.0;
-          for (int j = 0; j <= D; ++j) {
-            ds[n][j] = 0;
-            dm[n][j] = m + 0.0;
-          }
-          continue;
-        }
-        const P1Element<D> el(p);
-        for (int j = 0; j <= D; ++j) {
-          ds[n][j] = gradient_weight * el.stiffness(j, j);
-          dm[n][j] = el.mass(j, j) + ds[n][j];
-        }
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t n = r.begin(); n != r.end(); ++n) {
+                          const auto& c = h.cell(ElemId(first[n]));
+                          std::array<std::array<double, D>, D + 1> p;
+                          for (int j = 0; j <= D; ++j) p[j] = h.point(c[j]);
+                          if (gradient_weight == 0) {  // pure L2: no gradients (a 3×3 inverse) needed
+                            const double m = P1Element<D>::measure_of(p) * P1Element<D>::mass_factor() * 2.0;
+                            for (int j = 0; j <= D; ++j) {
+                              ds[n][j] = 0;
+                              dm[n][j] = m + 0.0;
+                            }
+                            continue;
+                          }
+                          const P1Element<D> el(p);
+                          for (int j = 0; j <= D; ++j) {
+                            ds[n][j] = gradient_weight * el.stiffness(j, j);
+                            dm[n][j] = el.mass(j, j) + ds[n][j];
+                          }
+                        }
+                      });
     std::vector<std::uint32_t> vk;
     for (std::size_t n = 0; n < count; ++n) {
       const auto& c = h.cell(ElemId(first[n]));

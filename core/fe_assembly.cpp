@@ -216,7 +216,8 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
                         constexpr double mf = P1Element<D>::mass_factor();
                         for (int a = 0; a <= D; ++a) {
                           cross += uu[a] * in.fphi[a];
-                          for (int b = 0; b <= D; ++b) quad += uu[a] * uu[b] * (measure * mf * (a == b ? 2.0 : 1.0));
+                          for (int b = 0; b <= D; ++b)
+                            quad += uu[a] * uu[b] * (measure * mf * (a == b ? 2.0 : 1.0));
                         }
                         // ∫(f-u)² = ∫f² - 2∫fu + ∫u²; cancellation can leave a tiny negative.
                         double e = in.f2 - 2 * cross + quad;
@@ -249,10 +250,10 @@ template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&
 template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                  const std::vector<ElementIntegrals<3>>&, double, IntegralIndex);
 template std::vector<double> element_errors<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
-                                               const std::vector<ElementIntegrals<2>>&, const Vector&,
-                                               double, IntegralIndex);
+                                               const std::vector<ElementIntegrals<2>>&, const Vector&, double,
+                                               IntegralIndex);
 template std::vector<double> element_errors<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
-                                               const std::vector<ElementIntegrals<3>>&, const Vector&,
-                                               double, IntegralIndex);
+                                               const std::vector<ElementIntegrals<3>>&, const Vector&, double,
+                                               IntegralIndex);
 
 }  // namespace mlfe

@@ -687,17 +687,19 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     const std::size_t n = cells_.size(), nchunks = (n + kChunk - 1) / kChunk;
     dead.resize(n, 0);
     std::vector<std::vector<std::pair<ElemId, unsigned>>> found(nchunks);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nchunks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k)
-        for (std::size_t i = k * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-          if (num_children_[i] != 0 || dead[i]) continue;
-          int m = 0;
-          for (VertexId v : cells_[i]) m += touched[v.value];
-          if (m < 2) continue;
-          const ElemId e(static_cast<std::uint32_t>(i));
-          if (const unsigned mask = leaf_hanging_mask(e, touched)) found[k].emplace_back(e, mask);
-        }
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nchunks, 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k != r.end(); ++k)
+                          for (std::size_t i = k * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
+                            if (num_children_[i] != 0 || dead[i]) continue;
+                            int m = 0;
+                            for (VertexId v : cells_[i]) m += touched[v.value];
+                            if (m < 2) continue;
+                            const ElemId e(static_cast<std::uint32_t>(i));
+                            if (const unsigned mask = leaf_hanging_mask(e, touched))
+                              found[k].emplace_back(e, mask);
+                          }
+                      });
     for (auto& f : found) closure.insert(closure.end(), f.begin(), f.end());
   }
   for (const auto& [e, mask] : closure) green_refine(e, mask);
