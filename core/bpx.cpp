@@ -56,10 +56,10 @@ BpxPreconditioner<D>::BpxPreconditioner(const Hierarchy<D>& h, double gradient_w
                           std::array<std::array<double, D>, D + 1> p;
                           for (int j = 0; j <= D; ++j) p[j] = h.point(c[j]);
                           if (gradient_weight == 0) {  // pure L2: no gradients (a 3×3 inverse) needed
-                            const double m = P1Element<D>::measure_of(p) * P1Element<D>::mass_factor() * 2.0;
+                            const double m = P1Element<D>::mass_of(P1Element<D>::measure_of(p), 0, 0);
                             for (int j = 0; j <= D; ++j) {
                               ds[n][j] = 0;
-                              dm[n][j] = m + 0.0;
+                              dm[n][j] = m;
                             }
                             continue;
                           }

@@ -85,7 +85,6 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
   // current row (no sort of all incidences, no binary search per entry); the blocks' rows are
   // then copied into the matrix in order.
   constexpr std::size_t kBlock = 2048;
-  constexpr double kMassFactor = P1Element<D>::mass_factor();
   constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
   const std::size_t nblocks = (nv + kBlock - 1) / kBlock;
   struct Block {
@@ -109,8 +108,8 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
               const int a = static_cast<int>(inc[k] % (D + 1));
               const auto& c = corners[i];
               for (int bb = 0; bb <= D; ++bb) {
-                const double x = with_grad ? local[i * kLocal + a * (D + 1) + bb]
-                                           : local[i] * kMassFactor * (a == bb ? 2.0 : 1.0);
+                const double x =
+                    with_grad ? local[i * kLocal + a * (D + 1) + bb] : P1Element<D>::mass_of(local[i], a, bb);
                 std::uint32_t& s = slot[c[bb]];
                 if (s == kNone) {
                   s = static_cast<std::uint32_t>(row.size());
@@ -213,11 +212,10 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
                         double uu[D + 1];
                         for (int a = 0; a <= D; ++a) uu[a] = u[c[a].value];
                         double cross = 0, quad = 0;
-                        constexpr double mf = P1Element<D>::mass_factor();
                         for (int a = 0; a <= D; ++a) {
                           cross += uu[a] * in.fphi[a];
                           for (int b = 0; b <= D; ++b)
-                            quad += uu[a] * uu[b] * (measure * mf * (a == b ? 2.0 : 1.0));
+                            quad += uu[a] * uu[b] * P1Element<D>::mass_of(measure, a, b);
                         }
                         // ∫(f-u)² = ∫f² - 2∫fu + ∫u²; cancellation can leave a tiny negative.
                         double e = in.f2 - 2 * cross + quad;
