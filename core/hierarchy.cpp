@@ -329,26 +329,14 @@ void Hierarchy<D>::red_refine(ElemId e) {
 }
 
 template <int D>
-unsigned Hierarchy<D>::hanging_mask(ElemId e) const {
-  using T = SimplexTraits<D>;
-  const Cell& c = cells_[e.value];
-  unsigned mask = 0;
-  for (int i = 0; i < T::kEdges; ++i)
-    if (edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]).valid()) mask |= 1u << i;
-  return mask;
-}
-
-template <int D>
-unsigned Hierarchy<D>::leaf_hanging_mask(ElemId e, const std::vector<std::uint8_t>& touched) const {
-  // The leaves were conforming when refine() began, so a midpoint on a leaf's edge is one this
-  // call created, and both its endpoints are flagged: probe the edge map only for those edges
-  // (most candidates have two or three flagged corners, so 1-3 probes instead of 6).
+unsigned Hierarchy<D>::hanging_mask(ElemId e, const std::vector<std::uint8_t>* flagged) const {
   using T = SimplexTraits<D>;
   const Cell& c = cells_[e.value];
   unsigned mask = 0;
   for (int i = 0; i < T::kEdges; ++i) {
     const VertexId a = c[T::kEdgeVerts[i][0]], b = c[T::kEdgeVerts[i][1]];
-    if (touched[a.value] && touched[b.value] && edge_mid_.find(a, b).valid()) mask |= 1u << i;
+    if (flagged && !((*flagged)[a.value] && (*flagged)[b.value])) continue;
+    if (edge_mid_.find(a, b).valid()) mask |= 1u << i;
   }
   return mask;
 }
@@ -579,7 +567,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     for (ElemId e : to_regreen) {
       drop_green_children(e);
       // e is a leaf again, with midpoints from earlier calls on its edges: flag its corners so
-      // leaf_hanging_mask() probes all of its edges.
+      // hanging_mask(e, &touched) probes all of its edges.
       for (VertexId v : cells_[e.value]) touched[v.value] = 1;
       if (use_incidence)
         add_incidence(e);
@@ -637,7 +625,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
                             for (VertexId v : cells_[e.value]) n += dirty[v.value];
                             if (n < 2) continue;  // no edge of e was split in this round
                           }
-                          const unsigned mask = leaf_hanging_mask(e, touched);
+                          const unsigned mask = hanging_mask(e, &touched);
                           if (mask == 0) continue;
                           if (kind(e) == ElemKind::kGreen) {
                             const ElemId p = parent(e);
@@ -696,7 +684,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
                             for (VertexId v : cells_[i]) m += touched[v.value];
                             if (m < 2) continue;
                             const ElemId e(static_cast<std::uint32_t>(i));
-                            if (const unsigned mask = leaf_hanging_mask(e, touched))
+                            if (const unsigned mask = hanging_mask(e, &touched))
                               found[k].emplace_back(e, mask);
                           }
                       });

@@ -180,8 +180,12 @@ class Hierarchy {
   static std::array<Cell, SimplexTraits<D>::kRedChildren> red_children(
       const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m);
   void green_refine(ElemId e, unsigned mask);
-  unsigned hanging_mask(ElemId e) const;
-  unsigned leaf_hanging_mask(ElemId e, const std::vector<std::uint8_t>& touched) const;
+  // Bit i set when local edge i has a midpoint. With `flagged`, only edges whose endpoints are
+  // both flagged are probed: inside refine(), a midpoint on a leaf's edge is one the call
+  // created (the leaves were conforming when it began), and refine() flags the endpoints of
+  // every edge it splits — so for leaves that is the same mask with 1-3 hash probes instead
+  // of 6. Non-leaves (green parents) carry older midpoints and need the full probe.
+  unsigned hanging_mask(ElemId e, const std::vector<std::uint8_t>* flagged = nullptr) const;
   bool hanging_on_parent_edges(ElemId e, unsigned mask) const;
   std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);
 
