@@ -38,6 +38,7 @@
 #include "core/approximation.h"
 #include "core/field.h"
 #include "core/hierarchy.h"
+#include "core/p1_element.h"
 #include "core/scalar_grid.h"
 #include "formats/volume_reader.h"
 
@@ -110,24 +111,10 @@ double voxel_rms_3d(const ScalarGrid& g, const Hierarchy<3>& h, const std::vecto
       lo[a] = std::min({p[0][a], p[1][a], p[2][a], p[3][a]});
       hi[a] = std::max({p[0][a], p[1][a], p[2][a], p[3][a]});
     }
-    // Barycentric coordinates: solve [p1-p0 p2-p0 p3-p0] λ = x - p0.
-    double m[3][3];
-    for (int a = 0; a < 3; ++a)
-      for (int k = 0; k < 3; ++k) m[a][k] = p[k + 1][a] - p[0][a];
-    const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
-                       m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
-                       m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-    if (std::abs(det) < 1e-300) continue;
-    double inv[3][3];
-    inv[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
-    inv[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
-    inv[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
-    inv[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
-    inv[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
-    inv[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
-    inv[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
-    inv[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
-    inv[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
+    // Barycentric coordinates: λ_{i+1}(x) = ∇λ_{i+1} · (x - p0), from the P1 element.
+    const P1Element<3> el(p);
+    if (el.measure == 0) continue;
+    const auto& inv = el.grad;  // rows 1..3 are the rows of [p1-p0 p2-p0 p3-p0]⁻¹
     const double u0 = u[c[0].value], u1 = u[c[1].value], u2 = u[c[2].value], u3 = u[c[3].value];
     const std::int64_t i0 = std::max<std::int64_t>(0, std::int64_t(std::ceil(lo[0] - eps)));
     const std::int64_t i1 = std::min<std::int64_t>(nx - 1, std::int64_t(std::floor(hi[0] + eps)));
@@ -139,9 +126,9 @@ double voxel_rms_3d(const ScalarGrid& g, const Hierarchy<3>& h, const std::vecto
       for (std::int64_t j = j0; j <= j1; ++j)
         for (std::int64_t i = i0; i <= i1; ++i) {
           const double d[3] = {i - p[0][0], j - p[0][1], k - p[0][2]};
-          const double l1 = inv[0][0] * d[0] + inv[0][1] * d[1] + inv[0][2] * d[2];
-          const double l2 = inv[1][0] * d[0] + inv[1][1] * d[1] + inv[1][2] * d[2];
-          const double l3 = inv[2][0] * d[0] + inv[2][1] * d[1] + inv[2][2] * d[2];
+          const double l1 = inv[1][0] * d[0] + inv[1][1] * d[1] + inv[1][2] * d[2];
+          const double l2 = inv[2][0] * d[0] + inv[2][1] * d[1] + inv[2][2] * d[2];
+          const double l3 = inv[3][0] * d[0] + inv[3][1] * d[1] + inv[3][2] * d[2];
           const double l0 = 1.0 - l1 - l2 - l3;
           if (l0 < -1e-7 || l1 < -1e-7 || l2 < -1e-7 || l3 < -1e-7) continue;
           approx[std::size_t(i + nx * (j + ny * k))] = float(l0 * u0 + l1 * u1 + l2 * u2 + l3 * u3);
