@@ -75,8 +75,9 @@ def best_of(n, fn):
     return best, out
 
 
-def flying_edges(img, iso):
-    f = vtk.vtkFlyingEdges3D()
+def vtk_contour(filter_class, img, iso):
+    """One iso-surface with normals from a VTK contour filter (flying edges or marching cubes)."""
+    f = filter_class()
     f.SetInputData(img)
     f.SetValue(0, iso)
     f.ComputeNormalsOn()
@@ -84,17 +85,14 @@ def flying_edges(img, iso):
     f.ComputeScalarsOff()
     f.Update()
     return f.GetOutput()
+
+
+def flying_edges(img, iso):
+    return vtk_contour(vtk.vtkFlyingEdges3D, img, iso)
 
 
 def marching_cubes(img, iso):
-    f = vtk.vtkMarchingCubes()
-    f.SetInputData(img)
-    f.SetValue(0, iso)
-    f.ComputeNormalsOn()
-    f.ComputeGradientsOff()
-    f.ComputeScalarsOff()
-    f.Update()
-    return f.GetOutput()
+    return vtk_contour(vtk.vtkMarchingCubes, img, iso)
 
 
 def quadric(poly, target_tris):
