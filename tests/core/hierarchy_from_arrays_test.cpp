@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/hierarchy.h"
+#include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
 namespace {
@@ -16,21 +17,7 @@ Hierarchy<D> adapted() {
   typename Hierarchy<D>::Point lo, hi;
   lo.fill(0.0);
   hi.fill(1.0);
-  Hierarchy<D> h = Hierarchy<D>::box(lo, hi);
-  for (int round = 0; round < 3; ++round) {
-    std::vector<ElemId> marked;
-    for (ElemId e : h.leaves()) {
-      bool near = false;  // has a vertex in [0, 0.25]^D
-      for (VertexId v : h.cell(e)) {
-        bool in = true;
-        for (int i = 0; i < D; ++i) in = in && h.point(v)[i] <= 0.25;
-        near = near || in;
-      }
-      if (near) marked.push_back(e);
-    }
-    h.refine(marked);
-  }
-  return h;
+  return test::refine_toward_origin(Hierarchy<D>::box(lo, hi), 3);
 }
 
 template <int D>
@@ -40,29 +27,14 @@ typename Hierarchy<D>::Arrays arrays_of(const Hierarchy<D>& h) {
           h.num_children_array(), h.level_array(),     h.kind_array()};
 }
 
-template <int D>
-void expect_same(const Hierarchy<D>& a, const Hierarchy<D>& b) {
-  EXPECT_EQ(a.points(), b.points());
-  EXPECT_EQ(a.vertex_parents_array(), b.vertex_parents_array());
-  EXPECT_EQ(a.vertex_level_array(), b.vertex_level_array());
-  EXPECT_EQ(a.cells(), b.cells());
-  EXPECT_EQ(a.parent_array(), b.parent_array());
-  EXPECT_EQ(a.first_child_array(), b.first_child_array());
-  EXPECT_EQ(a.num_children_array(), b.num_children_array());
-  EXPECT_EQ(a.level_array(), b.level_array());
-  EXPECT_EQ(a.kind_array(), b.kind_array());
-  EXPECT_EQ(a.coarse_count(), b.coarse_count());
-  EXPECT_EQ(a.edge_midpoints().size(), b.edge_midpoints().size());
-}
-
 TEST(HierarchyFromArrays, RebuildsAnAdaptedHierarchyExactlyIn2DAnd3D) {
   const auto h2 = adapted<2>();
   const auto h3 = adapted<3>();
   bool has_green = false;
   for (ElemKind k : h3.kind_array()) has_green |= k == ElemKind::kGreen;
   ASSERT_TRUE(has_green) << "the fixture should exercise green closure";
-  expect_same(h2, Hierarchy<2>::from_arrays(arrays_of(h2)));
-  expect_same(h3, Hierarchy<3>::from_arrays(arrays_of(h3)));
+  test::expect_same_hierarchy(h2, Hierarchy<2>::from_arrays(arrays_of(h2)));
+  test::expect_same_hierarchy(h3, Hierarchy<3>::from_arrays(arrays_of(h3)));
 }
 
 TEST(HierarchyFromArrays, RebuiltHierarchyRefinesLikeTheOriginal) {
@@ -71,7 +43,7 @@ TEST(HierarchyFromArrays, RebuiltHierarchyRefinesLikeTheOriginal) {
   // The edge map was rebuilt from vertex_parents: refining both must give the same result.
   a.refine_uniform();
   b.refine_uniform();
-  expect_same(a, b);
+  test::expect_same_hierarchy(a, b);
 }
 
 // Applies `corrupt` to the arrays of the fixture and expects an Error containing `needle`.

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
 namespace {
@@ -26,21 +27,7 @@ Hierarchy<D> adapted(int rounds) {
   lo.fill(0.0);
   hi.fill(1.0);
   hi[1] = 2.0;
-  Hierarchy<D> h = Hierarchy<D>::box(lo, hi);
-  for (int round = 0; round < rounds; ++round) {
-    std::vector<ElemId> marked;
-    for (ElemId e : h.leaves()) {
-      bool near = false;
-      for (VertexId v : h.cell(e)) {
-        bool in = true;
-        for (int i = 0; i < D; ++i) in = in && h.point(v)[i] <= 0.25;
-        near = near || in;
-      }
-      if (near) marked.push_back(e);
-    }
-    h.refine(marked);
-  }
-  return h;
+  return test::refine_toward_origin(Hierarchy<D>::box(lo, hi), rounds);
 }
 
 template <int D>
@@ -104,16 +91,7 @@ void expect_round_trip(bool compress) {
   const HierarchyFile f = read_hierarchy(a.string());
   ASSERT_EQ(f.dim, D);
   const auto& g = std::get<Hierarchy<D>>(f.hierarchy);
-  EXPECT_EQ(g.points(), h.points());
-  EXPECT_EQ(g.vertex_parents_array(), h.vertex_parents_array());
-  EXPECT_EQ(g.vertex_level_array(), h.vertex_level_array());
-  EXPECT_EQ(g.cells(), h.cells());
-  EXPECT_EQ(g.parent_array(), h.parent_array());
-  EXPECT_EQ(g.first_child_array(), h.first_child_array());
-  EXPECT_EQ(g.num_children_array(), h.num_children_array());
-  EXPECT_EQ(g.level_array(), h.level_array());
-  EXPECT_EQ(g.kind_array(), h.kind_array());
-  EXPECT_EQ(g.edge_midpoints().size(), h.edge_midpoints().size());
+  test::expect_same_hierarchy(g, h);
   EXPECT_EQ(f.values, u);
   EXPECT_EQ(f.transform.spacing, info.transform.spacing);
   EXPECT_EQ(f.transform.origin, info.transform.origin);
