@@ -13,6 +13,7 @@
 #include <cctype>
 #include <cmath>
 #include <fstream>
+#include <mutex>
 
 #include "core/error.h"
 #include "formats/atomic_file.h"
@@ -23,23 +24,43 @@ namespace {
 
 // OpenMesh reports every refused face and every file written on its global log streams; a
 // command line converting large meshes must not print thousands of such lines. The failures
-// that matter are reported through return values and become mlfe::Error. (The flags are
-// process-global: concurrent OpenMesh users see their logs muted while this is alive.)
+// that matter are reported through return values and become mlfe::Error.
+// The streams are process-global and OpenMesh does not guard them (surfaces are converted and
+// simplified on several threads at once; unsynchronised omlog() calls crashed there), so all
+// users share one count under a mutex: the first mutes the streams, the last restores them.
 class QuietOpenMesh {
  public:
-  QuietOpenMesh() : log_(::omlog().is_enabled()), err_(::omerr().is_enabled()) {
-    ::omlog().disable();
-    ::omerr().disable();
+  QuietOpenMesh() {
+    const std::lock_guard<std::mutex> lock(shared().mutex);
+    Shared& s = shared();
+    if (s.users++ == 0) {
+      s.log = ::omlog().is_enabled();
+      s.err = ::omerr().is_enabled();
+      ::omlog().disable();
+      ::omerr().disable();
+    }
   }
   ~QuietOpenMesh() {
-    if (log_) ::omlog().enable();
-    if (err_) ::omerr().enable();
+    const std::lock_guard<std::mutex> lock(shared().mutex);
+    Shared& s = shared();
+    if (--s.users == 0) {
+      if (s.log) ::omlog().enable();
+      if (s.err) ::omerr().enable();
+    }
   }
   QuietOpenMesh(const QuietOpenMesh&) = delete;
   QuietOpenMesh& operator=(const QuietOpenMesh&) = delete;
 
  private:
-  bool log_, err_;
+  struct Shared {
+    std::mutex mutex;
+    int users = 0;
+    bool log = false, err = false;
+  };
+  static Shared& shared() {
+    static Shared s;
+    return s;
+  }
 };
 
 void check_mesh(const TriangleMesh& mesh, const std::string& what) {
