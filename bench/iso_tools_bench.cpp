@@ -31,6 +31,7 @@
 #include "core/approximation.h"
 #include "core/field.h"
 #include "core/iso_surface.h"
+#include "core/surface_simplification.h"
 #include "formats/hierarchy_io.h"
 #include "formats/openmesh_io.h"
 #include "formats/volume_reader.h"
@@ -200,7 +201,9 @@ int main(int argc, char** argv) {
         const double s = std::atof(args[4].c_str());
         const auto& sp = hf.transform.spacing;
         const auto t3 = Clock::now();
-        m = simplify_within(m, s * std::min({sp[0], sp[1], sp[2]}));
+        SimplifyOptions so;
+        so.tolerance = s * std::min({sp[0], sp[1], sp[2]});
+        m = simplify_within(m, so);
         t_simplify = since(t3);
       }
       to_index(m, hf.transform.spacing);

@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/field.h"
 #include "core/iso_surface.h"
+#include "core/surface_simplification.h"
 #include "formats/atomic_file.h"
 #include "formats/draco_io.h"
 #include "formats/file_names.h"
@@ -310,10 +311,12 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   }
   if (p.simplify > 0) {
     const double voxel = smallest_spacing(b.transform, b.dim);
-    // Surfaces are independent: one task each (the decimater itself is sequential).
+    SimplifyOptions so;
+    so.tolerance = p.simplify * voxel;
+    // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (!m.triangles.empty()) m = simplify_within(m, p.simplify * voxel);
+      if (!m.triangles.empty()) m = simplify_within(m, so);
     });
   }
   if (p.decimate > 0)

@@ -6,7 +6,6 @@
 #include "formats/openmesh_io.h"
 
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
-#include <OpenMesh/Tools/Decimater/ModHausdorffT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 #include <algorithm>
@@ -16,6 +15,7 @@
 #include <mutex>
 
 #include "core/error.h"
+#include "core/surface_simplification.h"
 #include "formats/atomic_file.h"
 #include "formats/file_names.h"
 
@@ -25,9 +25,10 @@ namespace {
 // OpenMesh reports every refused face and every file written on its global log streams; a
 // command line converting large meshes must not print thousands of such lines. The failures
 // that matter are reported through return values and become mlfe::Error.
-// The streams are process-global and OpenMesh does not guard them (surfaces are converted and
-// simplified on several threads at once; unsynchronised omlog() calls crashed there), so all
-// users share one count under a mutex: the first mutes the streams, the last restores them.
+// The streams are process-global and OpenMesh does not guard them (callers may convert meshes
+// on several threads at once; unsynchronised omlog() calls crashed `mlfe convert` when it
+// simplified surfaces through OpenMesh in parallel), so all users share one count under a
+// mutex: the first mutes the streams, the last restores them.
 class QuietOpenMesh {
  public:
   QuietOpenMesh() {
@@ -98,27 +99,6 @@ OpenMeshTriMesh convert(const TriangleMesh& mesh, const std::string& what) {
     }
   }
   return om;
-}
-
-// Area-weighted vertex normals (cross products are twice the area times the unit normal).
-void recompute_normals(TriangleMesh& mesh) {
-  std::vector<std::array<double, 3>> sum(mesh.positions.size(), {0.0, 0.0, 0.0});
-  for (const auto& t : mesh.triangles) {
-    const auto &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
-    const double u[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
-    const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
-    const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
-    for (auto i : t)
-      for (int k = 0; k < 3; ++k) sum[i][k] += n[k];
-  }
-  mesh.normals.resize(mesh.positions.size());
-  for (std::size_t i = 0; i < sum.size(); ++i) {
-    const double len = std::sqrt(sum[i][0] * sum[i][0] + sum[i][1] * sum[i][1] + sum[i][2] * sum[i][2]);
-    if (len > 0)
-      mesh.normals[i] = {float(sum[i][0] / len), float(sum[i][1] / len), float(sum[i][2] / len)};
-    else
-      mesh.normals[i] = {0.0f, 0.0f, 1.0f};  // isolated vertex: any unit vector
-  }
 }
 
 }  // namespace
@@ -214,43 +194,7 @@ TriangleMesh decimate_to(const TriangleMesh& mesh, std::size_t target_triangles)
     om.garbage_collection();
   }
   TriangleMesh out = from_openmesh(om);
-  recompute_normals(out);
-  return out;
-}
-
-TriangleMesh simplify_within(const TriangleMesh& mesh, double tolerance, std::size_t min_triangles) {
-  if (!(tolerance > 0) || !std::isfinite(tolerance))
-    throw Error("simplification: the tolerance must be positive");
-  OpenMeshTriMesh om = convert(mesh, "simplification");
-  if (om.has_vertex_normals()) om.release_vertex_normals();  // recomputed below
-  om.request_face_normals();
-  om.update_face_normals();
-  using Decimater = OpenMesh::Decimater::DecimaterT<OpenMeshTriMesh>;
-  using ModQuadric = OpenMesh::Decimater::ModQuadricT<OpenMeshTriMesh>;
-  using ModNormalFlipping = OpenMesh::Decimater::ModNormalFlippingT<OpenMeshTriMesh>;
-  {
-    // Quadrics order the collapses (cheapest first); the Hausdorff module is the bound: it
-    // keeps every removed vertex attached to the face that now covers it and refuses a
-    // collapse that would leave any of them farther than `tolerance` from the surface. Small
-    // closed parts therefore survive (collapsing them would move their points too far),
-    // which is what a count-driven quadric decimation loses.
-    using ModHausdorff = OpenMesh::Decimater::ModHausdorffT<OpenMeshTriMesh>;
-    Decimater decimater(om);
-    ModQuadric::Handle quadric;
-    decimater.add(quadric);
-    decimater.module(quadric).unset_max_err();
-    ModHausdorff::Handle hausdorff;
-    decimater.add(hausdorff);
-    decimater.module(hausdorff).set_tolerance(static_cast<float>(tolerance));
-    ModNormalFlipping::Handle flipping;
-    decimater.add(flipping);
-    decimater.module(flipping).set_max_normal_deviation(45.0);
-    if (!decimater.initialize()) throw Error("simplification: OpenMesh decimater failed to initialize");
-    decimater.decimate_to_faces(0, min_triangles);
-    om.garbage_collection();
-  }
-  TriangleMesh out = from_openmesh(om);
-  recompute_normals(out);
+  compute_area_weighted_normals(out);
   return out;
 }
 

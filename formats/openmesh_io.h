@@ -45,13 +45,4 @@ TriangleMesh read_mesh_file(const std::string& path);
 /// (area-weighted) from the decimated geometry. Throws mlfe::Error like to_openmesh.
 TriangleMesh decimate_to(const TriangleMesh& mesh, std::size_t target_triangles);
 
-/// Error-bounded simplification (OpenMesh Decimater: ModQuadric orders the edge collapses,
-/// ModHausdorff refuses any collapse after which a vertex of the input would lie farther than
-/// `tolerance` (in the mesh's units) from the simplified surface, ModNormalFlipping refuses
-/// face normals turning by more than 45 degrees). Stops when no collapse is allowed or at
-/// `min_triangles`. Small closed parts are kept (removing them would break the bound).
-/// Normals are recomputed (area-weighted). Deterministic for the same input.
-/// Throws mlfe::Error like to_openmesh, or for a tolerance that is not positive and finite.
-TriangleMesh simplify_within(const TriangleMesh& mesh, double tolerance, std::size_t min_triangles = 0);
-
 }  // namespace mlfe

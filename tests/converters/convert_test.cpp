@@ -17,7 +17,7 @@
 #include "formats/gltf_writer.h"
 #include "formats/openmesh_io.h"
 #include "formats/volume_reader.h"
-#include "tests/formats/test_meshes.h"
+#include "tests/test_meshes.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;

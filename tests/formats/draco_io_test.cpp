@@ -8,7 +8,7 @@
 
 #include "core/error.h"
 #include "formats/openmesh_io.h"
-#include "tests/formats/test_meshes.h"
+#include "tests/test_meshes.h"
 
 namespace mlfe {
 namespace {

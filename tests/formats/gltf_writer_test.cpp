@@ -11,7 +11,7 @@
 
 #include "core/error.h"
 #include "formats/draco_io.h"
-#include "tests/formats/test_meshes.h"
+#include "tests/test_meshes.h"
 
 namespace mlfe {
 namespace {

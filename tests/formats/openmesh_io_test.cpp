@@ -1,20 +1,18 @@
 #include "formats/openmesh_io.h"
 
 #include <gtest/gtest.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 
 #include "core/error.h"
-#include "tests/formats/test_meshes.h"
+#include "tests/test_meshes.h"
 
 namespace mlfe {
 namespace {
 
 using test::icosphere;
-using test::one_sided_hausdorff;
 using test::scratch_dir;
 using test::unmatched_triangles;
 
@@ -102,64 +100,6 @@ TEST(Decimation, LeavesMeshesAtOrBelowTheTargetAlone) {
   const TriangleMesh out = decimate_to(in, in.triangle_count());
   EXPECT_EQ(out.positions, in.positions);
   EXPECT_EQ(out.triangles, in.triangles);
-}
-
-TEST(Simplification, KeepsEveryInputVertexWithinTheTolerance) {
-  const TriangleMesh in = icosphere(5, 50.0f);  // 20480 triangles, edges ~2.4
-  for (double tol : {0.05, 0.5}) {
-    const TriangleMesh out = simplify_within(in, tol);
-    EXPECT_LT(out.triangle_count(), in.triangle_count() / (tol > 0.1 ? 8 : 2)) << tol;
-    EXPECT_LE(one_sided_hausdorff(in, out), tol * 1.001) << tol;
-    EXPECT_EQ(out.vertex_count(), out.triangle_count() / 2 + 2);  // still closed, genus 0
-    ASSERT_EQ(out.normals.size(), out.positions.size());
-    for (std::size_t i = 0; i < out.positions.size(); ++i) {
-      const auto &p = out.positions[i], &n = out.normals[i];
-      const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-      ASSERT_GT((n[0] * p[0] + n[1] * p[1] + n[2] * p[2]) / r, 0.9);
-    }
-  }
-}
-
-TEST(Simplification, KeepsSmallPartsAndIsDeterministic) {
-  // A big sphere and a small one 3 tolerances in radius: a count-driven decimation may spend
-  // the small part; the error bound may not, since collapsing it moves its points too far.
-  TriangleMesh in = icosphere(4, 50.0f);
-  const TriangleMesh small = icosphere(2, 1.5f, {80.0f, 0.0f, 0.0f});
-  const auto offset = static_cast<std::uint32_t>(in.positions.size());
-  in.positions.insert(in.positions.end(), small.positions.begin(), small.positions.end());
-  in.normals.insert(in.normals.end(), small.normals.begin(), small.normals.end());
-  for (auto t : small.triangles) in.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-  const TriangleMesh out = simplify_within(in, 0.5);
-  EXPECT_LE(one_sided_hausdorff(in, out), 0.5 * 1.001);
-  std::size_t near_small = 0;
-  for (const auto& p : out.positions) near_small += std::abs(p[0] - 80.0f) < 2.0f;
-  EXPECT_GE(near_small, 4u);  // at least a tetrahedron is left of the small sphere
-  const TriangleMesh again = simplify_within(in, 0.5);
-  EXPECT_EQ(again.positions, out.positions);
-  EXPECT_EQ(again.triangles, out.triangles);
-}
-
-// `mlfe convert --iso a,b --simplify` simplifies its surfaces on several threads: each must
-// come out as if it ran alone. (The crash that concurrency once caused, on OpenMesh's global
-// log streams, only shows in a fresh process: see the CLI test ConcurrentSimplification.)
-TEST(Simplification, RunsConcurrentlyWithTheSameResultAsAlone) {
-  const TriangleMesh in = icosphere(3, 10.0f);
-  const TriangleMesh alone = simplify_within(in, 0.2);
-  for (int round = 0; round < 10; ++round) {
-    std::vector<TriangleMesh> out(8);
-    tbb::parallel_for(std::size_t(0), out.size(), [&](std::size_t i) { out[i] = simplify_within(in, 0.2); });
-    for (const auto& m : out) {
-      ASSERT_EQ(m.positions, alone.positions);
-      ASSERT_EQ(m.triangles, alone.triangles);
-    }
-  }
-}
-
-TEST(Simplification, RejectsABadTolerance) {
-  const TriangleMesh in = icosphere(1, 1.0f);
-  EXPECT_THROW(simplify_within(in, 0.0), Error);
-  EXPECT_THROW(simplify_within(in, -1.0), Error);
-  EXPECT_THROW(simplify_within(in, std::nan("")), Error);
 }
 
 }  // namespace

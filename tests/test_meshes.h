@@ -1,5 +1,5 @@
-// Small synthetic meshes and helpers shared by the mesh-writer tests (openmesh_io, draco_io,
-// gltf_writer, the CLI tests). Header-only so the tests/formats glob needs nothing new.
+// Small synthetic meshes and helpers shared by the mesh tests (core surface simplification,
+// openmesh_io, draco_io, gltf_writer, the CLI tests). Header-only.
 #pragma once
 #include <gtest/gtest.h>
 #include <unistd.h>

@@ -1,0 +1,49 @@
+// Error-bounded simplification of triangle meshes (the iso-surfaces of `mlfe convert
+// --simplify`): half-edge collapses ordered by quadric error, each refused unless every vertex
+// of the input stays within a tolerance of the simplified surface. No I/O; TBB-parallel and
+// deterministic whatever the thread count.
+#pragma once
+#include <cstddef>
+
+#include "core/triangle_mesh.h"
+
+namespace mlfe {
+
+struct SimplifyOptions {
+  double tolerance = 0;                   ///< bound on the distance of input vertices, mesh units; > 0
+  std::size_t min_triangles = 0;          ///< stop once the mesh has this many triangles or fewer
+  double max_normal_turn_degrees = 45.0;  ///< a collapse may not turn a face normal further
+};
+
+struct SimplifyStats {
+  std::size_t passes = 0;     ///< rounds of independent collapses
+  std::size_t collapses = 0;  ///< vertices removed
+};
+
+/// Simplifies `mesh` by half-edge collapses (a vertex moves onto a neighbour, so every output
+/// position is an input position), cheapest quadric error first (Garland & Heckbert 1997).
+///
+/// Contract:
+/// - Bound: every input vertex used by a triangle lies within `opts.tolerance` of the output
+///   surface (one-sided Hausdorff distance from the input's vertices; each input vertex is
+///   kept attached to a face that covers it, as in Klein, Liebich & Straßer 1996). So small
+///   closed parts never vanish.
+/// - Topology: collapses that would change it are refused (link condition), so a closed
+///   2-manifold stays closed with the same genus, boundaries stay boundaries (boundary vertices
+///   only move along boundary edges), and vertices on non-manifold edges or fans never move.
+///   No collapse turns a face normal by more than `opts.max_normal_turn_degrees` or makes a
+///   face degenerate. Orientation is kept.
+/// - Triangles with a repeated index are dropped first. Input normals are ignored; output
+///   normals are area-weighted from the output geometry. Output vertices and triangles keep
+///   their input order (unused vertices dropped).
+/// - Deterministic: the same input and options give identical output for any thread count.
+/// - Throws mlfe::Error for a tolerance that is not positive and finite, an index out of range
+///   or a non-finite position used by a triangle.
+TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts,
+                             SimplifyStats* stats = nullptr);
+
+/// Area-weighted vertex normals from the geometry (unit length; (0, 0, 1) for a vertex whose
+/// triangles have no area). Replaces `mesh.normals`.
+void compute_area_weighted_normals(TriangleMesh& mesh);
+
+}  // namespace mlfe

@@ -1,0 +1,235 @@
+#include "core/surface_simplification.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <map>
+#include <set>
+#include <utility>
+
+#include "core/error.h"
+#include "tests/test_meshes.h"
+
+namespace mlfe {
+namespace {
+
+using test::icosphere;
+using test::one_sided_hausdorff;
+
+using Edge = std::pair<std::uint32_t, std::uint32_t>;
+
+// Undirected edge -> number of triangles using it.
+std::map<Edge, int> edge_use(const TriangleMesh& m) {
+  std::map<Edge, int> use;
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) ++use[std::minmax(t[k], t[(k + 1) % 3])];
+  return use;
+}
+
+// Every edge in exactly two triangles, and consistently oriented (each directed edge once).
+void expect_closed_oriented_manifold(const TriangleMesh& m) {
+  for (const auto& [e, n] : edge_use(m)) ASSERT_EQ(n, 2) << e.first << "-" << e.second;
+  std::set<Edge> directed;
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) ASSERT_TRUE(directed.insert({t[k], t[(k + 1) % 3]}).second);
+}
+
+long euler_characteristic(const TriangleMesh& m) {
+  return long(m.vertex_count()) - long(edge_use(m).size()) + long(m.triangle_count());
+}
+
+TriangleMesh simplify(const TriangleMesh& m, double tol, std::size_t min_triangles = 0) {
+  SimplifyOptions o;
+  o.tolerance = tol;
+  o.min_triangles = min_triangles;
+  return simplify_within(m, o);
+}
+
+// Torus with radii R, r on a u x v grid, outward normals, CCW from outside.
+TriangleMesh torus(int nu, int nv, double R, double r) {
+  const double pi = 3.14159265358979323846;
+  TriangleMesh m;
+  for (int i = 0; i < nu; ++i)
+    for (int j = 0; j < nv; ++j) {
+      const double u = 2 * pi * i / nu, v = 2 * pi * j / nv;
+      m.positions.push_back({float((R + r * std::cos(v)) * std::cos(u)),
+                             float((R + r * std::cos(v)) * std::sin(u)), float(r * std::sin(v))});
+    }
+  auto id = [&](int i, int j) { return std::uint32_t((i % nu) * nv + (j % nv)); };
+  for (int i = 0; i < nu; ++i)
+    for (int j = 0; j < nv; ++j) {
+      m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  return m;
+}
+
+// Open height-field patch z = h(x, y) on an n x n grid of unit spacing.
+template <class H>
+TriangleMesh patch(int n, H h) {
+  TriangleMesh m;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) m.positions.push_back({float(x), float(y), float(h(x, y))});
+  auto id = [&](int x, int y) { return std::uint32_t(y * n + x); };
+  for (int y = 0; y + 1 < n; ++y)
+    for (int x = 0; x + 1 < n; ++x) {
+      m.triangles.push_back({id(x, y), id(x + 1, y), id(x + 1, y + 1)});
+      m.triangles.push_back({id(x, y), id(x + 1, y + 1), id(x, y + 1)});
+    }
+  return m;
+}
+
+std::set<std::array<float, 3>> boundary_points(const TriangleMesh& m) {
+  std::set<std::array<float, 3>> out;
+  for (const auto& [e, n] : edge_use(m))
+    if (n == 1) {
+      out.insert(m.positions[e.first]);
+      out.insert(m.positions[e.second]);
+    }
+  return out;
+}
+
+TEST(SurfaceSimplification, KeepsEveryInputVertexWithinTheTolerance) {
+  const TriangleMesh in = icosphere(5, 50.0f);  // 20480 triangles, edges ~2.4
+  for (double tol : {0.05, 0.5}) {
+    SimplifyStats stats;
+    SimplifyOptions o;
+    o.tolerance = tol;
+    const TriangleMesh out = simplify_within(in, o, &stats);
+    EXPECT_LT(out.triangle_count(), in.triangle_count() / (tol > 0.1 ? 8 : 2)) << tol;
+    EXPECT_EQ(stats.collapses, in.vertex_count() - out.vertex_count());
+    EXPECT_LE(one_sided_hausdorff(in, out), tol * (1 + 1e-6)) << tol;
+    expect_closed_oriented_manifold(out);
+    EXPECT_EQ(euler_characteristic(out), 2);
+    ASSERT_EQ(out.normals.size(), out.positions.size());
+    for (std::size_t i = 0; i < out.positions.size(); ++i) {
+      const auto &p = out.positions[i], &n = out.normals[i];
+      const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+      ASSERT_GT((n[0] * p[0] + n[1] * p[1] + n[2] * p[2]) / r, 0.9);
+    }
+    // Half-edge collapses only: every output position is an input position.
+    const std::set<std::array<float, 3>> input(in.positions.begin(), in.positions.end());
+    for (const auto& p : out.positions) ASSERT_TRUE(input.count(p));
+  }
+}
+
+TEST(SurfaceSimplification, KeepsTheGenusOfATorus) {
+  const TriangleMesh in = torus(96, 48, 30.0, 8.0);
+  const TriangleMesh out = simplify(in, 0.4);
+  EXPECT_LT(out.triangle_count(), in.triangle_count() / 4);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.4 * (1 + 1e-6));
+  expect_closed_oriented_manifold(out);
+  EXPECT_EQ(euler_characteristic(out), 0);
+}
+
+TEST(SurfaceSimplification, KeepsSmallPartsThatABudgetWouldSpend) {
+  // A big sphere and a small one 3 tolerances in radius: collapsing the small one would move
+  // its points too far, so it stays (at least a tetrahedron).
+  TriangleMesh in = icosphere(4, 50.0f);
+  const TriangleMesh small = icosphere(2, 1.5f, {80.0f, 0.0f, 0.0f});
+  const auto offset = static_cast<std::uint32_t>(in.positions.size());
+  in.positions.insert(in.positions.end(), small.positions.begin(), small.positions.end());
+  for (auto t : small.triangles) in.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  in.normals.clear();
+  const TriangleMesh out = simplify(in, 0.5);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.5 * (1 + 1e-6));
+  std::size_t near_small = 0;
+  for (const auto& p : out.positions) near_small += std::abs(p[0] - 80.0f) < 2.0f;
+  EXPECT_GE(near_small, 4u);
+  expect_closed_oriented_manifold(out);
+  EXPECT_EQ(euler_characteristic(out), 4);  // two spheres
+}
+
+TEST(SurfaceSimplification, KeepsBoundariesOnTheBoundary) {
+  // A bump on an open patch: boundary points stay boundary points, the flat part collapses.
+  const TriangleMesh in = patch(41, [](int x, int y) {
+    const double r2 = (x - 20) * (x - 20) + (y - 20) * (y - 20);
+    return r2 < 144 ? 6.0 * std::exp(-r2 / 30.0) : 0.0;
+  });
+  const TriangleMesh out = simplify(in, 0.1);
+  EXPECT_LT(out.triangle_count(), in.triangle_count() / 4);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.1 * (1 + 1e-6));
+  const auto before = boundary_points(in), after = boundary_points(out);
+  for (const auto& p : after) EXPECT_TRUE(before.count(p));
+  // The four corners cannot go: any collapse would cut them off by more than the tolerance.
+  for (std::array<float, 3> c : {std::array<float, 3>{0, 0, 0}, {40, 0, 0}, {0, 40, 0}, {40, 40, 0}})
+    EXPECT_TRUE(after.count(c)) << c[0] << "," << c[1];
+  for (const auto& [e, n] : edge_use(out)) EXPECT_LE(n, 2);
+}
+
+TEST(SurfaceSimplification, FlatPatchCollapsesToAFewTriangles) {
+  const TriangleMesh in = patch(17, [](int, int) { return 0.0; });
+  const TriangleMesh out = simplify(in, 0.01);
+  EXPECT_LE(out.triangle_count(), 4u);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.01);
+}
+
+TEST(SurfaceSimplification, StopsAtTheTriangleFloor) {
+  const TriangleMesh in = icosphere(5, 50.0f);
+  const TriangleMesh out = simplify(in, 0.5, 5000);
+  EXPECT_GE(out.triangle_count(), 4999u);
+  EXPECT_LE(out.triangle_count(), 5000u);
+  expect_closed_oriented_manifold(out);
+}
+
+TEST(SurfaceSimplification, SameOutputWithOneOrTwoThreadsAndWhenRunConcurrently) {
+  const TriangleMesh in = torus(64, 32, 30.0, 8.0);
+  TriangleMesh one;
+  {
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    one = simplify(in, 0.3);
+  }
+  const TriangleMesh two = simplify(in, 0.3);
+  EXPECT_EQ(one.positions, two.positions);
+  EXPECT_EQ(one.triangles, two.triangles);
+  EXPECT_EQ(one.normals, two.normals);
+  std::vector<TriangleMesh> many(6);
+  tbb::parallel_for(std::size_t(0), many.size(), [&](std::size_t i) { many[i] = simplify(in, 0.3); });
+  for (const auto& m : many) {
+    EXPECT_EQ(m.positions, one.positions);
+    EXPECT_EQ(m.triangles, one.triangles);
+  }
+}
+
+TEST(SurfaceSimplification, LeavesNonManifoldPartsInPlace) {
+  // A fin: three triangles on one edge, around a sphere. Nothing crashes, the fin's edge
+  // vertices stay, and the bound holds.
+  TriangleMesh in = icosphere(3, 10.0f);
+  in.normals.clear();
+  const std::uint32_t a = std::uint32_t(in.positions.size());
+  in.positions.push_back({20, 0, 0});
+  in.positions.push_back({20, 0, 5});
+  in.positions.push_back({25, 0, 2});
+  in.positions.push_back({15, 0, 2});
+  in.positions.push_back({20, 5, 2});
+  in.triangles.push_back({a, a + 1, a + 2});
+  in.triangles.push_back({a, a + 3, a + 1});
+  in.triangles.push_back({a, a + 1, a + 4});
+  in.triangles.push_back({a, a, a + 4});  // degenerate: dropped
+  const TriangleMesh out = simplify(in, 0.2);
+  EXPECT_LE(one_sided_hausdorff(in, out), 0.2 * (1 + 1e-6));
+  std::size_t fin = 0;
+  for (const auto& p : out.positions) fin += p[0] >= 14.0f;
+  EXPECT_EQ(fin, 5u);
+  for (const auto& t : out.triangles) EXPECT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+}
+
+TEST(SurfaceSimplification, RejectsBadInput) {
+  const TriangleMesh in = icosphere(1, 1.0f);
+  EXPECT_THROW(simplify(in, 0.0), Error);
+  EXPECT_THROW(simplify(in, -1.0), Error);
+  EXPECT_THROW(simplify(in, std::nan("")), Error);
+  EXPECT_THROW(simplify(in, INFINITY), Error);
+  TriangleMesh bad = in;
+  bad.triangles.push_back({0, 1, std::uint32_t(in.positions.size())});
+  EXPECT_THROW(simplify(bad, 0.1), Error);
+  bad = in;
+  bad.positions[3][1] = std::nanf("");
+  EXPECT_THROW(simplify(bad, 0.1), Error);
+  EXPECT_EQ(simplify(TriangleMesh{}, 0.1).triangle_count(), 0u);
+}
+
+}  // namespace
+}  // namespace mlfe
