@@ -243,6 +243,8 @@ def main():
     ap.add_argument("--json", default=None, help="also write all rows as JSON here")
     ap.add_argument("--simplify", default="0",
                     help="comma-separated `mlfe convert --simplify` tolerances in voxels to run per budget (0: none)")
+    ap.add_argument("--snap", type=float, default=1.0,
+                    help="`mlfe convert --snap` in voxels (the CLI's default 1; 0: the approximation's own surface)")
     ap.add_argument("--mlfe-args", default="", help="extra arguments for every mlfe convert (space separated)")
     ap.add_argument("cases", nargs="*", help="VOL:iso1,iso2:maxv1,maxv2")
     args = ap.parse_args()
@@ -292,6 +294,7 @@ def main():
                         cmd += ["--max-vertices", str(mv)]
                     if simp > 0:
                         cmd += ["--simplify", f"{simp:g}"]
+                    cmd += ["--snap", f"{args.snap:g}"]
                     cmd += extra + ["-o", glb, "--hierarchy", hier, "--report", rep, "--quiet"]
                     log("  ", " ".join(cmd))
                     t0 = time.perf_counter()
@@ -299,11 +302,11 @@ def main():
                     t_conv = time.perf_counter() - t0
                     report = json.load(open(rep))
                     ecmd = [tools, "--threads", str(THREADS), "extract", hier, f"{iso:g}", W(f"mlfe{key}.ply")]
-                    if simp > 0:
-                        ecmd.append(f"{simp:g}")
+                    ecmd += [f"{simp:g}", path, f"{args.snap:g}"]
                     ex, _ = run_json(ecmd)
                     label = "mlfe convert" + (f" --max-vertices {mv}" if mv > 0 else "") + \
-                        (f" --simplify {simp:g}" if simp > 0 else "") + (" " + args.mlfe_args if extra else "")
+                        (f" --simplify {simp:g}" if simp > 0 else "") + f" --snap {args.snap:g}" + \
+                        (" " + args.mlfe_args if extra else "")
                     r = dict(method=label, triangles=ex["triangles"], seconds=t_conv,
                              extract_seconds=ex["extract_seconds"], extract_setup_seconds=ex["setup_seconds"],
                              simplify_seconds=ex.get("simplify_seconds", 0.0),

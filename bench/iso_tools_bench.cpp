@@ -9,9 +9,10 @@
 //   iso_tools_bench mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%] [--surface-tolerance S]
 //       The in-process mlfe convert pipeline: read, approximate<3> with iso-aware refinement
 //       (iso_values = {ISO}), IsoExtractor::extract on the finest level.
-//   iso_tools_bench extract HIER.mlfeh ISO OUT.ply
+//   iso_tools_bench extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME SNAP_VOXELS]]
 //       Extraction only, from a stored hierarchy (IsoExtractor construction and extract timed
-//       separately; extract repeated 5 times, best reported).
+//       separately; extract repeated 5 times, best reported); optionally snapped onto the
+//       volume's iso-surface and simplified as `mlfe convert --snap S --simplify S` does.
 // Every mode prints one JSON line on stdout with counts and seconds. --threads N (default 2)
 // may precede the mode.
 #include <openvdb/openvdb.h>
@@ -25,6 +26,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -60,7 +62,7 @@ static int usage() {
                "       iso_tools_bench [--threads N] vdb VOL ISO ADAPTIVITY OUT.ply\n"
                "       iso_tools_bench [--threads N] mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%%] "
                "[--surface-tolerance S]\n"
-               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS]\n");
+               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME SNAP_VOXELS]]\n");
   return 1;
 }
 
@@ -177,7 +179,7 @@ int main(int argc, char** argv) {
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()},
              {"peak_rss_mb", peak_rss_mb()}};
-    } else if (mode == "extract" && (args.size() == 4 || args.size() == 5)) {
+    } else if (mode == "extract" && (args.size() == 4 || args.size() == 5 || args.size() == 7)) {
       HierarchyFile hf = read_hierarchy(args[1]);
       if (hf.dim != 3 || hf.values.empty())
         throw std::runtime_error(args[1] + ": needs a 3D hierarchy with values");
@@ -187,17 +189,28 @@ int main(int argc, char** argv) {
       IsoExtractor x(h, hf.values);
       const double t_setup = since(t0);
       GridTransform local;
+      // As `mlfe convert --snap S`: vertices moved onto the volume's iso-surface.
+      std::optional<ScalarGrid> volume;
+      std::optional<GridField> field;
+      IsoOptions io;
+      if (args.size() == 7 && std::atof(args[6].c_str()) > 0) {
+        volume = read_volume(args[5]);
+        field.emplace(*volume);
+        const auto& sp = hf.transform.spacing;
+        io.snap_to = &*field;
+        io.snap_distance = std::atof(args[6].c_str()) * std::min({sp[0], sp[1], sp[2]});
+      }
       TriangleMesh m;
       double best = 1e300;
       for (int rep = 0; rep < 5; ++rep) {
         const auto t1 = Clock::now();
-        m = x.extract(iso, local);
+        m = x.extract(iso, local, io);
         best = std::min(best, since(t1));
       }
       // As `mlfe convert --simplify S`: S voxels of the smallest spacing, in the local frame.
       double t_simplify = 0;
       const std::size_t extracted = m.triangles.size();
-      if (args.size() == 5) {
+      if (args.size() >= 5 && std::atof(args[4].c_str()) > 0) {
         const double s = std::atof(args[4].c_str());
         const auto& sp = hf.transform.spacing;
         const auto t3 = Clock::now();

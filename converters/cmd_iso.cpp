@@ -44,11 +44,14 @@ void run(const IsoState& s, bool convert) {
     prov["rms_error_percent"] = last.rms_percent;
     prov["psnr_db"] = last.psnr_db;
     prov["vertices"] = b.vertices();
-    prov["options"] = {{"rms", s.params.rms}, {"threshold", s.params.threshold}, {"max_vertices", s.params.max_vertices},
-                       {"norm", s.params.norm}, {"surface_tolerance", s.params.surface_tolerance}};
+    prov["options"] = {{"rms", s.params.rms},
+                       {"threshold", s.params.threshold},
+                       {"max_vertices", s.params.max_vertices},
+                       {"norm", s.params.norm},
+                       {"surface_tolerance", s.params.surface_tolerance}};
     if (!s.hierarchy.empty()) write_built(s.hierarchy, b, prov);
   }
-  const nlohmann::json summary = write_assets(s.output, b, s.asset, prov);
+  const nlohmann::json summary = write_assets(s.output, b, s.asset, prov, grid ? &*grid : nullptr);
   if (!s.report.empty()) {
     nlohmann::json r = build_report(s.input, grid ? &*grid : nullptr, b);
     r["asset"] = summary;
@@ -57,7 +60,8 @@ void run(const IsoState& s, bool convert) {
   }
   if (!s.params.quiet)
     std::fprintf(stderr, "mlfe %s: %zu triangles, %zu bytes -> %s\n", convert ? "convert" : "iso",
-                 summary["triangles"].get<std::size_t>(), summary["bytes"].get<std::size_t>(), s.output.c_str());
+                 summary["triangles"].get<std::size_t>(), summary["bytes"].get<std::size_t>(),
+                 s.output.c_str());
   std::printf("%s\n", s.output.c_str());
   if (!s.hierarchy.empty()) std::printf("%s\n", s.hierarchy.c_str());
   if (!s.report.empty()) std::printf("%s\n", s.report.c_str());
@@ -73,7 +77,8 @@ void add_common(CLI::App* cmd, IsoState& s) {
 
 void add_iso_command(CLI::App& app) {
   auto state = std::make_shared<IsoState>();
-  CLI::App* cmd = app.add_subcommand("iso", "Iso-surfaces from a hierarchy (.mlfeh) or a volume (built first)");
+  CLI::App* cmd =
+      app.add_subcommand("iso", "Iso-surfaces from a hierarchy (.mlfeh) or a volume (built first)");
   cmd->add_option("input", state->input, "hierarchy (.mlfeh) or volume")->required();
   add_common(cmd, *state);
   cmd->callback([state] { run(*state, false); });

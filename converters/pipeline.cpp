@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 
 #include "core/error.h"
@@ -82,6 +83,12 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option(
          "--simplify", p.simplify,
          "simplify every surface while it stays within this many voxels of the extracted one (0: off)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option(
+         "--snap", p.snap,
+         "move surface vertices onto the volume's own iso-surface, at most this many voxels "
+         "along the approximation's gradient (0: keep the approximation's surface; needs the volume)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
@@ -271,7 +278,7 @@ double smallest_spacing(const GridTransform& t, int dim) {
 }  // namespace
 
 nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
-                            const nlohmann::json& provenance) {
+                            const nlohmann::json& provenance, const ScalarGrid* grid) {
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
   const std::string ext = lower_extension(out);
@@ -279,6 +286,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
 
   std::vector<GltfSurface> surfaces;
   std::vector<double> isos;
+  bool field_used = false;
   if (b.dim == 3) {
     if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     isos = parse_values(p.iso, "--iso");
@@ -286,13 +294,26 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     IsoExtractor x(b.a3->hierarchy, b.a3->values);
     const int finest = b.a3->hierarchy.max_level();
     const int level = p.level < 0 ? finest : std::min(p.level, finest);
+    std::optional<GridField> field;
+    if (grid && grid->dim == 3 && p.snap > 0) field.emplace(*grid);
+    field_used = field.has_value();
+    auto options = [&](int at) {
+      IsoOptions o;
+      o.normals_toward_higher = p.normals_toward_higher;
+      o.level = at;
+      if (field) {
+        o.snap_to = &*field;
+        o.snap_distance = p.snap * smallest_spacing(b.transform, b.dim);
+      }
+      return o;
+    };
     for (std::size_t i = 0; i < isos.size(); ++i) {
       GltfSurface s;
       s.iso_value = isos[i];
       s.name = fmt::format("iso {}", isos[i]);
-      s.mesh = x.extract(isos[i], b.transform, {p.normals_toward_higher, level});
+      s.mesh = x.extract(isos[i], b.transform, options(level));
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
-        s.lods.push_back(x.extract(isos[i], b.transform, {p.normals_toward_higher, level - 2 * k}));
+        s.lods.push_back(x.extract(isos[i], b.transform, options(level - 2 * k)));
       // Surfaces that enclose others are translucent so the inner ones stay visible: with
       // normals toward lower values the innermost surface is the highest iso-value.
       const bool innermost = p.normals_toward_higher ? i == 0 : i + 1 == isos.size();
@@ -341,6 +362,8 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras = provenance;
     o.extras["tolerance_mm"] = tol;
     o.extras["iso_values"] = isos;
+    o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
+    o.extras["simplify_voxels"] = p.simplify;
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.

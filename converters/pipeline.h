@@ -90,6 +90,7 @@ struct AssetParams {
   int lod = 0;               ///< coarser levels to add to glTF
   std::size_t decimate = 0;  ///< triangle budget per surface (OpenMesh quadric decimation)
   double simplify = 0;       ///< error-bounded simplification tolerance in voxels (0: off)
+  double snap = 1.0;         ///< move vertices onto the data's surface, at most this many voxels (0: off)
   bool normals_toward_higher = false;
   double z_scale = 1.0;  ///< 2D height fields: height per data unit
   int level = -1;        ///< extract on this level (-1 finest)
@@ -97,8 +98,10 @@ struct AssetParams {
 void add_asset_options(CLI::App* cmd, AssetParams& p);
 
 /// Extracts the surfaces of `b` and writes them to `out` by extension (.glb .gltf .drc .ply
-/// .obj .stl .off). Returns a JSON summary (triangles per surface, bytes, seconds).
+/// .obj .stl .off). `grid` is the volume `b` was built from, or nullptr (a hierarchy file):
+/// with it, 3D surfaces are snapped onto the data's own iso-surface (AssetParams::snap).
+/// Returns a JSON summary (triangles per surface, bytes, seconds).
 nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
-                            const nlohmann::json& provenance);
+                            const nlohmann::json& provenance, const ScalarGrid* grid = nullptr);
 
 }  // namespace mlfe::cli

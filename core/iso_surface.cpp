@@ -1,6 +1,9 @@
 // Marching tetrahedra on the multilevel hierarchy (Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 5).
 #include "core/iso_surface.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <unordered_map>
@@ -29,6 +32,89 @@ std::array<float, 3> to_float_unit(const V3& v) {
   const double n = std::sqrt(dot(v, v));
   if (n == 0) return {0.f, 0.f, 1.f};
   return {float(v[0] / n), float(v[1] / n), float(v[2] / n)};
+}
+
+// The crossing of f = iso nearest to x along the unit direction d, |t| <= reach: samples
+// every `step` outward on both sides (nearer first, + before - at equal distance), then
+// regula falsi (Illinois) in the first bracket. Returns false when there is none.
+bool nearest_crossing(const Field& f, double iso, const V3& x, const V3& d, double reach, double step,
+                      double& t) {
+  auto g = [&](double s) { return f.value({x[0] + s * d[0], x[1] + s * d[1], x[2] + s * d[2]}) - iso; };
+  const double g0 = g(0);
+  if (g0 == 0) {
+    t = 0;
+    return true;
+  }
+  double prev[2] = {g0, g0};
+  const int n = int(std::ceil(reach / step));
+  for (int k = 1; k <= n; ++k) {
+    for (int side = 0; side < 2; ++side) {
+      const double sgn = side == 0 ? 1.0 : -1.0;
+      const double s1 = sgn * std::min(reach, k * step), s0 = sgn * std::min(reach, (k - 1) * step);
+      const double g1 = g(s1);
+      if ((g1 > 0) != (prev[side] > 0) || g1 == 0) {
+        double a = s0, b = s1, ga = prev[side], gb = g1;
+        int last = 0;
+        for (int it = 0; it < 40 && gb != 0 && std::abs(b - a) > 1e-7 * step; ++it) {
+          const double c = (a * gb - b * ga) / (gb - ga);
+          const double gc = g(c);
+          if ((gc > 0) == (gb > 0)) {
+            b = c;
+            gb = gc;
+            if (last == -1) ga *= 0.5;
+            last = -1;
+          } else {
+            a = b;
+            ga = gb;
+            b = c;
+            gb = gc;
+            last = 1;
+          }
+        }
+        t = b;
+        return true;
+      }
+      prev[side] = g1;
+    }
+  }
+  return false;
+}
+
+// Moves the surface's vertices (local frame) onto f = iso along u's gradient; reverts the
+// vertices of any triangle the moves would flip or collapse, until none does.
+void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3>& grad,
+                  const TriangleMesh& mesh, std::vector<V3>& local) {
+  const std::vector<V3> original = local;
+  const V3 hi = f.extent();
+  const double step = f.resolution() / 4;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, local.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const double len = std::sqrt(dot(grad[i], grad[i]));
+          if (!(len > 0)) continue;
+          const V3 d{grad[i][0] / len, grad[i][1] / len, grad[i][2] / len};
+          double t = 0;
+          if (!nearest_crossing(f, iso, original[i], d, reach, step, t)) continue;
+          const V3 q{original[i][0] + t * d[0], original[i][1] + t * d[1], original[i][2] + t * d[2]};
+          bool inside = true;
+          for (int k = 0; k < f.dim(); ++k) inside = inside && q[k] >= 0 && q[k] <= hi[k];
+          if (inside) local[i] = q;
+        }
+      });
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (const auto& tri : mesh.triangles) {
+      const V3 before =
+          cross(sub(original[tri[1]], original[tri[0]]), sub(original[tri[2]], original[tri[0]]));
+      const V3 after = cross(sub(local[tri[1]], local[tri[0]]), sub(local[tri[2]], local[tri[0]]));
+      if (dot(before, after) > 0.1 * std::sqrt(dot(before, before) * dot(after, after))) continue;
+      for (auto v : tri)
+        if (local[v] != original[v]) {
+          local[v] = original[v];
+          changed = true;
+        }
+    }
+  }
 }
 
 template <int D>
@@ -145,8 +231,8 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       for (int k = 0; k < 3; ++k) poly.push_back(out_vertex(c[up[k]], c[dn[0]]));
     } else {
       // Quadrilateral in cyclic order around the tetrahedron.
-      poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]),
-              out_vertex(c[up[1]], c[dn[1]]), out_vertex(c[up[1]], c[dn[0]])};
+      poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]), out_vertex(c[up[1]], c[dn[1]]),
+              out_vertex(c[up[1]], c[dn[0]])};
     }
     const P1Element<3> el = element_of(h, e);
     V3 g{0, 0, 0};
@@ -157,7 +243,8 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       const auto& ov = verts[i];
       const auto& pa = h.point(ov.a);
       const auto& pb = h.point(ov.b);
-      return V3{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]), pa[2] + ov.t * (pb[2] - pa[2])};
+      return V3{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]),
+                pa[2] + ov.t * (pb[2] - pa[2])};
     };
     auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
       if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
@@ -206,19 +293,29 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
   };
 
-  // 4. Physical positions and normals.
+  // 4. Local positions and gradients of u (interpolated along the cut edge).
+  std::vector<V3> local(verts.size()), grad(verts.size());
+  for (std::size_t i = 0; i < verts.size(); ++i) {
+    const auto& ov = verts[i];
+    const auto& pa = h.point(ov.a);
+    const auto& pb = h.point(ov.b);
+    local[i] = {pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]),
+                pa[2] + ov.t * (pb[2] - pa[2])};
+    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
+    grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
+               (1 - ov.t) * ga[2] + ov.t * gb[2]};
+  }
+  if (opts.snap_to && opts.snap_distance > 0)
+    snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);
+
+  // 5. Physical positions and normals.
   const double sign = opts.normals_toward_higher ? 1.0 : -1.0;
   mesh.positions.reserve(verts.size());
   mesh.normals.reserve(verts.size());
-  for (const auto& ov : verts) {
-    const auto& pa = h.point(ov.a);
-    const auto& pb = h.point(ov.b);
-    const V3 local{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]), pa[2] + ov.t * (pb[2] - pa[2])};
-    const V3 p = transform.local_to_physical(local);
+  for (std::size_t i = 0; i < verts.size(); ++i) {
+    const V3 p = transform.local_to_physical(local[i]);
     mesh.positions.push_back({float(p[0]), float(p[1]), float(p[2])});
-    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
-    V3 n{sign * ((1 - ov.t) * ga[0] + ov.t * gb[0]), sign * ((1 - ov.t) * ga[1] + ov.t * gb[1]),
-         sign * ((1 - ov.t) * ga[2] + ov.t * gb[2])};
+    const V3 n{sign * grad[i][0], sign * grad[i][1], sign * grad[i][2]};
     mesh.normals.push_back(to_float_unit(transform.rotate(n)));
   }
   // A reflecting transform (det < 0) turns counter-clockwise into clockwise.

@@ -14,6 +14,7 @@
 #pragma once
 #include <vector>
 
+#include "core/field.h"
 #include "core/hierarchy.h"
 #include "core/scalar_grid.h"
 #include "core/triangle_mesh.h"
@@ -24,6 +25,14 @@ struct IsoOptions {
   bool normals_toward_higher = false;  ///< default: normals point toward lower values
   int level = -1;                      ///< extract on T_level (coarser, via the hierarchical
                                        ///< basis); -1: the finest (leaf) triangulation
+  /// When set (the input f the hierarchy approximates, in the hierarchy's local frame; it must
+  /// outlive the call): every vertex moves along u's gradient onto the data's own surface
+  /// f = iso, the nearest crossing within `snap_distance` (local units) on either side, so the
+  /// asset carries the scan's surface instead of the approximation's, at the same triangles.
+  /// A vertex with no crossing in reach, or whose move would leave the domain or flip one of
+  /// its triangles, stays where u put it. Normals stay the paper's (gradients of u).
+  const Field* snap_to = nullptr;
+  double snap_distance = 0;
 };
 
 class IsoExtractor {

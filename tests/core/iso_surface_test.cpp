@@ -20,7 +20,8 @@ ScalarGrid grid3(int n, double spacing, const std::function<double(double, doubl
   g.values.resize(std::size_t(n) * n * n);
   for (int k = 0; k < n; ++k)
     for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) g.values[i + n * (j + n * k)] = float(f(i * spacing, j * spacing, k * spacing));
+      for (int i = 0; i < n; ++i)
+        g.values[i + n * (j + n * k)] = float(f(i * spacing, j * spacing, k * spacing));
   return g;
 }
 
@@ -71,7 +72,8 @@ TEST(IsoSurface, SphereIsAccurateClosedAndOrientedOutward) {
   ASSERT_GT(m.triangles.size(), 500u);
   double worst = 0;
   for (const auto& p : m.positions) {
-    const double r = std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+    const double r = std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
+                               (p[2] - c[2]) * (p[2] - c[2]));
     worst = std::max(worst, std::abs(r - R));
   }
   std::printf("sphere: %zu triangles, worst distance %.3f voxels, %zu vertices in the hierarchy\n",
@@ -126,8 +128,9 @@ TEST(IsoSurface, IsoValueExactlyOnVerticesLeavesNoCracksOrDegenerateTriangles) {
   expect_closed_manifold(m, 2);
   int on_vertex = 0;
   for (const auto& p : m.positions)
-    if (std::abs(p[0] * p[0] + p[1] * p[1] + p[2] * p[2] - 25.0) < 1e-4 && std::abs(p[0] - std::round(p[0])) < 1e-6 &&
-        std::abs(p[1] - std::round(p[1])) < 1e-6 && std::abs(p[2] - std::round(p[2])) < 1e-6)
+    if (std::abs(p[0] * p[0] + p[1] * p[1] + p[2] * p[2] - 25.0) < 1e-4 &&
+        std::abs(p[0] - std::round(p[0])) < 1e-6 && std::abs(p[1] - std::round(p[1])) < 1e-6 &&
+        std::abs(p[2] - std::round(p[2])) < 1e-6)
       ++on_vertex;
   EXPECT_GT(on_vertex, 6);  // the surface really passes through mesh vertices
 }
@@ -158,7 +161,8 @@ TEST(IsoSurface, CoarserLevelsGiveCoarserClosedSurfaces) {
   std::vector<double> u(h.vertex_count());
   for (std::size_t v = 0; v < u.size(); ++v) {
     const auto& p = h.point(VertexId(v));
-    u[v] = std::sqrt((p[0] - 0.51) * (p[0] - 0.51) + (p[1] - 0.47) * (p[1] - 0.47) + (p[2] - 0.5) * (p[2] - 0.5));
+    u[v] = std::sqrt((p[0] - 0.51) * (p[0] - 0.51) + (p[1] - 0.47) * (p[1] - 0.47) +
+                     (p[2] - 0.5) * (p[2] - 0.5));
   }
   IsoExtractor x(h, u);
   std::size_t prev = 0;
@@ -180,18 +184,108 @@ TEST(IsoSurface, ReflectingTransformKeepsWindingConsistentWithNormals) {
   std::vector<double> u(h.vertex_count());
   for (std::size_t v = 0; v < u.size(); ++v) {
     const auto& p = h.point(VertexId(v));
-    u[v] = -std::sqrt((p[0] - 0.5) * (p[0] - 0.5) + (p[1] - 0.5) * (p[1] - 0.5) + (p[2] - 0.5) * (p[2] - 0.5));
+    u[v] =
+        -std::sqrt((p[0] - 0.5) * (p[0] - 0.5) + (p[1] - 0.5) * (p[1] - 0.5) + (p[2] - 0.5) * (p[2] - 0.5));
   }
   IsoExtractor x(h, u);
   GridTransform t;
   t.direction = {-1, 0, 0, 0, -1, 0, 0, 0, 1};  // a rotation
   GridTransform r;
-  r.direction = {-1, 0, 0, 0, 1, 0, 0, 0, 1};   // a reflection
+  r.direction = {-1, 0, 0, 0, 1, 0, 0, 0, 1};  // a reflection
   for (const auto& tr : {t, r}) {
     const auto m = x.extract(-0.3, tr);
     expect_closed_manifold(m, 2);
     expect_winding_follows_normals(m);
   }
+}
+
+// A coarse approximation of a ball whose surface u = iso sits off the data's; snapping moves
+// every vertex onto f = iso (the trilinear interpolant) without touching the triangles.
+TEST(IsoSurface, SnapMovesVerticesOntoTheDataSurfaceWithoutFlips) {
+  const std::array<double, 3> c{20.3, 19.6, 21.1};
+  const double R = 9.5;
+  const auto g = grid3(41, 1.0, [&](double x, double y, double z) {
+    // Not a distance field: a radial profile plus ripples u cannot follow at this budget.
+    const double r = std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
+    return 100.0 / (1.0 + std::exp(r - R)) + 4.0 * std::sin(0.9 * x) * std::cos(0.7 * y);
+  });
+  GridField f(g);
+  ApproximationOptions o;
+  o.max_vertices = 4000;
+  o.target_rms = 0.5;
+  const auto a = approximate<3>(f, o);
+  IsoExtractor x(a.hierarchy, a.values);
+  const double iso = 50.0;
+  const auto plain = x.extract(iso, g.transform);
+  IsoOptions so;
+  so.snap_to = &f;
+  so.snap_distance = 1.5;
+  const auto snapped = x.extract(iso, g.transform, so);
+  ASSERT_EQ(snapped.triangles, plain.triangles);
+  ASSERT_EQ(snapped.normals, plain.normals);  // the paper's normals stay
+  ASSERT_EQ(snapped.positions.size(), plain.positions.size());
+  double plain_err = 0, snapped_err = 0;
+  std::size_t moved = 0, on_surface = 0;
+  for (std::size_t i = 0; i < plain.positions.size(); ++i) {
+    const auto& p = plain.positions[i];
+    const auto& q = snapped.positions[i];
+    const double e0 = std::abs(f.value({p[0], p[1], p[2]}) - iso),
+                 e1 = std::abs(f.value({q[0], q[1], q[2]}) - iso);
+    plain_err += e0;
+    snapped_err += e1;
+    const double d = std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) +
+                               (p[2] - q[2]) * (p[2] - q[2]));
+    EXPECT_LE(d, 1.5 + 1e-4);
+    if (d > 0) {
+      ++moved;
+      on_surface += e1 < 1e-3;  // float positions: f changes by up to ~25 per voxel here
+    }
+  }
+  std::printf("snap: %zu of %zu vertices moved (hierarchy %zu, stop %s), mean |f - iso| %.3f -> %.4f\n", moved,
+              plain.positions.size(), a.hierarchy.vertex_count(), a.stop_reason.c_str(),
+              plain_err / plain.positions.size(), snapped_err / plain.positions.size());
+  EXPECT_GT(moved, plain.positions.size() * 8 / 10);
+  EXPECT_GE(on_surface, moved * 99 / 100);
+  EXPECT_LT(snapped_err, plain_err / 20);
+  // No triangle turns over (the guard reverts the vertices of any that would).
+  for (const auto& t : plain.triangles) {
+    auto normal = [&](const TriangleMesh& m) {
+      const auto &a0 = m.positions[t[0]], &a1 = m.positions[t[1]], &a2 = m.positions[t[2]];
+      const double u[3] = {a1[0] - a0[0], a1[1] - a0[1], a1[2] - a0[2]};
+      const double v[3] = {a2[0] - a0[0], a2[1] - a0[1], a2[2] - a0[2]};
+      return std::array<double, 3>{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                                   u[0] * v[1] - u[1] * v[0]};
+    };
+    const auto n0 = normal(plain), n1 = normal(snapped);
+    ASSERT_GT(n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2], 0.0);
+  }
+  expect_closed_manifold(snapped, 2);
+}
+
+TEST(IsoSurface, SnapLeavesExactSurfacesAndOutOfReachCrossingsAlone) {
+  // A linear field: u = f exactly, so there is nothing to move.
+  const auto g = grid3(9, 1.0, [](double x, double y, double z) { return 0.3 * x + 0.5 * y - 0.2 * z; });
+  GridField f(g);
+  const auto a = approximate<3>(f, ApproximationOptions{});
+  IsoExtractor x(a.hierarchy, a.values);
+  IsoOptions so;
+  so.snap_to = &f;
+  so.snap_distance = 1.0;
+  const auto plain = x.extract(1.7, g.transform), snapped = x.extract(1.7, g.transform, so);
+  ASSERT_EQ(plain.positions.size(), snapped.positions.size());
+  for (std::size_t i = 0; i < plain.positions.size(); ++i)
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(snapped.positions[i][k], plain.positions[i][k], 1e-5);
+  // Snapping onto a field whose surface is 3 units away with a reach of 1: nothing moves.
+  const auto shifted_grid =
+      grid3(9, 1.0, [](double x, double y, double z) { return 0.3 * x + 0.5 * y - 0.2 * z - 1.8; });
+  GridField shifted(shifted_grid);  // f' = iso at 0.3x + 0.5y - 0.2z = 3.5: 2.9 units along the normal
+  so.snap_to = &shifted;
+  EXPECT_EQ(x.extract(1.7, g.transform, so).positions, plain.positions);
+  so.snap_distance = 4.0;
+  const auto far = x.extract(1.7, g.transform, so);
+  std::size_t moved = 0;
+  for (std::size_t i = 0; i < far.positions.size(); ++i) moved += far.positions[i] != plain.positions[i];
+  EXPECT_GT(moved, 0u);
 }
 
 TEST(HeightField, LiftsLeafTrianglesWithUpwardNormals) {
@@ -239,11 +333,12 @@ TEST(IsoAwareRefinement, PullsTheSurfaceOntoTheDataWhereThePlainTargetDoesNot) {
     const auto m = x.extract(0.0, g.transform);
     double worst = 0;
     for (const auto& p : m.positions) {
-      const double r = std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) + (p[2] - c[2]) * (p[2] - c[2]));
+      const double r = std::sqrt((p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
+                                 (p[2] - c[2]) * (p[2] - c[2]));
       worst = std::max(worst, std::abs(r - R));
     }
-    std::printf("iso-aware %d: %zu vertices, %zu triangles, worst surface distance %.3f voxels\n", int(iso_aware),
-                a.hierarchy.vertex_count(), m.triangles.size(), worst);
+    std::printf("iso-aware %d: %zu vertices, %zu triangles, worst surface distance %.3f voxels\n",
+                int(iso_aware), a.hierarchy.vertex_count(), m.triangles.size(), worst);
     return worst;
   };
   const double plain = worst_distance(false);
