@@ -315,21 +315,21 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     std::vector<ElemId> remap;
     bool refined = false;
     while (count > 0) {
-      std::unique_ptr<Hierarchy<D>> backup;
-      if (opts.max_vertices) backup = std::make_unique<Hierarchy<D>>(h);
       const std::size_t before = h.vertex_count();
       std::vector<ElemId> sel;
       for (std::size_t i = 0; i < count; ++i) sel.push_back(marked[i].id);
-      remap = h.refine(sel);
-      const std::size_t added = h.vertex_count() - before;
+      // An attempt over the budget is rolled back by refine() itself (no copy of h).
+      std::size_t reached = 0;
+      remap = h.refine(sel, opts.max_vertices, &reached);
+      const std::size_t added = reached - before;
       vertices_per_mark = std::max(1.0, double(added) / double(count));
-      if (!opts.max_vertices || h.vertex_count() <= opts.max_vertices) {
+      if (!opts.max_vertices || reached <= opts.max_vertices) {
         refined = true;
         break;
       }
       // Overshot: scale the selection by the room over what this attempt added, with a
       // margin, so the next attempt nearly always fits.
-      h = std::move(*backup);
+      MLFE_CHECK(h.vertex_count() == before);
       const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.9 * double(room) / double(added));
       count = std::min(count - 1, scaled);
     }

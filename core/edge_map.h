@@ -43,6 +43,29 @@ class EdgeMap {
     ++size_;
   }
 
+  /// Removes {a, b}, which must be present (refine() rolling back its own inserts). Backward
+  /// shift instead of tombstones, so lookups stay as short as if the edge never was there.
+  void erase(VertexId a, VertexId b) {
+    const std::uint64_t k = key(a, b);
+    std::size_t i = slot(k);
+    while (keys_[i] != k) {
+      MLFE_CHECK_MSG(keys_[i] != kEmpty, "erased edge not present");
+      i = (i + 1) & mask_;
+    }
+    // Move later entries of the probe run into the hole unless their home slot lies
+    // cyclically in (hole, j]: they would become unreachable otherwise.
+    for (std::size_t j = (i + 1) & mask_; keys_[j] != kEmpty; j = (j + 1) & mask_) {
+      const std::size_t home = slot(keys_[j]);
+      if (((j - home) & mask_) >= ((j - i) & mask_)) {
+        keys_[i] = keys_[j];
+        values_[i] = values_[j];
+        i = j;
+      }
+    }
+    keys_[i] = kEmpty;
+    --size_;
+  }
+
   std::size_t size() const { return size_; }
   void reserve(std::size_t n) {
     std::size_t cap = keys_.size();

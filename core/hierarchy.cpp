@@ -21,6 +21,8 @@ int popcount(unsigned m) { return __builtin_popcount(m); }
 
 // Faces of a tetrahedron as masks of their three edges; face i is opposite vertex i.
 constexpr unsigned kTetFaceEdges[4] = {0x38, 0x26, 0x15, 0x0B};
+// Children of each green type (index: green_type()).
+constexpr int kGreenChildren[5] = {0, 2, 3, 4, 4};
 // Pairs of opposite edges of a tetrahedron.
 constexpr unsigned kTetOppositePairs[3] = {(1u << 0) | (1u << 5), (1u << 1) | (1u << 4),
                                            (1u << 2) | (1u << 3)};
@@ -248,7 +250,6 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
       sum += std::abs(h.cell_measure(k));
     }
     const int type = green_type(D, mask);
-    constexpr int kGreenChildren[5] = {0, 2, 3, 4, 4};
     if (type <= 0 || static_cast<int>(n) != kGreenChildren[type])
       fail(el + " has an invalid green refinement (" + vs(n) + " children)");
     if (!(std::abs(sum - std::abs(m)) <= 1e-9 * std::abs(m)))
@@ -354,18 +355,17 @@ bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
 }
 
 template <int D>
-void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
+int Hierarchy<D>::green_children(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const {
   using T = SimplexTraits<D>;
   const int type = green_type(D, mask);
   MLFE_CHECK(type > 0 && is_leaf(e) && kind(e) != ElemKind::kGreen);
-  const Cell c = cells_[e.value];
-  const int lvl = level_[e.value] + 1;
+  const Cell& c = cells_[e.value];
   auto mid = [&](VertexId a, VertexId b) {
     VertexId m = edge_mid_.find(a, b);
     MLFE_CHECK(m.valid());
     return m;
   };
-  std::vector<Cell> kids;
+  int n = 0;
   int edge = 0;
   while (!(mask & (1u << edge))) ++edge;
   if (type == 1) {
@@ -374,14 +374,17 @@ void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
     Cell k0 = c, k1 = c;
     k0[lb] = m;  // keeps the vertex order, hence the orientation, of the parent
     k1[la] = m;
-    kids = {k0, k1};
+    kids[0] = k0;
+    kids[1] = k1;
+    n = 2;
   } else if constexpr (D == 3) {
     if (type == 4) {
       const int other = 5 - edge;  // opposite edges have indices summing to 5
       const VertexId a = c[T::kEdgeVerts[edge][0]], b = c[T::kEdgeVerts[edge][1]];
       const VertexId cc = c[T::kEdgeVerts[other][0]], d = c[T::kEdgeVerts[other][1]];
       const VertexId m1 = mid(a, b), m2 = mid(cc, d);
-      kids = {{a, m1, cc, m2}, {a, m1, m2, d}, {m1, b, cc, m2}, {m1, b, m2, d}};
+      kids = {{{a, m1, cc, m2}, {a, m1, m2, d}, {m1, b, cc, m2}, {m1, b, m2, d}}};
+      n = 4;
     } else {
       // Types 2 and 3 split one face (s, p, q) and join it to the apex d.
       int face = -1;
@@ -389,14 +392,16 @@ void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
         if ((mask & ~kTetFaceEdges[f]) == 0) face = f;
       MLFE_CHECK(face >= 0);
       const VertexId d = c[face];
-      std::vector<std::array<VertexId, 3>> tris;
+      std::array<std::array<VertexId, 3>, 4> tris;
+      int nt = 0;
       if (type == 3) {
         std::array<VertexId, 3> f;
-        int n = 0;
+        int nf = 0;
         for (int i = 0; i < 4; ++i)
-          if (i != face) f[n++] = c[i];
+          if (i != face) f[nf++] = c[i];
         const VertexId m01 = mid(f[0], f[1]), m02 = mid(f[0], f[2]), m12 = mid(f[1], f[2]);
-        tris = {{f[0], m01, m02}, {m01, f[1], m12}, {m02, m12, f[2]}, {m01, m12, m02}};
+        tris = {{{f[0], m01, m02}, {m01, f[1], m12}, {m02, m12, f[2]}, {m01, m12, m02}}};
+        nt = 4;
       } else {
         // Two hanging edges (s,p), (s,q) sharing s. The quadrilateral m_sp, p, q, m_sq is cut by
         // a diagonal that the element across the face must choose identically: it starts at
@@ -421,23 +426,26 @@ void Hierarchy<D>::green_refine(ElemId e, unsigned mask) {
         const double lp = len2(vs, vp), lq = len2(vs, vq);
         const VertexId msp = mid(vs, vp), msq = mid(vs, vq);
         const bool from_p = lp > lq || (lp == lq && vp < vq);
-        if (from_p)
-          tris = {{vs, msp, msq}, {msp, vp, vq}, {msp, vq, msq}};
-        else
-          tris = {{vs, msp, msq}, {msq, msp, vp}, {msq, vp, vq}};
+        tris[0] = {vs, msp, msq};
+        if (from_p) {
+          tris[1] = {msp, vp, vq};
+          tris[2] = {msp, vq, msq};
+        } else {
+          tris[1] = {msq, msp, vp};
+          tris[2] = {msq, vp, vq};
+        }
+        nt = 3;
       }
-      for (const auto& t : tris) kids.push_back({t[0], t[1], t[2], d});
+      for (int i = 0; i < nt; ++i) kids[n++] = {tris[i][0], tris[i][1], tris[i][2], d};
     }
   }
+  MLFE_CHECK(n == kGreenChildren[type]);
   const double parent_sign = signed_measure(e) > 0 ? 1.0 : -1.0;
-  const ElemId first(static_cast<std::uint32_t>(cells_.size()));
-  for (Cell k : kids) {
+  for (int i = 0; i < n; ++i) {
     // Green children carry no similarity guarantee; give them the parent's orientation.
-    if (cell_measure(k) * parent_sign < 0) std::swap(k[0], k[1]);
-    add_element(k, e, lvl, ElemKind::kGreen);
+    if (cell_measure(kids[i]) * parent_sign < 0) std::swap(kids[i][0], kids[i][1]);
   }
-  first_child_[e.value] = first;
-  num_children_[e.value] = static_cast<std::uint8_t>(kids.size());
+  return n;
 }
 
 template <int D>
@@ -466,8 +474,11 @@ void Hierarchy<D>::reserve_for(std::size_t red_count) {
 }
 
 template <int D>
-std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
+std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t vertex_limit,
+                                         std::size_t* vertices_reached) {
   const std::size_t old_count = cells_.size();
+  const std::size_t old_vertex_count = points_.size();
+  if (vertices_reached) *vertices_reached = old_vertex_count;
   std::vector<ElemId> to_red;
   to_red.reserve(marked.size());
   for (ElemId e : marked) {
@@ -550,12 +561,21 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
   // Without this, one new midpoint on a ring of green-refined elements turns the whole ring
   // red, whose neighbours then turn red, ... — a local mark could add 10^5 vertices.
   std::vector<ElemId> to_regreen;
+  // With a vertex limit: the child links of older elements as they were before this call
+  // changed them, for the rollback (elements and vertices created here are truncated away).
+  struct UndoLink {
+    ElemId e, first_child;
+    std::uint8_t num_children;
+  };
+  std::vector<UndoLink> undo_links;
   while (!to_red.empty() || !to_regreen.empty()) {
     const std::size_t round_first_elem = cells_.size();
     const std::size_t first_new_vertex = points_.size();
     reserve_for(to_red.size());
     // A parent whose green children go becomes a leaf again.
     const auto drop_green_children = [&](ElemId e) {
+      if (vertex_limit > 0 && e.value < old_count)
+        undo_links.push_back({e, first_child_[e.value], num_children_[e.value]});
       for (int i = 0; i < num_children(e); ++i) {
         const ElemId ch(first_child(e).value + i);
         MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
@@ -576,6 +596,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     }
     for (ElemId e : to_red) {
       if (!is_leaf(e)) drop_green_children(e);  // e's green children go; e is refined red instead
+      if (vertex_limit > 0 && e.value < old_count) undo_links.push_back({e, ElemId::invalid(), 0});
       red_refine(e);
       if (!use_incidence)
         for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
@@ -665,6 +686,28 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
     }
   }
 
+  // Only red refinement adds vertices, so the count is final here.
+  if (vertices_reached) *vertices_reached = points_.size();
+  if (vertex_limit > 0 && points_.size() > vertex_limit) {
+    // Newest first, so an element changed twice ends with its state before the call.
+    for (auto u = undo_links.rbegin(); u != undo_links.rend(); ++u) {
+      first_child_[u->e.value] = u->first_child;
+      num_children_[u->e.value] = u->num_children;
+    }
+    for (std::size_t v = points_.size(); v-- > old_vertex_count;)
+      edge_mid_.erase(vertex_parents_[v][0], vertex_parents_[v][1]);
+    points_.resize(old_vertex_count);
+    vertex_parents_.resize(old_vertex_count);
+    vertex_level_.resize(old_vertex_count);
+    cells_.resize(old_count);
+    parent_.resize(old_count);
+    first_child_.resize(old_count);
+    num_children_.resize(old_count);
+    level_.resize(old_count);
+    kind_.resize(old_count);
+    return {};
+  }
+
   // Green closure: every remaining leaf with hanging midpoints has an admissible pattern.
   // Candidates: leaves with ≥ 2 flagged corners, in id order (deterministic child numbering).
   // One parallel pass over the element arrays (streamed; the flags fit in cache) costs less
@@ -690,7 +733,42 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked) {
                       });
     for (auto& f : found) closure.insert(closure.end(), f.begin(), f.end());
   }
-  for (const auto& [e, mask] : closure) green_refine(e, mask);
+  // Children are appended in closure order, so each element's child range is a prefix sum
+  // over the child counts of the ones before it; the children themselves (hash look-ups and
+  // orientation tests) are then computed in parallel into their ranges.
+  if (!closure.empty()) {
+    const std::size_t first = cells_.size();
+    std::vector<std::size_t> offset(closure.size() + 1, 0);
+    for (std::size_t i = 0; i < closure.size(); ++i)
+      offset[i + 1] = offset[i] + kGreenChildren[std::max(0, green_type(D, closure[i].second))];
+    const std::size_t ne = first + offset.back();
+    MLFE_CHECK(ne < ElemId::kInvalidValue);
+    cells_.resize(ne);
+    parent_.resize(ne);
+    first_child_.resize(ne, ElemId::invalid());
+    num_children_.resize(ne, 0);
+    level_.resize(ne);
+    kind_.resize(ne, ElemKind::kGreen);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::array<Cell, 4> kids;
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const auto [e, mask] = closure[i];
+                          const int n = green_children(e, mask, kids);
+                          const std::size_t at = first + offset[i];
+                          MLFE_CHECK(at + n == first + offset[i + 1]);
+                          const int lvl = level_[e.value] + 1;
+                          MLFE_CHECK_MSG(lvl < 255, "refinement level limit (254) reached");
+                          for (int k = 0; k < n; ++k) {
+                            cells_[at + k] = kids[k];
+                            parent_[at + k] = e;
+                            level_[at + k] = static_cast<std::uint8_t>(lvl);
+                          }
+                          first_child_[e.value] = ElemId(static_cast<std::uint32_t>(at));
+                          num_children_[e.value] = static_cast<std::uint8_t>(n);
+                        }
+                      });
+  }
   dead.resize(cells_.size(), 0);
   return compact(dead, old_count);
 }

@@ -118,7 +118,16 @@ class Hierarchy {
   /// ElemIds are renumbered (compacted); VertexIds are stable and new vertices are appended.
   /// Returns, for every element id before the call, its id after the call (invalid for the
   /// green children that were removed), so callers can carry per-element data across.
-  std::vector<ElemId> refine(std::vector<ElemId> marked);
+  ///
+  ///
+  /// With a vertex_limit > 0, a refinement that would end with more vertices than the limit
+  /// is rolled back instead: the hierarchy is left as it was (same arrays, same edge
+  /// midpoints) and an empty vector is returned. It stops before the green closure, which
+  /// adds no vertex, so a budgeted caller needs no copy to undo an overshooting attempt and
+  /// does not pay for its closure. *vertices_reached, if given, is the vertex count the
+  /// refinement reached (the final count unless rolled back).
+  std::vector<ElemId> refine(std::vector<ElemId> marked, std::size_t vertex_limit = 0,
+                             std::size_t* vertices_reached = nullptr);
   /// Red-refines every leaf once.
   void refine_uniform();
 
@@ -179,7 +188,9 @@ class Hierarchy {
   void reserve_for(std::size_t red_count);
   static std::array<Cell, SimplexTraits<D>::kRedChildren> red_children(
       const Cell& c, const std::array<VertexId, SimplexTraits<D>::kEdges>& m);
-  void green_refine(ElemId e, unsigned mask);
+  // The green children of leaf e for its hanging-edge mask (kids[0..n), n returned), each
+  // oriented like e. Read-only, so the closure computes them in parallel.
+  int green_children(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const;
   // Bit i set when local edge i has a midpoint. With `flagged`, only edges whose endpoints are
   // both flagged are probed: inside refine(), a midpoint on a leaf's edge is one the call
   // created (the leaves were conforming when it began), and refine() flags the endpoints of

@@ -10,6 +10,7 @@
 #include <set>
 
 #include "core/mesh_quality.h"
+#include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
 namespace {
@@ -423,6 +424,86 @@ TYPED_TEST(HierarchyTest, LevelTriangulationsAreConformingAndFaceNeighborsSymmet
         for (int g = 0; g <= D; ++g) back |= nb[j][g] == int(i);
         ASSERT_TRUE(back);
       }
+  }
+}
+
+TYPED_TEST(HierarchyTest, RefinementOverTheVertexLimitIsRolledBack) {
+  constexpr int D = TypeParam::value;
+  // Every midpoint of h is found, and nothing else: edges the rolled-back attempts bisected
+  // (those of `over`) are gone from the edge map.
+  const auto expect_edge_map = [](const Hierarchy<D>& h, const Hierarchy<D>& over) {
+    EXPECT_EQ(h.edge_midpoints().size(), h.vertex_count() - (D == 2 ? 4 : 8));
+    for (std::size_t i = 0; i < over.vertex_count(); ++i) {
+      const VertexId v(static_cast<std::uint32_t>(i));
+      const auto& par = over.vertex_parents(v);
+      if (!par[0].valid()) continue;
+      EXPECT_EQ(h.edge_midpoints().find(par[0], par[1]), i < h.vertex_count() ? v : VertexId::invalid());
+    }
+  };
+  for (unsigned seed : {1u, 2u, 3u}) {
+    auto h = unit_box<D>();
+    std::mt19937 rng(seed);
+    int rolled_back = 0;
+    for (int it = 0; it < (D == 2 ? 8 : 5); ++it) {
+      auto leaves = h.leaves();
+      std::vector<ElemId> marked;
+      std::uniform_int_distribution<std::size_t> pick(0, leaves.size() - 1);
+      for (int k = 0; k < 6; ++k) marked.push_back(leaves[pick(rng)]);
+      // Green leaves: their parents lose green children (red, or a new green closure).
+      for (ElemId e : leaves)
+        if (h.kind(e) == ElemKind::kGreen && rng() % 5 == 0) marked.push_back(e);
+      auto full = h;
+      const auto full_remap = full.refine(marked);
+      const std::size_t before = h.vertex_count();
+      // One vertex short of what the refinement needs: rolled back, unchanged.
+      const auto copy = h;
+      std::size_t reached = 0;
+      if (full.vertex_count() > before) {
+        EXPECT_TRUE(h.refine(marked, full.vertex_count() - 1, &reached).empty());
+        EXPECT_EQ(reached, full.vertex_count());
+        test::expect_same_hierarchy(h, copy);
+        expect_edge_map(h, full);
+        ++rolled_back;
+      }
+      // Exactly enough: the same refinement as without a limit.
+      EXPECT_EQ(h.refine(marked, full.vertex_count(), &reached), full_remap);
+      EXPECT_EQ(reached, full.vertex_count());
+      test::expect_same_hierarchy(h, full);
+      expect_edge_map(h, full);
+    }
+    EXPECT_GT(rolled_back, 0);
+  }
+}
+
+TEST(EdgeMap, EraseKeepsEveryOtherEdgeFindable) {
+  // A small table with many collisions and wrap-arounds, against std::map.
+  std::mt19937 rng(5);
+  EdgeMap m;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> ref;
+  std::uniform_int_distribution<std::uint32_t> vert(0, 40);
+  for (int step = 0; step < 20000; ++step) {
+    std::uint32_t a = vert(rng), b = vert(rng);
+    if (a == b) continue;
+    if (a > b) std::swap(a, b);
+    const auto it = ref.find({a, b});
+    if (it == ref.end()) {
+      if (ref.size() < 30 || rng() % 2) {
+        m.insert(VertexId(a), VertexId(b), VertexId(std::uint32_t(step)));
+        ref[{a, b}] = std::uint32_t(step);
+      }
+    } else if (rng() % 2) {
+      m.erase(VertexId(b), VertexId(a));
+      ref.erase(it);
+    }
+    if (step % 97 == 0) {
+      ASSERT_EQ(m.size(), ref.size());
+      for (std::uint32_t x = 0; x <= 40; ++x)
+        for (std::uint32_t y = x + 1; y <= 40; ++y) {
+          const auto r = ref.find({x, y});
+          ASSERT_EQ(m.find(VertexId(x), VertexId(y)),
+                    r == ref.end() ? VertexId::invalid() : VertexId(r->second));
+        }
+    }
   }
 }
 
