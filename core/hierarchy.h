@@ -119,7 +119,6 @@ class Hierarchy {
   /// Returns, for every element id before the call, its id after the call (invalid for the
   /// green children that were removed), so callers can carry per-element data across.
   ///
-  ///
   /// With a vertex_limit > 0, a refinement that would end with more vertices than the limit
   /// is rolled back instead: the hierarchy is left as it was (same arrays, same edge
   /// midpoints) and an empty vector is returned. It stops before the green closure, which
