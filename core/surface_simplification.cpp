@@ -460,7 +460,9 @@ class Simplifier {
     if (common != edge_faces) return false;
 
     // Faces around v0 that survive with v1 in v0's place: no duplicate of a face around v1,
-    // no flip, no degeneracy.
+    // no flip, no degeneracy. After the link condition, a face (v1, x, y) can only exist when
+    // x and y are both common neighbours, i.e. the two vertices opposite the edge (a valence-3
+    // v0 inside a tetrahedron-like cap); only then are v1's faces searched.
     s.targets.clear();
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f) {
       const auto& face = faces_[*f];
@@ -468,8 +470,9 @@ class Simplifier {
       Index x = kNone, y = kNone;
       for (Index a : face)
         if (a != v0) (x == kNone ? x : y) = a;
-      for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
-        if (contains(faces_[*g], x) && contains(faces_[*g], y)) return false;
+      if (edge_faces == 2 && faces_on_edge(s.n1, x) > 0 && faces_on_edge(s.n1, y) > 0)
+        for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
+          if (contains(faces_[*g], x) && contains(faces_[*g], y)) return false;
       Vec3 p[3], q[3];
       for (int k = 0; k < 3; ++k) {
         p[k] = pos_[face[k]];
