@@ -2,6 +2,9 @@
 // a volume, in one command.
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <filesystem>
 #include <memory>
 
@@ -15,10 +18,36 @@ namespace {
 
 struct IsoState {
   std::string input, output, hierarchy, report;
+  std::string volume;  ///< iso on a hierarchy: the volume it was built from, for --snap
   BuildParams params;
   AssetParams asset;
   VolumeReadOptions read;
 };
+
+// The volume given for snapping must be the one the hierarchy was built from: same frame and
+// the same box (the hierarchy's coarse mesh spans the grid, [0, (n - 1) * spacing] per axis).
+void check_volume_matches(const std::string& volume, const ScalarGrid& g, const std::string& hierarchy,
+                          const Built& b) {
+  if (b.dim != 3 || g.dim != 3)
+    throw Error(volume + ": --volume needs a 3D volume and a 3D hierarchy (" + hierarchy + ")");
+  auto near = [](double x, double y) {
+    return std::abs(x - y) <= 1e-6 * std::max({1.0, std::abs(x), std::abs(y)});
+  };
+  const auto& t = g.transform;
+  const auto& h = b.a3->hierarchy;
+  std::array<double, 3> hi{0, 0, 0};
+  for (std::size_t v = 0; v < h.vertex_count(); ++v)
+    for (int a = 0; a < 3; ++a) hi[a] = std::max(hi[a], h.point(VertexId(std::uint32_t(v)))[a]);
+  for (int a = 0; a < 3; ++a) {
+    if (!near(t.spacing[a], b.transform.spacing[a]) || !near(t.origin[a], b.transform.origin[a]))
+      throw Error(volume + ": spacing or origin differ from the hierarchy's (" + hierarchy + ")");
+    if (!near(double(g.dims[a] - 1) * t.spacing[a], hi[a]))
+      throw Error(volume + ": its extent differs from the hierarchy's domain (" + hierarchy + ")");
+  }
+  for (int k = 0; k < 9; ++k)
+    if (!near(t.direction[k], b.transform.direction[k]))
+      throw Error(volume + ": its direction matrix differs from the hierarchy's (" + hierarchy + ")");
+}
 
 void run(const IsoState& s, bool convert) {
   nlohmann::json prov = {{"input", std::filesystem::path(s.input).filename().string()},
@@ -31,7 +60,13 @@ void run(const IsoState& s, bool convert) {
   Built b;
   if (!convert && is_hierarchy_file(s.input)) {
     b = built_from_file(s.input);
+    if (!s.volume.empty()) {
+      grid = read_volume(s.volume, s.read);
+      check_volume_matches(s.volume, *grid, s.input, b);
+    }
   } else {
+    if (!s.volume.empty())
+      throw Error("--volume is for a hierarchy input; " + s.input + " is a volume itself");
     grid = read_volume(s.input, s.read);
     std::vector<double> isos;
     if (grid->dim == 3) {
@@ -80,6 +115,9 @@ void add_iso_command(CLI::App& app) {
   CLI::App* cmd =
       app.add_subcommand("iso", "Iso-surfaces from a hierarchy (.mlfeh) or a volume (built first)");
   cmd->add_option("input", state->input, "hierarchy (.mlfeh) or volume")->required();
+  cmd->add_option(
+      "--volume", state->volume,
+      "with a hierarchy input: the volume it was built from, so surfaces snap onto it as in convert");
   add_common(cmd, *state);
   cmd->callback([state] { run(*state, false); });
 }

@@ -181,6 +181,25 @@ TEST(Convert, HierarchyRoundTripGivesTheSameSurfaces) {
   EXPECT_EQ(read_bytes(a), read_bytes(b));
 }
 
+// A kept hierarchy plus its volume gives the same snapped surfaces as the one-shot convert;
+// a volume that does not match the hierarchy is refused.
+TEST(Convert, IsoOnAHierarchyWithItsVolumeSnapsLikeConvert) {
+  const std::string h = scratch() + "/vol.mlfeh", a = scratch() + "/vol_a.ply", b = scratch() + "/vol_b.ply";
+  ASSERT_EQ(
+      run("convert " + kSkull + " --iso 3 --max-vertices 6000 --quiet -o " + a + " --hierarchy " + h).status,
+      0);
+  ASSERT_EQ(run("iso " + h + " --iso 3 --quiet --volume " + kSkull + " -o " + b).status, 0);
+  EXPECT_EQ(read_bytes(a), read_bytes(b));
+  const std::string other = std::string(MLFE_SOURCE_DIR) + "/tests/data/mri_small_bigendian.nii";
+  const std::string c = scratch() + "/vol_c.ply";
+  const RunResult r = run("iso " + h + " --iso 3 --quiet --volume " + other + " -o " + c);
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("mri_small_bigendian.nii"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(c));
+  EXPECT_EQ(run("iso " + kSkull + " --iso 3 --quiet --volume " + kSkull + " -o " + c).status, 2);
+  EXPECT_FALSE(fs::exists(c));
+}
+
 // By default the vertices sit on the scan's own iso-surface (trilinear f = iso), not on the
 // approximation's; the triangles are the same.
 TEST(Convert, SnapPutsTheAssetOnTheScansSurface) {
