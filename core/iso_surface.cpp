@@ -5,10 +5,12 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <unordered_map>
 
 #include "core/check.h"
+#include "core/edge_map.h"
 #include "core/hierarchical_basis.h"
 #include "core/p1_element.h"
 
@@ -199,23 +201,23 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     double t;
   };
   std::vector<OutVertex> verts;
-  std::unordered_map<std::uint64_t, std::uint32_t> index;
-  index.reserve(cut.size() * 2);
+  EdgeMap on_edge;  // cut edge -> output vertex (flat hash: this runs once per cut edge)
+  on_edge.reserve(cut.size() * 2);
+  std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;  // rare: u == iso at a vertex
   auto out_vertex = [&](VertexId a, VertexId b) -> std::uint32_t {
     // a above, b at or below.
     const double ua = u[a.value], ub = u[b.value];
-    std::uint64_t key;
-    double t;
-    if (ub == iso) {
-      key = (std::uint64_t(b.value) << 32) | b.value;  // snapped to b; edge keys never have lo == hi
-      t = 1.0;
-    } else {
-      key = EdgeMap::key(a, b);
-      t = (ua - iso) / (ua - ub);
+    const auto next = static_cast<std::uint32_t>(verts.size());
+    if (ub == iso) {  // the cut is the vertex b itself, shared by every edge through it
+      auto [it, inserted] = on_vertex.emplace(b.value, next);
+      if (inserted) verts.push_back({a, b, 1.0});
+      return it->second;
     }
-    auto [it, inserted] = index.emplace(key, static_cast<std::uint32_t>(verts.size()));
-    if (inserted) verts.push_back({a, b, t});
-    return it->second;
+    const VertexId found = on_edge.find(a, b);
+    if (found.valid()) return found.value;
+    on_edge.insert(a, b, VertexId(next));
+    verts.push_back({a, b, (ua - iso) / (ua - ub)});
+    return next;
   };
 
   TriangleMesh mesh;
@@ -224,15 +226,17 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     const auto& c = h.cell(e);
     int up[4], dn[4], nu = 0, nd = 0;
     for (int i = 0; i < 4; ++i) (u[c[i].value] > iso ? up[nu++] : dn[nd++]) = i;
-    std::vector<std::uint32_t> poly;
+    std::array<std::uint32_t, 4> poly{};
+    int corners = 3;
     if (nu == 1) {
-      for (int k = 0; k < 3; ++k) poly.push_back(out_vertex(c[up[0]], c[dn[k]]));
+      for (int k = 0; k < 3; ++k) poly[k] = out_vertex(c[up[0]], c[dn[k]]);
     } else if (nu == 3) {
-      for (int k = 0; k < 3; ++k) poly.push_back(out_vertex(c[up[k]], c[dn[0]]));
+      for (int k = 0; k < 3; ++k) poly[k] = out_vertex(c[up[k]], c[dn[0]]);
     } else {
       // Quadrilateral in cyclic order around the tetrahedron.
       poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]), out_vertex(c[up[1]], c[dn[1]]),
               out_vertex(c[up[1]], c[dn[0]])};
+      corners = 4;
     }
     const P1Element<3> el = element_of(h, e);
     V3 g{0, 0, 0};
@@ -253,43 +257,46 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       mesh.triangles.push_back({i0, i1, i2});
     };
     emit(poly[0], poly[1], poly[2]);
-    if (poly.size() == 4) emit(poly[0], poly[2], poly[3]);
+    if (corners == 4) emit(poly[0], poly[2], poly[3]);
   }
 
   // 3. Vertex normals at the mesh vertices that carry output vertices: volume-weighted mean of
   // the gradients of all tetrahedra around them. Those tetrahedra have a vertex value inside
   // [lo, hi] of the needed vertices, so the same range walk finds all of them.
-  std::vector<std::uint8_t> needed(h.vertex_count(), 0);
+  constexpr std::uint32_t kNotNeeded = ~std::uint32_t(0);
+  std::vector<std::uint32_t> slot(h.vertex_count(), kNotNeeded);  // needed vertex -> acc slot
+  std::vector<std::array<double, 4>> acc;                         // gradient sum, volume sum
   double nlo = 1e300, nhi = -1e300;
   for (const auto& ov : verts)
     for (VertexId v : {ov.a, ov.b}) {
-      needed[v.value] = 1;
+      if (slot[v.value] != kNotNeeded) continue;
+      slot[v.value] = static_cast<std::uint32_t>(acc.size());
+      acc.push_back({0, 0, 0, 0});
       nlo = std::min(nlo, u[v.value]);
       nhi = std::max(nhi, u[v.value]);
     }
-  std::unordered_map<std::uint32_t, std::array<double, 4>> acc;  // gradient sum, volume sum
   if (!verts.empty()) {
     walk_level(
         h, level, [&](ElemId e) { return double(hi_[e.value]) >= nlo && double(lo_[e.value]) <= nhi; },
         [&](ElemId e) {
           const auto& c = h.cell(e);
           bool any = false;
-          for (VertexId v : c) any |= needed[v.value] != 0;
+          for (VertexId v : c) any |= slot[v.value] != kNotNeeded;
           if (!any) return;
           const P1Element<3> el = element_of(h, e);
           V3 g{0, 0, 0};
           for (int i = 0; i < 4; ++i)
             for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
           for (VertexId v : c)
-            if (needed[v.value]) {
-              auto& s = acc[v.value];
+            if (slot[v.value] != kNotNeeded) {
+              auto& s = acc[slot[v.value]];
               for (int k = 0; k < 3; ++k) s[k] += el.measure * g[k];
               s[3] += el.measure;
             }
         });
   }
   auto vertex_gradient = [&](VertexId v) {
-    const auto& s = acc[v.value];
+    const auto& s = acc[slot[v.value]];
     return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
   };
 
