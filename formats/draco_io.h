@@ -19,7 +19,9 @@ struct DracoOptions {
   /// Octahedral quantization bits for normals (Draco accepts 1..30; 10 is visually lossless).
   int normal_bits = 10;
   /// Draco speed 0 (smallest) .. 10 (fastest, sequential coding), for encoder and decoder.
-  int speed = 5;
+  /// 3 is Draco's own default (draco_encoder -cl 7): its predictive edgebreaker made the
+  /// skull's simplified surfaces 25 % smaller than speed 5 did, at a still fast decode.
+  int speed = 3;
   /// Quantization box shared by every mesh of a scene: the cube [box_min, box_min + box_range].
   /// Every position must lie inside it. box_range <= 0 means "use the mesh's own bounding box".
   std::array<float, 3> box_min{0.0f, 0.0f, 0.0f};
