@@ -13,15 +13,18 @@ struct SimplifyOptions {
   double tolerance = 0;                   ///< bound on the distance of input vertices, mesh units; > 0
   std::size_t min_triangles = 0;          ///< stop once the mesh has this many triangles or fewer
   double max_normal_turn_degrees = 45.0;  ///< a collapse may not turn a face normal further
+  bool flip_edges = true;  ///< also flip edges toward valence 6 (smaller Draco files, fewer triangles)
 };
 
 struct SimplifyStats {
   std::size_t passes = 0;     ///< rounds of independent collapses
   std::size_t collapses = 0;  ///< vertices removed
+  std::size_t flips = 0;      ///< valence-improving edge flips
 };
 
 /// Simplifies `mesh` by half-edge collapses (a vertex moves onto a neighbour, so every output
-/// position is an input position), cheapest quadric error first (Garland & Heckbert 1997).
+/// position is an input position), cheapest quadric error first (Garland & Heckbert 1997),
+/// and edge flips that make valences more regular (under the same checks).
 ///
 /// Contract:
 /// - Bound: every input vertex used by a triangle lies within `opts.tolerance` of the output

@@ -262,6 +262,37 @@ TEST(SurfaceSimplification, TriangleSoupsDoNotBreakIt) {
   }
 }
 
+TEST(SurfaceSimplification, FlipsMakeValencesMoreRegular) {
+  const TriangleMesh in = torus(96, 48, 30.0, 8.0);
+  auto valence_spread = [](const TriangleMesh& m) {  // mean |valence - 6| (closed mesh)
+    std::vector<int> valence(m.positions.size(), 0);
+    for (const auto& [e, n] : edge_use(m)) {
+      ++valence[e.first];
+      ++valence[e.second];
+    }
+    double sum = 0;
+    for (int v : valence) sum += std::abs(v - 6);
+    return sum / double(valence.size());
+  };
+  SimplifyOptions o;
+  o.tolerance = 0.4;
+  SimplifyStats with_stats, without_stats;
+  const TriangleMesh with = simplify_within(in, o, &with_stats);
+  o.flip_edges = false;
+  const TriangleMesh without = simplify_within(in, o, &without_stats);
+  EXPECT_GT(with_stats.flips, 0u);
+  EXPECT_EQ(without_stats.flips, 0u);
+  std::printf("valence spread %.3f with flips (%zu triangles), %.3f without (%zu)\n", valence_spread(with),
+              with.triangle_count(), valence_spread(without), without.triangle_count());
+  EXPECT_LT(valence_spread(with), valence_spread(without));
+  EXPECT_LE(with.triangle_count(), without.triangle_count());
+  for (const TriangleMesh* m : {&with, &without}) {
+    EXPECT_LE(one_sided_hausdorff(in, *m), 0.4 * (1 + 1e-6));
+    expect_closed_oriented_manifold(*m);
+    EXPECT_EQ(euler_characteristic(*m), 0);
+  }
+}
+
 TEST(SurfaceSimplification, RejectsBadInput) {
   const TriangleMesh in = icosphere(1, 1.0f);
   EXPECT_THROW(simplify(in, 0.0), Error);
