@@ -19,8 +19,9 @@ int& thread_option() {
 }  // namespace mlfe::cli
 
 int main(int argc, char** argv) {
-  CLI::App app{"mlfe: adaptive multilevel finite-element approximation of volume data "
-               "(hierarchies, iso-surfaces, glTF/Draco assets)"};
+  CLI::App app{
+      "mlfe: adaptive multilevel finite-element approximation of volume data "
+      "(hierarchies, iso-surfaces, glTF/Draco assets)"};
   app.set_version_flag("--version", std::string("mlfe ") + MLFE_VERSION);
   app.add_option("--threads", mlfe::cli::thread_option(),
                  "worker threads (0: all cores); output does not depend on it")
@@ -40,7 +41,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // CLI11 prints the message (or --help / --version) and returns its own error numbers
+    // (105, 106, ...); the documented contract is 1 for every usage error.
+    return app.exit(e) == 0 ? 0 : 1;
   } catch (const mlfe::Error& e) {
     std::fprintf(stderr, "mlfe: %s\n", e.what());
     return 2;

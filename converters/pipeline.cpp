@@ -89,7 +89,7 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "--snap", p.snap,
          "move surface vertices onto the volume's own iso-surface, at most this many voxels "
          "along the approximation's gradient (0: keep the approximation's surface; needs the volume)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0.0, 8.0))
       ->capture_default_str();
   cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();

@@ -89,6 +89,8 @@ void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3
   const std::vector<V3> original = local;
   const V3 hi = f.extent();
   const double step = f.resolution() / 4;
+  // No crossing lies farther than the domain's diagonal: a larger reach only costs samples.
+  reach = std::min(reach, std::sqrt(dot(hi, hi)));
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, local.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {

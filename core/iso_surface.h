@@ -31,6 +31,8 @@ struct IsoOptions {
   /// asset carries the scan's surface instead of the approximation's, at the same triangles.
   /// A vertex with no crossing in reach, or whose move would leave the domain or flip one of
   /// its triangles, stays where u put it. Normals stay the paper's (gradients of u).
+  /// Cost: up to 8 * snap_distance / resolution samples of f per vertex (a reach beyond the
+  /// domain's diagonal is cut to it).
   const Field* snap_to = nullptr;
   double snap_distance = 0;
 };

@@ -200,6 +200,23 @@ TEST(Convert, IsoOnAHierarchyWithItsVolumeSnapsLikeConvert) {
   EXPECT_FALSE(fs::exists(c));
 }
 
+// Usage errors (unknown options, values out of range) exit with 1 as documented, --help and
+// --version with 0, and write nothing.
+TEST(Convert, UsageErrorsExitWith1) {
+  const std::string out = scratch() + "/usage.glb";
+  for (const std::string& args :
+       {"convert " + kSkull + " --iso 3 --snap 100 -o " + out,
+        "convert " + kSkull + " --iso 3 --simplify -1 -o " + out,
+        "convert " + kSkull + " --iso 3 --bogus -o " + out, std::string("frobnicate"), std::string()}) {
+    const RunResult r = run(args);
+    EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(out)) << args;
+  }
+  EXPECT_EQ(run("--help").status, 0);
+  EXPECT_EQ(run("--version").status, 0);
+  EXPECT_EQ(run("convert --help").status, 0);
+}
+
 // By default the vertices sit on the scan's own iso-surface (trilinear f = iso), not on the
 // approximation's; the triangles are the same.
 TEST(Convert, SnapPutsTheAssetOnTheScansSurface) {
