@@ -42,6 +42,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <initializer_list>
 #include <limits>
 #include <string>
 #include <vector>
@@ -114,6 +115,11 @@ struct Neighbour {
   int faces;
 };
 
+// Some edge to a neighbour lies in one face only.
+bool on_boundary(const std::vector<Neighbour>& n) {
+  return std::any_of(n.begin(), n.end(), [](const Neighbour& x) { return x.faces == 1; });
+}
+
 // Per-task scratch, reused across the vertices of a chunk.
 struct Scratch {
   std::vector<Neighbour> n0, n1;
@@ -145,7 +151,7 @@ class Simplifier {
 
     quadric_.resize(nv);
     for (const auto& f : faces_) {
-      const Vec3 n = (pos_[f[1]] - pos_[f[0]]).cross(pos_[f[2]] - pos_[f[0]]);
+      const Vec3 n = normal_of(f);
       const double len = n.norm();
       if (!(len > 0)) continue;
       const Vec3 u = n / len;
@@ -331,7 +337,7 @@ class Simplifier {
       for (Index v = 0; v < Index(pos_.size()); ++v) {
         neighbours(v, n);
         valence[v] = int(n.size());
-        boundary[v] = std::any_of(n.begin(), n.end(), [](const Neighbour& x) { return x.faces == 1; });
+        boundary[v] = on_boundary(n);
       }
       const Index stamp = ++stamp_counter_;
       face_stamp_.resize(faces_.size(), 0);
@@ -372,15 +378,18 @@ class Simplifier {
             exists = contains(faces_[*h], d);
           if (exists) continue;
           const std::array<Index, 3> nf{a, d, c}, ng{b, c, d};
-          if (!flip_keeps_shape(faces_[f], fg, nf, ng)) continue;
+          const Vec3 nf_old = normal_of(faces_[f]), ng_old = normal_of(fg);
+          if (!keeps_shape(nf, kNone, kNone, {nf_old, ng_old}) ||
+              !keeps_shape(ng, kNone, kNone, {nf_old, ng_old}))
+            continue;
           bool bound = true;
           for (Index face : {f, g})
             for (const Index* p = fp_.begin(face); p != fp_.end(face) && bound; ++p)
-              bound = std::min(tri_distance2(*p, nf), tri_distance2(*p, ng)) <= tol2_;
+              bound = std::min(distance2(*p, nf), distance2(*p, ng)) <= tol2_;
           if (!bound) continue;
           for (Index face : {f, g})
             for (const Index* p = fp_.begin(face); p != fp_.end(face); ++p)
-              owner_[*p] = tri_distance2(*p, nf) <= tri_distance2(*p, ng) ? f : g;
+              owner_[*p] = distance2(*p, nf) <= distance2(*p, ng) ? f : g;
           faces_[f] = nf;
           faces_[g] = ng;
           for (Index v : {a, b, c, d}) {
@@ -396,27 +405,24 @@ class Simplifier {
     }
   }
 
-  double tri_distance2(Index point, const std::array<Index, 3>& t) const {
-    return point_triangle_distance2(pos_[point], pos_[t[0]], pos_[t[1]], pos_[t[2]]);
+  // Position of vertex v with v0 read as v1: the geometry after collapsing v0 onto v1 (kNone
+  // for the current geometry).
+  const Vec3& at(Index v, Index v0 = kNone, Index v1 = kNone) const { return pos_[v == v0 ? v1 : v]; }
+
+  // Normal (twice the area) of triangle t, with v0 read as v1.
+  Vec3 normal_of(const std::array<Index, 3>& t, Index v0 = kNone, Index v1 = kNone) const {
+    return (at(t[1], v0, v1) - at(t[0], v0, v1)).cross(at(t[2], v0, v1) - at(t[0], v0, v1));
   }
 
-  Vec3 normal_of(const std::array<Index, 3>& t) const {
-    return (pos_[t[1]] - pos_[t[0]]).cross(pos_[t[2]] - pos_[t[0]]);
-  }
-
-  // The two new faces are not degenerate and turn neither old normal past the limit.
-  bool flip_keeps_shape(const std::array<Index, 3>& f, const std::array<Index, 3>& g,
-                        const std::array<Index, 3>& nf, const std::array<Index, 3>& ng) const {
-    const Vec3 old_n[2] = {normal_of(f), normal_of(g)};
-    for (const auto* t : {&nf, &ng}) {
-      const Vec3 n = normal_of(*t);
-      const double scale = std::max({(pos_[(*t)[1]] - pos_[(*t)[0]]).squaredNorm(),
-                                     (pos_[(*t)[2]] - pos_[(*t)[0]]).squaredNorm(),
-                                     (pos_[(*t)[2]] - pos_[(*t)[1]]).squaredNorm()});
-      if (!(n.norm() > 1e-10 * scale)) return false;
-      for (const Vec3& o : old_n)
-        if (n.dot(o) < cos_max_turn_ * n.norm() * o.norm()) return false;
-    }
+  // Triangle t (v0 read as v1) is not degenerate and its normal is within the turn limit of
+  // each of `old` (the normals of the faces it replaces).
+  bool keeps_shape(const std::array<Index, 3>& t, Index v0, Index v1, std::initializer_list<Vec3> old) const {
+    const Vec3 &a = at(t[0], v0, v1), &b = at(t[1], v0, v1), &c = at(t[2], v0, v1);
+    const Vec3 n = normal_of(t, v0, v1);
+    const double scale = std::max({(b - a).squaredNorm(), (c - a).squaredNorm(), (c - b).squaredNorm()});
+    if (!(n.norm() > 1e-10 * scale)) return false;
+    for (const Vec3& o : old)
+      if (n.dot(o) < cos_max_turn_ * n.norm() * o.norm()) return false;
     return true;
   }
 
@@ -502,40 +508,42 @@ class Simplifier {
     return 0;
   }
 
-  // Neighbours v0 may move onto, by quadric cost (ties by squared length, then index).
-  void ordered_targets(Index v0, Scratch& s, bool& boundary0) const {
+  // Calls each(cost, w) for every neighbour w that v0 may move onto (cost: the quadric error
+  // with a tiny length term breaking ties); returns whether v0 is on the boundary. Fills s.n0.
+  template <class Each>
+  bool for_each_target(Index v0, Scratch& s, Each&& each) const {
     neighbours(v0, s.n0);
-    boundary0 = false;
-    for (const auto& x : s.n0) boundary0 = boundary0 || x.faces == 1;
-    s.order.clear();
+    const bool boundary0 = on_boundary(s.n0);
     for (const auto& x : s.n0) {
       if (locked_[x.v]) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
-      const double cost = eval_sum(quadric_[v0], quadric_[x.v], pos_[x.v]);
-      s.order.push_back({cost + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(), x.v});
+      each(eval_sum(quadric_[v0], quadric_[x.v], pos_[x.v]) + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(),
+           x.v);
     }
+    return boundary0;
+  }
+
+  // Neighbours v0 may move onto, cheapest first (ties by index).
+  bool ordered_targets(Index v0, Scratch& s) const {
+    s.order.clear();
+    const bool boundary0 = for_each_target(v0, s, [&](double cost, Index w) {
+      s.order.push_back({cost, w});
+    });
     std::sort(s.order.begin(), s.order.end());
+    return boundary0;
   }
 
   // The first key of ordered_targets(), without sorting.
   double cheapest(Index v0, Scratch& s) const {
     if (locked_[v0] || vf_.size(v0) == 0) return kNoKey;
-    neighbours(v0, s.n0);
-    bool boundary0 = false;
-    for (const auto& x : s.n0) boundary0 = boundary0 || x.faces == 1;
     double best = kNoKey;
-    for (const auto& x : s.n0) {
-      if (locked_[x.v] || (boundary0 && x.faces != 1)) continue;
-      const double cost = eval_sum(quadric_[v0], quadric_[x.v], pos_[x.v]);
-      best = std::min(best, cost + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm());
-    }
+    for_each_target(v0, s, [&](double cost, Index) { best = std::min(best, cost); });
     return best;
   }
 
   // The cheapest neighbour v0 may move onto under all checks, or kNone.
   Index find_target(Index v0, Scratch& s) const {
-    bool boundary0 = false;
-    ordered_targets(v0, s, boundary0);
+    const bool boundary0 = ordered_targets(v0, s);
     for (const auto& c : s.order)
       if (legal(v0, c.second, boundary0, s)) return c.second;
     return kNone;
@@ -575,8 +583,7 @@ class Simplifier {
   bool legal(Index v0, Index v1, bool boundary0, Scratch& s) const {
     const int edge_faces = faces_on_edge(s.n0, v1);
     neighbours(v1, s.n1);
-    bool boundary1 = false;
-    for (const auto& x : s.n1) boundary1 = boundary1 || x.faces == 1;
+    const bool boundary1 = on_boundary(s.n1);
     // Link condition: the common neighbours are exactly the vertices opposite the edge, and
     // two boundary vertices joined by an interior edge would pinch the surface.
     if (boundary0 && boundary1 && edge_faces != 1) return false;
@@ -599,17 +606,7 @@ class Simplifier {
       if (edge_faces == 2 && faces_on_edge(s.n1, x) > 0 && faces_on_edge(s.n1, y) > 0)
         for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
           if (contains(faces_[*g], x) && contains(faces_[*g], y)) return false;
-      Vec3 p[3], q[3];
-      for (int k = 0; k < 3; ++k) {
-        p[k] = pos_[face[k]];
-        q[k] = face[k] == v0 ? pos_[v1] : p[k];
-      }
-      const Vec3 before = (p[1] - p[0]).cross(p[2] - p[0]);
-      const Vec3 after = (q[1] - q[0]).cross(q[2] - q[0]);
-      const double scale =
-          std::max({(q[1] - q[0]).squaredNorm(), (q[2] - q[0]).squaredNorm(), (q[2] - q[1]).squaredNorm()});
-      if (!(after.norm() > 1e-10 * scale)) return false;
-      if (after.dot(before) < cos_max_turn_ * after.norm() * before.norm()) return false;
+      if (!keeps_shape(face, v0, v1, {normal_of(face)})) return false;
       s.targets.push_back(*f);
     }
     for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
@@ -623,19 +620,19 @@ class Simplifier {
     return true;
   }
 
-  bool close_to(Index point, Index f, Index v0, Index v1) const {
-    const auto& t = faces_[f];
-    return point_triangle_distance2(pos_[point], pos_[t[0] == v0 ? v1 : t[0]], pos_[t[1] == v0 ? v1 : t[1]],
-                                    pos_[t[2] == v0 ? v1 : t[2]]) <= tol2_;
+  // Squared distance from input vertex `point` to triangle t, with v0 read as v1 (the
+  // geometry after a collapse; kNone for none).
+  double distance2(Index point, const std::array<Index, 3>& t, Index v0 = kNone, Index v1 = kNone) const {
+    return point_triangle_distance2(pos_[point], at(t[0], v0, v1), at(t[1], v0, v1), at(t[2], v0, v1));
   }
 
   // Some target face lies within the tolerance of the point (v0 read as v1); `first` (a
   // target or kNone) is tried first, as the likeliest.
   bool within(Index point, Index first, Index v0, Index v1, const std::vector<Index>& targets) const {
-    if (first != kNone && close_to(point, first, v0, v1)) return true;
+    if (first != kNone && distance2(point, faces_[first], v0, v1) <= tol2_) return true;
     for (Index f : targets) {
       if (f == first) continue;
-      if (close_to(point, f, v0, v1)) return true;
+      if (distance2(point, faces_[f], v0, v1) <= tol2_) return true;
     }
     return false;
   }
@@ -646,11 +643,7 @@ class Simplifier {
     double best = std::numeric_limits<double>::infinity();
     Index best_face = kNone;
     for (Index f : targets) {
-      const auto& t = faces_[f];
-      const Vec3& a = pos_[t[0] == v0 ? v1 : t[0]];
-      const Vec3& b = pos_[t[1] == v0 ? v1 : t[1]];
-      const Vec3& c = pos_[t[2] == v0 ? v1 : t[2]];
-      const double d = point_triangle_distance2(pos_[point], a, b, c);
+      const double d = distance2(point, faces_[f], v0, v1);
       if (d < best || (d == best && f < best_face)) {
         best = d;
         best_face = f;
@@ -701,27 +694,6 @@ class Simplifier {
 };
 
 }  // namespace
-
-void compute_area_weighted_normals(TriangleMesh& mesh) {
-  // Cross products are twice the area times the unit normal: summing them weights by area.
-  std::vector<Vec3> sum(mesh.positions.size(), Vec3::Zero());
-  for (const auto& t : mesh.triangles) {
-    MLFE_CHECK(t[0] < sum.size() && t[1] < sum.size() && t[2] < sum.size());
-    const auto &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
-    const Vec3 u(double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]);
-    const Vec3 v(double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]);
-    const Vec3 n = u.cross(v);
-    for (auto i : t) sum[i] += n;
-  }
-  mesh.normals.resize(mesh.positions.size());
-  for (std::size_t i = 0; i < sum.size(); ++i) {
-    const double len = sum[i].norm();
-    if (len > 0)
-      mesh.normals[i] = {float(sum[i].x() / len), float(sum[i].y() / len), float(sum[i].z() / len)};
-    else
-      mesh.normals[i] = {0.0f, 0.0f, 1.0f};
-  }
-}
 
 TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts, SimplifyStats* stats) {
   if (!(opts.tolerance > 0) || !std::isfinite(opts.tolerance))

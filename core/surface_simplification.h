@@ -45,8 +45,4 @@ struct SimplifyStats {
 TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts,
                              SimplifyStats* stats = nullptr);
 
-/// Area-weighted vertex normals from the geometry (unit length; (0, 0, 1) for a vertex whose
-/// triangles have no area). Replaces `mesh.normals`.
-void compute_area_weighted_normals(TriangleMesh& mesh);
-
 }  // namespace mlfe

@@ -10,11 +10,15 @@ namespace mlfe {
 
 struct TriangleMesh {
   std::vector<std::array<float, 3>> positions;
-  std::vector<std::array<float, 3>> normals;          ///< empty, or one per position
+  std::vector<std::array<float, 3>> normals;            ///< empty, or one per position
   std::vector<std::array<std::uint32_t, 3>> triangles;  ///< counter-clockwise seen from the normal side
 
   std::size_t vertex_count() const { return positions.size(); }
   std::size_t triangle_count() const { return triangles.size(); }
 };
+
+/// Area-weighted vertex normals from the geometry (unit length; (0, 0, 1) for a vertex whose
+/// triangles have no area). Replaces `mesh.normals`. Triangle indices must be in range (CHECK).
+void compute_area_weighted_normals(TriangleMesh& mesh);
 
 }  // namespace mlfe

@@ -15,7 +15,6 @@
 #include <mutex>
 
 #include "core/error.h"
-#include "core/surface_simplification.h"
 #include "formats/atomic_file.h"
 #include "formats/file_names.h"
 
