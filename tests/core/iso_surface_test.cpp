@@ -25,6 +25,10 @@ ScalarGrid grid3(int n, double spacing, const std::function<double(double, doubl
   return g;
 }
 
+double distance_to(const std::array<double, 3>& c, double x, double y, double z) {
+  return std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
+}
+
 // Closed, consistently oriented 2-manifold: every directed edge once, its reverse once.
 void expect_closed_manifold(const TriangleMesh& m, int euler) {
   std::map<std::pair<std::uint32_t, std::uint32_t>, int> directed;
@@ -59,9 +63,7 @@ TEST(IsoSurface, SphereIsAccurateClosedAndOrientedOutward) {
   // A bright ball: f = 20 - distance to the centre (voxels of 1 mm).
   const std::array<double, 3> c{20.3, 19.6, 21.1};
   const double R = 11.0;
-  const auto g = grid3(41, 1.0, [&](double x, double y, double z) {
-    return 20.0 - std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
-  });
+  const auto g = grid3(41, 1.0, [&](double x, double y, double z) { return 20.0 - distance_to(c, x, y, z); });
   GridField f(g);
   ApproximationOptions o;
   o.target_rms = 0.02;
@@ -206,7 +208,7 @@ TEST(IsoSurface, SnapMovesVerticesOntoTheDataSurfaceWithoutFlips) {
   const double R = 9.5;
   const auto g = grid3(41, 1.0, [&](double x, double y, double z) {
     // Not a distance field: a radial profile plus ripples u cannot follow at this budget.
-    const double r = std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
+    const double r = distance_to(c, x, y, z);
     return 100.0 / (1.0 + std::exp(r - R)) + 4.0 * std::sin(0.9 * x) * std::cos(0.7 * y);
   });
   GridField f(g);
@@ -241,8 +243,8 @@ TEST(IsoSurface, SnapMovesVerticesOntoTheDataSurfaceWithoutFlips) {
       on_surface += e1 < 1e-3;  // float positions: f changes by up to ~25 per voxel here
     }
   }
-  std::printf("snap: %zu of %zu vertices moved (hierarchy %zu, stop %s), mean |f - iso| %.3f -> %.4f\n", moved,
-              plain.positions.size(), a.hierarchy.vertex_count(), a.stop_reason.c_str(),
+  std::printf("snap: %zu of %zu vertices moved (hierarchy %zu, stop %s), mean |f - iso| %.3f -> %.4f\n",
+              moved, plain.positions.size(), a.hierarchy.vertex_count(), a.stop_reason.c_str(),
               plain_err / plain.positions.size(), snapped_err / plain.positions.size());
   EXPECT_GT(moved, plain.positions.size() * 8 / 10);
   EXPECT_GE(on_surface, moved * 99 / 100);
@@ -316,7 +318,7 @@ TEST(IsoAwareRefinement, PullsTheSurfaceOntoTheDataWhereThePlainTargetDoesNot) {
   const std::array<double, 3> c{16.2, 15.7, 16.6};
   const double R = 9.0;
   const auto g = grid3(33, 1.0, [&](double x, double y, double z) {
-    const double r = std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1]) * (y - c[1]) + (z - c[2]) * (z - c[2]));
+    const double r = distance_to(c, x, y, z);
     return 100.0 * std::tanh((R - r) / 1.5);
   });
   GridField f(g);
