@@ -144,6 +144,10 @@ class Simplifier {
     for (const auto& f : faces_)
       for (Index v : f)
         if (!pos_[v].allFinite()) throw Error("simplification: non-finite vertex position");
+    if (!mesh.normals.empty()) {
+      if (mesh.normals.size() != nv) throw Error("simplification: the mesh has normals for some vertices only");
+      normals_ = mesh.normals;
+    }
     face_alive_.assign(faces_.size(), 1);
     alive_faces_ = faces_.size();
     tol2_ = opts.tolerance * opts.tolerance;
@@ -662,17 +666,22 @@ class Simplifier {
       if (index[v] != kNone) {
         index[v] = Index(out.positions.size());
         out.positions.push_back({float(pos_[v].x()), float(pos_[v].y()), float(pos_[v].z())});
+        if (!normals_.empty()) out.normals.push_back(normals_[v]);
       }
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
         out.triangles.push_back({index[faces_[f][0]], index[faces_[f][1]], index[faces_[f][2]]});
-    compute_area_weighted_normals(out);
+    // Every output vertex is an input vertex, so its input normal (for iso-surfaces the data's
+    // gradient there) still holds; it is closer to the data's surface normal than one averaged
+    // from the coarser triangles.
+    if (normals_.empty()) compute_area_weighted_normals(out);
     return out;
   }
 
   SimplifyOptions opts_;
   double tol2_ = 0, cos_max_turn_ = 0;
   std::vector<Vec3> pos_;
+  std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
   std::vector<uint8_t> face_alive_, locked_, dirty_, stuck_;
   std::vector<uint8_t> screened_;                 // passed the full checks since its last key

@@ -36,12 +36,15 @@ struct SimplifyStats {
 ///   only move along boundary edges), and vertices on non-manifold edges or fans never move.
 ///   No collapse turns a face normal by more than `opts.max_normal_turn_degrees` or makes a
 ///   face degenerate. Orientation is kept.
-/// - Triangles with a repeated index are dropped first. Input normals are ignored; output
-///   normals are area-weighted from the output geometry. Output vertices and triangles keep
-///   their input order (unused vertices dropped).
+/// - Triangles with a repeated index are dropped first. Output vertices keep their input
+///   normals when the input has one per vertex (iso-surfaces: the data's gradient, more
+///   faithful than normals averaged from the coarser triangles); without input normals they
+///   are area-weighted from the output geometry. Output vertices and triangles keep their
+///   input order (unused vertices dropped).
 /// - Deterministic: the same input and options give identical output for any thread count.
-/// - Throws mlfe::Error for a tolerance that is not positive and finite, an index out of range
-///   or a non-finite position used by a triangle.
+/// - Throws mlfe::Error for a tolerance that is not positive and finite, an index out of range,
+///   a non-finite position used by a triangle, or a normal count that is neither 0 nor one per
+///   vertex.
 TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts,
                              SimplifyStats* stats = nullptr);
 

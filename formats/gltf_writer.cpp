@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <optional>
 
 #include "core/error.h"
 #include "formats/atomic_file.h"
@@ -93,17 +94,9 @@ Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std:
     out.triangles.push_back(t);
   }
 
-  // Area-weighted face normals: the fallback for missing or zero normals.
-  std::vector<std::array<double, 3>> face_sum(n, {0.0, 0.0, 0.0});
-  for (const auto& t : out.triangles) {
-    const auto &a = out.positions[t[0]], &b = out.positions[t[1]], &c = out.positions[t[2]];
-    const double u[3] = {double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]};
-    const double v[3] = {double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]};
-    const double cr[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
-    for (auto vi : t)
-      for (int k = 0; k < 3; ++k) face_sum[vi][k] += cr[k];
-  }
   // The rotation part (1000*m) maps normals; it is orthonormal, so no inverse transpose needed.
+  // Missing or zero normals fall back to the area-weighted normals of the converted triangles.
+  std::optional<TriangleMesh> geometric;
   out.normals.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     std::array<double, 3> v{0.0, 0.0, 0.0};
@@ -111,16 +104,18 @@ Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std:
       const auto& q = in.normals[i];
       for (int r = 0; r < 3; ++r) v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
     }
-    double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    if (!(len > 1e-12) || !std::isfinite(len)) {
-      v = face_sum[i];
-      len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (len > 1e-12 && std::isfinite(len)) {
+      for (int k = 0; k < 3; ++k) out.normals[i][k] = float(v[k] / len);
+      continue;
     }
-    if (!(len > 0) || !std::isfinite(len)) {
-      v = {0.0, 1.0, 0.0};  // unreferenced or fully degenerate vertex: any unit vector is valid
-      len = 1.0;
+    if (!geometric) {
+      geometric.emplace();
+      geometric->positions = out.positions;
+      geometric->triangles = out.triangles;
+      compute_area_weighted_normals(*geometric);
     }
-    for (int k = 0; k < 3; ++k) out.normals[i][k] = float(v[k] / len);
+    out.normals[i] = geometric->normals[i];
   }
   return level;
 }

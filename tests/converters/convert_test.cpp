@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -270,6 +271,32 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   EXPECT_LE(worst, tol * 1.01);
   std::string report;
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
+
+  // The simplified surface keeps the paper's normals: each vertex has the normal the
+  // extracted surface has at the same position.
+  std::map<std::array<float, 3>, std::array<float, 3>> normal_at;
+  for (std::size_t i = 0; i < a.positions.size(); ++i) normal_at[a.positions[i]] = a.normals[i];
+  ASSERT_EQ(b.normals.size(), b.positions.size());
+  for (std::size_t i = 0; i < b.positions.size(); ++i) {
+    const auto it = normal_at.find(b.positions[i]);
+    ASSERT_NE(it, normal_at.end());
+    for (int k = 0; k < 3; ++k) ASSERT_NEAR(b.normals[i][k], it->second[k], 1e-6);
+  }
+  // --normals surface: area-weighted normals of the written triangles instead.
+  const std::string surf = scratch() + "/simp_surface.ply";
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals surface -o " + surf).status, 0);
+  const TriangleMesh c = read_mesh_file(surf);
+  ASSERT_EQ(c.positions, b.positions);
+  TriangleMesh expected = c;
+  compute_area_weighted_normals(expected);
+  double differ = 0;
+  for (std::size_t i = 0; i < c.normals.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_NEAR(c.normals[i][k], expected.normals[i][k], 1e-5);
+      differ = std::max(differ, double(std::abs(c.normals[i][k] - b.normals[i][k])));
+    }
+  EXPECT_GT(differ, 0.05);  // the two kinds are really different
+  EXPECT_NE(run("convert " + common + " --normals flat -o " + surf).status, 0);
 }
 
 // Several surfaces are simplified at once, each in a fresh process here: OpenMesh's global log

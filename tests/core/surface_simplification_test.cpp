@@ -293,6 +293,33 @@ TEST(SurfaceSimplification, FlipsMakeValencesMoreRegular) {
   }
 }
 
+TEST(SurfaceSimplification, KeepsTheInputNormalsOfSurvivingVertices) {
+  // Normals that are not the geometry's (tilted away from the radial direction by a
+  // vertex-dependent angle), so a recomputed normal cannot pass for a kept one.
+  TriangleMesh in = icosphere(4, 50.0f);
+  for (std::size_t i = 0; i < in.normals.size(); ++i) {
+    auto& n = in.normals[i];
+    const float t = 0.3f * float(i % 7) / 7.0f;
+    n = {n[0] + t, n[1] - 0.5f * t, n[2]};
+    const float len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (auto& c : n) c /= len;
+  }
+  std::map<std::array<float, 3>, std::array<float, 3>> normal_at;
+  for (std::size_t i = 0; i < in.positions.size(); ++i) normal_at[in.positions[i]] = in.normals[i];
+  const TriangleMesh out = simplify(in, 0.5);
+  ASSERT_LT(out.triangle_count(), in.triangle_count() / 4);
+  ASSERT_EQ(out.normals.size(), out.positions.size());
+  for (std::size_t i = 0; i < out.positions.size(); ++i) ASSERT_EQ(out.normals[i], normal_at.at(out.positions[i]));
+
+  // Without input normals the output's are area-weighted from its own triangles.
+  in.normals.clear();
+  const TriangleMesh bare = simplify(in, 0.5);
+  TriangleMesh expected = bare;
+  compute_area_weighted_normals(expected);
+  ASSERT_FALSE(bare.normals.empty());
+  EXPECT_EQ(bare.normals, expected.normals);
+}
+
 TEST(SurfaceSimplification, RejectsBadInput) {
   const TriangleMesh in = icosphere(1, 1.0f);
   EXPECT_THROW(simplify(in, 0.0), Error);
@@ -304,6 +331,9 @@ TEST(SurfaceSimplification, RejectsBadInput) {
   EXPECT_THROW(simplify(bad, 0.1), Error);
   bad = in;
   bad.positions[3][1] = std::nanf("");
+  EXPECT_THROW(simplify(bad, 0.1), Error);
+  bad = in;
+  bad.normals.pop_back();
   EXPECT_THROW(simplify(bad, 0.1), Error);
   EXPECT_EQ(simplify(TriangleMesh{}, 0.1).triangle_count(), 0u);
 }
