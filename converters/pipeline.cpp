@@ -93,9 +93,10 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->capture_default_str();
   cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
   cmd->add_option("--normals", p.normals,
-                  "vertex normals: gradient (the approximation's gradients, the paper's) or surface "
-                  "(area-weighted from the written triangles; smaller Draco files)")
-      ->check(CLI::IsMember({"gradient", "surface"}))
+                  "vertex normals: gradient (the approximation's gradients, the paper's; kept through "
+                  "--simplify), surface (area-weighted from the written triangles; smaller Draco files) "
+                  "or auto (gradient, surface after --simplify/--decimate)")
+      ->check(CLI::IsMember({"auto", "gradient", "surface"}))
       ->capture_default_str();
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
   cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
@@ -348,7 +349,9 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   if (p.decimate > 0)
     for (auto& s : surfaces)
       if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
-  if (p.normals == "surface")
+  const bool simplified = p.simplify > 0 || p.decimate > 0;
+  const std::string normals = p.normals != "auto" ? p.normals : simplified ? "surface" : "gradient";
+  if (normals == "surface")
     for (auto& s : surfaces) {
       compute_area_weighted_normals(s.mesh);
       for (auto& lod : s.lods) compute_area_weighted_normals(lod);
@@ -374,7 +377,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["iso_values"] = isos;
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
-    o.extras["normals"] = p.normals;
+    o.extras["normals"] = p.decimate > 0 ? "surface" : normals;
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.

@@ -272,31 +272,41 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   std::string report;
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
 
-  // The simplified surface keeps the paper's normals: each vertex has the normal the
-  // extracted surface has at the same position.
+  // --normals gradient: the simplified surface keeps the paper's normals, each vertex has the
+  // normal the extracted surface has at the same position.
+  const std::string grad = scratch() + "/simp_gradient.ply";
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals gradient -o " + grad).status, 0);
+  const TriangleMesh kept = read_mesh_file(grad);
+  ASSERT_EQ(kept.positions, b.positions);
   std::map<std::array<float, 3>, std::array<float, 3>> normal_at;
   for (std::size_t i = 0; i < a.positions.size(); ++i) normal_at[a.positions[i]] = a.normals[i];
-  ASSERT_EQ(b.normals.size(), b.positions.size());
-  for (std::size_t i = 0; i < b.positions.size(); ++i) {
-    const auto it = normal_at.find(b.positions[i]);
+  ASSERT_EQ(kept.normals.size(), kept.positions.size());
+  for (std::size_t i = 0; i < kept.positions.size(); ++i) {
+    const auto it = normal_at.find(kept.positions[i]);
     ASSERT_NE(it, normal_at.end());
-    for (int k = 0; k < 3; ++k) ASSERT_NEAR(b.normals[i][k], it->second[k], 1e-6);
+    for (int k = 0; k < 3; ++k) ASSERT_NEAR(kept.normals[i][k], it->second[k], 1e-6);
   }
-  // --normals surface: area-weighted normals of the written triangles instead.
+  // --normals surface, and the default after --simplify: area-weighted normals of the written
+  // triangles instead.
   const std::string surf = scratch() + "/simp_surface.ply";
   ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals surface -o " + surf).status, 0);
+  EXPECT_EQ(read_bytes(surf), read_bytes(simp));
   const TriangleMesh c = read_mesh_file(surf);
-  ASSERT_EQ(c.positions, b.positions);
+  ASSERT_EQ(c.positions, kept.positions);
   TriangleMesh expected = c;
   compute_area_weighted_normals(expected);
   double differ = 0;
   for (std::size_t i = 0; i < c.normals.size(); ++i)
     for (int k = 0; k < 3; ++k) {
       ASSERT_NEAR(c.normals[i][k], expected.normals[i][k], 1e-5);
-      differ = std::max(differ, double(std::abs(c.normals[i][k] - b.normals[i][k])));
+      differ = std::max(differ, double(std::abs(c.normals[i][k] - kept.normals[i][k])));
     }
   EXPECT_GT(differ, 0.05);  // the two kinds are really different
-  EXPECT_NE(run("convert " + common + " --normals flat -o " + surf).status, 0);
+  // Without simplification the default is the paper's normals.
+  const std::string full_grad = scratch() + "/full_gradient.ply";
+  ASSERT_EQ(run("convert " + common + " --normals gradient -o " + full_grad).status, 0);
+  EXPECT_EQ(read_bytes(full_grad), read_bytes(full));
+  EXPECT_EQ(run("convert " + common + " --normals flat -o " + surf).status, 1);
 }
 
 // Several surfaces are simplified at once, each in a fresh process here: OpenMesh's global log
