@@ -203,6 +203,13 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     double t;
   };
   std::vector<OutVertex> verts;
+  std::vector<V3> local;  // per output vertex: its point on the cut edge, local frame
+  auto add_vertex = [&](VertexId a, VertexId b, double t) {
+    verts.push_back({a, b, t});
+    const auto& pa = h.point(a);
+    const auto& pb = h.point(b);
+    local.push_back({pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1]), pa[2] + t * (pb[2] - pa[2])});
+  };
   EdgeMap on_edge;  // cut edge -> output vertex (flat hash: this runs once per cut edge)
   on_edge.reserve(cut.size() * 2);
   std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;  // rare: u == iso at a vertex
@@ -212,13 +219,13 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     const auto next = static_cast<std::uint32_t>(verts.size());
     if (ub == iso) {  // the cut is the vertex b itself, shared by every edge through it
       auto [it, inserted] = on_vertex.emplace(b.value, next);
-      if (inserted) verts.push_back({a, b, 1.0});
+      if (inserted) add_vertex(a, b, 1.0);
       return it->second;
     }
     const VertexId found = on_edge.find(a, b);
     if (found.valid()) return found.value;
     on_edge.insert(a, b, VertexId(next));
-    verts.push_back({a, b, (ua - iso) / (ua - ub)});
+    add_vertex(a, b, (ua - iso) / (ua - ub));
     return next;
   };
 
@@ -245,16 +252,9 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     for (int i = 0; i < 4; ++i)
       for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
     const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
-    auto local_pos = [&](std::uint32_t i) {
-      const auto& ov = verts[i];
-      const auto& pa = h.point(ov.a);
-      const auto& pb = h.point(ov.b);
-      return V3{pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]),
-                pa[2] + ov.t * (pb[2] - pa[2])};
-    };
     auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
       if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
-      const V3 n = cross(sub(local_pos(i1), local_pos(i0)), sub(local_pos(i2), local_pos(i0)));
+      const V3 n = cross(sub(local[i1], local[i0]), sub(local[i2], local[i0]));
       if (dot(n, want) < 0) std::swap(i1, i2);
       mesh.triangles.push_back({i0, i1, i2});
     };
@@ -302,14 +302,10 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
   };
 
-  // 4. Local positions and gradients of u (interpolated along the cut edge).
-  std::vector<V3> local(verts.size()), grad(verts.size());
+  // 4. Gradients of u at the output vertices (interpolated along the cut edge).
+  std::vector<V3> grad(verts.size());
   for (std::size_t i = 0; i < verts.size(); ++i) {
     const auto& ov = verts[i];
-    const auto& pa = h.point(ov.a);
-    const auto& pb = h.point(ov.b);
-    local[i] = {pa[0] + ov.t * (pb[0] - pa[0]), pa[1] + ov.t * (pb[1] - pa[1]),
-                pa[2] + ov.t * (pb[2] - pa[2])};
     const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
     grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
                (1 - ov.t) * ga[2] + ov.t * gb[2]};
