@@ -349,8 +349,10 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   if (p.decimate > 0)
     for (auto& s : surfaces)
       if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
-  const bool simplified = p.simplify > 0 || p.decimate > 0;
-  const std::string normals = p.normals != "auto" ? p.normals : simplified ? "surface" : "gradient";
+  // --decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
+  const std::string normals = p.decimate > 0 || (p.normals == "auto" && p.simplify > 0) ? "surface"
+                              : p.normals == "auto"                                   ? "gradient"
+                                                                                      : p.normals;
   if (normals == "surface")
     for (auto& s : surfaces) {
       compute_area_weighted_normals(s.mesh);
@@ -377,7 +379,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["iso_values"] = isos;
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
-    o.extras["normals"] = p.decimate > 0 ? "surface" : normals;
+    o.extras["normals"] = normals;
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.
