@@ -9,7 +9,7 @@
 //   iso_tools_bench mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%] [--surface-tolerance S]
 //       The in-process mlfe convert pipeline: read, approximate<3> with iso-aware refinement
 //       (iso_values = {ISO}), IsoExtractor::extract on the finest level.
-//   iso_tools_bench extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME SNAP_VOXELS]]
+//   iso_tools_bench extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME SNAP_VOXELS [input|optimal]]]
 //       Extraction only, from a stored hierarchy (IsoExtractor construction and extract timed
 //       separately; extract repeated 5 times, best reported); optionally snapped onto the
 //       volume's iso-surface and simplified as `mlfe convert --snap S --simplify S` does.
@@ -62,7 +62,8 @@ static int usage() {
                "       iso_tools_bench [--threads N] vdb VOL ISO ADAPTIVITY OUT.ply\n"
                "       iso_tools_bench [--threads N] mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%%] "
                "[--surface-tolerance S]\n"
-               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME SNAP_VOXELS]]\n");
+               "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME "
+               "SNAP_VOXELS [input|optimal]]]\n");
   return 1;
 }
 
@@ -179,7 +180,8 @@ int main(int argc, char** argv) {
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()},
              {"peak_rss_mb", peak_rss_mb()}};
-    } else if (mode == "extract" && (args.size() == 4 || args.size() == 5 || args.size() == 7)) {
+    } else if (mode == "extract" &&
+               (args.size() == 4 || args.size() == 5 || args.size() == 7 || args.size() == 8)) {
       HierarchyFile hf = read_hierarchy(args[1]);
       if (hf.dim != 3 || hf.values.empty())
         throw std::runtime_error(args[1] + ": needs a 3D hierarchy with values");
@@ -193,7 +195,7 @@ int main(int argc, char** argv) {
       std::optional<ScalarGrid> volume;
       std::optional<GridField> field;
       IsoOptions io;
-      if (args.size() == 7 && std::atof(args[6].c_str()) > 0) {
+      if (args.size() >= 7 && std::atof(args[6].c_str()) > 0) {
         volume = read_volume(args[5]);
         field.emplace(*volume);
         const auto& sp = hf.transform.spacing;
@@ -216,6 +218,7 @@ int main(int argc, char** argv) {
         const auto t3 = Clock::now();
         SimplifyOptions so;
         so.tolerance = s * std::min({sp[0], sp[1], sp[2]});
+        if (args.size() == 8 && args[7] == "optimal") so.placement = Placement::kOptimal;
         m = simplify_within(m, so);
         t_simplify = since(t3);
       }

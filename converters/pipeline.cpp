@@ -85,6 +85,11 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "simplify every surface while it stays within this many voxels of the extracted one (0: off)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--placement", p.placement,
+                  "--simplify's vertex placement: input (every vertex stays an extracted one) or optimal "
+                  "(quadric minimum near the surface: fewer triangles at the same tolerance)")
+      ->check(CLI::IsMember({"input", "optimal"}))
+      ->capture_default_str();
   cmd->add_option(
          "--snap", p.snap,
          "move surface vertices onto the volume's own iso-surface, at most this many voxels "
@@ -340,6 +345,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     const double voxel = smallest_spacing(b.transform, b.dim);
     SimplifyOptions so;
     so.tolerance = p.simplify * voxel;
+    so.placement = p.placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
@@ -351,8 +357,8 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
       if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
   // --decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
   const std::string normals = p.decimate > 0 || (p.normals == "auto" && p.simplify > 0) ? "surface"
-                              : p.normals == "auto"                                   ? "gradient"
-                                                                                      : p.normals;
+                              : p.normals == "auto"                                     ? "gradient"
+                                                                                        : p.normals;
   if (normals == "surface")
     for (auto& s : surfaces) {
       compute_area_weighted_normals(s.mesh);
@@ -379,6 +385,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["iso_values"] = isos;
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
+    if (p.simplify > 0) o.extras["placement"] = p.placement;
     o.extras["normals"] = normals;
     write_gltf(out, surfaces, o);
   } else {

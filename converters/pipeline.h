@@ -99,6 +99,10 @@ struct AssetParams {
   /// surface once --simplify or --decimate has made new triangles. --decimate (OpenMesh)
   /// moves vertices, so its output always has surface normals.
   std::string normals = "auto";
+  /// --simplify's vertex placement: "input" (half-edge collapses: every vertex an extracted,
+  /// snapped one) or "optimal" (quadric minimum: fewer triangles at the same bound on smooth
+  /// surfaces, slower on noisy ones).
+  std::string placement = "input";
   double z_scale = 1.0;  ///< 2D height fields: height per data unit
   int level = -1;        ///< extract on this level (-1 finest)
 };

@@ -10,19 +10,25 @@
 // - Topology: the link condition (Dey, Edelsbrunner, Guha & Nekhayev, "Topology preserving
 //   edge contraction", 1999), with boundary vertices joined to a virtual vertex.
 //
+// Placement (optional): the survivor moves to the minimum of the merged quadrics (Garland &
+// Heckbert's optimal placement); as their full-edge collapses it removes more triangles at the
+// same bound, since the surface is no longer pinned to input vertices.
+//
 // Parallel and deterministic, in passes. Each pass (1) computes a cheap key (the quadric cost of
 // the best-looking neighbour) for every vertex whose one-ring changed, (2) walks the vertices
 // by key and picks greedily those whose closed one-rings are disjoint from the rings already
 // picked, (3) collapses the picked vertices in parallel, each onto the cheapest neighbour that
-// passes the topology, normal and distance checks. Disjoint rings make the collapses
-// independent: none writes a face, a point or a quadric another one reads, so each sees the
-// pass's starting state and the result does not depend on the order or the thread count.
+// passes the topology, normal and distance checks. Disjoint rings (two-rings when survivors
+// move) make the collapses independent: none writes a face, a point, a position or a quadric
+// another one reads, so each sees the pass's starting state and the result does not depend on
+// the order or the thread count.
 // A vertex that passes no check is stuck until something near it changes. Once most picked
 // vertices turn out stuck (late, when the bound binds), every candidate is checked up front in
 // parallel instead, so stuck vertices stop blocking their neighbours' rings.
 //
 // Local numbering of a collapse v0 -> v1 (v0 disappears; faces around v0 not containing v1
-// get v1 in its place, the one or two faces on edge v0 v1 are removed):
+// get v1 in its place, the one or two faces on edge v0 v1 are removed; with optimal placement
+// v1 then moves to p, so v1's other faces change shape too):
 //
 //          a                     a
 //        /   \                 /   |
@@ -120,16 +126,24 @@ bool on_boundary(const std::vector<Neighbour>& n) {
   return std::any_of(n.begin(), n.end(), [](const Neighbour& x) { return x.faces == 1; });
 }
 
+// A collapse being evaluated: v0 moves onto v1, and v1 (with it the merged vertex) sits at p.
+struct Move {
+  Index v0, v1;
+  Vec3 p;
+};
+
 // Per-task scratch, reused across the vertices of a chunk.
 struct Scratch {
   std::vector<Neighbour> n0, n1;
   std::vector<std::pair<double, Index>> order;
-  std::vector<Index> targets;  // faces around v1 after the collapse
+  std::vector<Index> targets;             // faces around v1 after the collapse
+  Move move{kNone, kNone, Vec3::Zero()};  // the last legal move found
 };
 
 class Simplifier {
  public:
-  Simplifier(const TriangleMesh& mesh, const SimplifyOptions& opts) : opts_(opts) {
+  Simplifier(const TriangleMesh& mesh, const SimplifyOptions& opts)
+      : opts_(opts), optimal_(opts.placement == Placement::kOptimal) {
     const std::size_t nv = mesh.positions.size();
     if (nv >= kNone) throw Error("simplification: too many vertices");
     for (const auto& t : mesh.triangles) {
@@ -138,14 +152,17 @@ class Simplifier {
       faces_.push_back({t[0], t[1], t[2]});
     }
     if (faces_.size() >= kNone) throw Error("simplification: too many triangles");
+    if (optimal_) input_faces_ = faces_;
     pos_.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
       pos_[i] = Vec3(mesh.positions[i][0], mesh.positions[i][1], mesh.positions[i][2]);
+    points_ = pos_;
     for (const auto& f : faces_)
       for (Index v : f)
         if (!pos_[v].allFinite()) throw Error("simplification: non-finite vertex position");
     if (!mesh.normals.empty()) {
-      if (mesh.normals.size() != nv) throw Error("simplification: the mesh has normals for some vertices only");
+      if (mesh.normals.size() != nv)
+        throw Error("simplification: the mesh has normals for some vertices only");
       normals_ = mesh.normals;
     }
     face_alive_.assign(faces_.size(), 1);
@@ -162,6 +179,7 @@ class Simplifier {
       for (Index v : f) quadric_[v].add_plane(u, -u.dot(pos_[f[0]]), 0.5 * len);
     }
     build_vertex_faces();
+    if (optimal_) input_vf_ = vf_;
     // Every input vertex is a point to keep within the bound, attached to its first face
     // (distance 0). Vertices no triangle uses are not part of the surface.
     owner_.assign(nv, kNone);
@@ -174,6 +192,14 @@ class Simplifier {
       for (Index v = r.begin(); v != r.end(); ++v)
         if (vf_.size(v) > 0 && !single_fan(v, n)) locked_[v] = 1;
     });
+    boundary_.assign(nv, 0);
+    {
+      std::vector<Neighbour> n;
+      for (Index v = 0; v < nv; ++v) {
+        neighbours(v, n);
+        boundary_[v] = on_boundary(n);
+      }
+    }
     key_.assign(nv, kNoKey);
     target_.assign(nv, kNone);
     stuck_.assign(nv, 0);
@@ -271,8 +297,16 @@ class Simplifier {
         for (const Index* f = vf_.begin(v0); f != vf_.end(v0) && free; ++f)
           for (Index v : faces_[*f]) free = free && stamp_[v] != stamp;
         if (!free) continue;
+        // With optimal placement the survivor (a neighbour) moves too, changing its own star,
+        // so the stamped region is the closed two-ring: selected vertices are then at least
+        // four edges apart and no collapse reads what another writes.
         for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
-          for (Index v : faces_[*f]) stamp_[v] = stamp;
+          for (Index v : faces_[*f]) {
+            stamp_[v] = stamp;
+            if (optimal_)
+              for (const Index* g = vf_.begin(v); g != vf_.end(v); ++g)
+                for (Index w : faces_[*g]) stamp_[w] = stamp;
+          }
         selected.push_back(v0);
       }
       // Each collapse removes at most two faces: far from the floor, all selected collapses
@@ -383,8 +417,7 @@ class Simplifier {
           if (exists) continue;
           const std::array<Index, 3> nf{a, d, c}, ng{b, c, d};
           const Vec3 nf_old = normal_of(faces_[f]), ng_old = normal_of(fg);
-          if (!keeps_shape(nf, kNone, kNone, {nf_old, ng_old}) ||
-              !keeps_shape(ng, kNone, kNone, {nf_old, ng_old}))
+          if (!keeps_shape(nf, nullptr, {nf_old, ng_old}) || !keeps_shape(ng, nullptr, {nf_old, ng_old}))
             continue;
           bool bound = true;
           for (Index face : {f, g})
@@ -411,18 +444,18 @@ class Simplifier {
 
   // Position of vertex v with v0 read as v1: the geometry after collapsing v0 onto v1 (kNone
   // for the current geometry).
-  const Vec3& at(Index v, Index v0 = kNone, Index v1 = kNone) const { return pos_[v == v0 ? v1 : v]; }
+  const Vec3& at(Index v, const Move* m) const { return m && (v == m->v0 || v == m->v1) ? m->p : pos_[v]; }
 
   // Normal (twice the area) of triangle t, with v0 read as v1.
-  Vec3 normal_of(const std::array<Index, 3>& t, Index v0 = kNone, Index v1 = kNone) const {
-    return (at(t[1], v0, v1) - at(t[0], v0, v1)).cross(at(t[2], v0, v1) - at(t[0], v0, v1));
+  Vec3 normal_of(const std::array<Index, 3>& t, const Move* m = nullptr) const {
+    return (at(t[1], m) - at(t[0], m)).cross(at(t[2], m) - at(t[0], m));
   }
 
   // Triangle t (v0 read as v1) is not degenerate and its normal is within the turn limit of
   // each of `old` (the normals of the faces it replaces).
-  bool keeps_shape(const std::array<Index, 3>& t, Index v0, Index v1, std::initializer_list<Vec3> old) const {
-    const Vec3 &a = at(t[0], v0, v1), &b = at(t[1], v0, v1), &c = at(t[2], v0, v1);
-    const Vec3 n = normal_of(t, v0, v1);
+  bool keeps_shape(const std::array<Index, 3>& t, const Move* m, std::initializer_list<Vec3> old) const {
+    const Vec3 &a = at(t[0], m), &b = at(t[1], m), &c = at(t[2], m);
+    const Vec3 n = normal_of(t, m);
     const double scale = std::max({(b - a).squaredNorm(), (c - a).squaredNorm(), (c - b).squaredNorm()});
     if (!(n.norm() > 1e-10 * scale)) return false;
     for (const Vec3& o : old)
@@ -521,8 +554,8 @@ class Simplifier {
     for (const auto& x : s.n0) {
       if (locked_[x.v]) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
-      each(eval_sum(quadric_[v0], quadric_[x.v], pos_[x.v]) + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(),
-           x.v);
+      const Vec3 p = place(v0, x.v, boundary0);
+      each(eval_sum(quadric_[v0], quadric_[x.v], p) + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(), x.v);
     }
     return boundary0;
   }
@@ -548,9 +581,42 @@ class Simplifier {
   // The cheapest neighbour v0 may move onto under all checks, or kNone.
   Index find_target(Index v0, Scratch& s) const {
     const bool boundary0 = ordered_targets(v0, s);
-    for (const auto& c : s.order)
-      if (legal(v0, c.second, boundary0, s)) return c.second;
+    for (const auto& c : s.order) {
+      const Vec3 p = place(v0, c.second, boundary0);
+      if (legal(v0, c.second, boundary0, p, s)) return c.second;
+      // Where the quadric minimum leaves the surface (tight tolerances on curved parts), the
+      // half-edge collapse may still pass.
+      if (p != pos_[c.second] && legal(v0, c.second, boundary0, pos_[c.second], s)) return c.second;
+    }
     return kNone;
+  }
+
+  // Where the merged vertex goes: the minimum of the summed quadrics (Garland & Heckbert) when
+  // it is well defined and near the edge, else the cheapest point of the edge; on the boundary
+  // (and in input-vertex mode) v1's own position, so boundaries stay where they are.
+  Vec3 place(Index v0, Index v1, bool boundary0) const {
+    if (!optimal_ || boundary0 || boundary_[v1]) return pos_[v1];
+    Quadric q = quadric_[v0];
+    q.add(quadric_[v1]);
+    const auto& a = q.q;
+    Eigen::Matrix3d m;
+    m << a[0], a[1], a[2], a[1], a[4], a[5], a[2], a[5], a[7];
+    const Vec3 b(a[3], a[6], a[8]);
+    const Vec3 e = pos_[v1] - pos_[v0];
+    const double len2 = e.squaredNorm();
+    const double scale = m.trace();
+    if (scale > 0 && std::abs(m.determinant()) > 1e-6 * scale * scale * scale) {
+      const Vec3 p = m.inverse() * (-b);
+      const Vec3 mid = 0.5 * (pos_[v0] + pos_[v1]);
+      if (p.allFinite() && (p - mid).squaredNorm() <= len2) return p;
+    }
+    // Along the edge: cost(t) = (p0 + t e)^T m (p0 + t e) + 2 b.(p0 + t e) + c.
+    const double qa = e.dot(m * e), qb = e.dot(m * pos_[v0] + b);
+    if (qa > 1e-12 * scale * len2) {
+      const double t = std::clamp(-qb / qa, 0.0, 1.0);
+      return pos_[v0] + t * e;
+    }
+    return pos_[v1];
   }
 
   // Collapses v0 onto the cheapest neighbour the checks allow; false (and marks v0 stuck) when
@@ -564,9 +630,16 @@ class Simplifier {
       stuck_[v0] = 1;
       return false;
     }
+    const Move& m = s.move;
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
       for (const Index* p = fp_.begin(*f); p != fp_.end(*f); ++p)
-        owner_[*p] = nearest(*p, v0, v1, s.targets).second;
+        owner_[*p] = nearest(*p, m, s.targets).second;
+    if (optimal_)
+      for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
+        if (!contains(faces_[*g], v0))
+          for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
+            owner_[*p] = nearest(*p, m, s.targets).second;
+    pos_[v1] = m.p;
     std::size_t removed = 0;
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f) {
       auto& face = faces_[*f];
@@ -584,13 +657,22 @@ class Simplifier {
     return true;
   }
 
-  bool legal(Index v0, Index v1, bool boundary0, Scratch& s) const {
+  // v0 onto v1, the survivor placed at p (pos_[v1]: a half-edge collapse).
+  bool legal(Index v0, Index v1, bool boundary0, const Vec3& p, Scratch& s) const {
+    s.move = {v0, v1, p};
+    const Move& m = s.move;
     const int edge_faces = faces_on_edge(s.n0, v1);
     neighbours(v1, s.n1);
     const bool boundary1 = on_boundary(s.n1);
     // Link condition: the common neighbours are exactly the vertices opposite the edge, and
     // two boundary vertices joined by an interior edge would pinch the surface.
     if (boundary0 && boundary1 && edge_faces != 1) return false;
+    // A boundary vertex that slides away must stay within the tolerance of the boundary edge
+    // that replaces its two: the bound in the other direction along the boundary curve.
+    if (boundary0)
+      for (const auto& x : s.n0)
+        if (x.faces == 1 && x.v != v1 && segment_distance2(pos_[v0], pos_[v1], pos_[x.v]) > tol2_)
+          return false;
     int common = 0;
     for (const auto& x : s.n0)
       if (x.v != v1 && faces_on_edge(s.n1, x.v) > 0) ++common;
@@ -610,44 +692,75 @@ class Simplifier {
       if (edge_faces == 2 && faces_on_edge(s.n1, x) > 0 && faces_on_edge(s.n1, y) > 0)
         for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
           if (contains(faces_[*g], x) && contains(faces_[*g], y)) return false;
-      if (!keeps_shape(face, v0, v1, {normal_of(face)})) return false;
+      if (!keeps_shape(face, &m, {normal_of(face)})) return false;
       s.targets.push_back(*f);
     }
+    const bool moves = m.p != pos_[v1];
+    if (moves && !near_input(m.p, v0, v1)) return false;
     for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
-      if (!contains(faces_[*g], v0)) s.targets.push_back(*g);
+      if (!contains(faces_[*g], v0)) {
+        if (moves && !keeps_shape(faces_[*g], &m, {normal_of(faces_[*g])})) return false;
+        s.targets.push_back(*g);
+      }
     // The bound: every point attached to a face around v0 must find a face around v1.
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f) {
       const Index first = contains(faces_[*f], v1) ? kNone : *f;  // its own face, moved, if kept
       for (const Index* p = fp_.begin(*f); p != fp_.end(*f); ++p)
-        if (!within(*p, first, v0, v1, s.targets)) return false;
+        if (!within(*p, first, m, s.targets)) return false;
     }
+    if (moves)
+      for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
+        if (!contains(faces_[*g], v0))
+          for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
+            if (!within(*p, *g, m, s.targets)) return false;
     return true;
   }
 
+  static double segment_distance2(const Vec3& p, const Vec3& a, const Vec3& b) {
+    const Vec3 ab = b - a;
+    const double len2 = ab.squaredNorm();
+    const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+    return (a + t * ab - p).squaredNorm();
+  }
+
+  // A moved vertex stays within the tolerance of the input surface (the bound the other way
+  // round): of an input triangle around the points attached to the faces it joins. Without it
+  // a quadric minimum could leave the surface where the one-sided bound does not look.
+  bool near_input(const Vec3& p, Index v0, Index v1) const {
+    for (Index v : {v1, v0})
+      for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
+        for (const Index* q = fp_.begin(*f); q != fp_.end(*f); ++q)
+          for (const Index* t = input_vf_.begin(*q); t != input_vf_.end(*q); ++t) {
+            const auto& it = input_faces_[*t];
+            if (point_triangle_distance2(p, points_[it[0]], points_[it[1]], points_[it[2]]) <= tol2_)
+              return true;
+          }
+    return false;
+  }
   // Squared distance from input vertex `point` to triangle t, with v0 read as v1 (the
   // geometry after a collapse; kNone for none).
-  double distance2(Index point, const std::array<Index, 3>& t, Index v0 = kNone, Index v1 = kNone) const {
-    return point_triangle_distance2(pos_[point], at(t[0], v0, v1), at(t[1], v0, v1), at(t[2], v0, v1));
+  double distance2(Index point, const std::array<Index, 3>& t, const Move* m = nullptr) const {
+    return point_triangle_distance2(points_[point], at(t[0], m), at(t[1], m), at(t[2], m));
   }
 
   // Some target face lies within the tolerance of the point (v0 read as v1); `first` (a
   // target or kNone) is tried first, as the likeliest.
-  bool within(Index point, Index first, Index v0, Index v1, const std::vector<Index>& targets) const {
-    if (first != kNone && distance2(point, faces_[first], v0, v1) <= tol2_) return true;
+  bool within(Index point, Index first, const Move& m, const std::vector<Index>& targets) const {
+    if (first != kNone && distance2(point, faces_[first], &m) <= tol2_) return true;
     for (Index f : targets) {
       if (f == first) continue;
-      if (distance2(point, faces_[f], v0, v1) <= tol2_) return true;
+      if (distance2(point, faces_[f], &m) <= tol2_) return true;
     }
     return false;
   }
 
   // Nearest target face (lowest index among equals) and its squared distance, with v0 read
   // as v1 (the geometry after the collapse).
-  std::pair<double, Index> nearest(Index point, Index v0, Index v1, const std::vector<Index>& targets) const {
+  std::pair<double, Index> nearest(Index point, const Move& m, const std::vector<Index>& targets) const {
     double best = std::numeric_limits<double>::infinity();
     Index best_face = kNone;
     for (Index f : targets) {
-      const double d = distance2(point, faces_[f], v0, v1);
+      const double d = distance2(point, faces_[f], &m);
       if (d < best || (d == best && f < best_face)) {
         best = d;
         best_face = f;
@@ -681,6 +794,11 @@ class Simplifier {
   SimplifyOptions opts_;
   double tol2_ = 0, cos_max_turn_ = 0;
   std::vector<Vec3> pos_;
+  std::vector<Vec3> points_;  // input positions: the points kept within the bound
+  bool optimal_ = false;
+  std::vector<std::array<Index, 3>> input_faces_;
+  Csr input_vf_;  // input vertex -> input faces
+  std::vector<uint8_t> boundary_;
   std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
   std::vector<uint8_t> face_alive_, locked_, dirty_, stuck_;

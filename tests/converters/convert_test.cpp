@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 
@@ -307,6 +308,39 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   ASSERT_EQ(run("convert " + common + " --normals gradient -o " + full_grad).status, 0);
   EXPECT_EQ(read_bytes(full_grad), read_bytes(full));
   EXPECT_EQ(run("convert " + common + " --normals flat -o " + surf).status, 1);
+}
+
+// --placement optimal: vertices at the quadric minimum, kept within the tolerance of the
+// extracted surface both ways; fewer triangles on the CT at the same tolerance; same bytes for
+// any thread count; recorded in the asset.
+TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
+  const std::string full = scratch() + "/opt_full.ply", pinned = scratch() + "/opt_pinned.ply",
+                    one = scratch() + "/opt1.ply", two = scratch() + "/opt2.ply",
+                    glb = scratch() + "/opt.glb";
+  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
+  ASSERT_EQ(run("convert " + common + " -o " + full).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + pinned).status, 0);
+  ASSERT_EQ(run("--threads 1 convert " + common + " --simplify 0.3 --placement optimal -o " + one).status, 0);
+  ASSERT_EQ(run("--threads 2 convert " + common + " --simplify 0.3 --placement optimal -o " + two).status, 0);
+  EXPECT_EQ(read_bytes(one), read_bytes(two));
+  const TriangleMesh a = read_mesh_file(full), b = read_mesh_file(pinned), c = read_mesh_file(two);
+  std::printf("triangles: %zu extracted, %zu input placement, %zu optimal placement\n", a.triangle_count(),
+              b.triangle_count(), c.triangle_count());
+  EXPECT_LT(c.triangle_count(), b.triangle_count() * 9 / 10);
+  const ScalarGrid g = read_volume(kSkull);
+  const double tol = 0.3 * std::min({g.transform.spacing[0], g.transform.spacing[1], g.transform.spacing[2]});
+  EXPECT_LE(test::one_sided_hausdorff(a, c, 5), tol * 1.01);
+  EXPECT_LE(test::one_sided_hausdorff(c, a), tol * 1.01);
+  // Vertices really moved: most are no extracted vertex.
+  const std::set<std::array<float, 3>> extracted(a.positions.begin(), a.positions.end());
+  std::size_t moved = 0;
+  for (const auto& p : c.positions) moved += !extracted.count(p);
+  EXPECT_GT(moved, c.positions.size() / 2);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement optimal -o " + glb).status, 0);
+  std::string report;
+  EXPECT_TRUE(validator_accepts(glb, &report)) << report;
+  EXPECT_EQ(parse_glb(read_bytes(glb)).gltf["asset"]["extras"]["placement"], "optimal");
+  EXPECT_EQ(run("convert " + common + " --simplify 0.3 --placement best -o " + glb).status, 1);
 }
 
 // Several surfaces are simplified at once, each in a fresh process here: OpenMesh's global log
