@@ -696,7 +696,6 @@ class Simplifier {
       s.targets.push_back(*f);
     }
     const bool moves = m.p != pos_[v1];
-    if (moves && !near_input(m.p, v0, v1)) return false;
     for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
       if (!contains(faces_[*g], v0)) {
         if (moves && !keeps_shape(faces_[*g], &m, {normal_of(faces_[*g])})) return false;
@@ -713,6 +712,8 @@ class Simplifier {
         if (!contains(faces_[*g], v0))
           for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
             if (!within(*p, *g, m, s.targets)) return false;
+    // Last: when the quadric minimum is off the surface this scans every candidate triangle.
+    if (moves && !near_input(m.p, v0, v1)) return false;
     return true;
   }
 
@@ -727,6 +728,16 @@ class Simplifier {
   // round): of an input triangle around the points attached to the faces it joins. Without it
   // a quadric minimum could leave the surface where the one-sided bound does not look.
   bool near_input(const Vec3& p, Index v0, Index v1) const {
+    auto near = [&](Index point) {
+      for (const Index* t = input_vf_.begin(point); t != input_vf_.end(point); ++t) {
+        const auto& it = input_faces_[*t];
+        if (point_triangle_distance2(p, points_[it[0]], points_[it[1]], points_[it[2]]) <= tol2_) return true;
+      }
+      return false;
+    };
+    // p lies near the edge v0 v1: the input triangles around those two input vertices first,
+    // then those around the points attached to their faces.
+    if (near(v1) || near(v0)) return true;
     for (Index v : {v1, v0})
       for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
         for (const Index* q = fp_.begin(*f); q != fp_.end(*f); ++q)
