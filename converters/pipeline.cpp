@@ -86,9 +86,10 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
-                  "--simplify's vertex placement: input (every vertex stays an extracted one) or optimal "
-                  "(quadric minimum near the surface: fewer triangles at the same tolerance)")
-      ->check(CLI::IsMember({"input", "optimal"}))
+                  "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
+                  "(quadric minimum near the surface: fewer triangles at the same tolerance) or auto "
+                  "(optimal, input with --normals gradient)")
+      ->check(CLI::IsMember({"auto", "input", "optimal"}))
       ->capture_default_str();
   cmd->add_option(
          "--snap", p.snap,
@@ -341,11 +342,15 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     s.color = {0.70f, 0.72f, 0.60f, 1.0f};
     surfaces.push_back(std::move(s));
   }
+  // Gradient normals hold at extracted vertices only, so they keep the vertices in place.
+  const std::string placement = p.placement != "auto"     ? p.placement
+                                : p.normals == "gradient" ? "input"
+                                                          : "optimal";
   if (p.simplify > 0) {
     const double voxel = smallest_spacing(b.transform, b.dim);
     SimplifyOptions so;
     so.tolerance = p.simplify * voxel;
-    so.placement = p.placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
+    so.placement = placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
@@ -385,7 +390,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["iso_values"] = isos;
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
-    if (p.simplify > 0) o.extras["placement"] = p.placement;
+    if (p.simplify > 0) o.extras["placement"] = placement;
     o.extras["normals"] = normals;
     write_gltf(out, surfaces, o);
   } else {

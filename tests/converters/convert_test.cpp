@@ -274,11 +274,14 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
 
   // --normals gradient: the simplified surface keeps the paper's normals, each vertex has the
-  // normal the extracted surface has at the same position.
-  const std::string grad = scratch() + "/simp_gradient.ply";
+  // normal the extracted surface has at the same position (so --placement auto keeps the
+  // vertices in place: the same positions as --placement input).
+  const std::string grad = scratch() + "/simp_gradient.ply", pinned = scratch() + "/simp_pinned.ply";
   ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals gradient -o " + grad).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement input -o " + pinned).status, 0);
   const TriangleMesh kept = read_mesh_file(grad);
-  ASSERT_EQ(kept.positions, b.positions);
+  ASSERT_EQ(kept.positions, read_mesh_file(pinned).positions);
+  ASSERT_NE(kept.positions, b.positions);  // the default moves vertices (optimal placement)
   std::map<std::array<float, 3>, std::array<float, 3>> normal_at;
   for (std::size_t i = 0; i < a.positions.size(); ++i) normal_at[a.positions[i]] = a.normals[i];
   ASSERT_EQ(kept.normals.size(), kept.positions.size());
@@ -292,6 +295,9 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   const std::string surf = scratch() + "/simp_surface.ply";
   ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals surface -o " + surf).status, 0);
   EXPECT_EQ(read_bytes(surf), read_bytes(simp));
+  ASSERT_EQ(
+      run("convert " + common + " --simplify 0.3 --normals surface --placement input -o " + surf).status, 0);
+  EXPECT_EQ(read_bytes(surf), read_bytes(pinned));
   const TriangleMesh c = read_mesh_file(surf);
   ASSERT_EQ(c.positions, kept.positions);
   TriangleMesh expected = c;
@@ -319,10 +325,13 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
                     glb = scratch() + "/opt.glb";
   const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
   ASSERT_EQ(run("convert " + common + " -o " + full).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + pinned).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement input -o " + pinned).status, 0);
   ASSERT_EQ(run("--threads 1 convert " + common + " --simplify 0.3 --placement optimal -o " + one).status, 0);
   ASSERT_EQ(run("--threads 2 convert " + common + " --simplify 0.3 --placement optimal -o " + two).status, 0);
   EXPECT_EQ(read_bytes(one), read_bytes(two));
+  const std::string dflt = scratch() + "/opt_default.ply";  // auto: optimal with surface normals
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + dflt).status, 0);
+  EXPECT_EQ(read_bytes(dflt), read_bytes(two));
   const TriangleMesh a = read_mesh_file(full), b = read_mesh_file(pinned), c = read_mesh_file(two);
   std::printf("triangles: %zu extracted, %zu input placement, %zu optimal placement\n", a.triangle_count(),
               b.triangle_count(), c.triangle_count());
