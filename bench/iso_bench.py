@@ -245,7 +245,7 @@ def main():
                     help="comma-separated `mlfe convert --simplify` tolerances in voxels to run per budget (0: none)")
     ap.add_argument("--snap", type=float, default=1.0,
                     help="`mlfe convert --snap` in voxels (the CLI's default 1; 0: the approximation's own surface)")
-    ap.add_argument("--placement", default="input", choices=["input", "optimal"],
+    ap.add_argument("--placement", default="optimal", choices=["input", "optimal"],
                     help="mlfe --simplify vertex placement (passed to convert and to the extraction)")
     ap.add_argument("--mlfe-args", default="", help="extra arguments for every mlfe convert (space separated)")
     ap.add_argument("cases", nargs="*", help="VOL:iso1,iso2:maxv1,maxv2")
@@ -297,7 +297,7 @@ def main():
                     if simp > 0:
                         cmd += ["--simplify", f"{simp:g}"]
                     cmd += ["--snap", f"{args.snap:g}"]
-                    if simp > 0 and args.placement != "input":
+                    if simp > 0:
                         cmd += ["--placement", args.placement]
                     cmd += extra + ["-o", glb, "--hierarchy", hier, "--report", rep, "--quiet"]
                     log("  ", " ".join(cmd))
@@ -312,7 +312,7 @@ def main():
                     ex, _ = run_json(ecmd)
                     label = "mlfe convert" + (f" --max-vertices {mv}" if mv > 0 else "") + \
                         (f" --simplify {simp:g}" if simp > 0 else "") + f" --snap {args.snap:g}" + \
-                        (f" --placement {args.placement}" if simp > 0 and args.placement != "input" else "") + \
+                        (f" --placement {args.placement}" if simp > 0 else "") + \
                         (" " + args.mlfe_args if extra else "")
                     r = dict(method=label, triangles=ex["triangles"], seconds=t_conv,
                              extract_seconds=ex["extract_seconds"], extract_setup_seconds=ex["setup_seconds"],
