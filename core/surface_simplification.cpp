@@ -442,16 +442,16 @@ class Simplifier {
     }
   }
 
-  // Position of vertex v with v0 read as v1: the geometry after collapsing v0 onto v1 (kNone
-  // for the current geometry).
+  // Position of vertex v in the geometry after move m (nullptr: the current geometry): v0 and
+  // v1 both sit at m->p.
   const Vec3& at(Index v, const Move* m) const { return m && (v == m->v0 || v == m->v1) ? m->p : pos_[v]; }
 
-  // Normal (twice the area) of triangle t, with v0 read as v1.
+  // Normal (twice the area) of triangle t after move m.
   Vec3 normal_of(const std::array<Index, 3>& t, const Move* m = nullptr) const {
     return (at(t[1], m) - at(t[0], m)).cross(at(t[2], m) - at(t[0], m));
   }
 
-  // Triangle t (v0 read as v1) is not degenerate and its normal is within the turn limit of
+  // Triangle t (after move m) is not degenerate and its normal is within the turn limit of
   // each of `old` (the normals of the faces it replaces).
   bool keeps_shape(const std::array<Index, 3>& t, const Move* m, std::initializer_list<Vec3> old) const {
     const Vec3 &a = at(t[0], m), &b = at(t[1], m), &c = at(t[2], m);
@@ -621,7 +621,8 @@ class Simplifier {
 
   // Collapses v0 onto the cheapest neighbour the checks allow; false (and marks v0 stuck) when
   // none does. Touches only faces around v0, points attached to them and the survivor's
-  // quadric: disjoint from every other selected collapse.
+  // quadric (optimal placement: also the survivor's position and the points of its faces):
+  // disjoint from every other selected collapse.
   bool collapse(Index v0, Scratch& s) {
     target_[v0] = kNone;
     removed_faces_[v0] = 0;
@@ -741,21 +742,18 @@ class Simplifier {
     for (Index v : {v1, v0})
       for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
         for (const Index* q = fp_.begin(*f); q != fp_.end(*f); ++q)
-          for (const Index* t = input_vf_.begin(*q); t != input_vf_.end(*q); ++t) {
-            const auto& it = input_faces_[*t];
-            if (point_triangle_distance2(p, points_[it[0]], points_[it[1]], points_[it[2]]) <= tol2_)
-              return true;
-          }
+          if (near(*q)) return true;
     return false;
   }
-  // Squared distance from input vertex `point` to triangle t, with v0 read as v1 (the
-  // geometry after a collapse; kNone for none).
+
+  // Squared distance from input vertex `point` (its input position) to triangle t after move
+  // m (nullptr: the current geometry).
   double distance2(Index point, const std::array<Index, 3>& t, const Move* m = nullptr) const {
     return point_triangle_distance2(points_[point], at(t[0], m), at(t[1], m), at(t[2], m));
   }
 
-  // Some target face lies within the tolerance of the point (v0 read as v1); `first` (a
-  // target or kNone) is tried first, as the likeliest.
+  // Some target face lies within the tolerance of the point after move m; `first` (a target
+  // or kNone) is tried first, as the likeliest.
   bool within(Index point, Index first, const Move& m, const std::vector<Index>& targets) const {
     if (first != kNone && distance2(point, faces_[first], &m) <= tol2_) return true;
     for (Index f : targets) {
@@ -765,8 +763,7 @@ class Simplifier {
     return false;
   }
 
-  // Nearest target face (lowest index among equals) and its squared distance, with v0 read
-  // as v1 (the geometry after the collapse).
+  // Nearest target face (lowest index among equals) and its squared distance after move m.
   std::pair<double, Index> nearest(Index point, const Move& m, const std::vector<Index>& targets) const {
     double best = std::numeric_limits<double>::infinity();
     Index best_face = kNone;
