@@ -582,11 +582,14 @@ class Simplifier {
   Index find_target(Index v0, Scratch& s) const {
     const bool boundary0 = ordered_targets(v0, s);
     for (const auto& c : s.order) {
-      const Vec3 p = place(v0, c.second, boundary0);
-      if (legal(v0, c.second, boundary0, p, s)) return c.second;
+      const Index v1 = c.second;
+      const int edge_faces = keeps_topology(v0, v1, boundary0, s);
+      if (edge_faces < 0) continue;
+      const Vec3 p = place(v0, v1, boundary0);
+      if (keeps_geometry(v0, v1, edge_faces, p, s)) return v1;
       // Where the quadric minimum leaves the surface (tight tolerances on curved parts), the
       // half-edge collapse may still pass.
-      if (p != pos_[c.second] && legal(v0, c.second, boundary0, pos_[c.second], s)) return c.second;
+      if (p != pos_[v1] && keeps_geometry(v0, v1, edge_faces, pos_[v1], s)) return v1;
     }
     return kNone;
   }
@@ -605,8 +608,11 @@ class Simplifier {
     const Vec3 e = pos_[v1] - pos_[v0];
     const double len2 = e.squaredNorm();
     const double scale = m.trace();
-    if (scale > 0 && std::abs(m.determinant()) > 1e-6 * scale * scale * scale) {
-      const Vec3 p = m.inverse() * (-b);
+    Eigen::Matrix3d inverse;
+    bool invertible = false;
+    m.computeInverseWithCheck(inverse, invertible, 1e-6 * scale * scale * scale);
+    if (scale > 0 && invertible) {
+      const Vec3 p = inverse * (-b);
       const Vec3 mid = 0.5 * (pos_[v0] + pos_[v1]);
       if (p.allFinite() && (p - mid).squaredNorm() <= len2) return p;
     }
@@ -658,26 +664,33 @@ class Simplifier {
     return true;
   }
 
-  // v0 onto v1, the survivor placed at p (pos_[v1]: a half-edge collapse).
-  bool legal(Index v0, Index v1, bool boundary0, const Vec3& p, Scratch& s) const {
-    s.move = {v0, v1, p};
-    const Move& m = s.move;
+  // The checks of v0 onto v1 that do not depend on where the survivor goes: the number of
+  // faces on edge v0 v1, or -1 when the collapse would change the topology or cut a boundary
+  // corner. Fills s.n1 (v1's neighbours).
+  int keeps_topology(Index v0, Index v1, bool boundary0, Scratch& s) const {
     const int edge_faces = faces_on_edge(s.n0, v1);
     neighbours(v1, s.n1);
     const bool boundary1 = on_boundary(s.n1);
     // Link condition: the common neighbours are exactly the vertices opposite the edge, and
     // two boundary vertices joined by an interior edge would pinch the surface.
-    if (boundary0 && boundary1 && edge_faces != 1) return false;
+    if (boundary0 && boundary1 && edge_faces != 1) return -1;
     // A boundary vertex that slides away must stay within the tolerance of the boundary edge
     // that replaces its two: the bound in the other direction along the boundary curve.
     if (boundary0)
       for (const auto& x : s.n0)
-        if (x.faces == 1 && x.v != v1 && segment_distance2(pos_[v0], pos_[v1], pos_[x.v]) > tol2_)
-          return false;
+        if (x.faces == 1 && x.v != v1 && segment_distance2(pos_[v0], pos_[v1], pos_[x.v]) > tol2_) return -1;
     int common = 0;
     for (const auto& x : s.n0)
       if (x.v != v1 && faces_on_edge(s.n1, x.v) > 0) ++common;
-    if (common != edge_faces) return false;
+    return common == edge_faces ? edge_faces : -1;
+  }
+
+  // The checks of v0 onto v1 with the survivor at p (pos_[v1]: a half-edge collapse), after
+  // keeps_topology(): shapes, the bound, and (moved survivor) nearness to the input. Leaves
+  // the move in s.move and the faces around the survivor in s.targets.
+  bool keeps_geometry(Index v0, Index v1, int edge_faces, const Vec3& p, Scratch& s) const {
+    s.move = {v0, v1, p};
+    const Move& m = s.move;
 
     // Faces around v0 that survive with v1 in v0's place: no duplicate of a face around v1,
     // no flip, no degeneracy. After the link condition, a face (v1, x, y) can only exist when
