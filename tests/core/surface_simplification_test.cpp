@@ -43,12 +43,16 @@ long euler_characteristic(const TriangleMesh& m) {
   return long(m.vertex_count()) - long(edge_use(m).size()) + long(m.triangle_count());
 }
 
-TriangleMesh simplify(const TriangleMesh& m, double tol, std::size_t min_triangles = 0) {
+TriangleMesh simplify(const TriangleMesh& m, double tol, std::size_t min_triangles = 0,
+                      Placement placement = Placement::kInputVertex) {
   SimplifyOptions o;
   o.tolerance = tol;
   o.min_triangles = min_triangles;
+  o.placement = placement;
   return simplify_within(m, o);
 }
+
+constexpr Placement kBothPlacements[] = {Placement::kInputVertex, Placement::kOptimal};
 
 // Torus with radii R, r on a u x v grid, outward normals, CCW from outside.
 TriangleMesh torus(int nu, int nv, double R, double r) {
@@ -178,21 +182,28 @@ TEST(SurfaceSimplification, StopsAtTheTriangleFloor) {
 }
 
 TEST(SurfaceSimplification, SameOutputWithOneOrTwoThreadsAndWhenRunConcurrently) {
-  const TriangleMesh in = torus(64, 32, 30.0, 8.0);
-  TriangleMesh one;
-  {
-    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
-    one = simplify(in, 0.3);
-  }
-  const TriangleMesh two = simplify(in, 0.3);
-  EXPECT_EQ(one.positions, two.positions);
-  EXPECT_EQ(one.triangles, two.triangles);
-  EXPECT_EQ(one.normals, two.normals);
-  std::vector<TriangleMesh> many(6);
-  tbb::parallel_for(std::size_t(0), many.size(), [&](std::size_t i) { many[i] = simplify(in, 0.3); });
-  for (const auto& m : many) {
-    EXPECT_EQ(m.positions, one.positions);
-    EXPECT_EQ(m.triangles, one.triangles);
+  TriangleMesh in = torus(64, 32, 30.0, 8.0);
+  std::mt19937 rng(5);  // noise, so that optimal placement moves vertices everywhere
+  std::uniform_real_distribution<float> noise(-0.1f, 0.1f);
+  for (auto& p : in.positions)
+    for (float& c : p) c += noise(rng);
+  for (const Placement pl : kBothPlacements) {
+    TriangleMesh one;
+    {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      one = simplify(in, 0.3, 0, pl);
+    }
+    const TriangleMesh two = simplify(in, 0.3, 0, pl);
+    EXPECT_EQ(one.positions, two.positions);
+    EXPECT_EQ(one.triangles, two.triangles);
+    EXPECT_EQ(one.normals, two.normals);
+    std::vector<TriangleMesh> many(6);
+    tbb::parallel_for(std::size_t(0), many.size(),
+                      [&](std::size_t i) { many[i] = simplify(in, 0.3, 0, pl); });
+    for (const auto& m : many) {
+      EXPECT_EQ(m.positions, one.positions);
+      EXPECT_EQ(m.triangles, one.triangles);
+    }
   }
 }
 
@@ -211,12 +222,14 @@ TEST(SurfaceSimplification, LeavesNonManifoldPartsInPlace) {
   in.triangles.push_back({a, a + 3, a + 1});
   in.triangles.push_back({a, a + 1, a + 4});
   in.triangles.push_back({a, a, a + 4});  // degenerate: dropped
-  const TriangleMesh out = simplify(in, 0.2);
-  EXPECT_LE(one_sided_hausdorff(in, out), 0.2 * (1 + 1e-6));
-  std::size_t fin = 0;
-  for (const auto& p : out.positions) fin += p[0] >= 14.0f;
-  EXPECT_EQ(fin, 5u);
-  for (const auto& t : out.triangles) EXPECT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+  for (const Placement pl : kBothPlacements) {
+    const TriangleMesh out = simplify(in, 0.2, 0, pl);
+    EXPECT_LE(one_sided_hausdorff(in, out), 0.2 * (1 + 1e-6));
+    std::size_t fin = 0;
+    for (const auto& p : out.positions) fin += p[0] >= 14.0f;
+    EXPECT_EQ(fin, 5u);
+    for (const auto& t : out.triangles) EXPECT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+  }
 }
 
 TEST(SurfaceSimplification, RandomNoisyMeshesKeepTheBoundAndTheTopology) {
@@ -229,8 +242,12 @@ TEST(SurfaceSimplification, RandomNoisyMeshesKeepTheBoundAndTheTopology) {
       for (float& c : p) c += noise(rng);
     const long euler = euler_characteristic(in);
     const double tol = std::uniform_real_distribution<double>(0.05, 1.5)(rng);
-    const TriangleMesh out = simplify(in, tol);
+    const Placement pl = kBothPlacements[round % 3 == 0];  // a third with optimal placement
+    const TriangleMesh out = simplify(in, tol, 0, pl);
     EXPECT_LE(one_sided_hausdorff(in, out), tol * (1 + 1e-6)) << round;
+    if (pl == Placement::kOptimal) {
+      EXPECT_LE(one_sided_hausdorff(out, in), tol * (1 + 1e-5)) << round;
+    }
     expect_closed_oriented_manifold(out);
     EXPECT_EQ(euler_characteristic(out), euler) << round;
     for (const auto& t : out.triangles) ASSERT_TRUE(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
@@ -248,7 +265,8 @@ TEST(SurfaceSimplification, TriangleSoupsDoNotBreakIt) {
     for (int i = 0; i < n; ++i) in.positions.push_back({coord(rng), coord(rng), coord(rng)});
     std::uniform_int_distribution<std::uint32_t> pick(0, std::uint32_t(n - 1));
     for (int i = 0; i < 3 * n; ++i) in.triangles.push_back({pick(rng), pick(rng), pick(rng)});
-    const TriangleMesh out = simplify(in, 0.5);
+    const Placement pl = kBothPlacements[round % 2];
+    const TriangleMesh out = simplify(in, 0.5, 0, pl);
     TriangleMesh kept = in;  // the bound is over vertices some valid triangle uses
     kept.triangles.clear();
     for (const auto& t : in.triangles)
@@ -261,6 +279,9 @@ TEST(SurfaceSimplification, TriangleSoupsDoNotBreakIt) {
     for (auto i : ids) used.positions.push_back(in.positions[i]);
     used.triangles.clear();
     EXPECT_LE(one_sided_hausdorff(used, out), 0.5 * (1 + 1e-6)) << round;
+    if (pl == Placement::kOptimal) {
+      EXPECT_LE(one_sided_hausdorff(out, kept), 0.5 * (1 + 1e-5)) << round;
+    }
   }
 }
 
