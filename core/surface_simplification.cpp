@@ -1,4 +1,4 @@
-// Error-bounded mesh simplification by half-edge collapses.
+// Error-bounded mesh simplification by edge collapses (half-edge, or to the quadric minimum).
 //
 // - Ordering: Garland & Heckbert, "Surface Simplification Using Quadric Error Metrics",
 //   SIGGRAPH 1997 (area-weighted plane quadrics, summed into the surviving vertex).
@@ -12,7 +12,10 @@
 //
 // Placement (optional): the survivor moves to the minimum of the merged quadrics (Garland &
 // Heckbert's optimal placement); as their full-edge collapses it removes more triangles at the
-// same bound, since the surface is no longer pinned to input vertices.
+// same bound, since the surface is no longer pinned to input vertices. The bound then also
+// holds the other way round: a moved vertex stays within the tolerance of the input surface.
+// Boundary vertices never move, and one is only removed within the tolerance of the boundary
+// edge that replaces it (the one-sided bound alone lets rim edges cut across concave bays).
 //
 // Parallel and deterministic, in passes. Each pass (1) computes a cheap key (the quadric cost of
 // the best-looking neighbour) for every vertex whose one-ring changed, (2) walks the vertices
