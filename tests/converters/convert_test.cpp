@@ -371,21 +371,28 @@ TEST(Convert, ConcurrentSimplificationIsStableAndDeterministic) {
 // compared byte for byte (the pipeline is deterministic); the glb's Draco geometry is decoded
 // and compared semantically (counts, box, every vertex near the golden surface), since Draco
 // reorders vertices. Regenerate with MLFE_UPDATE_GOLDEN=1 after an intended change.
-TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
-  const std::string ply = scratch() + "/golden.ply", glb = scratch() + "/golden.glb";
-  const std::string args = kSkull + " --iso 2.5 --max-vertices 3000 --quiet";
+// `mlfe convert ARGS -o X.ply` gives the bytes of tests/golden/NAME.
+void expect_golden_ply(const std::string& args, const std::string& name) {
+  const std::string ply = scratch() + "/" + name;
   ASSERT_EQ(run("convert " + args + " -o " + ply).status, 0);
-  ASSERT_EQ(run("convert " + args + " -o " + glb).status, 0);
-  const std::string golden_ply = kGolden + "/ct_skull_iso2.5_3000.ply";
+  const std::string golden_ply = kGolden + "/" + name;
   if (std::getenv("MLFE_UPDATE_GOLDEN")) fs::copy_file(ply, golden_ply, fs::copy_options::overwrite_existing);
   ASSERT_TRUE(fs::exists(golden_ply)) << "missing golden file " << golden_ply;
   const std::string got = read_bytes(ply), want = read_bytes(golden_ply);
   // Not EXPECT_EQ on the strings: a failure would print megabytes of binary.
   std::size_t first_diff = 0;
   while (first_diff < std::min(got.size(), want.size()) && got[first_diff] == want[first_diff]) ++first_diff;
-  EXPECT_TRUE(got == want) << "PLY differs from the golden file: " << got.size() << " vs " << want.size()
+  EXPECT_TRUE(got == want) << name << " differs from the golden file: " << got.size() << " vs " << want.size()
                            << " bytes, first difference at byte " << first_diff << "; header now:\n"
                            << got.substr(0, got.find("end_header"));
+}
+
+TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
+  const std::string glb = scratch() + "/golden.glb";
+  const std::string args = kSkull + " --iso 2.5 --max-vertices 3000 --quiet";
+  expect_golden_ply(args, "ct_skull_iso2.5_3000.ply");
+  ASSERT_EQ(run("convert " + args + " -o " + glb).status, 0);
+  const std::string golden_ply = kGolden + "/ct_skull_iso2.5_3000.ply";
 
   const TriangleMesh golden = read_mesh_file(golden_ply);
   const Glb g = parse_glb(read_bytes(glb));
@@ -422,6 +429,12 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
   }
   EXPECT_LE(worst, 0.3651e-3 * std::sqrt(3.0))
       << "decoded Draco geometry too far from the golden surface (m)";
+}
+
+// The README's main job on a small budget: snapped, simplified (default placement) surfaces.
+TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
+  expect_golden_ply(kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --quiet",
+                    "ct_skull_iso1.5_3_8000_simplify0.2.ply");
 }
 
 TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
