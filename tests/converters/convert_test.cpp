@@ -447,6 +447,25 @@ TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
   const json r = json::parse(read_bytes(rep));
   EXPECT_LE(r["rms_error_percent"].get<double>(), 1.0);
   EXPECT_LT(r["vertices"].get<double>(), 403.0 * 344.0 / 4);
+
+  // Simplified terrain (open surface: the rim stays within the tolerance too), both
+  // placements: fewer triangles, the bound both ways, and a valid asset.
+  const std::string full = scratch() + "/dem.ply";
+  const std::string common = " convert " + dem + " --rms 1% --z-scale 0.00001 --quiet";
+  ASSERT_EQ(run(common + " -o " + full).status, 0);
+  const TriangleMesh a = read_mesh_file(full);
+  for (const std::string placement : {"input", "optimal"}) {
+    const std::string ply = scratch() + "/dem_" + placement + ".ply", sglb = scratch() + "/dem_s.glb";
+    ASSERT_EQ(run(common + " --simplify 0.5 --placement " + placement + " -o " + ply).status, 0);
+    ASSERT_EQ(run(common + " --simplify 0.5 --placement " + placement + " -o " + sglb).status, 0);
+    EXPECT_TRUE(validator_accepts(sglb, &report)) << report;
+    const TriangleMesh b = read_mesh_file(ply);
+    EXPECT_LT(b.triangle_count(), a.triangle_count() / 2) << placement;
+    const ScalarGrid g = read_volume(dem);
+    const double tol = 0.5 * std::min(g.transform.spacing[0], g.transform.spacing[1]);
+    EXPECT_LE(test::one_sided_hausdorff(a, b, 3), tol * 1.01) << placement;
+    EXPECT_LE(test::one_sided_hausdorff(b, a), tol * 1.01) << placement;
+  }
 }
 
 TEST(Build, ReportHasTheDocumentedFields) {
