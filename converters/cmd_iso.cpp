@@ -35,9 +35,10 @@ void check_volume_matches(const std::string& volume, const ScalarGrid& g, const 
   };
   const auto& t = g.transform;
   const auto& h = b.a3->hierarchy;
-  std::array<double, 3> hi{0, 0, 0};
-  for (std::size_t v = 0; v < h.vertex_count(); ++v)
-    for (int a = 0; a < 3; ++a) hi[a] = std::max(hi[a], h.point(VertexId(std::uint32_t(v)))[a]);
+  std::array<double, 3> hi{0, 0, 0};  // the coarse mesh's vertices include the box's corners
+  for (std::size_t e = 0; e < h.coarse_count(); ++e)
+    for (VertexId v : h.cell(ElemId(std::uint32_t(e))))
+      for (int a = 0; a < 3; ++a) hi[a] = std::max(hi[a], h.point(v)[a]);
   for (int a = 0; a < 3; ++a) {
     if (!near(t.spacing[a], b.transform.spacing[a]) || !near(t.origin[a], b.transform.origin[a]))
       throw Error(volume + ": spacing or origin differ from the hierarchy's (" + hierarchy + ")");

@@ -189,20 +189,18 @@ class Simplifier {
     for (Index v = 0; v < nv; ++v)
       if (vf_.size(v) > 0) owner_[v] = *vf_.begin(v);
     // Stars that are not a single fan (non-manifold edges or vertices) never change.
+    // Boundary vertices stay boundary vertices (collapses keep the topology, flips only take
+    // interior edges), so the flag is set once, from the same neighbour lists.
     locked_.assign(nv, 0);
+    boundary_.assign(nv, 0);
     tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 1024), [&](const tbb::blocked_range<Index>& r) {
       std::vector<Neighbour> n;
-      for (Index v = r.begin(); v != r.end(); ++v)
-        if (vf_.size(v) > 0 && !single_fan(v, n)) locked_[v] = 1;
-    });
-    boundary_.assign(nv, 0);
-    {
-      std::vector<Neighbour> n;
-      for (Index v = 0; v < nv; ++v) {
-        neighbours(v, n);
+      for (Index v = r.begin(); v != r.end(); ++v) {
+        if (vf_.size(v) == 0) continue;
+        if (!single_fan(v, n)) locked_[v] = 1;  // single_fan() leaves v's neighbours in n
         boundary_[v] = on_boundary(n);
       }
-    }
+    });
     key_.assign(nv, kNoKey);
     target_.assign(nv, kNone);
     stuck_.assign(nv, 0);
@@ -808,9 +806,11 @@ class Simplifier {
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
         out.triangles.push_back({index[faces_[f][0]], index[faces_[f][1]], index[faces_[f][2]]});
-    // Every output vertex is an input vertex, so its input normal (for iso-surfaces the data's
-    // gradient there) still holds; it is closer to the data's surface normal than one averaged
-    // from the coarser triangles.
+    // With input-vertex placement every output vertex is an input vertex, so its input normal
+    // (for iso-surfaces the data's gradient there) still holds; it is closer to the data's
+    // surface normal than one averaged from the coarser triangles. (Optimal placement keeps
+    // the survivor's normal at a point within the tolerance; the CLI then writes surface
+    // normals instead.)
     if (normals_.empty()) compute_area_weighted_normals(out);
     return out;
   }
