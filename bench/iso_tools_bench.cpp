@@ -13,11 +13,16 @@
 //       Extraction only, from a stored hierarchy (IsoExtractor construction and extract timed
 //       separately; extract repeated 5 times, best reported); optionally snapped onto the
 //       volume's iso-surface and simplified as `mlfe convert --snap S --simplify S` does.
+//   iso_tools_bench meshopt IN.ply TARGET_TRIANGLES OUT.ply
+//       meshoptimizer (Debian libmeshoptimizer-dev): meshopt_simplify to TARGET_TRIANGLES with
+//       no error limit (target_error 1: the count decides), unused vertices dropped; what users
+//       pair with VTK flying edges. Only the simplification is timed.
 // Every mode prints one JSON line on stdout with counts and seconds. --threads N (default 2)
 // may precede the mode.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/VolumeToMesh.h>
+#include <meshoptimizer.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -63,7 +68,8 @@ static int usage() {
                "       iso_tools_bench [--threads N] mlfe VOL ISO OUT.ply [--max-vertices N] [--rms P%%] "
                "[--surface-tolerance S]\n"
                "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME "
-               "SNAP_VOXELS [input|optimal]]]\n");
+               "SNAP_VOXELS [input|optimal]]]\n"
+               "       iso_tools_bench meshopt IN.ply TARGET_TRIANGLES OUT.ply\n");
   return 1;
 }
 
@@ -232,6 +238,31 @@ int main(int argc, char** argv) {
              {"extracted_triangles", extracted},
              {"hierarchy_vertices", h.vertex_count()},
              {"leaves", h.leaves().size()},
+             {"vertices", m.positions.size()},
+             {"triangles", m.triangles.size()}};
+    } else if (mode == "meshopt" && args.size() == 4) {
+      const TriangleMesh in = read_mesh_file(args[1]);
+      const std::size_t target = std::strtoull(args[2].c_str(), nullptr, 10);
+      const auto t0 = Clock::now();
+      std::vector<unsigned> idx(in.triangles.size() * 3), dst(idx.size());
+      for (std::size_t t = 0; t < in.triangles.size(); ++t)
+        for (int k = 0; k < 3; ++k) idx[3 * t + k] = in.triangles[t][k];
+      float err = 0;
+      const std::size_t n = meshopt_simplify(dst.data(), idx.data(), idx.size(), &in.positions[0][0],
+                                             in.positions.size(), sizeof(float) * 3, target * 3, 1.0f, 0, &err);
+      dst.resize(n);
+      std::vector<std::array<float, 3>> pos(in.positions.size());
+      const std::size_t nv = meshopt_optimizeVertexFetch(pos.data(), dst.data(), dst.size(), in.positions.data(),
+                                                         in.positions.size(), sizeof(float) * 3);
+      const double t_simplify = since(t0);
+      TriangleMesh m;
+      m.positions.assign(pos.begin(), pos.begin() + static_cast<std::ptrdiff_t>(nv));
+      for (std::size_t i = 0; i < dst.size(); i += 3) m.triangles.push_back({dst[i], dst[i + 1], dst[i + 2]});
+      write_mesh_file(args[3], m);
+      out = {{"method", "meshopt_simplify"},
+             {"simplify_seconds", t_simplify},
+             {"relative_error", err},
+             {"absolute_error", err * meshopt_simplifyScale(&in.positions[0][0], in.positions.size(), 12)},
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()}};
     } else {

@@ -5,6 +5,8 @@
 //   mesh_to_glb_bench IN.ply OUT.glb [--scale sx,sy,sz] [--tolerance MM] [--no-draco]
 //     --scale      multiply positions per axis first (voxel index -> millimetres: the spacing)
 //     --tolerance  Draco position tolerance in mm (default: min(scale) / 10, mlfe's default)
+//     --drc P      also write the positions alone as Draco (.drc, same tolerance): "bytes without
+//                  normals" in the JSON
 // Prints one JSON line: triangles, vertices, bytes, seconds.
 #include <nlohmann/json.hpp>
 
@@ -16,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "formats/draco_io.h"
 #include "formats/gltf_writer.h"
 #include "formats/openmesh_io.h"
 
@@ -27,12 +30,15 @@ int main(int argc, char** argv) {
   std::array<double, 3> scale{1, 1, 1};
   double tol = 0;
   bool draco = true;
+  std::string drc;
   for (int i = 3; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--scale" && i + 1 < argc) {
       if (std::sscanf(argv[++i], "%lf,%lf,%lf", &scale[0], &scale[1], &scale[2]) != 3) return 1;
     } else if (a == "--tolerance" && i + 1 < argc) {
       tol = std::atof(argv[++i]);
+    } else if (a == "--drc" && i + 1 < argc) {
+      drc = argv[++i];
     } else if (a == "--no-draco") {
       draco = false;
     } else {
@@ -48,6 +54,13 @@ int main(int argc, char** argv) {
     for (auto& p : s.mesh.positions)
       for (int a = 0; a < 3; ++a) p[a] = float(p[a] * scale[a]);
     s.mesh.normals.clear();  // recomputed from the (scaled) triangles by write_gltf
+    std::size_t drc_bytes = 0;
+    if (!drc.empty()) {
+      mlfe::DracoOptions d;
+      d.tolerance = tol;
+      mlfe::write_draco_file(drc, s.mesh, d);
+      drc_bytes = std::filesystem::file_size(drc);
+    }
     s.name = "surface";
     const std::size_t tris = s.mesh.triangles.size(), verts = s.mesh.positions.size();
     mlfe::GltfOptions o;
@@ -60,6 +73,7 @@ int main(int argc, char** argv) {
     const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     nlohmann::json j = {{"triangles", tris}, {"vertices", verts}, {"bytes", std::filesystem::file_size(argv[2])},
                         {"tolerance_mm", tol}, {"draco", draco}, {"seconds", sec}};
+    if (!drc.empty()) j["drc_positions_bytes"] = drc_bytes;
     std::printf("%s\n", j.dump().c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mesh_to_glb_bench: %s\n", e.what());

@@ -2,9 +2,11 @@
 
 #include <fmt/format.h>
 #include <sys/resource.h>
+#include <unistd.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -41,10 +43,9 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
 }
 
 void add_build_options(CLI::App* cmd, BuildParams& p) {
-  cmd->add_option(
-         "--rms", p.rms,
-         "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data units")
-      ->capture_default_str();
+  cmd->add_option("--rms", p.rms,
+                  "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data "
+                  "units [default: 0.5% without --iso; with --iso, refinement follows the surfaces]");
   cmd->add_option(
          "--threshold", p.threshold,
          "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
@@ -66,6 +67,13 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
                   "with iso-values: refine until surfaces are within this many voxels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_flag("--check-u", p.check_against_u,
+                "surface-driven builds: after the first solve, refine where u's surfaces miss the data's and solve "
+                "again (more vertices; u then follows small parts too)");
+  cmd->add_option("--max-memory", p.max_memory,
+                  "memory budget of the build: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; "
+                  "refinement stops there with a message")
+      ->capture_default_str();
   cmd->add_flag("--quiet", p.quiet, "no progress on stderr");
 }
 
@@ -82,8 +90,15 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "reduce every surface to this many triangles (OpenMesh quadric decimater)");
   cmd->add_option(
          "--simplify", p.simplify,
-         "simplify every surface while it stays within this many voxels of the extracted one (0: off)")
+         "simplify every surface while it stays within this many voxels of the extracted one (0: the raw "
+         "extraction)")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_option("--simplifier", p.simplifier,
+                  "--simplify's algorithm: fast (meshoptimizer: collapses while its error estimate stays within "
+                  "the tolerance; seconds for millions of triangles) or bounded (every extracted vertex verified "
+                  "within the tolerance of the result, topology kept; tens of microseconds per triangle)")
+      ->check(CLI::IsMember({"fast", "bounded"}))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
                   "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
@@ -132,6 +147,31 @@ double peak_rss_mb() {
   return ru.ru_maxrss / 1024.0;
 }
 
+std::size_t parse_memory_budget(const std::string& text) {
+  std::string t = text;
+  double scale = 1;
+  bool percent = false;
+  if (!t.empty()) {
+    const char c = static_cast<char>(std::toupper(static_cast<unsigned char>(t.back())));
+    if (c == '%') percent = true;
+    if (c == 'K') scale = 1024.0;
+    if (c == 'M') scale = 1024.0 * 1024.0;
+    if (c == 'G') scale = 1024.0 * 1024.0 * 1024.0;
+    if (percent || scale > 1) t.pop_back();
+  }
+  std::vector<double> v;
+  try {
+    v = parse_values(t, "--max-memory");
+  } catch (const Error&) {
+    v.clear();
+  }
+  if (v.size() != 1 || v[0] < 0 || (percent && v[0] > 100))
+    throw Error("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" + text + "'");
+  if (!percent) return static_cast<std::size_t>(v[0] * scale);
+  const double ram = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+  return static_cast<std::size_t>(ram * v[0] / 100.0);
+}
+
 Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values) {
   for (int a = 0; a < grid.dim; ++a)
     if (grid.dims[a] < 2)
@@ -147,10 +187,12 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
   const double span = range[1] > range[0] ? double(range[1]) - double(range[0]) : 1.0;
 
   ApproximationOptions o;
+  // With surfaces to extract and no global target, refine for the surfaces alone.
+  o.surface_driven = !iso_values.empty() && p.rms.empty() && p.threshold <= 0 && p.max_vertices == 0;
   if (p.threshold > 0) {
     o.threshold = p.threshold;
-  } else {
-    std::string r = p.rms;
+  } else if (!o.surface_driven) {
+    std::string r = p.rms.empty() ? "0.5%" : p.rms;
     const bool percent = !r.empty() && r.back() == '%';
     if (percent) r.pop_back();
     const auto v = parse_values(r, "--rms");
@@ -166,9 +208,25 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
                                                     : Preconditioner::kNone;
   o.iso_values = iso_values;
   o.surface_tolerance = p.surface_tolerance;
+  o.check_surfaces_against_u = p.check_against_u;
+  const std::size_t budget = parse_memory_budget(p.max_memory);
+  if (budget > 0) {
+    // What the build may use: the budget less the volume (and its min/max pyramid), with a
+    // tenth kept for extraction and writing.
+    const double grid_bytes = double(grid.voxel_count()) * (sizeof(float) + 1.2);
+    const double room = 0.9 * double(budget) - grid_bytes;
+    if (room < 64.0 * 1024 * 1024)
+      throw Error(fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
+                              grid.source, grid_bytes / 1048576.0, p.max_memory, double(budget) / 1048576.0));
+    o.max_memory_bytes = static_cast<std::size_t>(room);
+  }
   if (!p.quiet) {
     std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices", "elements",
                  "rms", "rms%", "psnr", "cg", "seconds");
+    o.surface_progress = [](const SurfacePassStats& s) {
+      std::fprintf(stderr, "surface pass: %zu vertices, %zu elements, %zu near a surface, %zu refined, %.2f s\n",
+                   s.vertices, s.elements, s.candidates, s.marked, s.seconds);
+    };
     o.progress = [](const IterationStats& s) {
       std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level,
                    s.vertices, s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
@@ -181,6 +239,11 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
   else
     b.a3 = approximate<3>(f, o);
   b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if ((grid.dim == 2 ? b.a2->memory_limited : b.a3->memory_limited))
+    std::fprintf(stderr,
+                 "mlfe: warning: %s: refinement stopped at the memory budget (--max-memory %s, %.0f MiB for the "
+                 "build); the approximation is coarser than asked\n",
+                 grid.source.c_str(), p.max_memory.c_str(), double(o.max_memory_bytes) / 1048576.0);
   return b;
 }
 
@@ -263,6 +326,16 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
                     {"refine_seconds", s.refine_seconds},
                     {"seconds", s.seconds}});
   r["per_iteration"] = rows;
+  const auto& passes = b.dim == 2 ? b.a2->surface_passes : b.a3->surface_passes;
+  nlohmann::json sp = nlohmann::json::array();
+  for (const auto& s : passes)
+    sp.push_back({{"vertices", s.vertices},
+                  {"elements", s.elements},
+                  {"candidates", s.candidates},
+                  {"marked", s.marked},
+                  {"seconds", s.seconds}});
+  r["surface_passes"] = sp;
+  r["memory_limited"] = b.dim == 2 ? b.a2->memory_limited : b.a3->memory_limited;
   return r;
 }
 
@@ -352,9 +425,11 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     so.tolerance = p.simplify * voxel;
     so.placement = placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
+    const bool bounded = p.simplifier == "bounded";
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (!m.triangles.empty()) m = simplify_within(m, so);
+      if (m.triangles.empty()) return;
+      m = bounded ? simplify_within(m, so) : simplify_fast(m, so.tolerance);
     });
   }
   if (p.decimate > 0)
@@ -390,7 +465,8 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["iso_values"] = isos;
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
-    if (p.simplify > 0) o.extras["placement"] = placement;
+    if (p.simplify > 0) o.extras["simplifier"] = p.simplifier;
+    if (p.simplify > 0 && p.simplifier == "bounded") o.extras["placement"] = placement;
     o.extras["normals"] = normals;
     write_gltf(out, surfaces, o);
   } else {

@@ -17,7 +17,9 @@
 namespace mlfe::cli {
 
 struct BuildParams {
-  std::string rms = "0.5%";  ///< target RMS error: "0.5%" of the value range, or absolute
+  /// Target RMS error: "0.5%" of the value range, or absolute. Empty: the default, which is
+  /// 0.5% without iso-values and none with them (surface-driven refinement; see build_from_grid).
+  std::string rms;
   double threshold = 0;      ///< the paper's per-element threshold (data units), 0: off
   std::size_t max_vertices = 0;
   int max_level = 20;
@@ -25,8 +27,16 @@ struct BuildParams {
   std::string norm = "l2";             ///< "l2" or "h1"
   std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
   double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
+  bool check_against_u = false;        ///< surface-driven: refine where u misses the data's surfaces
+  /// Memory budget of the build: "50%" of the machine's RAM (default), or bytes with an
+  /// optional K/M/G suffix; "0": none. Refinement stops at it with a message.
+  std::string max_memory = "50%";
   bool quiet = false;
 };
+
+/// The memory budget in bytes of a --max-memory text ("50%", "6G", "512M", "0"); throws
+/// mlfe::Error on bad text.
+std::size_t parse_memory_budget(const std::string& text);
 
 /// Adds --rms, --threshold, --max-vertices, --max-level, --start-level, --norm,
 /// --preconditioner, --surface-tolerance and --quiet.
@@ -52,7 +62,9 @@ struct Built {
   int levels() const { return (dim == 2 ? a2->hierarchy.max_level() : a3->hierarchy.max_level()) + 1; }
 };
 
-/// Runs the adaptive approximation on `grid` (iso values drive iso-aware refinement).
+/// Runs the adaptive approximation on `grid`. With iso values and no global target (--rms,
+/// --threshold, --max-vertices), refinement is surface-driven (ApproximationOptions::
+/// surface_driven); with one, the global target drives it and the iso values add iso-aware marks.
 /// Throws mlfe::Error for unusable grids (fewer than 2 samples along an axis) or options.
 Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values);
 
@@ -89,7 +101,11 @@ struct AssetParams {
   bool quantize = false;
   int lod = 0;               ///< coarser levels to add to glTF
   std::size_t decimate = 0;  ///< triangle budget per surface (OpenMesh quadric decimation)
-  double simplify = 0;       ///< error-bounded simplification tolerance in voxels (0: off)
+  /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
+  /// compact: chosen from bench/convert_bench.py (bench/RESULTS.md).
+  double simplify = 0.3;
+  /// "fast" (meshoptimizer, error estimated) or "bounded" (simplify_within, error verified).
+  std::string simplifier = "fast";
   double snap = 1.0;         ///< move vertices onto the data's surface, at most this many voxels (0: off)
   bool normals_toward_higher = false;
   /// "gradient": the paper's normals (volume-weighted tetrahedron gradients of u, interpolated

@@ -19,6 +19,7 @@
 #include "core/fe_assembly.h"
 #include "core/hierarchical_basis.h"
 #include "core/p1_element.h"
+#include "core/surface_estimator.h"
 
 namespace mlfe {
 
@@ -106,7 +107,188 @@ bool surface_needs_refinement(const Hierarchy<D>& h, ElemId e, const ElementInte
   return false;
 }
 
+template <int D>
+std::array<std::array<double, D>, D + 1> corner_points(const Hierarchy<D>& h, ElemId e) {
+  std::array<std::array<double, D>, D + 1> p;
+  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
+  return p;
+}
+
+// (D!·|T|)^(1/D): the side of the cube D! copies of T would fill; a Kuhn simplex of a voxel has
+// size one voxel.
+template <int D>
+double element_size(const Hierarchy<D>& h, ElemId e) {
+  return D == 2 ? std::sqrt(h.measure(e) * 2.0) : std::cbrt(h.measure(e) * 6.0);
+}
+
+// Whether the data can have one of the iso-surfaces in e (range_in_box is conservative).
+template <int D>
+bool data_brackets(const Hierarchy<D>& h, ElemId e, const Field& f, const std::vector<double>& isos) {
+  std::array<double, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  for (int a = 0; a < D; ++a) lo[a] = hi[a] = h.point(h.cell(e)[0])[a];
+  for (VertexId v : h.cell(e))
+    for (int a = 0; a < D; ++a) {
+      lo[a] = std::min(lo[a], h.point(v)[a]);
+      hi[a] = std::max(hi[a], h.point(v)[a]);
+    }
+  const auto r = f.range_in_box(lo, hi);
+  for (double iso : isos)
+    if (r[0] <= iso && iso <= r[1]) return true;
+  return false;
+}
+
+// The surface-driven rule for leaf e and the linear function with nodal values `nodal` (f's
+// interpolant while the mesh is built, u after a solve). Surfaces farther apart than the
+// tolerance are refined down to elements of two voxels: below that, noise and voxel-scale
+// detail would refine whole surfaces to the grid, and snapping puts the asset's vertices on
+// the data's surface anyway. A piece of surface that the linear function misses altogether is
+// refined down to one voxel, so small parts survive.
+template <int D, typename Values>
+bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, const Field& f,
+                      const ApproximationOptions& opts, double tolerance_voxels, bool* candidate = nullptr) {
+  const double size = element_size(h, e), voxel = f.voxel_size();
+  if (h.level(e) >= opts.max_level || size <= voxel) return false;
+  std::array<double, D + 1> c;
+  double cmin = 1e300, cmax = -1e300;
+  for (int i = 0; i <= D; ++i) {
+    c[i] = nodal[h.cell(e)[i].value];
+    cmin = std::min(cmin, c[i]);
+    cmax = std::max(cmax, c[i]);
+  }
+  bool linear_cuts = false;
+  for (double iso : opts.iso_values) linear_cuts |= cmin <= iso && iso <= cmax;
+  if (!linear_cuts && !data_brackets(h, e, f, opts.iso_values)) return false;
+  if (candidate) *candidate = true;
+  // Samples one voxel apart along the axes of a Kuhn simplex (its longest edge is the cube's
+  // diagonal, √3 voxels per voxel): a feature of two voxels cannot fall between them.
+  const bool coarse = size > 2.0 * voxel;
+  const SurfaceGap gap = surface_gap<D>(corner_points(h, e), c, f, opts.iso_values, tolerance_voxels * voxel,
+                                        std::sqrt(double(D)) * voxel, coarse);
+  return gap == SurfaceGap::kMissing || (gap == SurfaceGap::kDistant && coarse);
+}
+
+// The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
+// allows at the current ratio of leaves to vertices (0: no limit). *by_memory tells which binds.
+template <int D>
+std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices, std::size_t leaves,
+                         bool* by_memory) {
+  std::size_t limit = opts.max_vertices;
+  *by_memory = false;
+  if (opts.max_memory_bytes > 0) {
+    const double ratio = std::max(double(leaves) / double(std::max<std::size_t>(1, vertices)), D == 3 ? 5.0 : 2.0);
+    const double per_vertex = double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
+    const auto mem = static_cast<std::size_t>(double(opts.max_memory_bytes) / per_vertex);
+    if (limit == 0 || mem < limit) {
+      limit = std::max<std::size_t>(mem, 1);
+      *by_memory = true;
+    }
+  }
+  return limit;
+}
+
+// Refines the first `count` of `marks` (in priority order); a refinement that would pass
+// `limit` vertices is undone by refine() and tried again with fewer marks, scaled by the room
+// over what the attempt added. Returns refine()'s remap, or an empty vector when not even one
+// mark fits (count is then 0). vertices_per_mark learns what a mark costs.
+template <int D>
+std::vector<ElemId> refine_within(Hierarchy<D>& h, const std::vector<ElemId>& marks, std::size_t& count,
+                                  std::size_t limit, double& vertices_per_mark) {
+  const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
+  while (count > 0) {
+    const std::size_t before = h.vertex_count();
+    std::vector<ElemId> sel(marks.begin(), marks.begin() + static_cast<std::ptrdiff_t>(count));
+    std::size_t reached = 0;
+    auto remap = h.refine(sel, limit, &reached);
+    const std::size_t added = reached - before;
+    vertices_per_mark = std::max(1.0, double(added) / double(count));
+    if (!limit || reached <= limit) return remap;
+    MLFE_CHECK(h.vertex_count() == before);
+    const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.9 * double(room) / double(added));
+    count = std::min(count - 1, scaled);
+  }
+  return {};
+}
+
+// Before the first solve (surface_driven): passes over the leaves pick those whose data range
+// brackets an iso-value, check the surface gap against f's interpolant, and refine every leaf
+// over the tolerance at once. A leaf that passed keeps passing (its corners do not change),
+// so each pass checks only the leaves the previous one created. Returns a stop reason when a
+// budget ended it, else "".
+template <int D>
+std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                                   Clock::time_point t0, Approximation<D>& out) {
+  std::vector<double> fv;  // f at every vertex: the interpolant's nodal values
+  double vertices_per_mark = 2.0;
+  // A leaf that passed keeps passing (its corners do not change), and refine() keeps the old
+  // elements first, so each pass checks only the elements from `fresh` on.
+  std::size_t fresh = 0;
+  for (;;) {
+    // Sample f at the new vertices.
+    const std::size_t old_nv = fv.size();
+    fv.resize(h.vertex_count());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(old_nv, fv.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          std::array<double, 3> x{0, 0, 0};
+                          for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
+                          fv[v] = f.value(x);
+                        }
+                      });
+    // Pick the new leaves and check them (in parallel, each in its own slot).
+    const std::size_t ne = h.element_count();
+    std::vector<std::uint8_t> decision(ne - fresh, 0);  // bit 0: candidate, bit 1: mark
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(fresh, ne, 256), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        const ElemId e(static_cast<std::uint32_t>(i));
+        if (!h.is_leaf(e)) continue;
+        bool candidate = false;
+        const bool mark = surface_gap_mark(h, e, fv, f, opts, opts.surface_tolerance, &candidate);
+        decision[i - fresh] = std::uint8_t((candidate ? 1 : 0) | (mark ? 2 : 0));
+      }
+    });
+    SurfacePassStats st;
+    std::vector<ElemId> marks;
+    for (std::size_t i = fresh; i < ne; ++i) {
+      st.candidates += decision[i - fresh] & 1;
+      if (decision[i - fresh] & 2) marks.push_back(ElemId(static_cast<std::uint32_t>(i)));
+    }
+    const auto& nc = h.num_children_array();
+    st.vertices = h.vertex_count();
+    st.elements = static_cast<std::size_t>(std::count(nc.begin(), nc.end(), std::uint8_t(0)));
+    st.marked = marks.size();
+    // Refine, within the budgets.
+    bool by_memory = false;
+    const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), st.elements, &by_memory);
+    std::size_t count = marks.size();
+    std::vector<ElemId> remap;
+    if (count > 0) remap = refine_within(h, marks, count, limit, vertices_per_mark);
+    st.seconds = since(t0);
+    out.surface_passes.push_back(st);
+    if (opts.surface_progress) opts.surface_progress(st);
+    if (marks.empty()) return "";
+    if (count < marks.size()) {
+      // A budget cut this pass short: later passes could only add what it refused.
+      out.memory_limited = by_memory;
+      return by_memory ? "memory budget" : "vertex budget";
+    }
+    // Survivors of the old elements are renumbered 0..kept-1; everything after is new.
+    std::size_t kept = 0;
+    for (ElemId r : remap) kept += r.valid();
+    fresh = kept;
+  }
+}
+
 }  // namespace
+
+std::size_t estimated_memory_bytes(int dim, std::size_t vertices, std::size_t leaves) {
+  // Per leaf: element arrays (with ~15 % inner elements), cached integrals, the assembly's
+  // incidence and corner tables, error and marking arrays. Per vertex: points, parents, edge
+  // map, matrix rows, preconditioner and solver vectors, values. Calibrated on peak RSS of
+  // 3D builds (bench/RESULTS.md), rounded up.
+  const double per_leaf = dim == 3 ? 210.0 : 170.0;
+  const double per_vertex = dim == 3 ? 420.0 : 260.0;
+  return static_cast<std::size_t>(per_leaf * double(leaves) + per_vertex * double(vertices));
+}
 
 template <int D>
 std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field& f,
@@ -165,12 +347,22 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     if (opts.max_vertices && h.vertex_count() * (1 << D) > opts.max_vertices) break;
     h.refine_uniform();
   }
+  const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
+  std::string surface_stop;
+  if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out);
 
   // Integrals cached per element id (valid for leaves); refinement remaps them.
   std::vector<ElementIntegrals<D>> cache;
   std::vector<std::uint8_t> have;
   std::vector<double> values;
   double vertices_per_mark = 2.0;  // a red refinement's 3 (2D) / 6 (3D) midpoints, shared
+  // The paper's threshold rule runs to its end; every other rule stops when it stalls.
+  const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0;
+  const auto fmt_stall = [](const char* what, double percent, const char* unit) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "stalled: %s %.2f%s", what, percent, unit);
+    return std::string(buf);
+  };
 
   for (int it = 0;; ++it) {
     IterationStats st;
@@ -197,7 +389,15 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
-    if (values.empty())
+    if (values.empty() && surface_driven) {
+      // f's interpolant is close to u on a mesh built around the surfaces: a warm start.
+      values.resize(h.vertex_count());
+      tbb::parallel_for(std::size_t(0), values.size(), [&](std::size_t v) {
+        std::array<double, 3> x{0, 0, 0};
+        for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
+        values[v] = f.value(x);
+      });
+    } else if (values.empty())
       values.assign(h.vertex_count(), 0.0);
     else
       prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
@@ -249,7 +449,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
                             if (tau2 > 0) mark |= density > tau2;
                             const bool surface =
                                 !opts.iso_values.empty() &&
-                                surface_needs_refinement(h, e, cache[e.value], x, density, f, opts);
+                                // u smooths the noise that f's interpolant follows: it is held
+                                // to twice the tolerance (snapping moves vertices the rest).
+                                (surface_driven ? opts.check_surfaces_against_u &&
+                                                      surface_gap_mark(h, e, x, f, opts, 2 * opts.surface_tolerance)
+                                                : surface_needs_refinement(h, e, cache[e.value], x, density, f, opts));
                             decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
                           }
                         });
@@ -261,11 +465,27 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       }
       if (marked.empty())
         stop = target_met           ? "target RMS error reached"
+               : surface_driven     ? (surface_stop.empty() ? "surfaces within tolerance" : surface_stop)
                : opts.threshold > 0 ? "no element above the threshold"
                                     : "maximum level reached";
     }
     if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
     if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
+    if (stop.empty() && !surface_stop.empty()) stop = surface_stop;  // a budget ended the surface passes
+    // The mesh was built around the data's surfaces before the first solve; u is checked
+    // against them once, and what that refines is solved for and kept.
+    if (stop.empty() && surface_driven && it >= 1 && opts.target_rms <= 0 && opts.threshold <= 0)
+      stop = "surfaces built from the data, checked against u";
+    // No stalled iterations: a refinement that added next to nothing, or an error that hardly
+    // fell, ends the loop instead of paying a full solve per handful of vertices.
+    if (stop.empty() && stall_checks && it > 0) {
+      const auto& prev = out.iterations.back();
+      const double growth = double(st.vertices - prev.vertices) / double(prev.vertices);
+      if (growth < opts.min_growth)
+        stop = fmt_stall("the last refinement added", 100.0 * growth, "% of the vertices");
+      else if (opts.target_rms > 0 && !target_met && prev.rms_error - st.rms_error < opts.min_growth * prev.rms_error)
+        stop = fmt_stall("the RMS error fell by", 100.0 * (prev.rms_error - st.rms_error) / prev.rms_error, "%");
+    }
     st.estimate_seconds = since(te);
 
     if (!stop.empty()) {
@@ -283,9 +503,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // uniform mesh to 8-12 on a graded one; it is learned from the previous attempt, so an
     // iteration usually takes one attempt instead of halving its way down to the budget.
     auto tr = Clock::now();
-    const std::size_t room = opts.max_vertices ? opts.max_vertices - h.vertex_count() : 0;
+    bool by_memory = false;
+    const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaves.size(), &by_memory);
+    const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
     const std::size_t cap =
-        opts.max_vertices ? std::min(marked.size(),
+        limit ? std::min(marked.size(),
                                      std::max<std::size_t>(
                                          1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
                           : marked.size();
@@ -311,28 +533,12 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       count = std::max<std::size_t>(k, 1);
     }
     // Within half a percent of the budget, further attempts would mostly be undone.
-    if (opts.max_vertices && room < std::max<std::size_t>(8, opts.max_vertices / 200)) count = 0;
-    std::vector<ElemId> remap;
-    bool refined = false;
-    while (count > 0) {
-      const std::size_t before = h.vertex_count();
-      std::vector<ElemId> sel;
-      for (std::size_t i = 0; i < count; ++i) sel.push_back(marked[i].id);
-      // An attempt over the budget is rolled back by refine() itself (no copy of h).
-      std::size_t reached = 0;
-      remap = h.refine(sel, opts.max_vertices, &reached);
-      const std::size_t added = reached - before;
-      vertices_per_mark = std::max(1.0, double(added) / double(count));
-      if (!opts.max_vertices || reached <= opts.max_vertices) {
-        refined = true;
-        break;
-      }
-      // Overshot: scale the selection by the room over what this attempt added, with a
-      // margin, so the next attempt nearly always fits.
-      MLFE_CHECK(h.vertex_count() == before);
-      const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.9 * double(room) / double(added));
-      count = std::min(count - 1, scaled);
-    }
+    if (limit && room < std::max<std::size_t>(8, limit / 200)) count = 0;
+    std::vector<ElemId> sel(count);
+    for (std::size_t i = 0; i < count; ++i) sel[i] = marked[i].id;
+    // An attempt over the budget is rolled back by refine() itself (no copy of h).
+    const std::vector<ElemId> remap = refine_within(h, sel, count, limit, vertices_per_mark);
+    const bool refined = count > 0;
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);
     st.seconds = since(t0);
@@ -340,7 +546,8 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     if (opts.progress) opts.progress(st);
     if (!refined) {
       // The budget does not allow even one more refinement: keep the last solution.
-      out.stop_reason = "vertex budget";
+      out.memory_limited = by_memory;
+      out.stop_reason = by_memory ? "memory budget" : "vertex budget";
       out.leaf_errors = err;
       break;
     }

@@ -6,8 +6,11 @@
 //   → red-green refine the elements whose error is too large → solve again (CG + BPX, warm
 //   started from the previous solution) → … until the global error is small enough.
 //
-// Beyond the paper: stopping by a target RMS error, a vertex budget or a maximum level;
-// optional H1 norm (u,v) + s²(∇u,∇v) with s the voxel spacing (the paper's future work).
+// Beyond the paper: stopping by a target RMS error, a vertex budget, a memory budget or a
+// maximum level; optional H1 norm (u,v) + s²(∇u,∇v) with s the voxel spacing (the paper's
+// future work); surface-driven refinement for assets (surface_estimator.h): the mesh is
+// refined where the iso-surfaces need it, decided from the data before the first solve, and
+// u is then checked against the same rule.
 #pragma once
 #include <cstddef>
 #include <functional>
@@ -35,6 +38,15 @@ struct IterationStats {
   double seconds = 0;            ///< since the start
 };
 
+/// One pass of the surface-driven refinement before the first solve.
+struct SurfacePassStats {
+  std::size_t vertices = 0;
+  std::size_t elements = 0;    ///< leaf elements
+  std::size_t candidates = 0;  ///< leaves whose data range brackets an iso-value
+  std::size_t marked = 0;
+  double seconds = 0;          ///< since the start of approximate()
+};
+
 enum class Preconditioner { kBpx, kJacobi, kNone };
 
 struct ApproximationOptions {
@@ -51,23 +63,49 @@ struct ApproximationOptions {
   /// surface_tolerance voxels (or the surface is missing from u), down to voxel-sized elements.
   std::vector<double> iso_values;
   double surface_tolerance = 0.5;
+  /// With iso_values: refine only where a surface needs it. Before the first solve, leaves
+  /// whose data range (Field::range_in_box) brackets an iso-value are refined while the
+  /// surfaces of f and of f's linear interpolant are more than surface_tolerance voxels apart
+  /// (surface_gap_exceeds), down to voxel-sized elements; flat parts of a surface stay on
+  /// coarse elements. After each solve the same rule is applied to u. target_rms, threshold and
+  /// max_vertices still apply when set.
+  bool surface_driven = false;
+  /// With surface_driven: after the first solve, also refine where u's surfaces miss the data's
+  /// or lie more than twice the tolerance from them, and solve once more. u smooths away small
+  /// noise blobs that f's interpolant kept, so this adds vertices (bench/RESULTS.md).
+  bool check_surfaces_against_u = false;
+  /// The loop ends when a refinement added fewer than this fraction of vertices (or, with a
+  /// target RMS, lowered the error by less than this fraction): such iterations cost a full
+  /// solve each for almost nothing. 0: off. Not applied to the paper's threshold rule.
+  double min_growth = 0.01;
+  /// Refinement stops before the estimated memory of the approximation (hierarchy, integrals,
+  /// matrix, solver vectors: estimated_memory_bytes()) would exceed this; 0: no limit.
+  std::size_t max_memory_bytes = 0;
   Preconditioner preconditioner = Preconditioner::kBpx;
   double cg_tolerance = 1e-9;     ///< relative residual
   int direct_solve_max = 1000;    ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
                                   ///< uniform levels; beyond, 3D fill-in makes BPX-CG cheaper); 0: never
   std::function<void(const IterationStats&)> progress;  ///< called after every solve
+  std::function<void(const SurfacePassStats&)> surface_progress;  ///< after every surface pass
 };
 
 template <int D>
 struct Approximation {
   Hierarchy<D> hierarchy;
   std::vector<double> values;     ///< u at every vertex of the hierarchy (local frame)
+  std::vector<SurfacePassStats> surface_passes;
   std::vector<IterationStats> iterations;
   std::vector<double> leaf_errors;  ///< E_T per leaf (h.leaves() order) of the final u
   double domain_measure = 0;
   double value_min = 0, value_max = 0;
   std::string stop_reason;
+  bool memory_limited = false;  ///< refinement stopped at max_memory_bytes
 };
+
+/// Estimated peak bytes of approximate() for a hierarchy of this size (hierarchy, cached
+/// integrals, matrix, preconditioner and solver vectors); an upper-side model, used for the
+/// memory budget.
+std::size_t estimated_memory_bytes(int dim, std::size_t vertices, std::size_t leaves);
 
 /// Runs the adaptive loop for a field of dimension D (CHECKed) on its domain box
 /// [0, extent] in the field's local frame. Deterministic for any thread count.

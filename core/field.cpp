@@ -15,6 +15,10 @@ void Field::gradients(const std::array<double, 3>* x, std::array<double, 3>* out
   for (std::size_t j = 0; j < n; ++j) out[j] = gradient(x[j]);
 }
 
+std::array<double, 2> Field::range_in_box(const std::array<double, 3>&, const std::array<double, 3>&) const {
+  return range();
+}
+
 namespace {
 
 // The sample lattice as plain locals: the batched loops write doubles through `out`, which
@@ -150,6 +154,18 @@ void GridField::gradients(const std::array<double, 3>* x, std::array<double, 3>*
   } else {
     for (std::size_t j = 0; j < n; ++j) out[j] = interpolate_gradient<3>(l, x[j]);
   }
+}
+
+std::array<double, 2> GridField::range_in_box(const std::array<double, 3>& lo,
+                                              const std::array<double, 3>& hi) const {
+  std::call_once(pyramid_once_, [&] { pyramid_ = std::make_unique<MinMaxPyramid>(grid_); });
+  std::array<double, 3> i0{0, 0, 0}, i1{0, 0, 0};
+  for (int a = 0; a < dim_; ++a) {
+    i0[a] = lo[a] * inv_spacing_[a];
+    i1[a] = hi[a] * inv_spacing_[a];
+  }
+  const auto r = pyramid_->range(i0, i1);
+  return {r[0], r[1]};
 }
 
 }  // namespace mlfe

@@ -5,7 +5,10 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <mutex>
 
+#include "core/minmax_pyramid.h"
 #include "core/scalar_grid.h"
 
 namespace mlfe {
@@ -36,6 +39,10 @@ class Field {
   virtual double voxel_size() const { return resolution(); }
   /// Smallest and largest value of f.
   virtual std::array<double, 2> range() const = 0;
+  /// A range that contains every value of f on the box [lo, hi] (local frame); it may be wider
+  /// (conservative), never narrower. Surface-driven refinement asks it for every candidate
+  /// element, so fields should answer without visiting the box's samples. Defaults to range().
+  virtual std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const;
 };
 
 /// Trilinear (3D) / bilinear (2D) interpolation of a ScalarGrid's samples, which sit at the
@@ -53,6 +60,8 @@ class GridField final : public Field {
   double resolution() const override { return resolution_; }
   double voxel_size() const override { return voxel_size_; }
   std::array<double, 2> range() const override { return range_; }
+  /// From a min/max pyramid of the samples, built on the first call (thread-safe).
+  std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const override;
   const ScalarGrid& grid() const { return grid_; }
 
  private:
@@ -64,6 +73,8 @@ class GridField final : public Field {
   double resolution_;
   double voxel_size_;
   std::array<double, 2> range_;
+  mutable std::once_flag pyramid_once_;
+  mutable std::unique_ptr<MinMaxPyramid> pyramid_;
 };
 
 }  // namespace mlfe

@@ -7,7 +7,7 @@ PKGS=(
   build-essential cmake ninja-build pkg-config git
   libeigen3-dev libtbb-dev
   libopenvdb-dev libboost-iostreams-dev
-  libopenmesh-dev libdraco-dev draco libtinygltf-dev
+  libopenmesh-dev libdraco-dev draco libtinygltf-dev libmeshoptimizer-dev
   libopenexr-dev openexr
   libcli11-dev nlohmann-json3-dev libfmt-dev
   libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
