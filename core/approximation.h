@@ -74,9 +74,9 @@ struct ApproximationOptions {
   /// or lie more than twice the tolerance from them, and solve once more. u smooths away small
   /// noise blobs that f's interpolant kept, so this adds vertices (bench/RESULTS.md).
   bool check_surfaces_against_u = false;
-  /// The loop ends when a refinement added fewer than this fraction of vertices (or, with a
-  /// target RMS, lowered the error by less than this fraction): such iterations cost a full
-  /// solve each for almost nothing. 0: off. Not applied to the paper's threshold rule.
+  /// With iso_values, the loop ends when a refinement added fewer than this fraction of
+  /// vertices: iso-aware marks can trickle in a few elements per iteration, each a full solve.
+  /// 0: off. Not applied to the paper's threshold rule.
   double min_growth = 0.01;
   /// Refinement stops before the estimated memory of the approximation (hierarchy, integrals,
   /// matrix, solver vectors: estimated_memory_bytes()) would exceed this; 0: no limit.

@@ -223,7 +223,7 @@ TEST(Convert, UsageErrorsExitWith1) {
 // approximation's; the triangles are the same.
 TEST(Convert, SnapPutsTheAssetOnTheScansSurface) {
   const std::string a = scratch() + "/snap0.ply", b = scratch() + "/snap1.ply";
-  const std::string common = "convert " + kSkull + " --iso 3 --max-vertices 6000 --quiet -o ";
+  const std::string common = "convert " + kSkull + " --iso 3 --max-vertices 6000 --simplify 0 --quiet -o ";
   ASSERT_EQ(run(common + a + " --snap 0").status, 0);
   ASSERT_EQ(run(common + b).status, 0);
   const TriangleMesh plain = read_mesh_file(a), snapped = read_mesh_file(b);
@@ -259,9 +259,9 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   const std::string full = scratch() + "/simp_full.ply", simp = scratch() + "/simp.ply",
                     glb = scratch() + "/simp.glb";
   const std::string common = kSkull + " --iso 3 --max-vertices 8000 --quiet";
-  ASSERT_EQ(run("convert " + common + " -o " + full).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + simp).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + glb).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0 -o " + full).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded -o " + simp).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded -o " + glb).status, 0);
   const TriangleMesh a = read_mesh_file(full), b = read_mesh_file(simp);
   EXPECT_LT(b.triangle_count(), a.triangle_count() / 2);
   // Every vertex of the extracted surface (every 7th, brute force) stays within 0.3 of the
@@ -277,8 +277,8 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   // normal the extracted surface has at the same position (so --placement auto keeps the
   // vertices in place: the same positions as --placement input).
   const std::string grad = scratch() + "/simp_gradient.ply", pinned = scratch() + "/simp_pinned.ply";
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals gradient -o " + grad).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement input -o " + pinned).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --normals gradient -o " + grad).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status, 0);
   const TriangleMesh kept = read_mesh_file(grad);
   ASSERT_EQ(kept.positions, read_mesh_file(pinned).positions);
   ASSERT_NE(kept.positions, b.positions);  // the default moves vertices (optimal placement)
@@ -293,10 +293,10 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   // --normals surface, and the default after --simplify: area-weighted normals of the written
   // triangles instead.
   const std::string surf = scratch() + "/simp_surface.ply";
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --normals surface -o " + surf).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --normals surface -o " + surf).status, 0);
   EXPECT_EQ(read_bytes(surf), read_bytes(simp));
   ASSERT_EQ(
-      run("convert " + common + " --simplify 0.3 --normals surface --placement input -o " + surf).status, 0);
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --normals surface --placement input -o " + surf).status, 0);
   EXPECT_EQ(read_bytes(surf), read_bytes(pinned));
   const TriangleMesh c = read_mesh_file(surf);
   ASSERT_EQ(c.positions, kept.positions);
@@ -311,9 +311,9 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   EXPECT_GT(differ, 0.05);  // the two kinds are really different
   // Without simplification the default is the paper's normals.
   const std::string full_grad = scratch() + "/full_gradient.ply";
-  ASSERT_EQ(run("convert " + common + " --normals gradient -o " + full_grad).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0 --normals gradient -o " + full_grad).status, 0);
   EXPECT_EQ(read_bytes(full_grad), read_bytes(full));
-  EXPECT_EQ(run("convert " + common + " --normals flat -o " + surf).status, 1);
+  EXPECT_EQ(run("convert " + common + " --simplify 0 --normals flat -o " + surf).status, 1);
 }
 
 // --placement optimal: vertices at the quadric minimum, kept within the tolerance of the
@@ -324,13 +324,13 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
                     one = scratch() + "/opt1.ply", two = scratch() + "/opt2.ply",
                     glb = scratch() + "/opt.glb";
   const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
-  ASSERT_EQ(run("convert " + common + " -o " + full).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement input -o " + pinned).status, 0);
-  ASSERT_EQ(run("--threads 1 convert " + common + " --simplify 0.3 --placement optimal -o " + one).status, 0);
-  ASSERT_EQ(run("--threads 2 convert " + common + " --simplify 0.3 --placement optimal -o " + two).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0 -o " + full).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status, 0);
+  ASSERT_EQ(run("--threads 1 convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + one).status, 0);
+  ASSERT_EQ(run("--threads 2 convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + two).status, 0);
   EXPECT_EQ(read_bytes(one), read_bytes(two));
   const std::string dflt = scratch() + "/opt_default.ply";  // auto: optimal with surface normals
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 -o " + dflt).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded -o " + dflt).status, 0);
   EXPECT_EQ(read_bytes(dflt), read_bytes(two));
   const TriangleMesh a = read_mesh_file(full), b = read_mesh_file(pinned), c = read_mesh_file(two);
   std::printf("triangles: %zu extracted, %zu input placement, %zu optimal placement\n", a.triangle_count(),
@@ -345,11 +345,11 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
   std::size_t moved = 0;
   for (const auto& p : c.positions) moved += !extracted.count(p);
   EXPECT_GT(moved, c.positions.size() / 2);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --placement optimal -o " + glb).status, 0);
+  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + glb).status, 0);
   std::string report;
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
   EXPECT_EQ(parse_glb(read_bytes(glb)).gltf["asset"]["extras"]["placement"], "optimal");
-  EXPECT_EQ(run("convert " + common + " --simplify 0.3 --placement best -o " + glb).status, 1);
+  EXPECT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement best -o " + glb).status, 1);
 }
 
 // Several surfaces are simplified at once, each in a fresh process here: OpenMesh's global log
@@ -357,7 +357,7 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
 // (README's main command). Every run must succeed, and match the single-threaded output.
 TEST(Convert, ConcurrentSimplificationIsStableAndDeterministic) {
   const std::string args =
-      " convert " + kSkull + " --iso 1,1.5,2,3 --max-vertices 3000 --simplify 0.3 --quiet";
+      " convert " + kSkull + " --iso 1,1.5,2,3 --max-vertices 3000 --simplify 0.3 --simplifier bounded --quiet";
   const std::string one = scratch() + "/cs1.ply";
   ASSERT_EQ(run("--threads 1" + args + " -o " + one).status, 0);
   for (int i = 0; i < 8; ++i) {
@@ -389,7 +389,7 @@ void expect_golden_ply(const std::string& args, const std::string& name) {
 
 TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
   const std::string glb = scratch() + "/golden.glb";
-  const std::string args = kSkull + " --iso 2.5 --max-vertices 3000 --quiet";
+  const std::string args = kSkull + " --iso 2.5 --max-vertices 3000 --simplify 0 --quiet";
   expect_golden_ply(args, "ct_skull_iso2.5_3000.ply");
   ASSERT_EQ(run("convert " + args + " -o " + glb).status, 0);
   const std::string golden_ply = kGolden + "/ct_skull_iso2.5_3000.ply";
@@ -433,7 +433,7 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
 
 // The README's main job on a small budget: snapped, simplified (default placement) surfaces.
 TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
-  expect_golden_ply(kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --quiet",
+  expect_golden_ply(kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --simplifier bounded --quiet",
                     "ct_skull_iso1.5_3_8000_simplify0.2.ply");
 }
 
@@ -452,12 +452,12 @@ TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
   // placements: fewer triangles, the bound both ways, and a valid asset.
   const std::string full = scratch() + "/dem.ply";
   const std::string common = " convert " + dem + " --rms 1% --z-scale 0.00001 --quiet";
-  ASSERT_EQ(run(common + " -o " + full).status, 0);
+  ASSERT_EQ(run(common + " --simplify 0 -o " + full).status, 0);
   const TriangleMesh a = read_mesh_file(full);
   for (const std::string placement : {"input", "optimal"}) {
     const std::string ply = scratch() + "/dem_" + placement + ".ply", sglb = scratch() + "/dem_s.glb";
-    ASSERT_EQ(run(common + " --simplify 0.5 --placement " + placement + " -o " + ply).status, 0);
-    ASSERT_EQ(run(common + " --simplify 0.5 --placement " + placement + " -o " + sglb).status, 0);
+    ASSERT_EQ(run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + ply).status, 0);
+    ASSERT_EQ(run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + sglb).status, 0);
     EXPECT_TRUE(validator_accepts(sglb, &report)) << report;
     const TriangleMesh b = read_mesh_file(ply);
     EXPECT_LT(b.triangle_count(), a.triangle_count() / 2) << placement;
