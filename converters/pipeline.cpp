@@ -215,7 +215,7 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
     // tenth kept for extraction and writing.
     const double grid_bytes = double(grid.voxel_count()) * (sizeof(float) + 1.2);
     const double room = 0.9 * double(budget) - grid_bytes;
-    if (room < 64.0 * 1024 * 1024)
+    if (room < 8.0 * 1024 * 1024)
       throw Error(fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
                               grid.source, grid_bytes / 1048576.0, p.max_memory, double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);

@@ -513,5 +513,72 @@ TEST(BadInput, ExitsWithStatusTwoOneLineAndNoOutput) {
     EXPECT_EQ(e.path().filename().string().rfind(".tmp-", 0), std::string::npos) << e.path();
 }
 
+// The iso-aware loop with a global target used to trickle in a few surface elements per full
+// solve (the skull: 0.1-2 % more vertices per iteration); it now ends within two iterations of
+// the first that adds less than 1 %, and says so.
+TEST(Convert, IsoAwareRefinementDoesNotStall) {
+  const std::string rep = scratch() + "/stall.json";
+  ASSERT_EQ(run("convert " + kSkull + " --rms 1% --iso 1.5,3 --simplify 0 --quiet -o " + scratch() +
+                "/stall.ply --report " + rep)
+                .status,
+            0);
+  const json r = json::parse(read_bytes(rep));
+  const auto& its = r["per_iteration"];
+  std::size_t first_small = its.size();
+  for (std::size_t i = 1; i < its.size(); ++i)
+    if (its[i]["vertices"].get<double>() < 1.01 * its[i - 1]["vertices"].get<double>()) {
+      first_small = i;
+      break;
+    }
+  EXPECT_LE(its.size(), first_small + 2);
+  EXPECT_NE(r["stop_reason"].get<std::string>().find("stalled"), std::string::npos) << r["stop_reason"];
+}
+
+// Defaults at work: a big sphere and, 25 voxels away, a sphere two voxels across. The default
+// convert (surface-driven, simplified) keeps the small part, writes fewer triangles than the
+// raw extraction, and the same bytes with 1 and 2 threads.
+TEST(Convert, DefaultConvertKeepsSmallPartsAndIsDeterministic) {
+  const std::string vol = scratch() + "/spheres.raw";
+  {
+    std::vector<float> v(64 * 64 * 64);
+    for (int k = 0; k < 64; ++k)
+      for (int j = 0; j < 64; ++j)
+        for (int i = 0; i < 64; ++i) {
+          auto d = [&](double x, double y, double z) {
+            return std::sqrt((i - x) * (i - x) + (j - y) * (j - y) + (k - z) * (k - z));
+          };
+          v[i + 64 * (j + 64 * k)] = float(std::max(20.0 - d(24, 24, 24), 1.0 - d(54, 54, 54)));
+        }
+    std::ofstream f(vol, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * 4));
+    std::ofstream j(vol + ".json");
+    j << R"({"dims": [64, 64, 64], "spacing": [1, 1, 1], "dtype": "float32", "endian": "little"})";
+  }
+  const std::string a = scratch() + "/sph1.ply", b = scratch() + "/sph2.ply", raw = scratch() + "/sphraw.ply";
+  ASSERT_EQ(run("--threads 1 convert " + vol + " --iso 0 --quiet -o " + a).status, 0);
+  ASSERT_EQ(run("--threads 2 convert " + vol + " --iso 0 --quiet -o " + b).status, 0);
+  ASSERT_EQ(run("convert " + vol + " --iso 0 --simplify 0 --quiet -o " + raw).status, 0);
+  EXPECT_EQ(read_bytes(a), read_bytes(b));
+  const TriangleMesh m = read_mesh_file(a), full = read_mesh_file(raw);
+  EXPECT_LT(m.triangle_count(), full.triangle_count());
+  int near_small = 0;
+  for (const auto& p : m.positions) {
+    const double d = std::sqrt((p[0] - 54) * (p[0] - 54) + (p[1] - 54) * (p[1] - 54) + (p[2] - 54) * (p[2] - 54));
+    if (d < 1.6) ++near_small;
+  }
+  EXPECT_GE(near_small, 4);  // a closed little surface around (54, 54, 54)
+}
+
+// --max-memory: a build that would not fit stops refining with a message, and still writes.
+TEST(Convert, MemoryBudgetStopsWithAMessage) {
+  const std::string out = scratch() + "/mem.ply", rep = scratch() + "/mem.json";
+  const RunResult r = run("convert " + kSkull + " --iso 1.5 --max-memory 12M -o " + out + " --report " + rep);
+  EXPECT_EQ(r.status, 0);
+  EXPECT_NE(r.err.find("memory budget"), std::string::npos) << r.err;
+  EXPECT_TRUE(json::parse(read_bytes(rep))["memory_limited"].get<bool>());
+  EXPECT_EQ(run("convert " + kSkull + " --iso 1.5 --max-memory lots -o " + out).status, 2);
+}
+
 }  // namespace
 }  // namespace mlfe
+
