@@ -2,11 +2,13 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <random>
 
 #include "core/check.h"
@@ -75,10 +77,10 @@ V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c, V3& b
   return add(a, add(scale(ab, v), scale(ac, w)));
 }
 
-double box_distance2(const std::array<float, 3>& lo, const std::array<float, 3>& hi, const V3& p) {
+double box_distance2(const V3& lo, const V3& hi, const V3& p) {
   double d2 = 0;
   for (int k = 0; k < 3; ++k) {
-    const double d = std::max({double(lo[k]) - p[k], 0.0, p[k] - double(hi[k])});
+    const double d = std::max(std::max(lo[k] - p[k], 0.0), p[k] - hi[k]);
     d2 += d * d;
   }
   return d2;
@@ -96,27 +98,67 @@ V3 interpolated_normal(const TriangleMesh& m, std::uint32_t t, const V3& bary) {
   return len > 0 ? scale(n, 1.0 / len) : V3{0, 0, 0};
 }
 
+/// Spreads the low 10 bits of x so that two zero bits follow each (for a 30-bit Morton code).
+std::uint32_t spread_bits(std::uint32_t x) {
+  x &= 0x3ff;
+  x = (x | (x << 16)) & 0x030000ff;
+  x = (x | (x << 8)) & 0x0300f00f;
+  x = (x | (x << 4)) & 0x030c30c3;
+  x = (x | (x << 2)) & 0x09249249;
+  return x;
+}
+
+/// Sample indices sorted by the Morton code of their point on a 1024^3 grid over their box
+/// (ties by index, so the order is unique).
+std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& samples) {
+  std::vector<std::uint32_t> order(samples.size());
+  std::iota(order.begin(), order.end(), 0u);
+  if (samples.empty()) return order;
+  V3 lo = samples[0].point, hi = lo;
+  for (const auto& s : samples)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], s.point[k]);
+      hi[k] = std::max(hi[k], s.point[k]);
+    }
+  std::vector<std::uint32_t> code(samples.size());
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    std::uint32_t c = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double extent = hi[k] - lo[k];
+      const double q = extent > 0 ? (samples[i].point[k] - lo[k]) / extent * 1023.0 : 0.0;
+      c |= spread_bits(std::uint32_t(std::clamp(q, 0.0, 1023.0))) << k;
+    }
+    code[i] = c;
+  }
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return code[a] < code[b] || (code[a] == code[b] && a < b);
+  });
+  return order;
+}
+
 }  // namespace
 
 TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
   const std::size_t nt = mesh.triangles.size();
-  tri_.resize(nt);
   std::vector<std::array<float, 3>> centroid(nt);
-  for (std::size_t t = 0; t < nt; ++t) {
-    for (int c = 0; c < 3; ++c) {
-      const std::uint32_t v = mesh.triangles[t][c];
-      MLFE_CHECK(v < mesh.positions.size());
-      tri_[t][c] = to_v3(mesh.positions[v]);
+  for (std::size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      double c = 0;
+      for (int i = 0; i < 3; ++i) {
+        const std::uint32_t v = mesh.triangles[t][i];
+        MLFE_CHECK(v < mesh.positions.size());
+        c += mesh.positions[v][k];
+      }
+      centroid[t][k] = float(c / 3.0);
     }
-    for (int k = 0; k < 3; ++k) centroid[t][k] = float((tri_[t][0][k] + tri_[t][1][k] + tri_[t][2][k]) / 3.0);
-  }
-  order_.resize(nt);
-  std::iota(order_.begin(), order_.end(), 0u);
+  id_.resize(nt);
+  std::iota(id_.begin(), id_.end(), 0u);
   if (nt == 0) return;
   nodes_.reserve(2 * (nt / kLeafSize + 1));
 
-  // Iterative top-down build: each range is split at the median centroid along the longest box
-  // axis (nth_element is deterministic for the same input), children stored next to each other.
+  // Step 1: top-down split of triangle ranges at the median centroid along the longest axis of
+  // the centroids' box (nth_element with an index tie-break is deterministic). Children are
+  // stored next to each other and after their parent.
   struct Task {
     std::uint32_t node, begin, end;
   };
@@ -126,39 +168,61 @@ TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
   while (!stack.empty()) {
     const Task task = stack.back();
     stack.pop_back();
-    Node node;
-    node.lo = {std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
-               std::numeric_limits<float>::max()};
-    node.hi = {-node.lo[0], -node.lo[1], -node.lo[2]};
-    for (std::uint32_t i = task.begin; i < task.end; ++i)
-      for (const V3& p : tri_[order_[i]])
-        for (int k = 0; k < 3; ++k) {
-          // Rounded outward so the float box never cuts off a double-precision corner.
-          node.lo[k] = std::min(node.lo[k], std::nextafter(float(p[k]), -std::numeric_limits<float>::max()));
-          node.hi[k] = std::max(node.hi[k], std::nextafter(float(p[k]), std::numeric_limits<float>::max()));
-        }
+    Node& node = nodes_[task.node];
     if (task.end - task.begin <= kLeafSize) {
       node.first = task.begin;
       node.count = task.end - task.begin;
-      nodes_[task.node] = node;
       continue;
     }
+    std::array<float, 3> lo = centroid[id_[task.begin]], hi = lo;
+    for (std::uint32_t i = task.begin; i < task.end; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], centroid[id_[i]][k]);
+        hi[k] = std::max(hi[k], centroid[id_[i]][k]);
+      }
     int axis = 0;
     for (int k = 1; k < 3; ++k)
-      if (node.hi[k] - node.lo[k] > node.hi[axis] - node.lo[axis]) axis = k;
+      if (hi[k] - lo[k] > hi[axis] - lo[axis]) axis = k;
     const std::uint32_t mid = task.begin + (task.end - task.begin) / 2;
-    std::nth_element(order_.begin() + task.begin, order_.begin() + mid, order_.begin() + task.end,
+    std::nth_element(id_.begin() + task.begin, id_.begin() + mid, id_.begin() + task.end,
                      [&](std::uint32_t a, std::uint32_t b) {
                        return centroid[a][axis] < centroid[b][axis] ||
                               (centroid[a][axis] == centroid[b][axis] && a < b);
                      });
-    node.first = std::uint32_t(nodes_.size());
+    const auto left = std::uint32_t(nodes_.size());
+    node.first = left;
     node.count = 0;
-    nodes_[task.node] = node;
+    nodes_.push_back({});  // invalidates `node`
     nodes_.push_back({});
-    nodes_.push_back({});
-    stack.push_back({node.first, task.begin, mid});
-    stack.push_back({node.first + 1, mid, task.end});
+    stack.push_back({left, task.begin, mid});
+    stack.push_back({left + 1, mid, task.end});
+  }
+
+  // Step 2: corners in leaf order (a leaf's triangles adjacent in memory for the queries).
+  tri_.resize(nt);
+  for (std::size_t slot = 0; slot < nt; ++slot)
+    for (int c = 0; c < 3; ++c) tri_[slot][c] = to_v3(mesh.positions[mesh.triangles[id_[slot]][c]]);
+
+  // Step 3: boxes bottom-up; children come after their parent, so a reverse sweep sees them
+  // first. Double precision boxes contain the double corners exactly.
+  for (std::size_t n = nodes_.size(); n-- > 0;) {
+    Node& node = nodes_[n];
+    if (node.count > 0) {
+      node.lo = node.hi = tri_[node.first][0];
+      for (std::uint32_t s = node.first; s < node.first + node.count; ++s)
+        for (const V3& p : tri_[s])
+          for (int k = 0; k < 3; ++k) {
+            node.lo[k] = std::min(node.lo[k], p[k]);
+            node.hi[k] = std::max(node.hi[k], p[k]);
+          }
+    } else {
+      const Node& l = nodes_[node.first];
+      const Node& r = nodes_[node.first + 1];
+      for (int k = 0; k < 3; ++k) {
+        node.lo[k] = std::min(l.lo[k], r.lo[k]);
+        node.hi[k] = std::max(l.hi[k], r.hi[k]);
+      }
+    }
   }
 }
 
@@ -167,7 +231,7 @@ TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
   if (nodes_.empty()) return hit;
   double best2 = std::numeric_limits<double>::infinity();
   std::uint32_t best_tri = 0;
-  V3 best_point{};
+  V3 best_point{}, best_bary{};
   std::uint32_t stack[128];
   int top = 0;
   stack[top++] = 0;
@@ -175,16 +239,16 @@ TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
     const Node& node = nodes_[stack[--top]];
     if (box_distance2(node.lo, node.hi, p) > best2) continue;
     if (node.count > 0) {
-      for (std::uint32_t i = node.first; i < node.first + node.count; ++i) {
-        const std::uint32_t t = order_[i];
+      for (std::uint32_t s = node.first; s < node.first + node.count; ++s) {
         V3 bary;
-        const V3 q = closest_on_triangle(p, tri_[t][0], tri_[t][1], tri_[t][2], bary);
+        const V3 q = closest_on_triangle(p, tri_[s][0], tri_[s][1], tri_[s][2], bary);
         const V3 d = sub(p, q);
         const double d2 = dot(d, d);
-        if (d2 < best2 || (d2 == best2 && t < best_tri)) {
+        if (d2 < best2 || (d2 == best2 && id_[s] < best_tri)) {
           best2 = d2;
-          best_tri = t;
+          best_tri = id_[s];
           best_point = q;
+          best_bary = bary;
         }
       }
       continue;
@@ -194,16 +258,17 @@ TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
     const double dr = box_distance2(nodes_[node.first + 1].lo, nodes_[node.first + 1].hi, p);
     MLFE_CHECK(top + 2 <= 128);
     if (dl <= dr) {
-      stack[top++] = node.first + 1;
+      if (dr <= best2) stack[top++] = node.first + 1;
       stack[top++] = node.first;
     } else {
-      stack[top++] = node.first;
+      if (dl <= best2) stack[top++] = node.first;
       stack[top++] = node.first + 1;
     }
   }
   hit.triangle = TriId(best_tri);
   hit.distance = std::sqrt(best2);
   hit.point = best_point;
+  hit.bary = best_bary;
   return hit;
 }
 
@@ -211,14 +276,20 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
   std::vector<SurfaceSample> samples;
   // Step 1: every vertex used by a triangle, with the lowest triangle that uses it.
   std::vector<std::uint32_t> first_tri(mesh.positions.size(), TriId::kInvalidValue);
+  std::vector<std::uint8_t> corner(mesh.positions.size(), 0);
   for (std::size_t t = mesh.triangles.size(); t-- > 0;)
-    for (std::uint32_t v : mesh.triangles[t]) {
+    for (int c = 0; c < 3; ++c) {
+      const std::uint32_t v = mesh.triangles[t][c];
       MLFE_CHECK(v < mesh.positions.size());
       first_tri[v] = std::uint32_t(t);
+      corner[v] = std::uint8_t(c);
     }
   for (std::size_t v = 0; v < mesh.positions.size(); ++v)
-    if (first_tri[v] != TriId::kInvalidValue)
-      samples.push_back({to_v3(mesh.positions[v]), TriId(first_tri[v])});
+    if (first_tri[v] != TriId::kInvalidValue) {
+      V3 bary{0, 0, 0};
+      bary[corner[v]] = 1;
+      samples.push_back({to_v3(mesh.positions[v]), TriId(first_tri[v]), bary});
+    }
 
   // Step 2: area-weighted random points; the cumulative area table makes the choice of triangle
   // a binary search, and one std::mt19937_64 stream drawn in order keeps it reproducible
@@ -251,7 +322,7 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
     const V3 a = to_v3(mesh.positions[tri[0]]);
     const V3 p = add(a, add(scale(sub(to_v3(mesh.positions[tri[1]]), a), u),
                             scale(sub(to_v3(mesh.positions[tri[2]]), a), v)));
-    samples.push_back({p, TriId(std::uint32_t(t))});
+    samples.push_back({p, TriId(std::uint32_t(t)), {1 - u - v, u, v}});
   }
   return samples;
 }
@@ -266,21 +337,19 @@ OneSidedDistance one_sided_distance(const TriangleMesh& from, const std::vector<
   };
   std::vector<Slot> slots(samples.size());
 
-  // Step 1 (parallel): closest point and normal angle per sample, each into its own slot.
+  // Step 1: queries in Morton order. Neighbouring queries then walk the same BVH nodes, which
+  // stay in cache; vertex order in a file is arbitrary (Draco shuffles it). The order does not
+  // change any result: each sample still writes only its own slot.
+  const std::vector<std::uint32_t> order = morton_order(samples);
+
+  // Step 2 (parallel): closest point and normal angle per sample.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 1024), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+    for (std::size_t j = range.begin(); j != range.end(); ++j) {
+      const std::size_t i = order[j];
       const SurfaceSample& s = samples[i];
       const TriangleBvh::Hit hit = to_bvh.closest(s.point);
-      const auto& ft = from.triangles[s.triangle.value];
-      V3 from_bary;
-      closest_on_triangle(s.point, to_v3(from.positions[ft[0]]), to_v3(from.positions[ft[1]]),
-                          to_v3(from.positions[ft[2]]), from_bary);
-      const auto& tt = to.triangles[hit.triangle.value];
-      V3 to_bary;
-      closest_on_triangle(hit.point, to_v3(to.positions[tt[0]]), to_v3(to.positions[tt[1]]),
-                          to_v3(to.positions[tt[2]]), to_bary);
-      const V3 n0 = interpolated_normal(from, s.triangle.value, from_bary);
-      const V3 n1 = interpolated_normal(to, hit.triangle.value, to_bary);
+      const V3 n0 = interpolated_normal(from, s.triangle.value, s.bary);
+      const V3 n1 = interpolated_normal(to, hit.triangle.value, hit.bary);
       double angle = -1;
       if (dot(n0, n0) > 0 && dot(n1, n1) > 0)
         angle = std::acos(std::clamp(dot(n0, n1), -1.0, 1.0)) * (180.0 / M_PI);
@@ -288,7 +357,7 @@ OneSidedDistance one_sided_distance(const TriangleMesh& from, const std::vector<
     }
   });
 
-  // Step 2 (sequential): reductions in sample order, so sums do not depend on scheduling.
+  // Step 3 (sequential): reductions in sample order, so sums do not depend on scheduling.
   OneSidedDistance r;
   r.samples = samples.size();
   double sum = 0, angle_sum = 0;
@@ -327,10 +396,21 @@ MeshDistance mesh_distance(const TriangleMesh& expected, const TriangleMesh& act
     compute_area_weighted_normals(e);
     compute_area_weighted_normals(a);
   }
-  const TriangleBvh e_bvh(e), a_bvh(a);
+  // The two sides are independent until the queries: build and sample them side by side.
+  std::optional<TriangleBvh> e_bvh, a_bvh;
+  std::vector<SurfaceSample> e_samples, a_samples;
+  tbb::parallel_invoke(
+      [&] {
+        e_bvh.emplace(e);
+        e_samples = sample_surface(e, options);
+      },
+      [&] {
+        a_bvh.emplace(a);
+        a_samples = sample_surface(a, options);
+      });
   MeshDistance d;
-  d.expected_to_actual = one_sided_distance(e, sample_surface(e, options), a, a_bvh);
-  d.actual_to_expected = one_sided_distance(a, sample_surface(a, options), e, e_bvh);
+  d.expected_to_actual = one_sided_distance(e, e_samples, a, *a_bvh);
+  d.actual_to_expected = one_sided_distance(a, a_samples, e, *e_bvh);
   return d;
 }
 

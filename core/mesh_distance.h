@@ -29,6 +29,7 @@ class TriangleBvh {
     TriId triangle;                 ///< invalid only for a mesh without triangles
     double distance = 0.0;          ///< Euclidean distance to the closest point
     std::array<double, 3> point{};  ///< the closest point on the mesh
+    std::array<double, 3> bary{};   ///< its barycentric weights in `triangle`
   };
 
   /// The closest point on any triangle to `p`. Ties between triangles at the same distance go
@@ -39,12 +40,14 @@ class TriangleBvh {
 
  private:
   struct Node {
-    std::array<float, 3> lo, hi;
-    std::uint32_t first = 0;  ///< leaf: first index into order_; inner: left child (right = left + 1)
+    std::array<double, 3> lo, hi;
+    std::uint32_t first = 0;  ///< leaf: first triangle slot; inner: left child (right = left + 1)
     std::uint32_t count = 0;  ///< triangles in a leaf, 0 for inner nodes
   };
-  std::vector<std::array<std::array<double, 3>, 3>> tri_;  ///< corner positions per triangle
-  std::vector<std::uint32_t> order_;                       ///< triangle ids, leaves contiguous
+  /// Corner positions per triangle slot, in leaf order so that a leaf's triangles are adjacent
+  /// in memory; id_[slot] is the triangle's index in the mesh.
+  std::vector<std::array<std::array<double, 3>, 3>> tri_;
+  std::vector<std::uint32_t> id_;
   std::vector<Node> nodes_;
 };
 
@@ -59,6 +62,7 @@ struct SurfaceSamplingOptions {
 struct SurfaceSample {
   std::array<double, 3> point;
   TriId triangle;
+  std::array<double, 3> bary;  ///< barycentric weights of `point` in `triangle`
 };
 
 /// The vertices of `mesh` that lie on a triangle (each with one of its triangles, the lowest
