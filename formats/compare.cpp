@@ -340,7 +340,8 @@ void compare_transforms(const GridTransform& e, const GridTransform& a, double r
 }
 
 /// Max and RMS of the differences, reduced in index order.
-void compare_values(const std::string& what, const float* e, const float* a, std::size_t n,
+template <class T>
+void compare_values(const std::string& what, const T* e, const T* a, std::size_t n,
                     const CompareOptions& options, CompareResult& r, nlohmann::json& report) {
   double max = 0, sum2 = 0;
   std::size_t at = 0;
@@ -438,11 +439,11 @@ void compare_hierarchy_arrays(const HierarchyFile& ef, const HierarchyFile& af, 
   // that level, so a difference there says which refinement step changed.
   nlohmann::json per_level = nlohmann::json::array();
   for (std::size_t k = 0; k < ev.size(); ++k) {
-    std::vector<float> x, y;
+    std::vector<double> x, y;
     for (std::size_t v = 0; v < ef.values.size(); ++v)
       if (e.vertex_level_array()[v] == k) {
-        x.push_back(float(ef.values[v]));
-        y.push_back(float(af.values[v]));
+        x.push_back(ef.values[v]);
+        y.push_back(af.values[v]);
       }
     nlohmann::json figures;
     compare_values(fmt::format("values at level {}", k), x.data(), y.data(), x.size(), options, r, figures);
