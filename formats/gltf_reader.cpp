@@ -1,8 +1,10 @@
 #include "formats/gltf_reader.h"
 
-// Declarations only: Debian's libtinygltf-dev is a compiled library (see gltf_writer.cpp).
+// Not through tinygltf's loader: in this process its symbols resolve to the copy bundled in
+// libdraco.so (a different version than the libtinygltf-dev headers), and that loader crashed
+// on damaged .glb files (GltfReader.TruncatedAndCorruptedFilesThrowError). The JSON is parsed
+// with nlohmann::json and every index and byte range is checked here instead.
 #include <fmt/format.h>
-#include <tiny_gltf.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -104,71 +106,183 @@ nlohmann::json strip_encoding(nlohmann::json j) {
   return j;
 }
 
-Eigen::Matrix4d local_matrix(const tinygltf::Node& n) {
+Eigen::Matrix4d local_matrix(const nlohmann::json& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
-  if (n.matrix.size() == 16) {
+  if (n.contains("matrix")) {
+    const auto matrix = n.at("matrix").get<std::vector<double>>();
+    if (matrix.size() != 16) throw Error("node matrix must have 16 numbers");
     for (int c = 0; c < 4; ++c)
-      for (int r = 0; r < 4; ++r) m(r, c) = n.matrix[c * 4 + r];  // glTF is column-major
+      for (int r = 0; r < 4; ++r) m(r, c) = matrix[c * 4 + r];  // glTF is column-major
     return m;
   }
-  Eigen::Affine3d t = Eigen::Affine3d::Identity();
-  if (n.translation.size() == 3)
-    t.translate(Eigen::Vector3d(n.translation[0], n.translation[1], n.translation[2]));
-  if (n.rotation.size() == 4)
-    t.rotate(Eigen::Quaterniond(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]).normalized());
-  if (n.scale.size() == 3) t.scale(Eigen::Vector3d(n.scale[0], n.scale[1], n.scale[2]));
-  return t.matrix();
+  auto vec = [&](const char* key, std::size_t n_expected) {
+    std::vector<double> v = n.contains(key) ? n.at(key).get<std::vector<double>>() : std::vector<double>{};
+    if (!v.empty() && v.size() != n_expected) throw Error(std::string("node ") + key + " has the wrong size");
+    return v;
+  };
+  const auto t = vec("translation", 3), r = vec("rotation", 4), sc = vec("scale", 3);
+  Eigen::Affine3d a = Eigen::Affine3d::Identity();
+  if (!t.empty()) a.translate(Eigen::Vector3d(t[0], t[1], t[2]));
+  if (!r.empty()) a.rotate(Eigen::Quaterniond(r[3], r[0], r[1], r[2]).normalized());
+  if (!sc.empty()) a.scale(Eigen::Vector3d(sc[0], sc[1], sc[2]));
+  return a.matrix();
+}
+
+std::string base64_decode(const std::string& in, const std::string& path) {
+  auto value = [&](char c) -> int {
+    if (c >= 'A' && c <= 'Z') return c - 'A';
+    if (c >= 'a' && c <= 'z') return c - 'a' + 26;
+    if (c >= '0' && c <= '9') return c - '0' + 52;
+    if (c == '+' || c == '-') return 62;
+    if (c == '/' || c == '_') return 63;
+    return -1;
+  };
+  std::string out;
+  out.reserve(in.size() / 4 * 3);
+  unsigned bits = 0;
+  int count = 0;
+  for (char c : in) {
+    if (c == '=') break;
+    const int v = value(c);
+    if (v < 0) fail(path, "bad base64 data in a buffer URI");
+    bits = (bits << 6) | unsigned(v);
+    if ((count += 6) >= 8) {
+      count -= 8;
+      out.push_back(char((bits >> count) & 0xff));
+    }
+  }
+  return out;
+}
+
+/// The bytes of every buffer: the GLB's BIN chunk, a data: URI or a file next to `path`.
+std::vector<std::string> load_buffers(const std::string& path, const std::string& bytes,
+                                      const nlohmann::json& j) {
+  std::vector<std::string> buffers;
+  if (!j.contains("buffers")) return buffers;
+  std::string bin;
+  if (is_glb(bytes) && bytes.size() >= 20) {
+    std::uint32_t json_length = 0;
+    std::memcpy(&json_length, bytes.data() + 12, 4);
+    const std::size_t at = 20 + std::size_t(json_length);
+    if (at + 8 <= bytes.size()) {
+      std::uint32_t length = 0, type = 0;
+      std::memcpy(&length, bytes.data() + at, 4);
+      std::memcpy(&type, bytes.data() + at + 4, 4);
+      if (type != 0x004E4942u || length > bytes.size() - at - 8) fail(path, "bad GLB BIN chunk");
+      bin = bytes.substr(at + 8, length);
+    }
+  }
+  const std::string dir = path.find('/') == std::string::npos ? "." : path.substr(0, path.rfind('/'));
+  for (const auto& b : j.at("buffers")) {
+    const auto length = b.at("byteLength").get<std::uint64_t>();
+    std::string data;
+    if (!b.contains("uri")) {
+      if (!buffers.empty() || !is_glb(bytes))
+        fail(path, "a buffer without uri that is not the GLB BIN chunk");
+      data = bin;
+    } else {
+      const auto uri = b.at("uri").get<std::string>();
+      if (uri.rfind("data:", 0) == 0) {
+        const auto comma = uri.find(";base64,");
+        if (comma == std::string::npos) fail(path, "buffer data URI is not base64");
+        data = base64_decode(uri.substr(comma + 8), path);
+      } else {
+        if (uri.find("..") != std::string::npos || uri.find(':') != std::string::npos || uri.empty() ||
+            uri[0] == '/')
+          fail(path, "buffer URI '" + uri + "' is not a file next to the asset");
+        data = read_all(dir + "/" + uri);
+      }
+    }
+    if (data.size() < length) fail(path, "a buffer is shorter than its byteLength");
+    buffers.push_back(std::move(data));
+  }
+  return buffers;
+}
+
+/// The bytes of buffer view `v` as [begin, begin + length) of its buffer, bounds-checked.
+struct ViewBytes {
+  const unsigned char* data;
+  std::size_t length, stride;
+};
+ViewBytes view_bytes(const std::string& path, const nlohmann::json& j,
+                     const std::vector<std::string>& buffers, std::int64_t v, const std::string& what) {
+  if (!j.contains("bufferViews") || v < 0 || v >= std::int64_t(j.at("bufferViews").size()))
+    fail(path, what + ": bufferView index out of range");
+  const auto& view = j.at("bufferViews").at(std::size_t(v));
+  const auto b = view.at("buffer").get<std::int64_t>();
+  if (b < 0 || b >= std::int64_t(buffers.size())) fail(path, what + ": buffer index out of range");
+  const auto offset = view.value("byteOffset", std::uint64_t(0));
+  const auto length = view.at("byteLength").get<std::uint64_t>();
+  const std::string& buffer = buffers[std::size_t(b)];
+  if (offset > buffer.size() || length > buffer.size() - offset)
+    fail(path, what + ": bufferView outside its buffer");
+  return {reinterpret_cast<const unsigned char*>(buffer.data()) + offset, std::size_t(length),
+          std::size_t(view.value("byteStride", std::uint64_t(0)))};
 }
 
 /// Element `i`, component `c` of an accessor as a double (normalized integers mapped as the
 /// glTF specification says).
 class AccessorView {
  public:
-  AccessorView(const std::string& path, const tinygltf::Model& model, int index, const std::string& what) {
-    if (index < 0 || index >= int(model.accessors.size())) fail(path, what + ": accessor index out of range");
-    acc_ = &model.accessors[index];
-    if (acc_->sparse.isSparse) fail(path, what + ": sparse accessors are not supported");
-    if (acc_->bufferView < 0 || acc_->bufferView >= int(model.bufferViews.size()))
-      fail(path, what + ": accessor has no buffer view");
-    const auto& view = model.bufferViews[acc_->bufferView];
-    if (view.buffer < 0 || view.buffer >= int(model.buffers.size())) fail(path, what + ": bad buffer index");
-    const auto& buffer = model.buffers[view.buffer].data;
-    components_ = tinygltf::GetNumComponentsInType(acc_->type);
-    size_ = tinygltf::GetComponentSizeInBytes(acc_->componentType);
-    if (components_ <= 0 || size_ <= 0) fail(path, what + ": bad accessor type");
-    stride_ = view.byteStride > 0 ? view.byteStride : std::size_t(components_ * size_);
-    const std::size_t begin = view.byteOffset + acc_->byteOffset;
-    const std::size_t need = acc_->count == 0 ? 0 : (acc_->count - 1) * stride_ + components_ * size_;
-    if (view.byteOffset + view.byteLength > buffer.size() || acc_->byteOffset + need > view.byteLength)
-      fail(path, what + ": accessor reaches outside its buffer");
-    data_ = buffer.data() + begin;
-  }
-  std::size_t count() const { return acc_->count; }
-  int components() const { return components_; }
-  double get(std::size_t i, int c) const {
-    const unsigned char* p = data_ + i * stride_ + std::size_t(c) * size_;
-    const bool norm = acc_->normalized;
-    switch (acc_->componentType) {
-      case TINYGLTF_COMPONENT_TYPE_FLOAT:
-        return load<float>(p);
-      case TINYGLTF_COMPONENT_TYPE_BYTE:
-        return norm ? std::max(load<std::int8_t>(p) / 127.0, -1.0) : load<std::int8_t>(p);
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
-        return norm ? load<std::uint8_t>(p) / 255.0 : load<std::uint8_t>(p);
-      case TINYGLTF_COMPONENT_TYPE_SHORT:
-        return norm ? std::max(load<std::int16_t>(p) / 32767.0, -1.0) : load<std::int16_t>(p);
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
-        return norm ? load<std::uint16_t>(p) / 65535.0 : load<std::uint16_t>(p);
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
-        return load<std::uint32_t>(p);
+  AccessorView(const std::string& path, const nlohmann::json& j, const std::vector<std::string>& buffers,
+               std::int64_t index, const std::string& what) {
+    if (!j.contains("accessors") || index < 0 || index >= std::int64_t(j.at("accessors").size()))
+      fail(path, what + ": accessor index out of range");
+    const auto& acc = j.at("accessors").at(std::size_t(index));
+    if (acc.contains("sparse")) fail(path, what + ": sparse accessors are not supported");
+    if (!acc.contains("bufferView")) fail(path, what + ": accessor has no bufferView");
+    const ViewBytes view = view_bytes(path, j, buffers, acc.at("bufferView").get<std::int64_t>(), what);
+    component_type_ = acc.at("componentType").get<int>();
+    normalized_ = acc.value("normalized", false);
+    const std::string type = acc.at("type").get<std::string>();
+    components_ = type == "SCALAR" ? 1 : type == "VEC2" ? 2 : type == "VEC3" ? 3 : type == "VEC4" ? 4 : 0;
+    switch (component_type_) {
+      case 5120:
+      case 5121:
+        size_ = 1;
+        break;
+      case 5122:
+      case 5123:
+        size_ = 2;
+        break;
+      case 5125:
+      case 5126:
+        size_ = 4;
+        break;
       default:
-        return load<double>(p);
+        size_ = 0;
     }
+    if (components_ == 0 || size_ == 0) fail(path, what + ": unsupported accessor type");
+    count_ = acc.at("count").get<std::uint64_t>();
+    stride_ = view.stride > 0 ? view.stride : std::size_t(components_ * size_);
+    const auto offset = acc.value("byteOffset", std::uint64_t(0));
+    const std::size_t element = std::size_t(components_ * size_);
+    if (count_ > 0 && (offset > view.length || (count_ - 1) > (view.length - offset) / stride_ ||
+                       (count_ - 1) * stride_ + element > view.length - offset))
+      fail(path, what + ": accessor reaches outside its bufferView");
+    data_ = view.data + offset;
   }
+  std::size_t count() const { return count_; }
+  int components() const { return components_; }
   bool integer_indices() const {
-    return acc_->componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
-           acc_->componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
-           acc_->componentType == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+    return component_type_ == 5121 || component_type_ == 5123 || component_type_ == 5125;
+  }
+  double get(std::size_t i, int c) const {
+    const unsigned char* p = data_ + i * stride_ + std::size_t(c) * std::size_t(size_);
+    switch (component_type_) {
+      case 5126:
+        return load<float>(p);
+      case 5120:
+        return normalized_ ? std::max(load<std::int8_t>(p) / 127.0, -1.0) : load<std::int8_t>(p);
+      case 5121:
+        return normalized_ ? load<std::uint8_t>(p) / 255.0 : load<std::uint8_t>(p);
+      case 5122:
+        return normalized_ ? std::max(load<std::int16_t>(p) / 32767.0, -1.0) : load<std::int16_t>(p);
+      case 5123:
+        return normalized_ ? load<std::uint16_t>(p) / 65535.0 : load<std::uint16_t>(p);
+      default:
+        return load<std::uint32_t>(p);
+    }
   }
 
  private:
@@ -178,40 +292,33 @@ class AccessorView {
     std::memcpy(&v, p, sizeof v);
     return v;
   }
-  const tinygltf::Accessor* acc_ = nullptr;
   const unsigned char* data_ = nullptr;
-  int components_ = 0, size_ = 0;
-  std::size_t stride_ = 0;
+  int component_type_ = 0, components_ = 0, size_ = 0;
+  bool normalized_ = false;
+  std::size_t count_ = 0, stride_ = 0;
 };
 
 /// The primitive's geometry in the mesh's own frame.
-TriangleMesh primitive_mesh(const std::string& path, const tinygltf::Model& model,
-                            const tinygltf::Primitive& prim, const std::string& label) {
-  const auto draco = prim.extensions.find("KHR_draco_mesh_compression");
-  if (draco != prim.extensions.end()) {
-    const tinygltf::Value& view_index = draco->second.Get("bufferView");
-    if (!view_index.IsInt()) fail(path, label + ": KHR_draco_mesh_compression without bufferView");
-    const int v = view_index.Get<int>();
-    if (v < 0 || v >= int(model.bufferViews.size())) fail(path, label + ": Draco bufferView out of range");
-    const auto& view = model.bufferViews[v];
-    if (view.buffer < 0 || view.buffer >= int(model.buffers.size()) ||
-        view.byteOffset + view.byteLength > model.buffers[view.buffer].data.size())
-      fail(path, label + ": Draco bufferView outside its buffer");
-    return decode_draco(
-        reinterpret_cast<const char*>(model.buffers[view.buffer].data.data()) + view.byteOffset,
-        view.byteLength, path + ": " + label);
+TriangleMesh primitive_mesh(const std::string& path, const nlohmann::json& j,
+                            const std::vector<std::string>& buffers, const nlohmann::json& prim,
+                            const std::string& label) {
+  if (prim.contains("extensions") && prim.at("extensions").contains("KHR_draco_mesh_compression")) {
+    const auto& ext = prim.at("extensions").at("KHR_draco_mesh_compression");
+    const ViewBytes view = view_bytes(path, j, buffers, ext.at("bufferView").get<std::int64_t>(), label);
+    return decode_draco(reinterpret_cast<const char*>(view.data), view.length, path + ": " + label);
   }
   TriangleMesh m;
-  const auto pos = prim.attributes.find("POSITION");
-  if (pos == prim.attributes.end()) fail(path, label + ": primitive without POSITION");
-  const AccessorView positions(path, model, pos->second, label + " POSITION");
+  const auto& attributes = prim.at("attributes");
+  if (!attributes.contains("POSITION")) fail(path, label + ": primitive without POSITION");
+  const AccessorView positions(path, j, buffers, attributes.at("POSITION").get<std::int64_t>(),
+                               label + " POSITION");
   if (positions.components() != 3) fail(path, label + ": POSITION is not VEC3");
   m.positions.resize(positions.count());
   for (std::size_t i = 0; i < positions.count(); ++i)
     for (int c = 0; c < 3; ++c) m.positions[i][c] = float(positions.get(i, c));
-  const auto nrm = prim.attributes.find("NORMAL");
-  if (nrm != prim.attributes.end()) {
-    const AccessorView normals(path, model, nrm->second, label + " NORMAL");
+  if (attributes.contains("NORMAL")) {
+    const AccessorView normals(path, j, buffers, attributes.at("NORMAL").get<std::int64_t>(),
+                               label + " NORMAL");
     if (normals.components() != 3 || normals.count() != positions.count())
       fail(path, label + ": NORMAL does not match POSITION");
     m.normals.resize(normals.count());
@@ -219,8 +326,8 @@ TriangleMesh primitive_mesh(const std::string& path, const tinygltf::Model& mode
       for (int c = 0; c < 3; ++c) m.normals[i][c] = float(normals.get(i, c));
   }
   std::vector<std::uint32_t> index;
-  if (prim.indices >= 0) {
-    const AccessorView indices(path, model, prim.indices, label + " indices");
+  if (prim.contains("indices")) {
+    const AccessorView indices(path, j, buffers, prim.at("indices").get<std::int64_t>(), label + " indices");
     if (indices.components() != 1 || !indices.integer_indices()) fail(path, label + ": bad index accessor");
     index.resize(indices.count());
     for (std::size_t i = 0; i < indices.count(); ++i) index[i] = std::uint32_t(indices.get(i, 0));
@@ -261,64 +368,67 @@ void transform_mesh(TriangleMesh& m, const Eigen::Matrix4d& world) {
 GltfAsset read_gltf(const std::string& path) {
   const std::string bytes = read_all(path);
   GltfAsset asset;
-  asset.structure = strip_encoding(parse_json(path, bytes));
+  try {
+    const nlohmann::json j = parse_json(path, bytes);
+    asset.structure = strip_encoding(j);
+    // Step 1: buffers (BIN chunk, data: URIs, files next to the asset). The JSON is read here
+    // directly: every index and range is checked, so a damaged file cannot make us read
+    // outside its buffers.
+    const std::vector<std::string> buffers = load_buffers(path, bytes, j);
 
-  // Step 1: buffers and accessors through tinygltf; images are not decoded (only geometry and
-  // the JSON matter here).
-  tinygltf::Model model;
-  tinygltf::TinyGLTF loader;
-  loader.SetImageLoader([](tinygltf::Image*, const int, std::string*, std::string*, int, int,
-                           const unsigned char*, int, void*) { return true; },
-                        nullptr);
-  std::string err, warn;
-  const std::string dir = path.find('/') == std::string::npos ? "." : path.substr(0, path.rfind('/'));
-  const bool ok = is_glb(bytes)
-                      ? loader.LoadBinaryFromMemory(&model, &err, &warn,
-                                                    reinterpret_cast<const unsigned char*>(bytes.data()),
-                                                    static_cast<unsigned>(bytes.size()), dir)
-                      : loader.LoadASCIIFromString(&model, &err, &warn, bytes.data(),
-                                                   static_cast<unsigned>(bytes.size()), dir);
-  if (!ok) {
-    std::replace(err.begin(), err.end(), '\n', ' ');
-    fail(path, "not a readable glTF file: " + err);
-  }
+    // Step 2: world matrices through the parent links (children may come before parents).
+    const nlohmann::json no_nodes = nlohmann::json::array();
+    const nlohmann::json& nodes = j.contains("nodes") ? j.at("nodes") : no_nodes;
+    const std::size_t nn = nodes.size();
+    std::vector<std::int64_t> parent(nn, -1);
+    for (std::size_t i = 0; i < nn; ++i)
+      if (nodes.at(i).contains("children"))
+        for (const auto& child : nodes.at(i).at("children")) {
+          const auto c = child.get<std::int64_t>();
+          if (c < 0 || std::size_t(c) >= nn || parent[std::size_t(c)] != -1)
+            fail(path, "node graph is not a forest");
+          parent[std::size_t(c)] = std::int64_t(i);
+        }
+    std::vector<Eigen::Matrix4d> world(nn);
+    for (std::size_t i = 0; i < nn; ++i) {
+      Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+      std::size_t depth = 0;
+      for (std::int64_t n = std::int64_t(i); n >= 0; n = parent[std::size_t(n)]) {
+        if (++depth > nn) fail(path, "node graph has a cycle");
+        m = local_matrix(nodes.at(std::size_t(n))) * m;
+      }
+      world[i] = m;
+    }
 
-  // Step 2: world matrices through the parent links (children may come before parents).
-  const std::size_t nn = model.nodes.size();
-  std::vector<int> parent(nn, -1);
-  for (std::size_t i = 0; i < nn; ++i)
-    for (int c : model.nodes[i].children) {
-      if (c < 0 || std::size_t(c) >= nn || parent[c] != -1) fail(path, "node graph is not a forest");
-      parent[c] = int(i);
+    // Step 3: every triangle primitive of every node with a mesh, in world coordinates.
+    for (std::size_t i = 0; i < nn; ++i) {
+      const auto& node = nodes.at(i);
+      if (!node.contains("mesh")) continue;
+      const auto mi = node.at("mesh").get<std::int64_t>();
+      if (!j.contains("meshes") || mi < 0 || mi >= std::int64_t(j.at("meshes").size()))
+        fail(path, fmt::format("node {}: mesh index out of range", i));
+      const auto& mesh = j.at("meshes").at(std::size_t(mi));
+      const auto& primitives = mesh.at("primitives");
+      for (std::size_t p = 0; p < primitives.size(); ++p) {
+        if (primitives.at(p).value("mode", 4) != 4) continue;  // points and lines have no surface
+        GltfPrimitive prim;
+        prim.node = int(i);
+        prim.mesh = int(mi);
+        prim.primitive = int(p);
+        prim.label = fmt::format("node {} '{}' mesh '{}' primitive {}", i, node.value("name", std::string()),
+                                 mesh.value("name", std::string()), p);
+        prim.mesh_data = primitive_mesh(path, j, buffers, primitives.at(p), prim.label);
+        transform_mesh(prim.mesh_data, world[i]);
+        asset.primitives.push_back(std::move(prim));
+      }
     }
-  std::vector<Eigen::Matrix4d> world(nn);
-  for (std::size_t i = 0; i < nn; ++i) {
-    Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
-    std::size_t depth = 0;
-    for (int n = int(i); n >= 0; n = parent[n]) {
-      if (++depth > nn) fail(path, "node graph has a cycle");
-      m = local_matrix(model.nodes[n]) * m;
-    }
-    world[i] = m;
-  }
-
-  // Step 3: every triangle primitive of every node with a mesh, in world coordinates.
-  for (std::size_t i = 0; i < nn; ++i) {
-    const int mi = model.nodes[i].mesh;
-    if (mi < 0) continue;
-    if (mi >= int(model.meshes.size())) fail(path, fmt::format("node {}: mesh index out of range", i));
-    const auto& mesh = model.meshes[mi];
-    for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
-      if (mesh.primitives[p].mode != TINYGLTF_MODE_TRIANGLES && mesh.primitives[p].mode != -1) continue;
-      GltfPrimitive prim;
-      prim.node = int(i);
-      prim.mesh = mi;
-      prim.primitive = int(p);
-      prim.label = fmt::format("node {} '{}' mesh '{}' primitive {}", i, model.nodes[i].name, mesh.name, p);
-      prim.mesh_data = primitive_mesh(path, model, mesh.primitives[p], prim.label);
-      transform_mesh(prim.mesh_data, world[i]);
-      asset.primitives.push_back(std::move(prim));
-    }
+  } catch (const nlohmann::json::exception& e) {
+    fail(path, std::string("bad glTF JSON: ") + e.what());
+  } catch (const Error& e) {
+    // Errors from helpers that do not know the path get it here.
+    const std::string what = e.what();
+    if (what.rfind(path + ": ", 0) == 0) throw;
+    fail(path, what);
   }
   return asset;
 }

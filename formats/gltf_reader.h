@@ -1,6 +1,7 @@
-// Reading glTF 2.0 assets (.glb, .gltf) back into triangle meshes for comparison: tinygltf parses
-// the file and its buffers, Draco decodes KHR_draco_mesh_compression primitives, and node
-// transforms are applied so positions are in the scene's frame (metres, +Y up).
+// Reading glTF 2.0 assets (.glb, .gltf) back into triangle meshes for comparison: the JSON is
+// parsed with nlohmann::json, buffers come from the GLB BIN chunk, data: URIs or files next to
+// the asset, Draco decodes KHR_draco_mesh_compression primitives, and node transforms are
+// applied so positions are in the scene's frame (metres, +Y up for mlfe's assets).
 #pragma once
 #include <nlohmann/json.hpp>
 #include <string>
@@ -30,11 +31,11 @@ struct GltfAsset {
 };
 
 /// Reads a .glb or .gltf file (by magic bytes: "glTF" is binary, anything else JSON).
-/// Primitives must be triangles (mode 4; other modes are skipped and named in
-/// structure) with float or normalized integer positions (KHR_mesh_quantization) and
-/// optional normals. Throws mlfe::Error ("<path>: <problem>") for unreadable files, bad JSON,
-/// accessors outside their buffers, indices out of range, sparse accessors and Draco payloads
-/// that do not decode.
+/// Triangle primitives (mode 4) with float or (normalized) integer positions
+/// (KHR_mesh_quantization) and optional normals are read; other modes are skipped (they stay
+/// visible in `structure`). Throws mlfe::Error ("<path>: <problem>") for unreadable files, bad
+/// JSON, buffers or accessors outside their data, indices out of range, sparse accessors,
+/// buffer URIs that leave the asset's folder and Draco payloads that do not decode.
 GltfAsset read_gltf(const std::string& path);
 
 }  // namespace mlfe
