@@ -87,6 +87,8 @@ CompareResult compare_files(const std::string& expected, const std::string& actu
 
 /// The mesh comparison of compare_files for meshes already in memory; `label` prefixes the
 /// difference items ("" for none). Meshes without triangles are compared by counts only.
+/// Normals: the meshes' own when both have one per vertex, else area-weighted ones for both.
+/// Triangle indices must be in range (CHECK: the readers guarantee it for files).
 CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
                              const CompareOptions& options = {}, const std::string& label = "");
 
