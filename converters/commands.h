@@ -23,6 +23,10 @@ struct CommandRegistrar {
 /// Number of worker threads requested with --threads (0: all cores).
 int& thread_option();
 
+/// Exit status a command asks for when it completes without an error (0 unless set; `compare`
+/// sets 1 for "different").
+int& command_exit_status();
+
 }  // namespace mlfe::cli
 
 #define MLFE_CLI_CONCAT2(a, b) a##b

@@ -1,5 +1,6 @@
 // mlfe: multilevel finite elements for volume data (Grosso, Lürig & Ertl, IEEE Vis 1997).
 // Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file).
+// `compare` follows diff(1) instead: 0 equal, 1 different, 2 bad input or usage error.
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -15,6 +16,10 @@ namespace mlfe::cli {
 int& thread_option() {
   static int threads = 0;
   return threads;
+}
+int& command_exit_status() {
+  static int status = 0;
+  return status;
 }
 }  // namespace mlfe::cli
 
@@ -42,8 +47,10 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     // CLI11 prints the message (or --help / --version) and returns its own error numbers
-    // (105, 106, ...); the documented contract is 1 for every usage error.
-    return app.exit(e) == 0 ? 0 : 1;
+    // (105, 106, ...); the documented contract is 1 for every usage error, except for compare,
+    // whose 1 means "different".
+    const int usage_status = app.got_subcommand("compare") ? 2 : 1;
+    return app.exit(e) == 0 ? 0 : usage_status;
   } catch (const mlfe::Error& e) {
     std::fprintf(stderr, "mlfe: %s\n", e.what());
     return 2;
@@ -54,5 +61,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "mlfe: %s\n", e.what());
     return 2;
   }
-  return 0;
+  return mlfe::cli::command_exit_status();
 }
