@@ -76,7 +76,7 @@ TEST(CompareCommand, ExitStatusZeroOneTwo) {
 TEST(GoldenCompare, SkullGlbMatchesCheckedInGlb) {
   const std::string glb = test::scratch_dir() + "/skull.glb";
   const std::string golden = kGolden + "/ct_skull_iso2.5_3000.glb";
-  const CliRun conv = mlfe_run("convert " + kSkull + " --iso 2.5 --max-vertices 3000 --quiet -o " + glb);
+  const CliRun conv = mlfe_run("convert " + kSkull + " --iso 2.5 --max-vertices 3000 --simplify 0 --quiet -o " + glb);
   ASSERT_EQ(conv.status, 0) << conv.err;
   if (std::getenv("MLFE_UPDATE_GOLDEN")) fs::copy_file(glb, golden, fs::copy_options::overwrite_existing);
   ASSERT_TRUE(fs::exists(golden)) << "missing golden file " << golden;
