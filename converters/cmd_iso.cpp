@@ -89,6 +89,7 @@ void run(const IsoState& s, bool convert) {
                        {"max_vertices", s.params.max_vertices},
                        {"norm", s.params.norm},
                        {"surface_tolerance", s.params.surface_tolerance}};
+    prov["refinement"] = b.surface_driven ? "surface-driven" : "global";
     if (!s.hierarchy.empty()) write_built(s.hierarchy, b, prov);
   }
   const nlohmann::json summary = write_assets(s.output, b, s.asset, prov, grid ? &*grid : nullptr);

@@ -234,6 +234,7 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
   }
   const auto t0 = std::chrono::steady_clock::now();
   GridField f(grid);
+  b.surface_driven = o.surface_driven;
   if (grid.dim == 2)
     b.a2 = approximate<2>(f, o);
   else
@@ -256,6 +257,7 @@ Built built_from_file(const std::string& path) {
   b.value_min = hf.value_min;
   b.value_max = hf.value_max;
   if (hf.values.empty()) throw Error(path + ": the hierarchy stores no values (u) to extract from");
+  b.surface_driven = hf.metadata.is_object() && hf.metadata.value("refinement", "") == "surface-driven";
   if (hf.dim == 2) {
     Approximation<2> a;
     a.hierarchy = std::get<Hierarchy<2>>(std::move(hf.hierarchy));
@@ -376,7 +378,17 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     isos = parse_values(p.iso, "--iso");
     std::sort(isos.begin(), isos.end());
-    IsoExtractor x(b.a3->hierarchy, b.a3->values);
+    // Surface-driven builds refined until the data's interpolant on the mesh has the data's
+    // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
+    // some of them away. With the volume at hand the asset takes the interpolant.
+    std::vector<double> nodal_data;
+    if (grid && grid->dim == 3 && b.surface_driven) {
+      const GridField gf(*grid);
+      const auto& pts = b.a3->hierarchy.points();
+      nodal_data.resize(pts.size());
+      tbb::parallel_for(std::size_t(0), pts.size(), [&](std::size_t v) { nodal_data[v] = gf.value({pts[v][0], pts[v][1], pts[v][2]}); });
+    }
+    IsoExtractor x(b.a3->hierarchy, nodal_data.empty() ? b.a3->values : nodal_data);
     const int finest = b.a3->hierarchy.max_level();
     const int level = p.level < 0 ? finest : std::min(p.level, finest);
     std::optional<GridField> field;

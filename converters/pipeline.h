@@ -51,6 +51,9 @@ struct Built {
   std::string space;
   double value_min = 0, value_max = 0;
   double seconds = 0;
+  /// Built around the iso-surfaces (ApproximationOptions::surface_driven): the mesh certifies
+  /// the data's interpolant there, so assets are extracted from it when the volume is at hand.
+  bool surface_driven = false;
   const std::vector<IterationStats>& iterations() const { return dim == 2 ? a2->iterations : a3->iterations; }
   const std::string& stop_reason() const { return dim == 2 ? a2->stop_reason : a3->stop_reason; }
   std::size_t vertices() const {

@@ -43,6 +43,9 @@ class Field {
   /// (conservative), never narrower. Surface-driven refinement asks it for every candidate
   /// element, so fields should answer without visiting the box's samples. Defaults to range().
   virtual std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const;
+  /// The sample grid f interpolates, when f is one (null otherwise): estimators can then test
+  /// the samples themselves, the values marching cubes and the scan's own surface come from.
+  virtual const ScalarGrid* samples() const { return nullptr; }
 };
 
 /// Trilinear (3D) / bilinear (2D) interpolation of a ScalarGrid's samples, which sit at the
@@ -63,6 +66,7 @@ class GridField final : public Field {
   /// From a min/max pyramid of the samples, built on the first call (thread-safe).
   std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const override;
   const ScalarGrid& grid() const { return grid_; }
+  const ScalarGrid* samples() const override { return &grid_; }
 
  private:
   const ScalarGrid& grid_;

@@ -63,6 +63,48 @@ SurfaceGap surface_gap(const std::array<std::array<double, D>, D + 1>& p,
     m = 0;
     return false;
   };
+  if (const ScalarGrid* g = f.samples(); g && g->dim == D) {
+    // The grid's own samples inside the simplex (barycentrics ≥ −ε), read directly.
+    std::array<std::int64_t, 3> i0{0, 0, 0}, i1{0, 0, 0};
+    for (int c = 0; c < D; ++c) {
+      double lo = p[0][c], hi = p[0][c];
+      for (int i = 1; i <= D; ++i) {
+        lo = std::min(lo, p[i][c]);
+        hi = std::max(hi, p[i][c]);
+      }
+      const double sp = g->transform.spacing[c];
+      i0[c] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(lo / sp - 1e-9)));
+      i1[c] = std::min<std::int64_t>(g->dims[c] - 1, static_cast<std::int64_t>(std::floor(hi / sp + 1e-9)));
+    }
+    for (std::int64_t k = i0[2]; k <= i1[2]; ++k)
+      for (std::int64_t j = i0[1]; j <= i1[1]; ++j)
+        for (std::int64_t i = i0[0]; i <= i1[0]; ++i) {
+          const std::int64_t idx[3] = {i, j, k};
+          std::array<double, D + 1> lam;
+          lam[0] = 1;
+          for (int q = 1; q <= D; ++q) {
+            double l = 0;
+            for (int c = 0; c < D; ++c) l += el.grad[q][c] * (double(idx[c]) * g->transform.spacing[c] - p[0][c]);
+            lam[q] = l;
+            lam[0] -= l;
+          }
+          bool inside = true;
+          for (double l : lam) inside &= l >= -1e-9;
+          if (!inside) continue;
+          double l = 0;
+          for (int q = 0; q <= D; ++q) l += lam[q] * corner_values[q];
+          const double v = g->at(i, j, k);
+          for (double iso : iso_values) {
+            if ((v > iso) == (l > iso)) continue;
+            if (!(cmin <= iso && iso <= cmax)) return SurfaceGap::kMissing;
+            if (std::abs(l - iso) * inv_grad > tolerance) {
+              result = SurfaceGap::kDistant;
+              if (stop_at_distant) return result;
+            }
+          }
+        }
+    return result;
+  }
   std::array<int, D + 1> a{};
   // Enumerate a_1..a_D with Σ ≤ n; a_0 = n − Σ.
   if constexpr (D == 2) {

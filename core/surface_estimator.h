@@ -24,9 +24,11 @@ enum class SurfaceGap {
 };
 
 /// How the iso-surfaces of f and of the linear function with the given corner values on the
-/// simplex p (local frame) compare inside the simplex, for all of `iso_values`. f is sampled on
-/// the simplex's barycentric lattice with spacing at most `sample_spacing` along the longest
-/// edge (one voxel: a feature of a voxel or more cannot fall between samples); a sample on the
+/// simplex p (local frame) compare inside the simplex, for all of `iso_values`. When f is a
+/// sample grid (Field::samples), its samples inside the simplex are tested: a surface of the
+/// data has samples on both sides, so none falls between them. Other fields are sampled on the
+/// simplex's barycentric lattice with spacing at most `sample_spacing` along the longest edge
+/// (one voxel: a feature of a voxel or more cannot fall between samples). A sample on the
 /// other side than the linear function lies between the surfaces, and counts with its distance
 /// |ℓ(x) − iso| / |∇ℓ| to ℓ's plane (kDistant beyond `tolerance`), or as kMissing when ℓ has no
 /// surface in the simplex. Returns kMissing as soon as one is found, and kDistant as soon as one
