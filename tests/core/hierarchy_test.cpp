@@ -475,6 +475,32 @@ TYPED_TEST(HierarchyTest, RefinementOverTheVertexLimitIsRolledBack) {
   }
 }
 
+// Found by bench/refine_stress. Coarse tet [0 4 5 7] (vertex ids of the cube corners) enters
+// the third call green, split on its edge 0-7 (midpoint 10). Its neighbour [0 1 5 7] is
+// red-refined in round 1, which puts midpoints on 0-5 and 5-7: the green children see them on
+// their parent's edges, and the face pattern 0-5-7 is admissible, so round 2 re-greens the
+// parent. In that same round a red refinement elsewhere splits the half edge 10-7 (a quarter
+// point of 0-7). The re-greened parent, a leaf again, has only one endpoint of that split edge
+// (7) among its corners, so it was no candidate, and its new green children carried the hanging
+// quarter point: a nonconforming mesh, and the next refine() aborted in green_children, as
+// `mlfe convert` did on a 35 M-voxel volume.
+TEST(HierarchyRegression, RegreenedParentWhoseHalfEdgeIsSplitInTheSameRoundGoesRed) {
+  const P<3> lo{0, 0, 0}, hi{1, 1, 1};
+  auto h = Hierarchy<3>::box(lo, hi);
+  // Positions in leaves() per refine() call; the last call aborted before the fix.
+  const std::vector<std::vector<std::size_t>> calls = {{2}, {7, 9}, {16, 2, 23}, {1}};
+  for (const auto& positions : calls) {
+    const auto leaves = h.leaves();
+    std::vector<ElemId> marked;
+    for (std::size_t i : positions) marked.push_back(leaves.at(i));
+    h.refine(marked);
+    expect_conforming(h, lo, hi);
+    expect_green_never_parent(h);
+    // Stop at the first nonconforming mesh: refining it further aborts the test binary.
+    ASSERT_FALSE(::testing::Test::HasFailure());
+  }
+}
+
 TEST(EdgeMap, EraseKeepsEveryOtherEdgeFindable) {
   // A small table with many collisions and wrap-arounds, against std::map.
   std::mt19937 rng(5);
