@@ -229,7 +229,8 @@ void run_case(long seed, const Options& opt) {
     const std::size_t nv = h.vertex_count(), ne = h.element_count(), nm = h.edge_midpoints().size();
     std::size_t reached = 0;
     const auto map = h.refine(marked, limit, &reached);
-    if (opt.verbose && limit > 0) std::fprintf(stderr, "    reached %zu%s\n", reached, map.empty() ? " (rolled back)" : "");
+    if (opt.verbose && limit > 0)
+      std::fprintf(stderr, "    reached %zu%s\n", reached, map.empty() ? " (rolled back)" : "");
     if (limit > 0 && map.empty() && !marked.empty()) {
       if (h.vertex_count() != nv || h.element_count() != ne || h.edge_midpoints().size() != nm)
         fail("rollback changed the hierarchy", seed, step);
@@ -261,7 +262,8 @@ bool run_forked(int dim, long seed, const Options& opt) {
   waitpid(pid, &status, 0);
   if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return true;
   std::fprintf(stderr, "FAILED: dim %d seed %ld (%s %d)\n", dim, seed,
-               WIFSIGNALED(status) ? "signal" : "exit", WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status));
+               WIFSIGNALED(status) ? "signal" : "exit",
+               WIFSIGNALED(status) ? WTERMSIG(status) : WEXITSTATUS(status));
   return false;
 }
 
@@ -305,7 +307,8 @@ void search_small(long seeds, int uniform, int calls) {
       if (!conforming(h)) {
         if (h.leaves().size() < best) {
           best = h.leaves().size();
-          std::printf("seed %ld: nonconforming after %d calls, %zu leaves:%s\n", seed, k + 1, best, log.c_str());
+          std::printf("seed %ld: nonconforming after %d calls, %zu leaves:%s\n", seed, k + 1, best,
+                      log.c_str());
           std::fflush(stdout);
         }
         break;
@@ -334,12 +337,14 @@ bool replay(const std::string& seq) {
     const std::size_t nv = h.vertex_count();
     if (std::getenv("REPLAY_DEBUG")) {
       std::printf("before call %d: marked", call + 1);
-      for (ElemId e : marked) std::printf(" %u(kind %d, parent %u)", e.value, int(h.kind(e)), h.parent(e).value);
+      for (ElemId e : marked)
+        std::printf(" %u(kind %d, parent %u)", e.value, int(h.kind(e)), h.parent(e).value);
       std::printf("\n");
       for (std::uint32_t e = 0; e < h.coarse_count(); ++e) {
         std::printf("  coarse %u: [%u %u %u %u] children %d kind %d:", e, h.cell(ElemId(e))[0].value,
                     h.cell(ElemId(e))[1].value, h.cell(ElemId(e))[2].value, h.cell(ElemId(e))[3].value,
-                    h.num_children(ElemId(e)), h.num_children(ElemId(e)) ? int(h.kind(h.first_child(ElemId(e)))) : -1);
+                    h.num_children(ElemId(e)),
+                    h.num_children(ElemId(e)) ? int(h.kind(h.first_child(ElemId(e)))) : -1);
         for (int k = 0; k < h.num_children(ElemId(e)); ++k) {
           const auto& c = h.cell(ElemId(h.first_child(ElemId(e)).value + k));
           std::printf(" [%u %u %u %u]%s", c[0].value, c[1].value, c[2].value, c[3].value,
@@ -398,14 +403,22 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&] { return i + 1 < argc ? std::string(argv[++i]) : std::string(); };
-    if (a == "--dim") opt.dim = std::stoi(next());
-    else if (a == "--seeds") opt.seeds = std::stol(next());
-    else if (a == "--first") opt.first = std::stol(next());
-    else if (a == "--max-leaves") opt.max_leaves = std::stoull(next());
-    else if (a == "--steps") opt.steps = std::stoi(next());
-    else if (a == "--verbose") opt.verbose = true;
-    else if (a == "--no-limits") opt.limits = false;
-    else if (a == "--no-validate") opt.validate = false;
+    if (a == "--dim")
+      opt.dim = std::stoi(next());
+    else if (a == "--seeds")
+      opt.seeds = std::stol(next());
+    else if (a == "--first")
+      opt.first = std::stol(next());
+    else if (a == "--max-leaves")
+      opt.max_leaves = std::stoull(next());
+    else if (a == "--steps")
+      opt.steps = std::stoi(next());
+    else if (a == "--verbose")
+      opt.verbose = true;
+    else if (a == "--no-limits")
+      opt.limits = false;
+    else if (a == "--no-validate")
+      opt.validate = false;
     else if (a == "--search-small") {
       const long seeds = std::stol(next());
       const int uniform = std::stoi(next());
@@ -422,8 +435,10 @@ int main(int argc, char** argv) {
       const int dim = std::stoi(next());
       const long seed = std::stol(next());
       opt.verbose = true;
-      if (dim == 2) run_case<2>(seed, opt);
-      else run_case<3>(seed, opt);
+      if (dim == 2)
+        run_case<2>(seed, opt);
+      else
+        run_case<3>(seed, opt);
       std::printf("ok\n");
       return 0;
     } else {

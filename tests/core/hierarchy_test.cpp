@@ -475,6 +475,54 @@ TYPED_TEST(HierarchyTest, RefinementOverTheVertexLimitIsRolledBack) {
   }
 }
 
+// The fast version of bench/refine_stress: many short random marking sequences on small
+// meshes (random subsets, balls, green leaves, mixtures; some calls under a vertex limit that
+// rolls them back). Every call must end conforming, with green elements only as leaves.
+TYPED_TEST(HierarchyTest, RandomMarkingSequencesStayConforming) {
+  constexpr int D = TypeParam::value;
+  P<D> lo, hi;
+  lo.fill(0);
+  hi.fill(1);
+  if constexpr (D == 3) hi = {1.0, 1.3, 0.8};
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  for (unsigned seed = 1; seed <= (D == 2 ? 1000u : 300u); ++seed) {
+    auto h = unit_box<D>();
+    std::mt19937 rng(seed);
+    for (int k = static_cast<int>(rng() % 3); k > 0; --k) h.refine_uniform();
+    for (int it = 0; it < 6 && h.leaves().size() < 5000; ++it) {
+      const auto leaves = h.leaves();
+      std::vector<ElemId> marked;
+      const int strategy = static_cast<int>(rng() % 4);
+      P<D> x;
+      for (int a = 0; a < D; ++a) x[a] = lo[a] + (hi[a] - lo[a]) * u01(rng);
+      const double p = u01(rng), r = 0.05 + 0.3 * u01(rng);
+      for (ElemId e : leaves) {
+        double d = 0;
+        for (int a = 0; a < D; ++a) {
+          const double t = h.point(h.cell(e)[0])[a] - x[a];
+          d += t * t;
+        }
+        const bool near = d < r * r;
+        const bool green = h.kind(e) == ElemKind::kGreen;
+        if ((strategy == 0 && u01(rng) < 0.2 * p * p) || (strategy == 1 && near) ||
+            (strategy == 2 && green && u01(rng) < p) || (strategy == 3 && near && (green || u01(rng) < p)))
+          marked.push_back(e);
+      }
+      std::shuffle(marked.begin(), marked.end(), rng);
+      if (rng() % 4 == 0) {
+        const auto copy = h;
+        const std::size_t limit = h.vertex_count() + 1 + rng() % (2 * marked.size() + 4);
+        if (h.refine(marked, limit).empty() && !marked.empty()) test::expect_same_hierarchy(h, copy);
+      } else {
+        h.refine(marked);
+      }
+      expect_conforming(h, lo, hi);
+      expect_green_never_parent(h);
+      ASSERT_FALSE(::testing::Test::HasFailure()) << "seed " << seed << ", call " << it;
+    }
+  }
+}
+
 // Found by bench/refine_stress. Coarse tet [0 4 5 7] (vertex ids of the cube corners) enters
 // the third call green, split on its edge 0-7 (midpoint 10). Its neighbour [0 1 5 7] is
 // red-refined in round 1, which puts midpoints on 0-5 and 5-7: the green children see them on
