@@ -361,17 +361,21 @@ int Hierarchy<D>::green_children(ElemId e, unsigned mask, std::array<Cell, 4>& k
 }
 
 template <int D>
-bool Hierarchy<D>::green_edges_split(ElemId e, unsigned mask) const {
+bool Hierarchy<D>::green_edges_split(ElemId e, unsigned mask,
+                                     const std::vector<std::uint8_t>& flagged) const {
   std::array<Cell, 4> kids;
-  return any_edge_split(kids, green_pattern(e, mask, kids));
+  return any_edge_split(kids, green_pattern(e, mask, kids), flagged);
 }
 
 template <int D>
-bool Hierarchy<D>::any_edge_split(const std::array<Cell, 4>& kids, int n) const {
+bool Hierarchy<D>::any_edge_split(const std::array<Cell, 4>& kids, int n,
+                                  const std::vector<std::uint8_t>& flagged) const {
   using T = SimplexTraits<D>;
   for (int k = 0; k < n; ++k)
-    for (int i = 0; i < T::kEdges; ++i)
-      if (edge_mid_.find(kids[k][T::kEdgeVerts[i][0]], kids[k][T::kEdgeVerts[i][1]]).valid()) return true;
+    for (int i = 0; i < T::kEdges; ++i) {
+      const VertexId a = kids[k][T::kEdgeVerts[i][0]], b = kids[k][T::kEdgeVerts[i][1]];
+      if (flagged[a.value] && flagged[b.value] && edge_mid_.find(a, b).valid()) return true;
+    }
   return false;
 }
 
@@ -687,11 +691,11 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           if (kind(e) == ElemKind::kGreen) {
                             const ElemId p = parent(e);
                             const unsigned pmask = hanging_on_parent_edges(e, mask) ? hanging_mask(p) : 0;
-                            if (green_type(D, pmask) > 0 && !green_edges_split(p, pmask))
+                            if (green_type(D, pmask) > 0 && !green_edges_split(p, pmask, touched))
                               regreen[i] = p;
                             else
                               request[i] = p;
-                          } else if (green_type(D, mask) < 0 || green_edges_split(e, mask)) {
+                          } else if (green_type(D, mask) < 0 || green_edges_split(e, mask, touched)) {
                             request[i] = e;
                           }
                         }
@@ -793,7 +797,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           const auto [e, mask] = closure[i];
                           const int n = green_children(e, mask, kids);
                           // A hanging vertex here would pass silently and abort a later refine().
-                          MLFE_CHECK_MSG(!any_edge_split(kids, n), "green child with a split edge");
+                          MLFE_CHECK_MSG(!any_edge_split(kids, n, touched), "green child with a split edge");
                           const std::size_t at = first + offset[i];
                           MLFE_CHECK(at + n == first + offset[i + 1]);
                           const int lvl = level_[e.value] + 1;
