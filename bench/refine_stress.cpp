@@ -4,7 +4,10 @@
 // mesh after every call. Each case runs in a forked child, so an abort is reported with its
 // seed instead of ending the run.
 //
-//   refine_stress [--dim 2|3|0] [--seeds N] [--first S] [--max-leaves L] [--steps K] [--verbose]
+//   refine_stress [--dim 2|3|0] [--seeds N] [--first S] [--max-leaves L] [--steps K] [--uniform U]
+//                 [--no-limits] [--no-validate] [--summary] [--verbose]
+//   Defaults (200 seeds per dimension up to 2*10^5 leaves) take about a minute; the >= 10 M leaf run
+//   of bench/refine_stress_results.md uses --uniform 6 (3D) / 10 (2D) --max-leaves 10000000.
 //   refine_stress --case DIM SEED   (one case in-process: for a debugger)
 #include <sys/wait.h>
 #include <unistd.h>
@@ -35,6 +38,8 @@ struct Options {
   long first = 1;
   std::size_t max_leaves = 200000;
   int steps = 12;
+  int uniform = -1;  // uniform refinements before the random calls; -1: drawn per case (0-3 / 0-5)
+  bool summary = false;
   bool verbose = false;
   bool limits = true;
   bool validate = true;  // off: see what an unvalidated caller (mlfe convert) would hit
@@ -214,7 +219,8 @@ void run_case(long seed, const Options& opt) {
   for (int a = 0; a < D; ++a) hi[a] = 1.0 + 0.5 * a * 0.3;
   Hierarchy<D> h = Hierarchy<D>::box(lo, hi);
   // Start coarse or from a few uniform refinements (a few hundred to a few 10^4 leaves).
-  const int uniform = int(rng() % (D == 3 ? 4 : 6));
+  const int drawn = int(rng() % (D == 3 ? 4 : 6));
+  const int uniform = opt.uniform >= 0 ? opt.uniform : drawn;
   for (int i = 0; i < uniform; ++i) h.refine_uniform();
   validate<D>(h, lo, hi, seed, -1);
   for (int step = 0; step < opt.steps; ++step) {
@@ -239,6 +245,10 @@ void run_case(long seed, const Options& opt) {
     if (opt.validate) validate<D>(h, lo, hi, seed, step, nv);
     if (h.leaves().size() > opt.max_leaves) break;
   }
+  if (opt.summary)
+    std::fprintf(stderr,
+                 "case dim %d seed %ld: %zu leaves, %zu vertices, level %d, conforming after every call\n", D,
+                 seed, h.leaves().size(), h.vertex_count(), h.max_level());
 }
 
 // Runs one case in a forked child; returns true when it passed.
@@ -417,6 +427,10 @@ int main(int argc, char** argv) {
       opt.verbose = true;
     else if (a == "--no-limits")
       opt.limits = false;
+    else if (a == "--uniform")
+      opt.uniform = std::stoi(next());
+    else if (a == "--summary")
+      opt.summary = true;
     else if (a == "--no-validate")
       opt.validate = false;
     else if (a == "--search-small") {
