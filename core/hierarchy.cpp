@@ -356,9 +356,34 @@ bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
 
 template <int D>
 int Hierarchy<D>::green_children(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const {
+  MLFE_CHECK(green_type(D, mask) > 0 && is_leaf(e) && kind(e) != ElemKind::kGreen);
+  return green_pattern(e, mask, kids);
+}
+
+template <int D>
+bool Hierarchy<D>::green_edges_split(ElemId e, unsigned mask,
+                                     const std::vector<std::uint8_t>& flagged) const {
+  std::array<Cell, 4> kids;
+  return any_edge_split(kids, green_pattern(e, mask, kids), flagged);
+}
+
+template <int D>
+bool Hierarchy<D>::any_edge_split(const std::array<Cell, 4>& kids, int n,
+                                  const std::vector<std::uint8_t>& flagged) const {
+  using T = SimplexTraits<D>;
+  for (int k = 0; k < n; ++k)
+    for (int i = 0; i < T::kEdges; ++i) {
+      const VertexId a = kids[k][T::kEdgeVerts[i][0]], b = kids[k][T::kEdgeVerts[i][1]];
+      if (flagged[a.value] && flagged[b.value] && edge_mid_.find(a, b).valid()) return true;
+    }
+  return false;
+}
+
+template <int D>
+int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const {
   using T = SimplexTraits<D>;
   const int type = green_type(D, mask);
-  MLFE_CHECK(type > 0 && is_leaf(e) && kind(e) != ElemKind::kGreen);
+  MLFE_CHECK(type > 0 && kind(e) != ElemKind::kGreen);
   const Cell& c = cells_[e.value];
   auto mid = [&](VertexId a, VertexId b) {
     VertexId m = edge_mid_.find(a, b);
@@ -613,8 +638,23 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
     };
     // Only the endpoints of split edges: a new vertex starts with no split edge around it, and
     // an older leaf cannot contain it, so flagging it would only add candidates and probes.
+    // A split edge can also be an edge of a leaf's future green children (a half edge, or an
+    // edge between midpoints of the leaf's edges), whose endpoints need not be corners of that
+    // leaf: the parents of those endpoints are, so they are made dirty too and the leaf becomes
+    // a candidate (green_edges_split then sends it to red). Not touched: no edge of theirs is
+    // split by this.
+    const auto mark_dirty = [&](VertexId v) {
+      if (!dirty[v.value]) {
+        dirty[v.value] = 1;
+        dirty_list.push_back(v);
+      }
+    };
     for (std::size_t v = first_new_vertex; v < points_.size(); ++v)
-      for (VertexId p : vertex_parents_[v]) mark(p);
+      for (VertexId p : vertex_parents_[v]) {
+        mark(p);
+        for (VertexId g : vertex_parents_[p.value])
+          if (g.valid()) mark_dirty(g);
+      }
 
     // Candidates: every element created in this round, and older leaves with ≥ 2 dirty vertices.
     std::vector<ElemId> candidates;
@@ -650,11 +690,12 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           if (mask == 0) continue;
                           if (kind(e) == ElemKind::kGreen) {
                             const ElemId p = parent(e);
-                            if (hanging_on_parent_edges(e, mask) && green_type(D, hanging_mask(p)) > 0)
+                            const unsigned pmask = hanging_on_parent_edges(e, mask) ? hanging_mask(p) : 0;
+                            if (green_type(D, pmask) > 0 && !green_edges_split(p, pmask, touched))
                               regreen[i] = p;
                             else
                               request[i] = p;
-                          } else if (green_type(D, mask) < 0) {
+                          } else if (green_type(D, mask) < 0 || green_edges_split(e, mask, touched)) {
                             request[i] = e;
                           }
                         }
@@ -755,6 +796,8 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {
                           const auto [e, mask] = closure[i];
                           const int n = green_children(e, mask, kids);
+                          // A hanging vertex here would pass silently and abort a later refine().
+                          MLFE_CHECK_MSG(!any_edge_split(kids, n, touched), "green child with a split edge");
                           const std::size_t at = first + offset[i];
                           MLFE_CHECK(at + n == first + offset[i + 1]);
                           const int lvl = level_[e.value] + 1;

@@ -190,6 +190,16 @@ class Hierarchy {
   // The green children of leaf e for its hanging-edge mask (kids[0..n), n returned), each
   // oriented like e. Read-only, so the closure computes them in parallel.
   int green_children(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const;
+  // green_children without the leaf requirement: the closure also asks it for the parent of
+  // green leaves it considers re-greening.
+  int green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& kids) const;
+  // Whether an edge of the green children of e for `mask` (half edges of split edges, edges
+  // between midpoints or to them) already has a midpoint: those children would be
+  // nonconforming, so e must be red-refined instead. `flagged` as for hanging_mask: such a
+  // midpoint is one the current refine() created (the old children of a re-greened parent had
+  // the edges that use only older midpoints, and they were conforming).
+  bool green_edges_split(ElemId e, unsigned mask, const std::vector<std::uint8_t>& flagged) const;
+  bool any_edge_split(const std::array<Cell, 4>& kids, int n, const std::vector<std::uint8_t>& flagged) const;
   // Bit i set when local edge i has a midpoint. With `flagged`, only edges whose endpoints are
   // both flagged are probed: inside refine(), a midpoint on a leaf's edge is one the call
   // created (the leaves were conforming when it began), and refine() flags the endpoints of

@@ -475,6 +475,80 @@ TYPED_TEST(HierarchyTest, RefinementOverTheVertexLimitIsRolledBack) {
   }
 }
 
+// The fast version of bench/refine_stress: many short random marking sequences on small
+// meshes (random subsets, balls, green leaves, mixtures; some calls under a vertex limit that
+// rolls them back). Every call must end conforming, with green elements only as leaves.
+TYPED_TEST(HierarchyTest, RandomMarkingSequencesStayConforming) {
+  constexpr int D = TypeParam::value;
+  P<D> lo, hi;
+  lo.fill(0);
+  hi.fill(1);
+  if constexpr (D == 3) hi = {1.0, 1.3, 0.8};
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  for (unsigned seed = 1; seed <= (D == 2 ? 1000u : 300u); ++seed) {
+    auto h = unit_box<D>();
+    std::mt19937 rng(seed);
+    for (int k = static_cast<int>(rng() % 3); k > 0; --k) h.refine_uniform();
+    for (int it = 0; it < 6 && h.leaves().size() < 5000; ++it) {
+      const auto leaves = h.leaves();
+      std::vector<ElemId> marked;
+      const int strategy = static_cast<int>(rng() % 4);
+      P<D> x;
+      for (int a = 0; a < D; ++a) x[a] = lo[a] + (hi[a] - lo[a]) * u01(rng);
+      const double p = u01(rng), r = 0.05 + 0.3 * u01(rng);
+      for (ElemId e : leaves) {
+        double d = 0;
+        for (int a = 0; a < D; ++a) {
+          const double t = h.point(h.cell(e)[0])[a] - x[a];
+          d += t * t;
+        }
+        const bool near = d < r * r;
+        const bool green = h.kind(e) == ElemKind::kGreen;
+        if ((strategy == 0 && u01(rng) < 0.2 * p * p) || (strategy == 1 && near) ||
+            (strategy == 2 && green && u01(rng) < p) || (strategy == 3 && near && (green || u01(rng) < p)))
+          marked.push_back(e);
+      }
+      std::shuffle(marked.begin(), marked.end(), rng);
+      if (rng() % 4 == 0) {
+        const auto copy = h;
+        const std::size_t limit = h.vertex_count() + 1 + rng() % (2 * marked.size() + 4);
+        if (h.refine(marked, limit).empty() && !marked.empty()) test::expect_same_hierarchy(h, copy);
+      } else {
+        h.refine(marked);
+      }
+      expect_conforming(h, lo, hi);
+      expect_green_never_parent(h);
+      ASSERT_FALSE(::testing::Test::HasFailure()) << "seed " << seed << ", call " << it;
+    }
+  }
+}
+
+// Found by bench/refine_stress. Coarse tet [0 4 5 7] (vertex ids of the cube corners) enters
+// the third call green, split on its edge 0-7 (midpoint 10). Its neighbour [0 1 5 7] is
+// red-refined in round 1, which puts midpoints on 0-5 and 5-7: the green children see them on
+// their parent's edges, and the face pattern 0-5-7 is admissible, so round 2 re-greens the
+// parent. In that same round a red refinement elsewhere splits the half edge 10-7 (a quarter
+// point of 0-7). The re-greened parent, a leaf again, has only one endpoint of that split edge
+// (7) among its corners, so it was no candidate, and its new green children carried the hanging
+// quarter point: a nonconforming mesh, and the next refine() aborted in green_children, as
+// `mlfe convert` did on a 35 M-voxel volume.
+TEST(HierarchyRegression, RegreenedParentWhoseHalfEdgeIsSplitInTheSameRoundGoesRed) {
+  const P<3> lo{0, 0, 0}, hi{1, 1, 1};
+  auto h = Hierarchy<3>::box(lo, hi);
+  // Positions in leaves() per refine() call; the last call aborted before the fix.
+  const std::vector<std::vector<std::size_t>> calls = {{2}, {7, 9}, {16, 2, 23}, {1}};
+  for (const auto& positions : calls) {
+    const auto leaves = h.leaves();
+    std::vector<ElemId> marked;
+    for (std::size_t i : positions) marked.push_back(leaves.at(i));
+    h.refine(marked);
+    expect_conforming(h, lo, hi);
+    expect_green_never_parent(h);
+    // Stop at the first nonconforming mesh: refining it further aborts the test binary.
+    ASSERT_FALSE(::testing::Test::HasFailure());
+  }
+}
+
 TEST(EdgeMap, EraseKeepsEveryOtherEdgeFindable) {
   // A small table with many collisions and wrap-arounds, against std::map.
   std::mt19937 rng(5);
