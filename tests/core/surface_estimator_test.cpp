@@ -173,13 +173,17 @@ TEST(SurfaceDriven, MemoryBudgetStopsRefinementWithItsReason) {
   o.iso_values = {0.0};
   o.surface_driven = true;
   const auto full = approximate<3>(f, o);
-  o.max_memory_bytes = estimated_memory_bytes(3, full.hierarchy.vertex_count() / 3, full.hierarchy.leaves().size() / 3);
+  // Between the uniform start mesh and the full one.
+  const auto& start = full.surface_passes.front();
+  o.max_memory_bytes = (estimated_memory_bytes(3, start.vertices, start.elements) +
+                        estimated_memory_bytes(3, full.hierarchy.vertex_count(), full.hierarchy.leaves().size())) /
+                       2;
   const auto cut = approximate<3>(f, o);
   EXPECT_TRUE(cut.memory_limited);
   EXPECT_EQ(cut.stop_reason, "memory budget");
   EXPECT_LT(cut.hierarchy.vertex_count(), full.hierarchy.vertex_count());
   EXPECT_LE(estimated_memory_bytes(3, cut.hierarchy.vertex_count(), cut.hierarchy.leaves().size()),
-            o.max_memory_bytes * 5 / 4);  // the limit is set from the leaf/vertex ratio before a pass
+            o.max_memory_bytes);
 }
 
 }  // namespace
