@@ -1,6 +1,7 @@
-// libFuzzer entry point for mlfe's own decoders: the hierarchy file reader (read_hierarchy,
-// through a temporary file) and the Draco payload decoder (decode_draco). mlfe::Error is the
-// expected outcome for bad input; anything else is a finding.
+// libFuzzer entry point for mlfe's own decoders: the hierarchy file reader (read_hierarchy),
+// the glTF reader (read_gltf, .glb) and the EXR/PNG reader (read_image, .exr), each through a
+// temporary file, and the Draco payload decoder (decode_draco). mlfe::Error is the expected
+// outcome for bad input; anything else is a finding.
 #include <unistd.h>
 
 #include <cstdint>
@@ -10,7 +11,9 @@
 
 #include "core/error.h"
 #include "formats/draco_io.h"
+#include "formats/gltf_reader.h"
 #include "formats/hierarchy_io.h"
+#include "formats/image_reader.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string kind = MLFE_FUZZ_KIND;
@@ -18,12 +21,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (kind == "draco") {
       mlfe::decode_draco(reinterpret_cast<const char*>(data), size, "fuzz input");
     } else {
-      static const std::string path = "/tmp/mlfe_fuzz_hierarchy_" + std::to_string(::getpid()) + ".mlfeh";
+      const std::string ext = kind == "gltf" ? ".glb" : kind == "exr" ? ".exr" : ".mlfeh";
+      static const std::string path = "/tmp/mlfe_fuzz_" + kind + "_" + std::to_string(::getpid()) + ext;
       {
         std::ofstream out(path, std::ios::binary | std::ios::trunc);
         out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
       }
-      mlfe::read_hierarchy(path);
+      if (kind == "gltf")
+        mlfe::read_gltf(path);
+      else if (kind == "exr")
+        mlfe::read_image(path);
+      else
+        mlfe::read_hierarchy(path);
     }
   } catch (const mlfe::Error&) {
   }

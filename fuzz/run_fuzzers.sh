@@ -15,7 +15,7 @@ TARGETS=("$@")
 # The user-facing parsers. fuzz_draco (Draco payloads, which mlfe only reads back from its own
 # outputs) is built too and can be run by name: libdraco sizes buffers from counts in the data
 # and asks for gigabytes on corrupt input, which ASan reports as a crash.
-if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image hierarchy); fi
+if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image hierarchy gltf exr); fi
 
 command -v clang++ >/dev/null || { echo "run_fuzzers: clang++ not found (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 
@@ -38,6 +38,8 @@ seed_patterns() {
     image) echo "*.pgm *.png" ;;
     hierarchy) echo "*.mlfeh" ;;
     draco) echo "*.drc" ;;
+    gltf) echo "*.glb" ;;
+    exr) echo "*.exr" ;;
   esac
 }
 
@@ -54,7 +56,7 @@ for t in "${TARGETS[@]}"; do
   corpus="$BUILD/corpus/$t"
   artifacts="$BUILD/artifacts/$t/"
   mkdir -p "$corpus" "$artifacts"
-  for dir in "$ROOT/tests/data" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$SHARED"; do
+  for dir in "$ROOT/tests/data" "$ROOT/tests/golden" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$SHARED"; do
     [ -d "$dir" ] || continue
     for pat in $(seed_patterns "$t"); do
       for f in "$dir"/$pat; do
