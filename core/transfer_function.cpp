@@ -17,21 +17,28 @@ namespace {
 constexpr double kSqrtPi = 1.7724538509055160273;
 constexpr double kMaxOpacity = 1.0 - 1e-6;
 
-// m[n] = ∫₀¹ uⁿ e^{−a u} du, n = 0..8. The upward recurrence loses digits for small a (it
-// divides by a), the power series for large a (alternating terms of size e^a), so each is used
-// where it is stable.
+// m[n] = ∫₀¹ uⁿ e^{−a u} du for the even n = 0..8 (odd entries are not needed and may be left
+// unset). The upward recurrence loses digits for small a (it divides by a), the power series for
+// large a (alternating terms of size e^a), so each is used where it is stable; the series shares
+// its terms (−a)^j / j! between the five moments.
 void exp_moments(double a, double m[9]) {
   if (a < 4.0) {
-    for (int n = 0; n <= 8; ++n) {
-      double term = 1.0, sum = 0.0;  // term = (−a)^j / j!
-      for (int j = 0; j < 80; ++j) {
-        const double add = term / double(n + j + 1);
-        sum += add;
-        if (std::abs(add) < 1e-18 * std::abs(sum)) break;
-        term *= -a / double(j + 1);
-      }
-      m[n] = sum;
+    static const auto inv = [] {
+      std::array<double, 128> r{};
+      for (std::size_t i = 1; i < r.size(); ++i) r[i] = 1.0 / double(i);
+      return r;
+    }();
+    double s0 = 0, s2 = 0, s4 = 0, s6 = 0, s8 = 0, term = 1.0;
+    for (int j = 0; j < 110; ++j) {
+      s0 += term * inv[j + 1];
+      s2 += term * inv[j + 3];
+      s4 += term * inv[j + 5];
+      s6 += term * inv[j + 7];
+      s8 += term * inv[j + 9];
+      term *= -a * inv[j + 1];
+      if (std::abs(term) < 1e-18) break;
     }
+    m[0] = s0, m[2] = s2, m[4] = s4, m[6] = s6, m[8] = s8;
     return;
   }
   const double e = std::exp(-a);

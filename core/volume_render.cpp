@@ -4,7 +4,6 @@
 // volume_render.h for the traversal steps.
 #include "core/volume_render.h"
 
-#include <tbb/blocked_range2d.h>
 #include <tbb/parallel_for.h>
 
 #include <Eigen/Dense>
@@ -254,9 +253,16 @@ std::size_t TetRenderMesh::memory_bytes() const {
          (lo_.capacity() + hi_.capacity()) * sizeof(float);
 }
 
-std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d) const {
+std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
+                                    ElemId hint) const {
   const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
   Vec3 pts[4];
+  // 1. climb from the hint to an ancestor containing q (none: start from T0).
+  while (hint.valid()) {
+    load(h_, hint, pts);
+    if (min_barycentric(pts, q) >= 0) break;
+    hint = h_.parent(hint);
+  }
   auto best_of = [&](ElemId first, std::size_t count) {
     ElemId best = first;
     double best_b = -std::numeric_limits<double>::infinity();
@@ -272,7 +278,8 @@ std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::a
     }
     return best;
   };
-  ElemId e = best_of(ElemId(0), h_.coarse_count());
+  // 2. descend to T_k.
+  ElemId e = hint.valid() ? hint : best_of(ElemId(0), h_.coarse_count());
   while (render_of_[e.value] == kNone) {
     MLFE_CHECK(!h_.is_leaf(e));
     e = best_of(h_.first_child(e), std::size_t(h_.num_children(e)));
@@ -303,7 +310,7 @@ bool clip_to_box(const Vec3& lo, const Vec3& hi, const Vec3& o, const Vec3& d, d
 
 template <class Visit>
 TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
-                  Visit&& visit) {
+                  Visit&& visit, ElemId* entry_hint) {
   TraceResult res;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
   res.hit = true;
@@ -313,7 +320,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   auto transparent = [&](ElemId e) { return skip->transparent(m.range_lo(e), m.range_hi(e)); };
 
   double t = res.t_near;
-  std::uint32_t r = m.locate(axpy(o, t, d), d);
+  std::uint32_t r = m.locate(axpy(o, t, d), d, entry_hint ? *entry_hint : ElemId::invalid());
+  if (entry_hint) *entry_hint = m.element(r);
   int entry = -1;
   Vec3 p[4];
   while (true) {
@@ -335,7 +343,7 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
         ++res.skips;
         t = t_out;
         if (t >= res.t_far - eps) break;
-        r = m.locate(axpy(o, t, d), d);
+        r = m.locate(axpy(o, t, d), d, a);
         entry = -1;
         continue;
       }
@@ -362,7 +370,7 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
       if (t >= res.t_far - eps) break;
       // Left the mesh before the box exit (rounding at the boundary): locate again.
       ++res.relocations;
-      r = m.locate(axpy(o, t, d), d);
+      r = m.locate(axpy(o, t, d), d, e);
       entry = -1;
       continue;
     }
@@ -377,8 +385,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
 
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin, const std::array<double, 3>& dir,
                       const CompiledTransferFunction* skip,
-                      const std::function<bool(const TraceSegment&)>& visit) {
-  return trace(m, origin, dir, skip, visit);
+                      const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
+  return trace(m, origin, dir, skip, visit, entry_hint);
 }
 
 // ---------------------------------------------------------------- images
@@ -397,8 +405,9 @@ struct Counters {
   }
 };
 
-// Runs pixel(x, y, acc) over 16x16 tiles in parallel; every pixel is computed on its own, so
-// the image does not depend on how tiles are distributed.
+// Runs pixel(x, y, acc, hint) over fixed 16x16 tiles in parallel. A pixel depends only on its
+// tile (the entry hint is reset per tile), so the image does not depend on how tiles are
+// distributed over threads.
 template <class Pixel>
 RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf, const RenderOptions& opt,
                          Pixel&& pixel) {
@@ -408,13 +417,16 @@ RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf,
   img.height = cam.height;
   img.rgba.assign(std::size_t(cam.width) * cam.height * 4, 0.0f);
   img.z.assign(std::size_t(cam.width) * cam.height, std::numeric_limits<float>::infinity());
-  tbb::parallel_for(tbb::blocked_range2d<int>(0, cam.height, 16, 0, cam.width, 16),
-                    [&](const tbb::blocked_range2d<int>& range) {
+  constexpr int kTile = 16;
+  const int tx = (cam.width + kTile - 1) / kTile, ty = (cam.height + kTile - 1) / kTile;
+  tbb::parallel_for(0, tx * ty, [&](int tile) {
                       RayAccumulator acc(ctf, opt.rule, opt.stop_opacity, opt.z_opacity);
-                      for (int y = range.rows().begin(); y < range.rows().end(); ++y)
-                        for (int x = range.cols().begin(); x < range.cols().end(); ++x) {
+                      ElemId hint = ElemId::invalid();
+                      const int x0 = (tile % tx) * kTile, y0 = (tile / tx) * kTile;
+                      for (int y = y0; y < std::min(y0 + kTile, cam.height); ++y)
+                        for (int x = x0; x < std::min(x0 + kTile, cam.width); ++x) {
                           acc.reset();
-                          pixel(x, y, acc);
+                          pixel(x, y, acc, hint);
                           const std::size_t i = std::size_t(y) * cam.width + x;
                           for (int c = 0; c < 3; ++c) img.rgba[4 * i + c] = float(acc.rgb()[c]);
                           img.rgba[4 * i + 3] = float(1.0 - acc.transmittance());
@@ -436,7 +448,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
                         const Camera& camera, const RenderOptions& opt, RenderStats* stats) {
   const CompiledTransferFunction ctf(tf);
   Counters n;
-  RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc) {
+  RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId& hint) {
     Vec3 ow, dw;
     camera.ray(x, y, ow, dw);
     const Vec3 o = world_to_local_point(transform, ow), d = world_to_local_direction(transform, dw);
@@ -447,7 +459,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
         acc.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
       }
       return !acc.done();
-    });
+    }, &hint);
     if (!r.hit) return;
     n.rays.fetch_add(1, std::memory_order_relaxed);
     n.segments.fetch_add(segs, std::memory_order_relaxed);
@@ -467,7 +479,7 @@ RenderImage render_grid(const ScalarGrid& grid, const TransferFunction& tf, cons
   const Vec3 lo{0, 0, 0}, hi = grid.local_extent();
   const double step = 0.5 * f.resolution();
   Counters n;
-  RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc) {
+  RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId&) {
     Vec3 ow, dw;
     camera.ray(x, y, ow, dw);
     const Vec3 o = world_to_local_point(grid.transform, ow), d = world_to_local_direction(grid.transform, dw);
