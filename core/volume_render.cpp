@@ -23,6 +23,10 @@ namespace {
 using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+// Skip a transparent ancestor only when it is at least this many levels above the leaf: a
+// skip ends in a point location (climb + descent, ~0.4 µs), a leaf step costs ~0.1 µs
+// (bench/RESULTS.md, render_bench: 1 level was slower than walking on both volumes).
+constexpr int kSkipLevels = 3;
 
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -330,16 +334,19 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
       break;
     }
     const ElemId e = m.element(r);
-    // Empty space: the largest transparent ancestor is crossed in one step.
-    if (skip && transparent(e)) {
+    // Empty space: the largest transparent ancestor is crossed in one step when it is at
+    // least kSkipLevels above (locating again behind it costs about as much as walking a few
+    // leaves); a transparent leaf is walked without evaluating u.
+    const bool empty = skip && transparent(e);
+    if (empty) {
       ElemId a = e;
       while (h.parent(a).valid() && transparent(h.parent(a))) a = h.parent(a);
-      if (a != e) {
+      if (h.level(e) - h.level(a) >= kSkipLevels) {
         load(h, a, p);
         double t_out;
         TetPlanes(p).exit(o, d, t, -1, t_out);
         t_out = std::min(t_out, res.t_far);
-        if (!visit(TraceSegment{-1, t, t_out, 0, 0, {0, 0, 0}})) break;
+        if (!visit(TraceSegment{-1, t, t_out, 0, 0, {0, 0, 0}, true})) break;
         ++res.skips;
         t = t_out;
         if (t >= res.t_far - eps) break;
@@ -353,17 +360,19 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
     double t_out;
     const int f = planes.exit(o, d, t, entry, t_out);
     t_out = std::min(t_out, res.t_far);
-    // u is linear: u(x) = Σ u_i λ_i(x), ∇λ_i = n_i / (n_i · (p_i − p_face)).
-    const auto& c = h.cell(e);
-    Vec3 g{0, 0, 0};
-    for (int i = 0; i < 4; ++i) {
-      const double w = m.value(c[i]) / (dot(planes.n[i], p[i]) - planes.h[i]);
-      for (int a = 0; a < 3; ++a) g[a] += w * planes.n[i][a];
+    TraceSegment seg{std::int32_t(r), t, t_out, 0, 0, {0, 0, 0}, empty};
+    if (!empty) {
+      // u is linear: u(x) = Σ u_i λ_i(x), ∇λ_i = n_i / (n_i · (p_i − p_face)).
+      const auto& c = h.cell(e);
+      for (int i = 0; i < 4; ++i) {
+        const double w = m.value(c[i]) / (dot(planes.n[i], p[i]) - planes.h[i]);
+        for (int a = 0; a < 3; ++a) seg.gradient[a] += w * planes.n[i][a];
+      }
+      const double u0 = m.value(c[0]);
+      seg.s0 = u0 + dot(seg.gradient, sub(axpy(o, t, d), p[0]));
+      seg.s1 = u0 + dot(seg.gradient, sub(axpy(o, t_out, d), p[0]));
     }
-    const double u0 = m.value(c[0]);
-    const double s0 = u0 + dot(g, sub(axpy(o, t, d), p[0]));
-    const double s1 = u0 + dot(g, sub(axpy(o, t_out, d), p[0]));
-    if (!visit(TraceSegment{std::int32_t(r), t, t_out, s0, s1, g})) break;
+    if (!visit(seg)) break;
     t = t_out;
     const std::int32_t next = m.neighbors(r)[f];
     if (next < 0) {
@@ -454,8 +463,8 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     const Vec3 o = world_to_local_point(transform, ow), d = world_to_local_direction(transform, dw);
     std::uint64_t segs = 0;
     const TraceResult r = trace(m, o, d, opt.skip_empty ? &ctf : nullptr, [&](const TraceSegment& s) {
-      if (s.tet >= 0) {
-        ++segs;
+      if (s.tet >= 0) ++segs;
+      if (!s.empty) {
         acc.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
       }
       return !acc.done();

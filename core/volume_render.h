@@ -130,11 +130,14 @@ class TetRenderMesh {
 
 /// One piece of a traced ray: tetrahedron `tet` (render index; −1 for a skipped transparent
 /// coarse element) from t0 to t1, with u at both ends and u's gradient there (local frame).
+/// `empty`: the element is transparent for the skip transfer function (s0, s1 and gradient
+/// are then not computed).
 struct TraceSegment {
   std::int32_t tet;
   double t0, t1;
   double s0, s1;
   std::array<double, 3> gradient;
+  bool empty;
 };
 
 struct TraceResult {
