@@ -59,7 +59,9 @@ int psnr(const std::string& a, const std::string& b) {
     mx = std::max(mx, std::abs(d));
   }
   const double rms = std::sqrt(se / double(pa.size()));
-  std::printf("%s\n", nlohmann::json({{"psnr_db", 20 * std::log10(1.0 / rms)}, {"max_abs", mx}, {"rms", rms}}).dump().c_str());
+  std::printf("%s\n", nlohmann::json({{"psnr_db", 20 * std::log10(1.0 / rms)}, {"max_abs", mx}, {"rms", rms}})
+                          .dump()
+                          .c_str());
   return 0;
 }
 
@@ -72,7 +74,8 @@ int setup(char** argv) {
   const std::string prefix = argv[9];
   {
     std::ofstream raw(prefix + ".raw", std::ios::binary);
-    raw.write(reinterpret_cast<const char*>(g.values.data()), std::streamsize(g.values.size() * sizeof(float)));
+    raw.write(reinterpret_cast<const char*>(g.values.data()),
+              std::streamsize(g.values.size() * sizeof(float)));
   }
   write_vtu<3>(prefix + ".vtu", h, h.leaves(), &hf.values, nullptr);
   // The camera exactly as `mlfe render` places it (converters/cmd_render.cpp), then in the
@@ -97,7 +100,10 @@ int setup(char** argv) {
                       {"tets", h.leaves().size()},
                       {"voxels", g.voxel_count()},
                       {"camera",
-                       {{"position", pos}, {"focal_point", tgt}, {"view_up", up}, {"parallel_scale", 0.5 * cam.ortho_height}}},
+                       {{"position", pos},
+                        {"focal_point", tgt},
+                        {"view_up", up},
+                        {"parallel_scale", 0.5 * cam.ortho_height}}},
                       {"tf", {{"rgb", tf.color}, {"opacity", tf.opacity}, {"unit", tf.unit_length}}}};
   std::printf("%s\n", j.dump().c_str());
   return 0;

@@ -106,7 +106,8 @@ void run(const IsoState& s, bool convert) {
   if (!s.report.empty()) std::printf("%s\n", s.report.c_str());
   // convert --render: the image of the hierarchy just built, with mlfe render's defaults.
   if (!s.render.empty())
-    for (const auto& f : render_outputs(s.render, RenderParams{}, b, grid ? &*grid : nullptr, s.input, s.params.quiet))
+    for (const auto& f :
+         render_outputs(s.render, RenderParams{}, b, grid ? &*grid : nullptr, s.input, s.params.quiet))
       std::printf("%s\n", f.c_str());
 }
 
@@ -136,7 +137,8 @@ void add_convert_command(CLI::App& app) {
       "convert", "Volume in, iso-surface asset out: adaptive build + marching tetrahedra + glTF/Draco");
   cmd->add_option("input", state->input, "volume or height field")->required();
   cmd->add_option("--hierarchy", state->hierarchy, "also keep the hierarchy it built (.mlfeh)");
-  cmd->add_option("--render", state->render, "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
+  cmd->add_option("--render", state->render,
+                  "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
   add_common(cmd, *state);
   cmd->callback([state] { run(*state, true); });
 }

@@ -21,14 +21,18 @@ namespace mlfe::cli {
 void add_render_options(CLI::App* cmd, RenderParams& p) {
   std::string presets;
   for (const auto& n : transfer_function_presets()) presets += (presets.empty() ? "" : ", ") + n;
-  cmd->add_option("--tf", p.tf, "transfer function: a preset (" + presets + ") or a ParaView colour map .json")
+  cmd->add_option("--tf", p.tf,
+                  "transfer function: a preset (" + presets + ") or a ParaView colour map .json")
       ->capture_default_str();
   cmd->add_option("--tf-unit", p.tf_unit,
                   "length (mm) the opacities refer to (0: one voxel for presets, 1 for ParaView files)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--camera", p.camera, "projection")->check(CLI::IsMember({"ortho", "perspective"}))->capture_default_str();
+  cmd->add_option("--camera", p.camera, "projection")
+      ->check(CLI::IsMember({"ortho", "perspective"}))
+      ->capture_default_str();
   cmd->add_option("--azimuth", p.azimuth, "degrees about +z (0: looking along +y)");
-  cmd->add_option("--elevation", p.elevation, "degrees above the horizontal plane")->check(CLI::Range(-90.0, 90.0));
+  cmd->add_option("--elevation", p.elevation, "degrees above the horizontal plane")
+      ->check(CLI::Range(-90.0, 90.0));
   cmd->add_option("--position", p.position, "camera position x,y,z (physical frame; replaces the orbit)");
   cmd->add_option("--target", p.target, "point looked at, x,y,z (default: the volume's centre)");
   cmd->add_option("--up", p.up, "up direction x,y,z (default 0,0,1)");
@@ -43,8 +47,11 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
   cmd->add_option("--png", p.png, "also write an sRGB PNG preview over the background");
   cmd->add_option("--frames", p.frames, "turntable: this many frames around +z, numbered files")
       ->check(CLI::Range(1, 3600));
-  cmd->add_option("--background", p.background, "PNG background, linear r,g,b in [0,1]")->capture_default_str();
-  cmd->add_option("--stop-opacity", p.stop_opacity, "early ray termination")->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  cmd->add_option("--background", p.background, "PNG background, linear r,g,b in [0,1]")
+      ->capture_default_str();
+  cmd->add_option("--stop-opacity", p.stop_opacity, "early ray termination")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--z-opacity", p.z_opacity, "Z is where the accumulated opacity reaches this")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
@@ -61,11 +68,15 @@ std::array<double, 3> parse3(const std::string& text, const std::string& what) {
 std::string numbered(const std::string& path, int frame, int frames) {
   if (frames <= 1) return path;
   const std::filesystem::path p(path);
-  return (p.parent_path() / fmt::format("{}_{:04d}{}", p.stem().string(), frame, p.extension().string())).string();
+  return (p.parent_path() / fmt::format("{}_{:04d}{}", p.stem().string(), frame, p.extension().string()))
+      .string();
 }
 
 nlohmann::json tf_json(const TransferFunction& tf) {
-  return {{"name", tf.name}, {"RGBPoints", tf.color}, {"opacityPoints", tf.opacity}, {"opacityUnitLength", tf.unit_length}};
+  return {{"name", tf.name},
+          {"RGBPoints", tf.color},
+          {"opacityPoints", tf.opacity},
+          {"opacityUnitLength", tf.unit_length}};
 }
 
 }  // namespace
@@ -75,12 +86,13 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   check_output_path(out, {".exr"});
   if (!p.png.empty()) check_output_path(p.png, {".png"});
   if (b.dim != 3) throw Error(source + ": rendering needs a 3D volume or hierarchy");
-  if (p.reference && !grid) throw Error(source + ": --reference needs the volume itself as input, not a hierarchy");
+  if (p.reference && !grid)
+    throw Error(source + ": --reference needs the volume itself as input, not a hierarchy");
   int w = 0, h = 0;
   {
     char x = 0, rest = 0;
-    if (std::sscanf(p.size.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || (x != 'x' && x != 'X') || w < 1 || h < 1 ||
-        w > 16384 || h > 16384)
+    if (std::sscanf(p.size.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || (x != 'x' && x != 'X') || w < 1 ||
+        h < 1 || w > 16384 || h > 16384)
       throw Error("--size: expected WxH (1..16384), got '" + p.size + "'");
   }
   const auto bg = parse3(p.background, "--background");
@@ -105,17 +117,20 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
       lo_l[a] = std::min(lo_l[a], q[a]);
       hi_l[a] = std::max(hi_l[a], q[a]);
     }
-  const std::array<double, 3> mid_l{0.5 * (lo_l[0] + hi_l[0]), 0.5 * (lo_l[1] + hi_l[1]), 0.5 * (lo_l[2] + hi_l[2])};
+  const std::array<double, 3> mid_l{0.5 * (lo_l[0] + hi_l[0]), 0.5 * (lo_l[1] + hi_l[1]),
+                                    0.5 * (lo_l[2] + hi_l[2])};
   const auto center = tr.local_to_physical(mid_l);
   double radius = 0;
   for (int c = 0; c < 8; ++c) {
-    const auto q = tr.local_to_physical({c & 1 ? hi_l[0] : lo_l[0], c & 2 ? hi_l[1] : lo_l[1], c & 4 ? hi_l[2] : lo_l[2]});
+    const auto q = tr.local_to_physical(
+        {c & 1 ? hi_l[0] : lo_l[0], c & 2 ? hi_l[1] : lo_l[1], c & 4 ? hi_l[2] : lo_l[2]});
     radius = std::max(radius, std::sqrt(std::pow(q[0] - center[0], 2) + std::pow(q[1] - center[1], 2) +
                                         std::pow(q[2] - center[2], 2)));
   }
 
   RenderOptions opt;
-  opt.rule = p.integration == "trapezoid" ? RayAccumulator::Rule::kTrapezoid : RayAccumulator::Rule::kPreIntegrated;
+  opt.rule =
+      p.integration == "trapezoid" ? RayAccumulator::Rule::kTrapezoid : RayAccumulator::Rule::kPreIntegrated;
   opt.stop_opacity = p.stop_opacity;
   opt.z_opacity = p.z_opacity;
   opt.shading = p.shading;
@@ -141,8 +156,8 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
     }
     const auto t0 = std::chrono::steady_clock::now();
     RenderStats stats;
-    const RenderImage img = p.reference ? render_grid(*grid, tf, cam, opt, &stats)
-                                        : render_mesh(*mesh, tr, tf, cam, opt, &stats);
+    const RenderImage img =
+        p.reference ? render_grid(*grid, tf, cam, opt, &stats) : render_mesh(*mesh, tr, tf, cam, opt, &stats);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ExrAttributes attr;
     attr.world_to_camera = cam.world_to_camera();
@@ -150,14 +165,15 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
     attr.strings = {
         {"mlfe/source", std::filesystem::path(source).filename().string()},
         {"mlfe/renderer", p.reference ? std::string("reference: trilinear voxels, 2 samples per voxel")
-                                      : fmt::format("tetrahedral mesh, level {} of {}, {} integration", mesh->level(),
-                                                    hier.max_level(), p.integration)},
+                                      : fmt::format("tetrahedral mesh, level {} of {}, {} integration",
+                                                    mesh->level(), hier.max_level(), p.integration)},
         {"mlfe/transferFunction", tf_json(tf).dump()},
         {"mlfe/zConvention",
-         fmt::format("Z = distance along the ray from its origin (camera position; orthographic: the image plane "
-                     "through it), physical units, to where the accumulated opacity first reaches {}; +inf where "
-                     "it never does",
-                     p.z_opacity)},
+         fmt::format(
+             "Z = distance along the ray from its origin (camera position; orthographic: the image plane "
+             "through it), physical units, to where the accumulated opacity first reaches {}; +inf where "
+             "it never does",
+             p.z_opacity)},
         {"mlfe/alpha", "linear RGB, premultiplied alpha, no background"},
         {"mlfe/tool", std::string("mlfe ") + MLFE_VERSION},
     };
@@ -169,12 +185,13 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
       written.push_back(numbered(p.png, frame, p.frames));
     }
     if (!quiet)
-      std::fprintf(stderr,
-                   "mlfe render: %dx%d in %.3f s, %llu rays, %llu segments, %llu skips, %llu relocated, %llu at the "
-                   "step bound -> %s\n",
-                   w, h, secs, (unsigned long long)stats.rays, (unsigned long long)stats.segments,
-                   (unsigned long long)stats.skips, (unsigned long long)stats.relocations,
-                   (unsigned long long)stats.step_bound_hits, exr_path.c_str());
+      std::fprintf(
+          stderr,
+          "mlfe render: %dx%d in %.3f s, %llu rays, %llu segments, %llu skips, %llu relocated, %llu at the "
+          "step bound -> %s\n",
+          w, h, secs, (unsigned long long)stats.rays, (unsigned long long)stats.segments,
+          (unsigned long long)stats.skips, (unsigned long long)stats.relocations,
+          (unsigned long long)stats.step_bound_hits, exr_path.c_str());
   }
   return written;
 }
@@ -197,7 +214,8 @@ void run_render(const RenderState& s) {
   } else {
     grid = read_volume(s.input, s.read);
     if (grid->dim != 3) throw Error(s.input + ": rendering needs a 3D volume");
-    if (!s.render.reference) b = build_from_grid(*grid, s.build, {});
+    if (!s.render.reference)
+      b = build_from_grid(*grid, s.build, {});
     else {
       b.dim = 3;
       b.transform = grid->transform;
@@ -218,8 +236,10 @@ void run_render(const RenderState& s) {
 void add_render_command(CLI::App& app) {
   auto state = std::make_shared<RenderState>();
   CLI::App* cmd = app.add_subcommand(
-      "render", "Ray-cast EXR image of a hierarchy or a volume, face to face through the adaptive tetrahedral mesh");
-  cmd->add_option("input", state->input, "hierarchy (.mlfeh) or 3D volume (built first, as mlfe build)")->required();
+      "render",
+      "Ray-cast EXR image of a hierarchy or a volume, face to face through the adaptive tetrahedral mesh");
+  cmd->add_option("input", state->input, "hierarchy (.mlfeh) or 3D volume (built first, as mlfe build)")
+      ->required();
   cmd->add_option("-o,--output", state->output, "image (.exr; numbered with --frames)")->required();
   add_render_options(cmd, state->render);
   add_build_options(cmd, state->build);

@@ -9,9 +9,9 @@
 namespace mlfe::cli {
 
 struct RenderParams {
-  std::string tf = "grey";        ///< preset name or a ParaView .json export
-  double tf_unit = 0;             ///< opacity unit length (mm); 0: one voxel (presets), 1 (JSON)
-  std::string camera = "ortho";   ///< "ortho" or "perspective"
+  std::string tf = "grey";       ///< preset name or a ParaView .json export
+  double tf_unit = 0;            ///< opacity unit length (mm); 0: one voxel (presets), 1 (JSON)
+  std::string camera = "ortho";  ///< "ortho" or "perspective"
   double azimuth = 0, elevation = 0;
   std::string position, target, up;  ///< "x,y,z" in the physical frame (override the orbit)
   std::string size = "500x500";

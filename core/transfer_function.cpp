@@ -72,7 +72,8 @@ double dawson(double x) {
   double e1 = std::exp(2.0 * xp * kH);
   const double e2 = e1 * e1;
   double d1 = n0 + 1, d2 = d1 - 2.0, sum = 0.0;
-  for (int i = 1; i <= kTerms; ++i, d1 += 2.0, d2 -= 2.0, e1 *= e2) sum += coeff[i] * (e1 / d1 + 1.0 / (d2 * e1));
+  for (int i = 1; i <= kTerms; ++i, d1 += 2.0, d2 -= 2.0, e1 *= e2)
+    sum += coeff[i] * (e1 / d1 + 1.0 / (d2 * e1));
   return std::exp(-xp * xp) * sum / kSqrtPi;
 }
 
@@ -87,12 +88,12 @@ void eval_list(const std::vector<std::array<double, N>>& pts, double s, int side
   if (s <= pts.front()[0] && (side < 0 || s < pts.front()[0])) return copy(0);
   if (s >= pts.back()[0] && (side > 0 || s > pts.back()[0])) return copy(n - 1);
   // First point with value > s (right side) or >= s (left side).
-  std::size_t hi = side > 0 ? std::upper_bound(pts.begin(), pts.end(), s,
-                                               [](double v, const auto& p) { return v < p[0]; }) -
-                                  pts.begin()
-                            : std::lower_bound(pts.begin(), pts.end(), s,
-                                               [](const auto& p, double v) { return p[0] < v; }) -
-                                  pts.begin();
+  std::size_t hi =
+      side > 0
+          ? std::upper_bound(pts.begin(), pts.end(), s, [](double v, const auto& p) { return v < p[0]; }) -
+                pts.begin()
+          : std::lower_bound(pts.begin(), pts.end(), s, [](const auto& p, double v) { return p[0] < v; }) -
+                pts.begin();
   if (hi == 0) return copy(0);
   if (hi >= n) return copy(n - 1);
   const std::size_t lo = hi - 1;
@@ -118,7 +119,8 @@ void TransferFunction::validate(const std::string& source) const {
   for (std::size_t i = 0; i < opacity.size(); ++i) {
     if (!std::isfinite(opacity[i][0]) || !std::isfinite(opacity[i][1]))
       fail("opacity point " + std::to_string(i) + " is not finite");
-    if (opacity[i][1] < 0 || opacity[i][1] > 1) fail("opacity point " + std::to_string(i) + " outside [0, 1]");
+    if (opacity[i][1] < 0 || opacity[i][1] > 1)
+      fail("opacity point " + std::to_string(i) + " outside [0, 1]");
     if (i > 0 && opacity[i][0] < opacity[i - 1][0]) fail("opacity points are not sorted by value");
   }
 }
@@ -147,7 +149,8 @@ TransferFunction transfer_function_preset(const std::string& name, double lo, do
   } else {
     std::string list;
     for (const auto& p : transfer_function_presets()) list += (list.empty() ? "" : ", ") + p;
-    throw Error("unknown transfer function preset '" + name + "' (presets: " + list + "; or a ParaView .json)");
+    throw Error("unknown transfer function preset '" + name + "' (presets: " + list +
+                "; or a ParaView .json)");
   }
   return tf;
 }
@@ -269,8 +272,8 @@ void RayAccumulator::add(double sf, double sb, double t, double length, double s
   }
 }
 
-void RayAccumulator::add_piece(double tf, double tb, const double cf[3], const double cb[3], double t, double l,
-                               double shade) {
+void RayAccumulator::add_piece(double tf, double tb, const double cf[3], const double cb[3], double t,
+                               double l, double shade) {
   if (!(l > 0) || (tf == 0 && tb == 0)) return;
   const double a = tf * l, b = tb * l;
   const double zeta = std::exp(-0.5 * (a + b));

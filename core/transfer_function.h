@@ -114,7 +114,8 @@ class RayAccumulator {
   double depth() const { return depth_; }
 
  private:
-  void add_piece(double tf, double tb, const double cf[3], const double cb[3], double t, double l, double shade);
+  void add_piece(double tf, double tb, const double cf[3], const double cb[3], double t, double l,
+                 double shade);
   const CompiledTransferFunction& tf_;
   Rule rule_;
   double stop_, z_opacity_;

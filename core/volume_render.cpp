@@ -33,7 +33,9 @@ inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[
 inline Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
-inline Vec3 axpy(const Vec3& o, double t, const Vec3& d) { return {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]}; }
+inline Vec3 axpy(const Vec3& o, double t, const Vec3& d) {
+  return {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
+}
 inline Vec3 normalized(const Vec3& a) {
   const double n = std::sqrt(dot(a, a));
   return {a[0] / n, a[1] / n, a[2] / n};
@@ -135,7 +137,8 @@ std::array<double, 16> Camera::world_to_camera() const {
 }
 
 std::array<double, 16> Camera::world_to_ndc() const {
-  Eigen::Matrix4d view = Eigen::Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(world_to_camera().data());
+  Eigen::Matrix4d view =
+      Eigen::Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(world_to_camera().data());
   Eigen::Matrix4d proj = Eigen::Matrix4d::Zero();
   const double aspect = double(width) / double(height), n = near_clip, fa = far_clip;
   if (perspective) {
@@ -160,8 +163,8 @@ std::array<double, 16> Camera::world_to_ndc() const {
   return out;
 }
 
-Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg, double elevation_deg,
-                    bool perspective, int width, int height) {
+Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg,
+                    double elevation_deg, bool perspective, int width, int height) {
   MLFE_CHECK(radius > 0 && width > 0 && height > 0);
   Camera c;
   c.perspective = perspective;
@@ -193,7 +196,8 @@ std::array<double, 3> world_to_local_point(const GridTransform& t, const std::ar
 }
 
 std::array<double, 3> world_to_local_direction(const GridTransform& t, const std::array<double, 3>& d) {
-  const Eigen::Matrix3d m = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(t.direction.data());
+  const Eigen::Matrix3d m =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(t.direction.data());
   const Eigen::Vector3d x = m.partialPivLu().solve(Eigen::Vector3d(d[0], d[1], d[2]));
   return {x[0], x[1], x[2]};
 }
@@ -319,7 +323,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
   res.hit = true;
   const Hierarchy<3>& h = m.hierarchy();
-  const double eps = 1e-9 * (res.t_far - res.t_near + std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
+  const double eps = 1e-9 * (res.t_far - res.t_near +
+                             std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
   const std::uint64_t bound = m.size() + 64;
   auto transparent = [&](ElemId e) { return skip->transparent(m.range_lo(e), m.range_hi(e)); };
 
@@ -392,8 +397,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
 
 }  // namespace
 
-TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin, const std::array<double, 3>& dir,
-                      const CompiledTransferFunction* skip,
+TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
+                      const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
   return trace(m, origin, dir, skip, visit, entry_hint);
 }
@@ -429,19 +434,19 @@ RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf,
   constexpr int kTile = 16;
   const int tx = (cam.width + kTile - 1) / kTile, ty = (cam.height + kTile - 1) / kTile;
   tbb::parallel_for(0, tx * ty, [&](int tile) {
-                      RayAccumulator acc(ctf, opt.rule, opt.stop_opacity, opt.z_opacity);
-                      ElemId hint = ElemId::invalid();
-                      const int x0 = (tile % tx) * kTile, y0 = (tile / tx) * kTile;
-                      for (int y = y0; y < std::min(y0 + kTile, cam.height); ++y)
-                        for (int x = x0; x < std::min(x0 + kTile, cam.width); ++x) {
-                          acc.reset();
-                          pixel(x, y, acc, hint);
-                          const std::size_t i = std::size_t(y) * cam.width + x;
-                          for (int c = 0; c < 3; ++c) img.rgba[4 * i + c] = float(acc.rgb()[c]);
-                          img.rgba[4 * i + 3] = float(1.0 - acc.transmittance());
-                          img.z[i] = float(acc.depth());
-                        }
-                    });
+    RayAccumulator acc(ctf, opt.rule, opt.stop_opacity, opt.z_opacity);
+    ElemId hint = ElemId::invalid();
+    const int x0 = (tile % tx) * kTile, y0 = (tile / tx) * kTile;
+    for (int y = y0; y < std::min(y0 + kTile, cam.height); ++y)
+      for (int x = x0; x < std::min(x0 + kTile, cam.width); ++x) {
+        acc.reset();
+        pixel(x, y, acc, hint);
+        const std::size_t i = std::size_t(y) * cam.width + x;
+        for (int c = 0; c < 3; ++c) img.rgba[4 * i + c] = float(acc.rgb()[c]);
+        img.rgba[4 * i + 3] = float(1.0 - acc.transmittance());
+        img.z[i] = float(acc.depth());
+      }
+  });
   return img;
 }
 
@@ -462,13 +467,16 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     camera.ray(x, y, ow, dw);
     const Vec3 o = world_to_local_point(transform, ow), d = world_to_local_direction(transform, dw);
     std::uint64_t segs = 0;
-    const TraceResult r = trace(m, o, d, opt.skip_empty ? &ctf : nullptr, [&](const TraceSegment& s) {
-      if (s.tet >= 0) ++segs;
-      if (!s.empty) {
-        acc.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
-      }
-      return !acc.done();
-    }, &hint);
+    const TraceResult r = trace(
+        m, o, d, opt.skip_empty ? &ctf : nullptr,
+        [&](const TraceSegment& s) {
+          if (s.tet >= 0) ++segs;
+          if (!s.empty) {
+            acc.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
+          }
+          return !acc.done();
+        },
+        &hint);
     if (!r.hit) return;
     n.rays.fetch_add(1, std::memory_order_relaxed);
     n.segments.fetch_add(segs, std::memory_order_relaxed);

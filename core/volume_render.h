@@ -13,9 +13,10 @@
 //      face plane the ray crosses first among those it leaves through (outward normal · d > 0),
 //      never the face it came in by, so a ray through a vertex or along an edge walks the ring
 //      of tetrahedra around it toward the direction of the ray instead of bouncing back;
-//   4. empty space: when the current tetrahedron's value range maps to zero opacity, climb to
-//      its largest ancestor with the same property (per-element ranges of u, as for iso-
-//      surfaces), cross that ancestor in one step and locate again behind it;
+//   4. empty space: a tetrahedron whose value range maps to zero opacity is walked without
+//      evaluating u; when its largest ancestor with the same property (per-element ranges of
+//      u, as for iso-surfaces) lies 3 or more levels above, that ancestor is crossed in one
+//      step and the ray located again behind it (a location costs several leaf steps);
 //   5. a ray that leaves the mesh before the box exit (rounding) is located again, not lost;
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
 // Exit test: the parametric form of the face-crossing test (as in Bunyk et al.) with the
@@ -39,8 +40,8 @@ struct Camera {
   std::array<double, 3> position{0, -1, 0};
   std::array<double, 3> target{0, 0, 0};
   std::array<double, 3> up{0, 0, 1};
-  double fov_degrees = 30;   ///< perspective: vertical field of view
-  double ortho_height = 1;   ///< orthographic: height of the view (world units)
+  double fov_degrees = 30;                  ///< perspective: vertical field of view
+  double ortho_height = 1;                  ///< orthographic: height of the view (world units)
   double near_clip = 0.01, far_clip = 100;  ///< for world_to_ndc only
   int width = 500, height = 500;
 
@@ -55,8 +56,8 @@ struct Camera {
 /// A camera on a sphere around `center` looking at it, framing a ball of `radius`:
 /// azimuth 0, elevation 0 looks along +y with +z up; azimuth turns about +z, elevation lifts
 /// toward +z (degrees). Clip planes enclose the ball.
-Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg, double elevation_deg,
-                    bool perspective, int width, int height);
+Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg,
+                    double elevation_deg, bool perspective, int width, int height);
 
 struct RenderOptions {
   RayAccumulator::Rule rule = RayAccumulator::Rule::kPreIntegrated;
@@ -75,10 +76,10 @@ struct RenderImage {
 };
 
 struct RenderStats {
-  std::uint64_t rays = 0;          ///< rays that hit the domain box
-  std::uint64_t segments = 0;      ///< tetrahedra (or reference samples) integrated
-  std::uint64_t skips = 0;         ///< transparent coarse elements crossed in one step
-  std::uint64_t relocations = 0;   ///< rays located again after leaving the mesh early
+  std::uint64_t rays = 0;             ///< rays that hit the domain box
+  std::uint64_t segments = 0;         ///< tetrahedra (or reference samples) integrated
+  std::uint64_t skips = 0;            ///< transparent coarse elements crossed in one step
+  std::uint64_t relocations = 0;      ///< rays located again after leaving the mesh early
   std::uint64_t step_bound_hits = 0;  ///< rays ended by the step bound (should be 0)
 };
 
@@ -141,7 +142,7 @@ struct TraceSegment {
 };
 
 struct TraceResult {
-  bool hit = false;        ///< the ray met the domain box
+  bool hit = false;              ///< the ray met the domain box
   double t_near = 0, t_far = 0;  ///< its chord in the box
   std::uint64_t steps = 0, skips = 0, relocations = 0;
   bool step_bound_hit = false;
@@ -152,8 +153,8 @@ struct TraceResult {
 /// elements whose range it reports transparent (skip->transparent) are crossed in one step.
 /// `entry_hint` (may be null): in, an element to start the entry search from; out, the entry
 /// element of this ray (for the next pixel).
-TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin, const std::array<double, 3>& dir,
-                      const CompiledTransferFunction* skip,
+TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
+                      const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint = nullptr);
 
 /// Renders u on m (in the hierarchy's local frame; `transform` maps it to the world frame the

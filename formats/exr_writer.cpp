@@ -6,11 +6,11 @@
 #include <ImfOutputFile.h>
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
+#include <half.h>
 #include <png.h>
 
 #include <algorithm>
 #include <cmath>
-#include <half.h>
 
 #include "core/check.h"
 #include "core/error.h"
@@ -38,7 +38,8 @@ std::uint8_t srgb8(double linear) {
 
 void write_exr(const std::string& path, const RenderImage& img, const ExrAttributes& attributes) {
   const int w = img.width, h = img.height;
-  MLFE_CHECK(w > 0 && h > 0 && img.rgba.size() == std::size_t(w) * h * 4 && img.z.size() == std::size_t(w) * h);
+  MLFE_CHECK(w > 0 && h > 0 && img.rgba.size() == std::size_t(w) * h * 4 &&
+             img.z.size() == std::size_t(w) * h);
   std::vector<half> channels[4];
   for (auto& c : channels) c.resize(std::size_t(w) * h);
   for (std::size_t i = 0; i < std::size_t(w) * h; ++i)
@@ -57,8 +58,8 @@ void write_exr(const std::string& path, const RenderImage& img, const ExrAttribu
   for (int c = 0; c < 4; ++c)
     fb.insert(names[c], Imf::Slice(Imf::HALF, reinterpret_cast<char*>(channels[c].data()), sizeof(half),
                                    sizeof(half) * std::size_t(w)));
-  fb.insert("Z", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(img.z.data())), sizeof(float),
-                            sizeof(float) * std::size_t(w)));
+  fb.insert("Z", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(img.z.data())),
+                            sizeof(float), sizeof(float) * std::size_t(w)));
   write_path_atomically(path, [&](const std::string& tmp) {
     try {
       Imf::OutputFile file(tmp.c_str(), header, 1);  // one thread: identical bytes whatever the machine
@@ -71,7 +72,8 @@ void write_exr(const std::string& path, const RenderImage& img, const ExrAttribu
   });
 }
 
-void write_png_preview(const std::string& path, const RenderImage& img, const std::array<double, 3>& background) {
+void write_png_preview(const std::string& path, const RenderImage& img,
+                       const std::array<double, 3>& background) {
   const int w = img.width, h = img.height;
   MLFE_CHECK(w > 0 && h > 0 && img.rgba.size() == std::size_t(w) * h * 4);
   std::vector<std::uint8_t> rgb(std::size_t(w) * h * 3);
@@ -90,7 +92,9 @@ void write_png_preview(const std::string& path, const RenderImage& img, const st
   std::vector<std::uint8_t> bytes(size);
   if (!png_image_write_to_memory(&image, bytes.data(), &size, 0, rgb.data(), 0, nullptr))
     throw Error(path + ": cannot encode PNG: " + image.message);
-  write_file_atomically(path, [&](std::ostream& out) { out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(size)); });
+  write_file_atomically(path, [&](std::ostream& out) {
+    out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(size));
+  });
 }
 
 }  // namespace mlfe

@@ -26,6 +26,7 @@ struct ExrAttributes {
 void write_exr(const std::string& path, const RenderImage& img, const ExrAttributes& attributes);
 
 /// Writes an 8-bit sRGB PNG of `img` composited over `background` (linear RGB) atomically.
-void write_png_preview(const std::string& path, const RenderImage& img, const std::array<double, 3>& background);
+void write_png_preview(const std::string& path, const RenderImage& img,
+                       const std::array<double, 3>& background);
 
 }  // namespace mlfe

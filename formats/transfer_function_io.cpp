@@ -37,7 +37,8 @@ TransferFunction read_paraview_transfer_function(const std::string& path, double
   tf.unit_length = unit_length;
   tf.name = j.contains("Name") && j["Name"].is_string() ? j["Name"].get<std::string>() : path;
   const auto rgb = numbers("RGBPoints", 4);
-  for (std::size_t i = 0; i < rgb.size(); i += 4) tf.color.push_back({rgb[i], rgb[i + 1], rgb[i + 2], rgb[i + 3]});
+  for (std::size_t i = 0; i < rgb.size(); i += 4)
+    tf.color.push_back({rgb[i], rgb[i + 1], rgb[i + 2], rgb[i + 3]});
   const auto pts = numbers("Points", 4);
   for (std::size_t i = 0; i < pts.size(); i += 4) {
     if (pts[i + 2] != 0.5 || pts[i + 3] != 0.0)

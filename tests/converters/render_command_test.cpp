@@ -48,7 +48,8 @@ std::string bytes(const std::string& path) {
 
 TEST(Render, HierarchyToExrAndPngSameBytesWithOneAndTwoThreads) {
   const std::string a = scratch() + "/a.exr", b = scratch() + "/b.exr", png = scratch() + "/a.png";
-  const std::string opts = " --tf bone --size 96x64 --camera perspective --azimuth 30 --elevation 20 --shading";
+  const std::string opts =
+      " --tf bone --size 96x64 --camera perspective --azimuth 30 --elevation 20 --shading";
   ASSERT_EQ(run("--threads 1 render " + kSmall + " -o " + a + " --png " + png + opts).status, 0);
   ASSERT_EQ(run("--threads 2 render " + kSmall + " -o " + b + opts).status, 0);
   EXPECT_GT(fs::file_size(a), 1000u);
@@ -66,11 +67,14 @@ TEST(Render, VolumeReferenceTurntableAndConvert) {
   EXPECT_TRUE(fs::exists(ref));
   const std::string turn = scratch() + "/turn.exr";
   ASSERT_EQ(run("render " + kSmall + " -o " + turn + " --frames 3 --size 32x32").status, 0);
-  for (const char* n : {"turn_0000.exr", "turn_0001.exr", "turn_0002.exr"}) EXPECT_TRUE(fs::exists(scratch() + "/" + n)) << n;
+  for (const char* n : {"turn_0000.exr", "turn_0001.exr", "turn_0002.exr"})
+    EXPECT_TRUE(fs::exists(scratch() + "/" + n)) << n;
   EXPECT_NE(bytes(scratch() + "/turn_0000.exr"), bytes(scratch() + "/turn_0001.exr"));
   const std::string glb = scratch() + "/s.glb", img = scratch() + "/s.exr";
-  ASSERT_EQ(run("convert " + kSkull + " --iso 3 --max-vertices 3000 -o " + glb + " --render " + img + " --quiet").status,
-            0);
+  ASSERT_EQ(
+      run("convert " + kSkull + " --iso 3 --max-vertices 3000 -o " + glb + " --render " + img + " --quiet")
+          .status,
+      0);
   EXPECT_TRUE(fs::exists(img));
 }
 

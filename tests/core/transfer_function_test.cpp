@@ -3,11 +3,11 @@
 // transmittance, narrow spikes, early termination.
 #include "core/transfer_function.h"
 
-#include "core/error.h"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
+
+#include "core/error.h"
 
 namespace mlfe {
 namespace {
@@ -17,7 +17,8 @@ struct Numeric {
   double rgb[3] = {0, 0, 0};
   double alpha = 0;
 };
-Numeric integrate_numerically(const CompiledTransferFunction& tf, double sf, double sb, double length, int n) {
+Numeric integrate_numerically(const CompiledTransferFunction& tf, double sf, double sb, double length,
+                              int n) {
   Numeric r;
   double T = 1;
   const double h = length / n;
@@ -35,8 +36,8 @@ Numeric integrate_numerically(const CompiledTransferFunction& tf, double sf, dou
 
 TEST(MeanTransmittance, MatchesQuadratureOnAllBranches) {
   // Small slope (Taylor), increasing (erfcx), decreasing (Dawson), large depths.
-  const double cases[][2] = {{0, 0},    {0.3, 0.3}, {0.5, 0.55}, {0.2, 3.0}, {3.0, 0.2}, {0, 40},
-                             {40, 0},   {12, 13},   {7, 0.01},   {0.01, 7},  {100, 120}, {1e-4, 0}};
+  const double cases[][2] = {{0, 0},  {0.3, 0.3}, {0.5, 0.55}, {0.2, 3.0}, {3.0, 0.2}, {0, 40},
+                             {40, 0}, {12, 13},   {7, 0.01},   {0.01, 7},  {100, 120}, {1e-4, 0}};
   for (const auto& c : cases) {
     const double a = c[0], b = c[1];
     const int n = 200000;
@@ -73,7 +74,8 @@ TEST(RayAccumulator, PreIntegrationMatchesFineNumericalIntegration) {
   tf.opacity = {{10, 0}, {30, 0.4}, {50, 0.05}, {80, 0.9}, {90, 0.2}};
   tf.unit_length = 1.5;
   const CompiledTransferFunction ctf(tf);
-  const double segments[][3] = {{0, 100, 4}, {100, 0, 4}, {20, 35, 0.7}, {85, 45, 10}, {55, 55, 2}, {5, 95, 0.1}};
+  const double segments[][3] = {{0, 100, 4},  {100, 0, 4}, {20, 35, 0.7},
+                                {85, 45, 10}, {55, 55, 2}, {5, 95, 0.1}};
   for (const auto& s : segments) {
     RayAccumulator acc(ctf, RayAccumulator::Rule::kPreIntegrated, 1.0, 0.5);
     acc.add(s[0], s[1], 0, s[2]);

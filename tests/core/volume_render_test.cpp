@@ -47,7 +47,8 @@ TEST(TraceRay, NoLostRaysThroughVerticesEdgesAndFaces) {
   // Axis-aligned both ways, and the cube's main diagonal (an edge of every Kuhn tetrahedron
   // around it). Pixel centres on the (1/8) lattice: through vertices, along edges, inside
   // faces, and in the box's own faces (grazing).
-  const Vec3 dirs[] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}, {s3, s3, s3}, {-s3, -s3, -s3}};
+  const Vec3 dirs[] = {{1, 0, 0},  {0, 1, 0},  {0, 0, 1},    {-1, 0, 0},
+                       {0, -1, 0}, {0, 0, -1}, {s3, s3, s3}, {-s3, -s3, -s3}};
   std::size_t rays = 0, segments = 0;
   for (const Vec3& d : dirs) {
     int ax = 0;
@@ -84,7 +85,8 @@ TEST(TraceRay, NoLostRaysThroughVerticesEdgesAndFaces) {
         EXPECT_EQ(r.relocations, 0u);
         EXPECT_FALSE(repeated) << "a tetrahedron visited twice, o=" << o[0] << "," << o[1] << "," << o[2];
         EXPECT_FALSE(gap);
-        EXPECT_NEAR(sum, c, 1e-6 * c) << "o=" << o[0] << "," << o[1] << "," << o[2] << " d=" << d[0] << "," << d[1];
+        EXPECT_NEAR(sum, c, 1e-6 * c)
+            << "o=" << o[0] << "," << o[1] << "," << o[2] << " d=" << d[0] << "," << d[1];
         EXPECT_NEAR(last, r.t_far, 1e-9);
       }
   }

@@ -116,7 +116,8 @@ TEST(PngPreview, CompositesOverTheBackgroundInSrgb) {
 
 TEST(ParaViewTransferFunction, ReadsRgbAndOpacityPoints) {
   const std::string path = temp("tf.json");
-  std::ofstream(path) << R"([{"ColorSpace":"Diverging","Name":"Cool to Warm","RGBPoints":[0,0.23,0.3,0.75,100,0.7,0.01,0.15],
+  std::ofstream(path)
+      << R"([{"ColorSpace":"Diverging","Name":"Cool to Warm","RGBPoints":[0,0.23,0.3,0.75,100,0.7,0.01,0.15],
     "Points":[0,0,0.5,0,50,0.2,0.5,0,100,1,0.5,0]}])";
   const TransferFunction tf = read_paraview_transfer_function(path, 2.0);
   EXPECT_EQ(tf.name, "Cool to Warm");
