@@ -137,7 +137,13 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   opt.skip_empty = !p.no_skip;
 
   std::unique_ptr<TetRenderMesh> mesh;
-  if (!p.reference) mesh = std::make_unique<TetRenderMesh>(hier, b.a3->values, p.level);
+  if (!p.reference) {
+    mesh = std::make_unique<TetRenderMesh>(hier, b.a3->values, p.level);
+    if (!quiet)
+      std::fprintf(stderr, "mlfe render: %zu tetrahedra on level %d, renderer adds %.1f MB (%.0f bytes/tetrahedron)\n",
+                   mesh->size(), mesh->level(), mesh->memory_bytes() / 1e6,
+                   double(mesh->memory_bytes()) / double(mesh->size()));
+  }
 
   std::vector<std::string> written;
   for (int frame = 0; frame < p.frames; ++frame) {

@@ -87,6 +87,38 @@ struct TetPlanes {
   }
 };
 
+// TetPlanes::exit on a precomputed record (same rule, float normals).
+int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in, int entry,
+                double& t_out) {
+  int best = -1;
+  double best_t = std::numeric_limits<double>::infinity();
+  double den[4];
+  for (int i = 0; i < 4; ++i) {
+    den[i] = double(R.n[i][0]) * d[0] + double(R.n[i][1]) * d[1] + double(R.n[i][2]) * d[2];
+    if (i == entry || den[i] <= 0) continue;
+    const double t = (R.h[i] - (double(R.n[i][0]) * o[0] + double(R.n[i][1]) * o[1] + double(R.n[i][2]) * o[2])) / den[i];
+    if (t < best_t) {
+      best_t = t;
+      best = i;
+    }
+  }
+  if (best < 0) {
+    double best_den = -std::numeric_limits<double>::infinity();
+    for (int i = 0; i < 4; ++i) {
+      if (i == entry) continue;
+      const double len = std::sqrt(double(R.n[i][0]) * R.n[i][0] + double(R.n[i][1]) * R.n[i][1] +
+                                   double(R.n[i][2]) * R.n[i][2]);
+      if (den[i] / len > best_den) {
+        best_den = den[i] / len;
+        best = i;
+      }
+    }
+    best_t = t_in;
+  }
+  t_out = std::max(t_in, best_t);
+  return best;
+}
+
 void load(const Hierarchy<3>& h, ElemId e, Vec3 (&p)[4]) {
   const auto& c = h.cell(e);
   for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
@@ -219,6 +251,30 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
   MLFE_CHECK(elems_.size() < 0x7FFFFFFFu);
   nb_ = h.face_neighbors(elems_);
+  records_.resize(elems_.size());
+  tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
+    const auto& c = h.cell(elems_[r]);
+    Vec3 p[4];
+    for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
+    StepRecord& R = records_[r];
+    Vec3 g{0, 0, 0};
+    for (int i = 0; i < 4; ++i) {
+      // The face's vertices in id order, so both elements sharing it compute the same normal.
+      int f[3] = {kFaceVerts[i][0], kFaceVerts[i][1], kFaceVerts[i][2]};
+      std::sort(f, f + 3, [&](int x, int y) { return c[x] < c[y]; });
+      Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
+      if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
+      const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
+      for (int a = 0; a < 3; ++a) R.n[i][a] = float(nf[a]);
+      R.h[i] = dot(nf, p[f[0]]);
+      // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
+      const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
+      for (int a = 0; a < 3; ++a) g[a] += w * n[a];
+    }
+    for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
+    const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
+    R.b = (*u_)[c[0].value] - dot(gf, p[0]);
+  });
   render_of_.assign(h.element_count(), kNone);
   for (std::size_t r = 0; r < elems_.size(); ++r) render_of_[elems_[r].value] = std::uint32_t(r);
   // 3. ranges: rendered elements from their vertices, coarser ones as the union of their
@@ -257,7 +313,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
 
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
-         nb_.capacity() * sizeof(nb_[0]) + render_of_.capacity() * sizeof(std::uint32_t) +
+         nb_.capacity() * sizeof(nb_[0]) + records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
          (lo_.capacity() + hi_.capacity()) * sizeof(float);
 }
 
@@ -295,6 +351,26 @@ std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::a
   return render_of_[e.value];
 }
 
+std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<double, 3>& p,
+                                     const std::array<double, 3>& d) const {
+  const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
+  Vec3 pts[4];
+  std::uint32_t r = start;
+  for (int step = 0; step < 32; ++step) {
+    load(h_, elems_[r], pts);
+    const Vec3 a = sub(pts[1], pts[0]), b = sub(pts[2], pts[0]), c = sub(pts[3], pts[0]), x = sub(q, pts[0]);
+    const double det = dot(a, cross(b, c));
+    const double l1 = dot(x, cross(b, c)) / det, l2 = dot(a, cross(x, c)) / det, l3 = dot(a, cross(b, x)) / det;
+    const double l[4] = {1.0 - l1 - l2 - l3, l1, l2, l3};
+    const int f = int(std::min_element(l, l + 4) - l);
+    if (l[f] >= 0) return r;
+    const std::int32_t next = nb_[r][f];
+    if (next < 0) break;
+    r = std::uint32_t(next);
+  }
+  return locate(p, d, elems_[start]);
+}
+
 // ---------------------------------------------------------------- traversal
 
 namespace {
@@ -329,7 +405,10 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   auto transparent = [&](ElemId e) { return skip->transparent(m.range_lo(e), m.range_hi(e)); };
 
   double t = res.t_near;
-  std::uint32_t r = m.locate(axpy(o, t, d), d, entry_hint ? *entry_hint : ElemId::invalid());
+  // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
+  // else descend the hierarchy.
+  const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
+  std::uint32_t r = start >= 0 ? m.walk_to(std::uint32_t(start), axpy(o, t, d), d) : m.locate(axpy(o, t, d), d);
   if (entry_hint) *entry_hint = m.element(r);
   int entry = -1;
   Vec3 p[4];
@@ -360,22 +439,15 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
         continue;
       }
     }
-    load(h, e, p);
-    const TetPlanes planes(p);
+    const TetRenderMesh::StepRecord& R = m.record(r);
     double t_out;
-    const int f = planes.exit(o, d, t, entry, t_out);
+    const int f = record_exit(R, o, d, t, entry, t_out);
     t_out = std::min(t_out, res.t_far);
     TraceSegment seg{std::int32_t(r), t, t_out, 0, 0, {0, 0, 0}, empty};
     if (!empty) {
-      // u is linear: u(x) = Σ u_i λ_i(x), ∇λ_i = n_i / (n_i · (p_i − p_face)).
-      const auto& c = h.cell(e);
-      for (int i = 0; i < 4; ++i) {
-        const double w = m.value(c[i]) / (dot(planes.n[i], p[i]) - planes.h[i]);
-        for (int a = 0; a < 3; ++a) seg.gradient[a] += w * planes.n[i][a];
-      }
-      const double u0 = m.value(c[0]);
-      seg.s0 = u0 + dot(seg.gradient, sub(axpy(o, t, d), p[0]));
-      seg.s1 = u0 + dot(seg.gradient, sub(axpy(o, t_out, d), p[0]));
+      seg.gradient = {double(R.g[0]), double(R.g[1]), double(R.g[2])};
+      seg.s0 = R.b + dot(seg.gradient, axpy(o, t, d));
+      seg.s1 = R.b + dot(seg.gradient, axpy(o, t_out, d));
     }
     if (!visit(seg)) break;
     t = t_out;

@@ -113,6 +113,22 @@ class TetRenderMesh {
   /// element just skipped): the same answer for points inside an element, fewer tests.
   std::uint32_t locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
                        ElemId hint = ElemId::invalid()) const;
+  /// Like locate(), by a visibility walk through face neighbours from element `start` of T_k
+  /// (each step crosses the face whose barycentric coordinate of the point is most negative):
+  /// cheap when the point is near `start` (the next pixel's entry). Falls back to locate() after
+  /// 32 steps or at the mesh boundary.
+  std::uint32_t walk_to(std::uint32_t start, const std::array<double, 3>& p, const std::array<double, 3>& d) const;
+  /// What a ray step needs of element r, precomputed once: the outward face planes
+  /// n_f · x = h_f (face f opposite local vertex f; normals rounded to float, offsets in double
+  /// through the face's lowest-id vertex, so the two elements sharing a face hold the same
+  /// plane with opposite signs) and u(x) = b + g · x.
+  struct StepRecord {
+    float n[4][3];
+    double h[4];
+    float g[3];
+    double b;
+  };
+  const StepRecord& record(std::uint32_t r) const { return records_[r]; }
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
 
@@ -123,6 +139,7 @@ class TetRenderMesh {
   const std::vector<double>* u_;
   std::vector<ElemId> elems_;
   std::vector<std::array<std::int32_t, 4>> nb_;
+  std::vector<StepRecord> records_;
   std::vector<std::uint32_t> render_of_;
   std::vector<float> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
