@@ -11,9 +11,11 @@ For every volume and vertex budget (the reduction) it:
   * VTK 9 (python3-vtk9) in separate processes under Xvfb (VTK's mappers need an OpenGL render
     window even when they ray cast on the CPU): vtkFixedPointVolumeRayCastMapper on the voxel
     grid at the VTK default sample distance (1 world unit) and at half a voxel, and
-    vtkUnstructuredGridVolumeRayCastMapper (Bunyk) on the same leaf tetrahedra (exported to
-    .vtu); same camera (orthographic) and transfer function; time of the second render (the
-    first builds VTK's structures), peak RSS of the process and its RSS before rendering.
+    vtkUnstructuredGridVolumeRayCastMapper (Bunyk) and vtkProjectedTetrahedraMapper (cell
+    projection; OpenGL, here Mesa's software llvmpipe under Xvfb, no GPU) on the same leaf
+    tetrahedra (exported to .vtu); same camera (orthographic) and transfer function; time of
+    the second render (the first builds VTK's structures), peak RSS of the process and its RSS
+    before rendering.
 Threads: mlfe and VTK SMP limited to 2 (the machine has 2 cores).
 
 usage: bench/render_bench.py [--build DIR] [--work DIR] [--size WxH] [--repeat N] [VOL:TF:verts1,verts2 ...]
@@ -40,10 +42,10 @@ cfg = json.loads(sys.argv[1])
 s = json.loads(open(cfg["setup"]).read())
 kind = cfg["kind"]
 vtk.vtkMultiThreader.SetGlobalMaximumNumberOfThreads(2)
-if kind == "bunyk":
+if kind in ("bunyk", "pt"):
     r = vtk.vtkXMLUnstructuredGridReader(); r.SetFileName(cfg["vtu"]); r.Update()
     data = r.GetOutput(); data.GetPointData().SetActiveScalars("u")
-    mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper()
+    mapper = vtk.vtkUnstructuredGridVolumeRayCastMapper() if kind == "bunyk" else vtk.vtkProjectedTetrahedraMapper()
     mapper.SetInputData(data)
 else:
     nx, ny, nz = s["dims"]
@@ -154,7 +156,7 @@ def main():
                        "ref_s": t_ref, "ref_rss_mb": rss_ref, "psnr_db": ps["psnr_db"], "max_abs": ps["max_abs"]}
                 if not a.no_vtk:
                     def vtk_run(kind, **kw):
-                        cfg = dict(kind=kind, setup=setup_path, size=[w, h], repeat=1 if kind == "bunyk" else a.repeat,
+                        cfg = dict(kind=kind, setup=setup_path, size=[w, h], repeat=1 if kind in ("bunyk", "pt") else a.repeat,
                                    png=prefix + "_vtk_" + kind + ".png", **kw)
                         e2 = dict(env, OMP_NUM_THREADS="2")
                         p = subprocess.run([sys.executable, "-c", VTK_CHILD, json.dumps(cfg)], capture_output=True,
@@ -169,6 +171,7 @@ def main():
                     row["vtk_fixed_default"] = vtk_grid["default"]
                     row["vtk_fixed_half_voxel"] = vtk_grid["half"]
                     row["vtk_bunyk"] = vtk_run("bunyk", vtu=prefix + ".vtu")
+                    row["vtk_projected_tetrahedra"] = vtk_run("pt", vtu=prefix + ".vtu")
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     finally:

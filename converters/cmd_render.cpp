@@ -140,9 +140,10 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   if (!p.reference) {
     mesh = std::make_unique<TetRenderMesh>(hier, b.a3->values, p.level);
     if (!quiet)
-      std::fprintf(stderr, "mlfe render: %zu tetrahedra on level %d, renderer adds %.1f MB (%.0f bytes/tetrahedron)\n",
-                   mesh->size(), mesh->level(), mesh->memory_bytes() / 1e6,
-                   double(mesh->memory_bytes()) / double(mesh->size()));
+      std::fprintf(
+          stderr, "mlfe render: %zu tetrahedra on level %d, renderer adds %.1f MB (%.0f bytes/tetrahedron)\n",
+          mesh->size(), mesh->level(), mesh->memory_bytes() / 1e6,
+          double(mesh->memory_bytes()) / double(mesh->size()));
   }
 
   std::vector<std::string> written;

@@ -5,6 +5,7 @@
 #include "core/volume_render.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -96,7 +97,8 @@ int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d
   for (int i = 0; i < 4; ++i) {
     den[i] = double(R.n[i][0]) * d[0] + double(R.n[i][1]) * d[1] + double(R.n[i][2]) * d[2];
     if (i == entry || den[i] <= 0) continue;
-    const double t = (R.h[i] - (double(R.n[i][0]) * o[0] + double(R.n[i][1]) * o[1] + double(R.n[i][2]) * o[2])) / den[i];
+    const double t =
+        (R.h[i] - (double(R.n[i][0]) * o[0] + double(R.n[i][1]) * o[1] + double(R.n[i][2]) * o[2])) / den[i];
     if (t < best_t) {
       best_t = t;
       best = i;
@@ -134,6 +136,39 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
   const double l2 = dot(a, cross(x, c)) / det;
   const double l3 = dot(a, cross(b, x)) / det;
   return std::min({1.0 - l1 - l2 - l3, l1, l2, l3});
+}
+
+// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, but with each face
+// packed into one 64-bit key (three 21-bit vertex ids) and sorted in parallel: several times
+// faster on a million tetrahedra. Larger meshes use the hierarchy's own.
+std::vector<std::array<std::int32_t, 4>> face_adjacency(const Hierarchy<3>& h,
+                                                        const std::vector<ElemId>& elems) {
+  if (h.vertex_count() >= (std::size_t(1) << 21) || elems.size() >= (std::size_t(1) << 29))
+    return h.face_neighbors(elems);
+  struct Face {
+    std::uint64_t key;
+    std::uint32_t slot;  // 4 * element index + local face
+    bool operator<(const Face& o) const { return key != o.key ? key < o.key : slot < o.slot; }
+  };
+  std::vector<Face> faces(elems.size() * 4);
+  tbb::parallel_for(std::size_t(0), elems.size(), [&](std::size_t i) {
+    const auto& c = h.cell(elems[i]);
+    for (int f = 0; f < 4; ++f) {
+      std::uint64_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
+      std::sort(v, v + 3);
+      faces[4 * i + f] = {(v[0] << 42) | (v[1] << 21) | v[2], std::uint32_t(4 * i + f)};
+    }
+  });
+  tbb::parallel_sort(faces.begin(), faces.end());
+  std::vector<std::array<std::int32_t, 4>> nb(elems.size(), {-1, -1, -1, -1});
+  for (std::size_t i = 0; i + 1 < faces.size(); ++i) {
+    if (faces[i].key != faces[i + 1].key) continue;
+    const std::uint32_t a = faces[i].slot, b = faces[i + 1].slot;
+    nb[a / 4][a % 4] = std::int32_t(b / 4);
+    nb[b / 4][b % 4] = std::int32_t(a / 4);
+    ++i;
+  }
+  return nb;
 }
 
 }  // namespace
@@ -250,7 +285,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // 2. the rendered elements and their face neighbours.
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
   MLFE_CHECK(elems_.size() < 0x7FFFFFFFu);
-  nb_ = h.face_neighbors(elems_);
+  nb_ = face_adjacency(h, elems_);
   records_.resize(elems_.size());
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
@@ -313,8 +348,8 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
 
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
-         nb_.capacity() * sizeof(nb_[0]) + records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
-         (lo_.capacity() + hi_.capacity()) * sizeof(float);
+         nb_.capacity() * sizeof(nb_[0]) + records_.capacity() * sizeof(StepRecord) +
+         render_of_.capacity() * sizeof(std::uint32_t) + (lo_.capacity() + hi_.capacity()) * sizeof(float);
 }
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
@@ -360,7 +395,8 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
     load(h_, elems_[r], pts);
     const Vec3 a = sub(pts[1], pts[0]), b = sub(pts[2], pts[0]), c = sub(pts[3], pts[0]), x = sub(q, pts[0]);
     const double det = dot(a, cross(b, c));
-    const double l1 = dot(x, cross(b, c)) / det, l2 = dot(a, cross(x, c)) / det, l3 = dot(a, cross(b, x)) / det;
+    const double l1 = dot(x, cross(b, c)) / det, l2 = dot(a, cross(x, c)) / det,
+                 l3 = dot(a, cross(b, x)) / det;
     const double l[4] = {1.0 - l1 - l2 - l3, l1, l2, l3};
     const int f = int(std::min_element(l, l + 4) - l);
     if (l[f] >= 0) return r;
@@ -408,7 +444,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
   // else descend the hierarchy.
   const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
-  std::uint32_t r = start >= 0 ? m.walk_to(std::uint32_t(start), axpy(o, t, d), d) : m.locate(axpy(o, t, d), d);
+  std::uint32_t r =
+      start >= 0 ? m.walk_to(std::uint32_t(start), axpy(o, t, d), d) : m.locate(axpy(o, t, d), d);
   if (entry_hint) *entry_hint = m.element(r);
   int entry = -1;
   Vec3 p[4];

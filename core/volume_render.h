@@ -117,7 +117,8 @@ class TetRenderMesh {
   /// (each step crosses the face whose barycentric coordinate of the point is most negative):
   /// cheap when the point is near `start` (the next pixel's entry). Falls back to locate() after
   /// 32 steps or at the mesh boundary.
-  std::uint32_t walk_to(std::uint32_t start, const std::array<double, 3>& p, const std::array<double, 3>& d) const;
+  std::uint32_t walk_to(std::uint32_t start, const std::array<double, 3>& p,
+                        const std::array<double, 3>& d) const;
   /// What a ray step needs of element r, precomputed once: the outward face planes
   /// n_f · x = h_f (face f opposite local vertex f; normals rounded to float, offsets in double
   /// through the face's lowest-id vertex, so the two elements sharing a face hold the same

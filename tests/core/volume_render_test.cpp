@@ -211,7 +211,10 @@ TEST(RenderMesh, CompactAdjacency) {
   const Blob b;
   const TetRenderMesh m(b.h, b.u);
   EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 150.0);
-  // Every interior face is shared both ways.
+  // The same neighbours as the hierarchy's own face_neighbors, and shared both ways.
+  const auto expected = b.h.face_neighbors(b.h.leaves());
+  ASSERT_EQ(expected.size(), m.size());
+  for (std::uint32_t r = 0; r < m.size(); ++r) EXPECT_EQ(m.neighbors(r), expected[r]) << r;
   for (std::uint32_t r = 0; r < m.size(); ++r)
     for (std::int32_t n : m.neighbors(r))
       if (n >= 0) {
