@@ -158,6 +158,14 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
                                     std::pow(cam.position[1] - cam.target[1], 2) +
                                     std::pow(cam.position[2] - cam.target[2], 2));
       if (!(dist > 0)) throw Error("--position and --target must differ");
+      const std::array<double, 3> f{cam.target[0] - cam.position[0], cam.target[1] - cam.position[1],
+                                    cam.target[2] - cam.position[2]};
+      const std::array<double, 3> side{f[1] * cam.up[2] - f[2] * cam.up[1],
+                                       f[2] * cam.up[0] - f[0] * cam.up[2],
+                                       f[0] * cam.up[1] - f[1] * cam.up[0]};
+      const double up_len = std::sqrt(cam.up[0] * cam.up[0] + cam.up[1] * cam.up[1] + cam.up[2] * cam.up[2]);
+      if (!(std::sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]) > 1e-9 * dist * up_len))
+        throw Error("--up must not be parallel to the viewing direction (or zero)");
       cam.near_clip = std::max(dist - radius, 1e-3 * radius);
       cam.far_clip = dist + 2 * radius;
     }
@@ -221,6 +229,8 @@ void run_render(const RenderState& s) {
   } else {
     grid = read_volume(s.input, s.read);
     if (grid->dim != 3) throw Error(s.input + ": rendering needs a 3D volume");
+    for (int a = 0; a < 3; ++a)
+      if (grid->dims[a] < 2) throw Error(s.input + ": rendering needs at least 2 samples along every axis");
     if (!s.render.reference)
       b = build_from_grid(*grid, s.build, {});
     else {

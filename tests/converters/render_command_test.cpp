@@ -92,6 +92,9 @@ TEST(Render, BadInputExitsTwoWithoutOutput) {
   EXPECT_EQ(r.status, 2);
   r = run("render " + kSmall + " --size 10 -o " + out);
   EXPECT_EQ(r.status, 2);
+  r = run("render " + kSmall + " --position 0,0,100 --target 0,0,0 --up 0,0,1 -o " + out);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("--up"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
   for (const auto& e : fs::directory_iterator(scratch()))
     EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
