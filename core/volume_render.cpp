@@ -25,8 +25,9 @@ using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // Skip a transparent ancestor only when it is at least this many levels above the leaf: a
-// skip ends in a point location (climb + descent, ~0.4 µs), a leaf step costs ~0.1 µs
-// (bench/RESULTS.md, render_bench: 1 level was slower than walking on both volumes).
+// skip ends in a point location (climb + descent, ~0.4 µs on the CT skull), a leaf step costs
+// ~0.1 µs; skipping at every level was slower than walking on the skull and no faster on the
+// MRI, 3 levels the fastest of those tried (bench/RESULTS.md, render_bench).
 constexpr int kSkipLevels = 3;
 
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
