@@ -10,6 +10,7 @@
 
 #include "converters/commands.h"
 #include "converters/pipeline.h"
+#include "converters/render_command.h"
 #include "converters/volume_options.h"
 #include "core/error.h"
 
@@ -22,6 +23,7 @@ struct IsoState {
   BuildParams params;
   AssetParams asset;
   VolumeReadOptions read;
+  std::string render;  ///< convert --render: also a ray-cast image (.exr) with the default view
 };
 
 // The volume given for snapping must be the one the hierarchy was built from: same frame and
@@ -56,6 +58,7 @@ void run(const IsoState& s, bool convert) {
   check_output_path(s.output, kAssetExtensions);
   if (!s.hierarchy.empty()) check_output_path(s.hierarchy, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
+  if (!s.render.empty()) check_output_path(s.render, {".exr"});
   if (!s.asset.iso.empty()) parse_values(s.asset.iso, "--iso");
   std::optional<ScalarGrid> grid;
   Built b;
@@ -106,6 +109,11 @@ void run(const IsoState& s, bool convert) {
   std::printf("%s\n", s.output.c_str());
   if (!s.hierarchy.empty()) std::printf("%s\n", s.hierarchy.c_str());
   if (!s.report.empty()) std::printf("%s\n", s.report.c_str());
+  // convert --render: the image of the hierarchy just built, with mlfe render's defaults.
+  if (!s.render.empty())
+    for (const auto& f :
+         render_outputs(s.render, RenderParams{}, b, grid ? &*grid : nullptr, s.input, s.params.quiet))
+      std::printf("%s\n", f.c_str());
 }
 
 void add_common(CLI::App* cmd, IsoState& s) {
@@ -134,6 +142,8 @@ void add_convert_command(CLI::App& app) {
       "convert", "Volume in, iso-surface asset out: adaptive build + marching tetrahedra + glTF/Draco");
   cmd->add_option("input", state->input, "volume or height field")->required();
   cmd->add_option("--hierarchy", state->hierarchy, "also keep the hierarchy it built (.mlfeh)");
+  cmd->add_option("--render", state->render,
+                  "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
   add_common(cmd, *state);
   cmd->callback([state] { run(*state, true); });
 }

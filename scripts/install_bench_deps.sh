@@ -4,12 +4,13 @@
 #   python3-numpy      arrays for the distance measurements (pulled in by vtk, listed for clarity)
 #   python3-scipy      KD-tree for the surface distances (bench/iso_bench.py)
 #   libopenvdb-tools   vdb_tool / vdb_print / vdb_render (OpenVDB comparison)
+#   xvfb               X server for VTK's volume mappers, which need a render window (bench/render_bench.py)
 #   libzfp-dev         optional: ZFP compressed-array comparison (skipped if unavailable)
 # Idempotent: checks every package with dpkg-query and runs apt-get update/install only when
 # something is missing. Build dependencies of mlfe itself: scripts/install_deps.sh.
 set -euo pipefail
 
-REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools)
+REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools xvfb)
 OPTIONAL=(libzfp-dev)
 
 is_installed() {

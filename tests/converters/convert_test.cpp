@@ -107,7 +107,7 @@ std::array<double, 6> glb_bbox(const Glb& g) {
 
 TEST(Cli, HelpWorksForEveryCommand) {
   EXPECT_EQ(run("--help").status, 0);
-  for (const char* c : {"info", "build", "iso", "convert", "refine"})
+  for (const char* c : {"info", "build", "iso", "convert", "refine", "render"})
     EXPECT_EQ(run(std::string(c) + " --help").status, 0) << c;
 }
 

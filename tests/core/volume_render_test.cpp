@@ -1,0 +1,254 @@
+// Ray casting on the tetrahedral hierarchy: no lost rays through vertices, along edges and in
+// faces; analytic transmittance; exactness on linear fields across levels; empty-space
+// skipping; the same image with 1 and 2 threads; the renderer's memory per tetrahedron.
+#include "core/volume_render.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <cstring>
+#include <set>
+
+#include "tests/core/test_hierarchies.h"
+
+namespace mlfe {
+namespace {
+
+using Vec3 = std::array<double, 3>;
+
+Hierarchy<3> lattice_box() {  // [0,1]^3, vertices on the lattice (1/4) Z^3, plus adaptive corner
+  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  h.refine_uniform();
+  h.refine_uniform();
+  return test::refine_toward_origin(std::move(h), 1);
+}
+
+// Chord of the ray in the box [lo, hi], computed independently of the renderer.
+double chord(const Vec3& lo, const Vec3& hi, const Vec3& o, const Vec3& d) {
+  double t0 = 0, t1 = 1e300;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
+      continue;
+    }
+    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+    t0 = std::max(t0, std::min(ta, tb));
+    t1 = std::min(t1, std::max(ta, tb));
+  }
+  return std::max(0.0, t1 - t0);
+}
+
+TEST(TraceRay, NoLostRaysThroughVerticesEdgesAndFaces) {
+  const Hierarchy<3> h = lattice_box();
+  const std::vector<double> u(h.vertex_count(), 1.0);
+  const TetRenderMesh m(h, u);
+  const double s3 = 1 / std::sqrt(3.0);
+  // Axis-aligned both ways, and the cube's main diagonal (an edge of every Kuhn tetrahedron
+  // around it). Pixel centres on the (1/8) lattice: through vertices, along edges, inside
+  // faces, and in the box's own faces (grazing).
+  const Vec3 dirs[] = {{1, 0, 0},  {0, 1, 0},  {0, 0, 1},    {-1, 0, 0},
+                       {0, -1, 0}, {0, 0, -1}, {s3, s3, s3}, {-s3, -s3, -s3}};
+  std::size_t rays = 0, segments = 0;
+  for (const Vec3& d : dirs) {
+    int ax = 0;
+    while (std::abs(d[ax]) < 0.5 && ax < 2) ++ax;
+    const bool diag = std::abs(d[0]) < 0.9 && std::abs(d[0]) > 0.1;
+    for (int i = 0; i <= 8; ++i)
+      for (int j = 0; j <= 8; ++j) {
+        Vec3 o;
+        if (diag) {
+          const Vec3 p{i / 8.0, j / 8.0, d[2] > 0 ? 0.0 : 1.0};
+          o = {p[0] - 2 * d[0], p[1] - 2 * d[1], p[2] - 2 * d[2]};
+        } else {
+          const int a1 = (ax + 1) % 3, a2 = (ax + 2) % 3;
+          o[ax] = d[ax] > 0 ? -1.0 : 2.0;
+          o[a1] = i / 8.0;
+          o[a2] = j / 8.0;
+        }
+        std::set<std::int32_t> seen;
+        double sum = 0, last = -1;
+        bool repeated = false, gap = false;
+        const TraceResult r = trace_ray(m, o, d, nullptr, [&](const TraceSegment& s) {
+          repeated |= !seen.insert(s.tet).second;
+          if (last >= 0) gap |= s.t0 != last;
+          last = s.t1;
+          sum += s.t1 - s.t0;
+          return true;
+        });
+        const double c = chord(m.box_lo(), m.box_hi(), o, d);
+        if (c == 0) continue;
+        ++rays;
+        segments += seen.size();
+        ASSERT_TRUE(r.hit);
+        EXPECT_FALSE(r.step_bound_hit) << "o=" << o[0] << "," << o[1] << "," << o[2];
+        EXPECT_EQ(r.relocations, 0u);
+        EXPECT_FALSE(repeated) << "a tetrahedron visited twice, o=" << o[0] << "," << o[1] << "," << o[2];
+        EXPECT_FALSE(gap);
+        EXPECT_NEAR(sum, c, 1e-6 * c)
+            << "o=" << o[0] << "," << o[1] << "," << o[2] << " d=" << d[0] << "," << d[1];
+        EXPECT_NEAR(last, r.t_far, 1e-9);
+      }
+  }
+  EXPECT_GT(rays, 500u);
+  EXPECT_GT(segments, rays);
+}
+
+TEST(RenderMesh, ConstantOpacityGivesAnalyticTransmittanceIncludingGrazingRays) {
+  const Hierarchy<3> h = lattice_box();
+  const std::vector<double> u(h.vertex_count(), 2.0);
+  const TetRenderMesh m(h, u);
+  TransferFunction tf;
+  tf.color = {{0, 1, 1, 1}};
+  tf.opacity = {{0, 0.4}};
+  tf.unit_length = 0.5;
+  const GridTransform identity;
+  RenderOptions opt;
+  opt.stop_opacity = 1.0;
+  // Lattice-aligned orthographic view (pixel centres on the box faces: grazing) and an oblique
+  // perspective one.
+  Camera ortho;
+  ortho.width = ortho.height = 9;
+  ortho.ortho_height = 9.0 / 8.0;
+  ortho.position = {0.5, 0.5, 3};
+  ortho.target = {0.5, 0.5, 0.5};
+  ortho.up = {0, 1, 0};
+  Camera persp = orbit_camera({0.5, 0.5, 0.5}, 0.87, 33, 21, true, 40, 30);
+  for (const Camera& cam : {ortho, persp}) {
+    const RenderImage img = render_mesh(m, identity, tf, cam, opt);
+    for (int y = 0; y < cam.height; ++y)
+      for (int x = 0; x < cam.width; ++x) {
+        Vec3 o, d;
+        cam.ray(x, y, o, d);
+        const double expected = 1 - std::pow(1 - 0.4, chord(m.box_lo(), m.box_hi(), o, d) / 0.5);
+        EXPECT_NEAR(img.rgba[4 * (y * cam.width + x) + 3], expected, 1e-5) << x << "," << y;
+      }
+  }
+}
+
+TEST(RenderMesh, LinearFieldGivesTheSameImageOnEveryLevel) {
+  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {2, 1, 1.5});
+  h.refine_uniform();
+  h = test::refine_toward_origin(std::move(h), 2);
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(std::uint32_t(v)));
+    u[v] = 3 * p[0] - 2 * p[1] + p[2] + 1;
+  }
+  TransferFunction tf;  // linear over the whole range [-1, 8.5]: one piece
+  tf.color = {{-1, 0.1, 0.2, 0.3}, {8.5, 0.9, 0.5, 0.1}};
+  tf.opacity = {{-1, 0.05}, {8.5, 0.5}};
+  tf.unit_length = 0.3;
+  const Camera cam = orbit_camera({1, 0.5, 0.75}, 1.35, 40, 25, true, 48, 40);
+  RenderOptions opt;
+  opt.stop_opacity = 1.0;
+  const TetRenderMesh fine(h, u), coarse(h, u, 0);
+  ASSERT_EQ(coarse.size(), 6u);
+  ASSERT_GT(fine.size(), 200u);
+  RenderStats sf, sc;
+  const RenderImage a = render_mesh(fine, GridTransform{}, tf, cam, opt, &sf);
+  const RenderImage b = render_mesh(coarse, GridTransform{}, tf, cam, opt, &sc);
+  EXPECT_GT(sf.segments, 2 * sc.segments);
+  double max_alpha = 0;
+  for (std::size_t i = 0; i < a.rgba.size(); ++i) {
+    EXPECT_NEAR(a.rgba[i], b.rgba[i], 2e-6) << i;
+    if (i % 4 == 3) max_alpha = std::max(max_alpha, double(a.rgba[i]));
+  }
+  EXPECT_GT(max_alpha, 0.5);
+}
+
+// A radial field with a transparent band: skipping must not change the image.
+struct Blob {
+  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  std::vector<double> u;
+  Blob() {
+    for (int k = 0; k < 4; ++k) h.refine_uniform();
+    u.resize(h.vertex_count());
+    for (std::size_t v = 0; v < u.size(); ++v) {
+      const auto& p = h.point(VertexId(std::uint32_t(v)));
+      u[v] = 1 - std::sqrt(std::pow(p[0] - 0.45, 2) + std::pow(p[1] - 0.5, 2) + std::pow(p[2] - 0.55, 2));
+    }
+  }
+};
+
+TEST(RenderMesh, EmptySpaceSkippingKeepsTheImage) {
+  const Blob b;
+  const TetRenderMesh m(b.h, b.u);
+  TransferFunction tf;
+  tf.color = {{0.6, 1, 0.5, 0.2}, {1, 1, 1, 1}};
+  tf.opacity = {{0.6, 0}, {0.7, 0.3}, {1, 0.8}};
+  tf.unit_length = 0.05;
+  const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 20, 30, false, 40, 40);
+  RenderOptions with, without;
+  without.skip_empty = false;
+  RenderStats sw, so;
+  const RenderImage a = render_mesh(m, GridTransform{}, tf, cam, with, &sw);
+  const RenderImage c = render_mesh(m, GridTransform{}, tf, cam, without, &so);
+  EXPECT_GT(sw.skips, 0u);
+  EXPECT_LT(sw.segments, so.segments);
+  EXPECT_EQ(sw.step_bound_hits + so.step_bound_hits, 0u);
+  for (std::size_t i = 0; i < a.rgba.size(); ++i) EXPECT_NEAR(a.rgba[i], c.rgba[i], 1e-6) << i;
+}
+
+TEST(RenderMesh, SameBytesWithOneAndTwoThreads) {
+  const Blob b;
+  const TetRenderMesh m(b.h, b.u);
+  TransferFunction tf = transfer_function_preset("hot", 0.3, 1, 0.05);
+  const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 70, -10, true, 64, 48);
+  RenderOptions opt;
+  opt.shading = true;
+  RenderImage img[2];
+  for (int t = 1; t <= 2; ++t) {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, t);
+    img[t - 1] = render_mesh(m, GridTransform{}, tf, cam, opt);
+  }
+  ASSERT_EQ(img[0].rgba.size(), img[1].rgba.size());
+  EXPECT_EQ(0, std::memcmp(img[0].rgba.data(), img[1].rgba.data(), img[0].rgba.size() * sizeof(float)));
+  EXPECT_EQ(0, std::memcmp(img[0].z.data(), img[1].z.data(), img[0].z.size() * sizeof(float)));
+}
+
+TEST(RenderMesh, CompactAdjacency) {
+  const Blob b;
+  const TetRenderMesh m(b.h, b.u);
+  EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 150.0);
+  // The same neighbours as the hierarchy's own face_neighbors, and shared both ways.
+  const auto expected = b.h.face_neighbors(b.h.leaves());
+  ASSERT_EQ(expected.size(), m.size());
+  for (std::uint32_t r = 0; r < m.size(); ++r) EXPECT_EQ(m.neighbors(r), expected[r]) << r;
+  for (std::uint32_t r = 0; r < m.size(); ++r)
+    for (std::int32_t n : m.neighbors(r))
+      if (n >= 0) {
+        const auto& back = m.neighbors(std::uint32_t(n));
+        EXPECT_NE(std::find(back.begin(), back.end(), std::int32_t(r)), back.end());
+      }
+}
+
+TEST(RenderGrid, MatchesTheMeshOnTrilinearData) {
+  // A linear function sampled on voxels is reproduced exactly by trilinear interpolation and
+  // by the P1 mesh, so the reference and the mesh images agree.
+  ScalarGrid g;
+  g.dims = {9, 9, 9};
+  g.transform.spacing = {0.125, 0.125, 0.125};
+  for (int k = 0; k < 9; ++k)
+    for (int j = 0; j < 9; ++j)
+      for (int i = 0; i < 9; ++i) g.values.push_back(float(i + 0.5 * j - 0.25 * k));
+  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  h.refine_uniform();
+  std::vector<double> u(h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.point(VertexId(std::uint32_t(v)));
+    u[v] = 8 * p[0] + 4 * p[1] - 2 * p[2];
+  }
+  TransferFunction tf;
+  tf.color = {{-2, 0, 0.3, 1}, {4, 1, 0.7, 0}};
+  tf.opacity = {{-2, 0.02}, {2, 0.3}, {4, 0.1}};
+  tf.unit_length = 0.1;
+  const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 15, 35, true, 32, 32);
+  RenderOptions opt;
+  const RenderImage a = render_grid(g, tf, cam, opt);
+  const RenderImage b = render_mesh(TetRenderMesh(h, u), GridTransform{}, tf, cam, opt);
+  for (std::size_t i = 0; i < a.rgba.size(); ++i) EXPECT_NEAR(a.rgba[i], b.rgba[i], 1e-5) << i;
+}
+
+}  // namespace
+}  // namespace mlfe
