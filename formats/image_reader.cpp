@@ -17,9 +17,12 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <sstream>
+#include <vector>
 
 #include "core/error.h"
 
@@ -70,9 +73,45 @@ std::string attribute_text(const Imf::Attribute& a) {
   return "bytes " + hex;
 }
 
+// OpenEXR sizes attribute buffers from the header's own size fields before it reads them, so a
+// corrupt size makes it ask for gigabytes. Every attribute of a single-part header must lie in
+// the file: name\0 type\0 int32 size, value; the list ends with an empty name.
+void check_exr_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto fail = [&](const std::string& what) { throw Error(path + ": not a valid EXR file (" + what + ")"); };
+  if (b.size() < 8) fail("truncated");
+  if (static_cast<unsigned char>(b[4]) != 2) fail("unsupported version");
+  const unsigned flags = static_cast<unsigned char>(b[5]);
+  if (flags & 0x10) return;  // multi-part: headers are checked by OpenEXR's multi-part reader
+  // Names and types are at most 31 bytes (255 with the long-names flag), as OpenEXR reads them.
+  const std::size_t max_name = (flags & 0x04) ? 255 : 31;
+  std::size_t at = 8;
+  const auto read_string = [&]() {
+    const std::size_t start = at;
+    while (at < b.size() && b[at] != 0) ++at;
+    if (at >= b.size()) fail("header runs past the end of the file");
+    if (at - start > max_name) fail("a header name is too long");
+    ++at;
+    return at - start - 1;
+  };
+  for (int n = 0;; ++n) {
+    if (n > 10000) fail("too many header attributes");
+    if (read_string() == 0) return;  // end of the attribute list
+    read_string();                    // type
+    if (at + 4 > b.size()) fail("header runs past the end of the file");
+    std::int32_t size = 0;
+    std::memcpy(&size, &b[at], 4);  // little-endian, as EXR is; this machine's order too
+    at += 4;
+    if (size < 0 || std::size_t(size) > b.size() - at) fail("a header attribute is larger than the file");
+    at += std::size_t(size);
+  }
+}
+
 Image read_exr(const std::string& path) {
   Image img;
   img.format = "exr";
+  check_exr_header(path);
   try {
     Imf::InputFile file(path.c_str());
     const Imf::Header& header = file.header();
