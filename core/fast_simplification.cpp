@@ -13,7 +13,8 @@ namespace mlfe {
 
 TriangleMesh simplify_fast(const TriangleMesh& mesh, double tolerance) {
   if (!(tolerance > 0) || !std::isfinite(tolerance))
-    throw Error("simplification tolerance must be positive and finite (got " + std::to_string(tolerance) + ")");
+    throw Error("simplification tolerance must be positive and finite (got " + std::to_string(tolerance) +
+                ")");
   const std::size_t nv = mesh.positions.size();
   // Pick: triangles without a repeated corner.
   std::vector<unsigned> in;
@@ -30,8 +31,8 @@ TriangleMesh simplify_fast(const TriangleMesh& mesh, double tolerance) {
   const float scale = meshopt_simplifyScale(&mesh.positions[0][0], nv, sizeof(float) * 3);
   const float target = scale > 0 ? float(tolerance / scale) : 0.0f;
   std::vector<unsigned> kept(in.size());
-  kept.resize(meshopt_simplify(kept.data(), in.data(), in.size(), &mesh.positions[0][0], nv, sizeof(float) * 3, 0,
-                               target, meshopt_SimplifyLockBorder, nullptr));
+  kept.resize(meshopt_simplify(kept.data(), in.data(), in.size(), &mesh.positions[0][0], nv,
+                               sizeof(float) * 3, 0, target, meshopt_SimplifyLockBorder, nullptr));
   // Compact: used vertices in input order.
   std::vector<unsigned> remap(nv, ~0u);
   for (unsigned v : kept) remap[v] = 0;

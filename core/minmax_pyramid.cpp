@@ -19,26 +19,27 @@ MinMaxPyramid::MinMaxPyramid(const ScalarGrid& grid) {
   l0.lo.resize(static_cast<std::size_t>(l0.n[0] * l0.n[1] * l0.n[2]));
   l0.hi.resize(l0.lo.size());
   const float* v = grid.values.data();
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, l0.n[2]), [&](const tbb::blocked_range<std::int64_t>& r) {
-    for (std::int64_t bz = r.begin(); bz != r.end(); ++bz)
-      for (std::int64_t by = 0; by < l0.n[1]; ++by)
-        for (std::int64_t bx = 0; bx < l0.n[0]; ++bx) {
-          float lo = v[0], hi = v[0];
-          bool first = true;
-          for (std::int64_t k = 2 * bz; k <= std::min(2 * bz + 2, d[2] - 1); ++k)
-            for (std::int64_t j = 2 * by; j <= std::min(2 * by + 2, d[1] - 1); ++j) {
-              const float* row = v + d[0] * (j + d[1] * k);
-              for (std::int64_t i = 2 * bx; i <= std::min(2 * bx + 2, d[0] - 1); ++i) {
-                if (first) lo = hi = row[i], first = false;
-                lo = std::min(lo, row[i]);
-                hi = std::max(hi, row[i]);
-              }
+  tbb::parallel_for(
+      tbb::blocked_range<std::int64_t>(0, l0.n[2]), [&](const tbb::blocked_range<std::int64_t>& r) {
+        for (std::int64_t bz = r.begin(); bz != r.end(); ++bz)
+          for (std::int64_t by = 0; by < l0.n[1]; ++by)
+            for (std::int64_t bx = 0; bx < l0.n[0]; ++bx) {
+              float lo = v[0], hi = v[0];
+              bool first = true;
+              for (std::int64_t k = 2 * bz; k <= std::min(2 * bz + 2, d[2] - 1); ++k)
+                for (std::int64_t j = 2 * by; j <= std::min(2 * by + 2, d[1] - 1); ++j) {
+                  const float* row = v + d[0] * (j + d[1] * k);
+                  for (std::int64_t i = 2 * bx; i <= std::min(2 * bx + 2, d[0] - 1); ++i) {
+                    if (first) lo = hi = row[i], first = false;
+                    lo = std::min(lo, row[i]);
+                    hi = std::max(hi, row[i]);
+                  }
+                }
+              const std::size_t at = static_cast<std::size_t>(bx + l0.n[0] * (by + l0.n[1] * bz));
+              l0.lo[at] = lo;
+              l0.hi[at] = hi;
             }
-          const std::size_t at = static_cast<std::size_t>(bx + l0.n[0] * (by + l0.n[1] * bz));
-          l0.lo[at] = lo;
-          l0.hi[at] = hi;
-        }
-  });
+      });
   levels_.push_back(std::move(l0));
   while (levels_.back().n[0] > 1 || levels_.back().n[1] > 1 || levels_.back().n[2] > 1) {
     const Level& c = levels_.back();
@@ -67,7 +68,8 @@ MinMaxPyramid::MinMaxPyramid(const ScalarGrid& grid) {
   }
 }
 
-std::array<float, 2> MinMaxPyramid::range(const std::array<double, 3>& i0, const std::array<double, 3>& i1) const {
+std::array<float, 2> MinMaxPyramid::range(const std::array<double, 3>& i0,
+                                          const std::array<double, 3>& i1) const {
   // Cells overlapping the box, then the level whose blocks (2^(k+1) cells) are at least as
   // wide as that cell span, so at most 2 blocks per axis cover it.
   std::array<std::int64_t, 3> c0, c1;
@@ -78,8 +80,8 @@ std::array<float, 2> MinMaxPyramid::range(const std::array<double, 3>& i0, const
     c0[a] = std::min<std::int64_t>(cells_[a] - 1, static_cast<std::int64_t>(std::floor(lo)));
     // A box ending exactly on a sample also touches the cell beyond it only in that sample,
     // which the cell below holds too.
-    c1[a] = std::max<std::int64_t>(c0[a], std::min<std::int64_t>(cells_[a] - 1,
-                                                                 static_cast<std::int64_t>(std::ceil(hi)) - 1));
+    c1[a] = std::max<std::int64_t>(
+        c0[a], std::min<std::int64_t>(cells_[a] - 1, static_cast<std::int64_t>(std::ceil(hi)) - 1));
     span = std::max(span, c1[a] - c0[a] + 1);
   }
   std::size_t k = 0;

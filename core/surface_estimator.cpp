@@ -84,7 +84,8 @@ SurfaceGap surface_gap(const std::array<std::array<double, D>, D + 1>& p,
           lam[0] = 1;
           for (int q = 1; q <= D; ++q) {
             double l = 0;
-            for (int c = 0; c < D; ++c) l += el.grad[q][c] * (double(idx[c]) * g->transform.spacing[c] - p[0][c]);
+            for (int c = 0; c < D; ++c)
+              l += el.grad[q][c] * (double(idx[c]) * g->transform.spacing[c] - p[0][c]);
             lam[q] = l;
             lam[0] -= l;
           }

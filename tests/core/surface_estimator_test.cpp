@@ -22,7 +22,8 @@ ScalarGrid grid3(std::array<std::int64_t, 3> n, const std::function<double(doubl
   g.values.resize(static_cast<std::size_t>(g.voxel_count()));
   for (std::int64_t k = 0; k < n[2]; ++k)
     for (std::int64_t j = 0; j < n[1]; ++j)
-      for (std::int64_t i = 0; i < n[0]; ++i) g.values[i + n[0] * (j + n[1] * k)] = float(f(double(i), double(j), double(k)));
+      for (std::int64_t i = 0; i < n[0]; ++i)
+        g.values[i + n[0] * (j + n[1] * k)] = float(f(double(i), double(j), double(k)));
   return g;
 }
 
@@ -40,7 +41,8 @@ TEST(MinMaxPyramid, RangeContainsEverySampleOfTheBoxAndIsExactForWholeBlocks) {
     std::array<std::int64_t, 2> c[3];
     for (int ax = 0; ax < 3; ++ax) {
       const double cells = double(g.dims[ax] - 1);
-      const double l = std::clamp(std::min(a[ax], b[ax]), 0.0, cells), h = std::clamp(std::max(a[ax], b[ax]), 0.0, cells);
+      const double l = std::clamp(std::min(a[ax], b[ax]), 0.0, cells),
+                   h = std::clamp(std::max(a[ax], b[ax]), 0.0, cells);
       c[ax] = {std::min<std::int64_t>(std::int64_t(std::floor(l)), g.dims[ax] - 2),
                std::max<std::int64_t>(std::min<std::int64_t>(std::int64_t(std::ceil(h)), g.dims[ax] - 1), 0)};
     }
@@ -82,7 +84,8 @@ std::array<double, 4> corners_of(const Field& f, const Tet& t) {
 }
 
 TEST(SurfaceGap, LinearDataIsWithinAndAShiftedPlaneIsDistant) {
-  const ScalarGrid g = grid3({12, 12, 12}, [](double i, double j, double k) { return i + 0.5 * j - 0.25 * k; });
+  const ScalarGrid g =
+      grid3({12, 12, 12}, [](double i, double j, double k) { return i + 0.5 * j - 0.25 * k; });
   const GridField f(g);
   const auto c = corners_of(f, kTet);
   EXPECT_EQ(surface_gap<3>(kTet, c, f, {5.0}, 0.25, 1.0), SurfaceGap::kWithin);
@@ -132,7 +135,8 @@ TEST(SurfaceDriven, RefinesNearTheSurfacesOnlyAndFindsTheSmallPart) {
     bool near_blob = false;
     for (VertexId v : h.cell(e)) {
       const auto& p = h.point(v);
-      const double d = std::sqrt((p[0] - 54) * (p[0] - 54) + (p[1] - 54) * (p[1] - 54) + (p[2] - 54) * (p[2] - 54));
+      const double d =
+          std::sqrt((p[0] - 54) * (p[0] - 54) + (p[1] - 54) * (p[1] - 54) + (p[2] - 54) * (p[2] - 54));
       near_blob |= d < 3;
       lo = std::min(lo, d);
       if (near_blob && a.values[v.value] > 0) blob = true;
@@ -175,9 +179,10 @@ TEST(SurfaceDriven, MemoryBudgetStopsRefinementWithItsReason) {
   const auto full = approximate<3>(f, o);
   // Between the uniform start mesh and the full one.
   const auto& start = full.surface_passes.front();
-  o.max_memory_bytes = (estimated_memory_bytes(3, start.vertices, start.elements) +
-                        estimated_memory_bytes(3, full.hierarchy.vertex_count(), full.hierarchy.leaves().size())) /
-                       2;
+  o.max_memory_bytes =
+      (estimated_memory_bytes(3, start.vertices, start.elements) +
+       estimated_memory_bytes(3, full.hierarchy.vertex_count(), full.hierarchy.leaves().size())) /
+      2;
   const auto cut = approximate<3>(f, o);
   EXPECT_TRUE(cut.memory_limited);
   EXPECT_EQ(cut.stop_reason, "memory budget");
