@@ -95,10 +95,11 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--simplifier", p.simplifier,
-                  "--simplify's algorithm: fast (meshoptimizer: collapses while its error estimate stays within "
-                  "the tolerance; seconds for millions of triangles) or bounded (every extracted vertex verified "
-                  "within the tolerance of the result, topology kept; tens of microseconds per triangle)")
-      ->check(CLI::IsMember({"fast", "bounded"}))
+                  "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
+                  "result, topology kept; ~10 microseconds per triangle), fast (meshoptimizer: collapses while its "
+                  "error estimate stays within the tolerance; seconds for millions of triangles) or auto (bounded "
+                  "for surfaces of up to 200000 extracted triangles, fast above)")
+      ->check(CLI::IsMember({"auto", "fast", "bounded"}))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
                   "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
@@ -437,10 +438,15 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     so.tolerance = p.simplify * voxel;
     so.placement = placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
-    const bool bounded = p.simplifier == "bounded";
+    // auto: the verified simplifier while it takes about a second or two (~10 µs per
+    // triangle), meshoptimizer beyond; decided per surface from its size alone, so the bytes do
+    // not depend on the thread count.
+    constexpr std::size_t kBoundedUpTo = 200000;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
+      const bool bounded =
+          p.simplifier == "bounded" || (p.simplifier == "auto" && m.triangles.size() <= kBoundedUpTo);
       m = bounded ? simplify_within(m, so) : simplify_fast(m, so.tolerance);
     });
   }
@@ -478,7 +484,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
     if (p.simplify > 0) o.extras["simplifier"] = p.simplifier;
-    if (p.simplify > 0 && p.simplifier == "bounded") o.extras["placement"] = placement;
+    if (p.simplify > 0 && p.simplifier != "fast") o.extras["placement"] = placement;
     o.extras["normals"] = normals;
     write_gltf(out, surfaces, o);
   } else {

@@ -107,8 +107,9 @@ struct AssetParams {
   /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
   /// compact: chosen from bench/convert_bench.py (bench/RESULTS.md).
   double simplify = 0.3;
-  /// "fast" (meshoptimizer, error estimated) or "bounded" (simplify_within, error verified).
-  std::string simplifier = "fast";
+  /// "bounded" (simplify_within, error verified), "fast" (meshoptimizer, error estimated) or
+  /// "auto" (bounded for surfaces of up to 200 000 extracted triangles, fast above).
+  std::string simplifier = "auto";
   double snap = 1.0;         ///< move vertices onto the data's surface, at most this many voxels (0: off)
   bool normals_toward_higher = false;
   /// "gradient": the paper's normals (volume-weighted tetrahedron gradients of u, interpolated
