@@ -18,15 +18,6 @@ SurfaceGap surface_gap(const std::array<std::array<double, D>, D + 1>& p,
   MLFE_CHECK(sample_spacing > 0);
   SurfaceGap result = SurfaceGap::kWithin;
   if (iso_values.empty()) return result;
-  // Pick: the iso-values f can cross here at all (the caller has usually checked the box).
-  double longest = 0;
-  for (int i = 0; i <= D; ++i)
-    for (int j = 0; j < i; ++j) {
-      double l2 = 0;
-      for (int c = 0; c < D; ++c) l2 += (p[i][c] - p[j][c]) * (p[i][c] - p[j][c]);
-      longest = std::max(longest, std::sqrt(l2));
-    }
-  const int n = std::max(1, static_cast<int>(std::ceil(longest / sample_spacing)));
   const P1Element<D> el(p);
   double g2 = 0;
   for (int c = 0; c < D; ++c) {
@@ -37,32 +28,24 @@ SurfaceGap surface_gap(const std::array<std::array<double, D>, D + 1>& p,
   const double inv_grad = g2 > 0 ? 1.0 / std::sqrt(g2) : std::numeric_limits<double>::infinity();
   const double cmin = *std::min_element(corner_values.begin(), corner_values.end());
   const double cmax = *std::max_element(corner_values.begin(), corner_values.end());
-
-  // Sample: the lattice points a/n (a ∈ N^(D+1), Σa = n), in batches through Field::values.
-  constexpr std::size_t kBatch = 256;
-  std::array<double, 3> x[kBatch];
-  double lin[kBatch], fv[kBatch];
-  std::size_t m = 0;
-  // Returns true when the answer is final.
-  const auto flush = [&]() {
-    f.values(x, fv, m);
-    for (std::size_t j = 0; j < m; ++j)
-      for (double iso : iso_values) {
-        const bool f_above = fv[j] > iso, l_above = lin[j] > iso;
-        if (f_above == l_above) continue;
-        // Between the surfaces: ℓ without a surface here means f has a piece ℓ misses.
-        if (!(cmin <= iso && iso <= cmax)) {
-          result = SurfaceGap::kMissing;
-          return true;
-        }
-        if (std::abs(lin[j] - iso) * inv_grad > tolerance) {
-          result = SurfaceGap::kDistant;
-          if (stop_at_distant) return true;
-        }
+  // One sample: f's value v and the linear function's l there. A sample on different sides of
+  // an iso-value lies between the surfaces; ℓ without a surface here means f has a piece ℓ
+  // misses. Returns true when the answer is final.
+  const auto classify = [&](double v, double l) {
+    for (double iso : iso_values) {
+      if ((v > iso) == (l > iso)) continue;
+      if (!(cmin <= iso && iso <= cmax)) {
+        result = SurfaceGap::kMissing;
+        return true;
       }
-    m = 0;
+      if (std::abs(l - iso) * inv_grad > tolerance) {
+        result = SurfaceGap::kDistant;
+        if (stop_at_distant) return true;
+      }
+    }
     return false;
   };
+
   if (const ScalarGrid* g = f.samples(); g && g->dim == D) {
     // The grid's own samples inside the simplex (barycentrics ≥ −ε), read directly.
     std::array<std::int64_t, 3> i0{0, 0, 0}, i1{0, 0, 0};
@@ -94,52 +77,49 @@ SurfaceGap surface_gap(const std::array<std::array<double, D>, D + 1>& p,
           if (!inside) continue;
           double l = 0;
           for (int q = 0; q <= D; ++q) l += lam[q] * corner_values[q];
-          const double v = g->at(i, j, k);
-          for (double iso : iso_values) {
-            if ((v > iso) == (l > iso)) continue;
-            if (!(cmin <= iso && iso <= cmax)) return SurfaceGap::kMissing;
-            if (std::abs(l - iso) * inv_grad > tolerance) {
-              result = SurfaceGap::kDistant;
-              if (stop_at_distant) return result;
-            }
-          }
+          if (classify(g->at(i, j, k), l)) return result;
         }
     return result;
   }
-  std::array<int, D + 1> a{};
-  // Enumerate a_1..a_D with Σ ≤ n; a_0 = n − Σ.
-  if constexpr (D == 2) {
-    for (a[1] = 0; a[1] <= n; ++a[1])
-      for (a[2] = 0; a[1] + a[2] <= n; ++a[2]) {
-        a[0] = n - a[1] - a[2];
+
+  // Other fields: the lattice points a/n (a ∈ N^(D+1), Σa = n) with n segments on the longest
+  // edge, in batches through Field::values.
+  double longest = 0;
+  for (int i = 0; i <= D; ++i)
+    for (int j = 0; j < i; ++j) {
+      double l2 = 0;
+      for (int c = 0; c < D; ++c) l2 += (p[i][c] - p[j][c]) * (p[i][c] - p[j][c]);
+      longest = std::max(longest, std::sqrt(l2));
+    }
+  const int n = std::max(1, static_cast<int>(std::ceil(longest / sample_spacing)));
+  constexpr std::size_t kBatch = 256;
+  std::array<double, 3> x[kBatch];
+  double lin[kBatch], fv[kBatch];
+  std::size_t m = 0;
+  const auto flush = [&]() {
+    f.values(x, fv, m);
+    for (std::size_t j = 0; j < m; ++j)
+      if (classify(fv[j], lin[j])) return true;
+    m = 0;
+    return false;
+  };
+  // a_1..a_D with Σ ≤ n (a_3 = 0 in 2D); a_0 = n − Σ.
+  std::array<int, 4> a{};
+  for (a[1] = 0; a[1] <= n; ++a[1])
+    for (a[2] = 0; a[1] + a[2] <= n; ++a[2])
+      for (a[3] = 0; a[3] <= (D == 3 ? n - a[1] - a[2] : 0); ++a[3]) {
+        a[0] = n - a[1] - a[2] - a[3];
         std::array<double, 3> y{0, 0, 0};
         double l = 0;
-        for (int i = 0; i <= 2; ++i) {
+        for (int i = 0; i <= D; ++i) {
           const double w = double(a[i]) / n;
-          for (int c = 0; c < 2; ++c) y[c] += w * p[i][c];
+          for (int c = 0; c < D; ++c) y[c] += w * p[i][c];
           l += w * corner_values[i];
         }
         x[m] = y;
         lin[m++] = l;
         if (m == kBatch && flush()) return result;
       }
-  } else {
-    for (a[1] = 0; a[1] <= n; ++a[1])
-      for (a[2] = 0; a[1] + a[2] <= n; ++a[2])
-        for (a[3] = 0; a[1] + a[2] + a[3] <= n; ++a[3]) {
-          a[0] = n - a[1] - a[2] - a[3];
-          std::array<double, 3> y{0, 0, 0};
-          double l = 0;
-          for (int i = 0; i <= 3; ++i) {
-            const double w = double(a[i]) / n;
-            for (int c = 0; c < 3; ++c) y[c] += w * p[i][c];
-            l += w * corner_values[i];
-          }
-          x[m] = y;
-          lin[m++] = l;
-          if (m == kBatch && flush()) return result;
-        }
-  }
   if (m > 0) flush();
   return result;
 }
