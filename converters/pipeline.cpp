@@ -382,12 +382,11 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
     // some of them away. With the volume at hand the asset takes the interpolant.
+    // A build keeps them; a hierarchy read from a file (iso --volume) samples them again.
     std::vector<double> nodal_data;
     if (grid && grid->dim == 3 && b.surface_driven) {
-      const GridField gf(*grid);
-      const auto& pts = b.a3->hierarchy.points();
-      nodal_data.resize(pts.size());
-      tbb::parallel_for(std::size_t(0), pts.size(), [&](std::size_t v) { nodal_data[v] = gf.value({pts[v][0], pts[v][1], pts[v][2]}); });
+      nodal_data = b.a3->data_values;
+      sample_at_vertices(b.a3->hierarchy, GridField(*grid), nodal_data);
     }
     IsoExtractor x(b.a3->hierarchy, nodal_data.empty() ? b.a3->values : nodal_data);
     const int finest = b.a3->hierarchy.max_level();

@@ -213,30 +213,19 @@ std::vector<ElemId> refine_within(Hierarchy<D>& h, const std::vector<ElemId>& ma
 }
 
 // Before the first solve (surface_driven): passes over the leaves pick those whose data range
-// brackets an iso-value, check the surface gap against f's interpolant, and refine every leaf
-// over the tolerance at once. A leaf that passed keeps passing (its corners do not change),
-// so each pass checks only the leaves the previous one created. Returns a stop reason when a
-// budget ended it, else "".
+// brackets an iso-value, check the surface gap against f's interpolant (out.data_values), and
+// refine every leaf over the tolerance at once. A leaf that passed keeps passing (its corners
+// do not change), so each pass checks only the leaves the previous one created. Returns a stop
+// reason when a budget ended it, else "".
 template <int D>
 std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
                                    Clock::time_point t0, Approximation<D>& out) {
-  std::vector<double> fv;  // f at every vertex: the interpolant's nodal values
+  std::vector<double>& fv = out.data_values;  // the interpolant's nodal values
   double vertices_per_mark = 2.0;
-  // A leaf that passed keeps passing (its corners do not change), and refine() keeps the old
-  // elements first, so each pass checks only the elements from `fresh` on.
+  // refine() keeps the old elements first: a pass checks only the elements from `fresh` on.
   std::size_t fresh = 0;
   for (;;) {
-    // Sample f at the new vertices.
-    const std::size_t old_nv = fv.size();
-    fv.resize(h.vertex_count());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(old_nv, fv.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                          std::array<double, 3> x{0, 0, 0};
-                          for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
-                          fv[v] = f.value(x);
-                        }
-                      });
+    sample_at_vertices(h, f, fv);
     // Pick the new leaves and check them (in parallel, each in its own slot).
     const std::size_t ne = h.element_count();
     std::vector<std::uint8_t> decision(ne - fresh, 0);  // bit 0: candidate, bit 1: mark
@@ -362,11 +351,6 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
   // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules
   // converge by themselves, and the paper's threshold rule runs to its end.
   const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
-  const auto fmt_stall = [](const char* what, double percent, const char* unit) {
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "stalled: %s %.2f%s", what, percent, unit);
-    return std::string(buf);
-  };
 
   for (int it = 0;; ++it) {
     IterationStats st;
@@ -393,15 +377,9 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
-    if (values.empty() && surface_driven) {
-      // f's interpolant is close to u on a mesh built around the surfaces: a warm start.
-      values.resize(h.vertex_count());
-      tbb::parallel_for(std::size_t(0), values.size(), [&](std::size_t v) {
-        std::array<double, 3> x{0, 0, 0};
-        for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
-        values[v] = f.value(x);
-      });
-    } else if (values.empty())
+    if (values.empty() && surface_driven)
+      values = out.data_values;  // f's interpolant is close to u on a mesh built around the surfaces
+    else if (values.empty())
       values.assign(h.vertex_count(), 0.0);
     else
       prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
@@ -480,13 +458,16 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // against them once, and what that refines is solved for and kept.
     if (stop.empty() && surface_driven && it >= 1 && opts.target_rms <= 0 && opts.threshold <= 0)
       stop = "surfaces built from the data, checked against u";
-    // No stalled iterations: a refinement that added next to nothing, or an error that hardly
-    // fell, ends the loop instead of paying a full solve per handful of vertices.
+    // No stalled iterations: a refinement that added next to nothing ends the loop instead of
+    // paying a full solve per handful of vertices.
     if (stop.empty() && stall_checks && it > 0) {
       const auto& prev = out.iterations.back();
       const double growth = double(st.vertices - prev.vertices) / double(prev.vertices);
-      if (growth < opts.min_growth)
-        stop = fmt_stall("the last refinement added", 100.0 * growth, "% of the vertices");
+      if (growth < opts.min_growth) {
+        char buf[96];
+        std::snprintf(buf, sizeof buf, "stalled: the last refinement added %.2f%% of the vertices", 100.0 * growth);
+        stop = buf;
+      }
     }
     st.estimate_seconds = since(te);
 
@@ -566,10 +547,27 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
   }
   out.values = std::move(values);
+  if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added
   return out;
 }
 
+template <int D>
+void sample_at_vertices(const Hierarchy<D>& h, const Field& f, std::vector<double>& values) {
+  const std::size_t from = std::min(values.size(), h.vertex_count());
+  values.resize(h.vertex_count());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(from, values.size(), 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                        std::array<double, 3> x{0, 0, 0};
+                        for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
+                        values[v] = f.value(x);
+                      }
+                    });
+}
+
 template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
+template void sample_at_vertices<2>(const Hierarchy<2>&, const Field&, std::vector<double>&);
+template void sample_at_vertices<3>(const Hierarchy<3>&, const Field&, std::vector<double>&);
 template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
 template std::vector<double> solve_best_approximation<2>(const Hierarchy<2>&, const Field&,
                                                          const ApproximationOptions&,

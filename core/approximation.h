@@ -100,7 +100,15 @@ struct Approximation {
   double value_min = 0, value_max = 0;
   std::string stop_reason;
   bool memory_limited = false;  ///< refinement stopped at max_memory_bytes
+  /// Surface-driven builds: f at every vertex (the nodal values of f's interpolant, which the
+  /// refinement certified near the surfaces); empty otherwise.
+  std::vector<double> data_values;
 };
+
+/// Extends `values` to f at every vertex of h: vertices from values.size() on are sampled (in
+/// the local frame), earlier ones kept. Parallel; the values do not depend on the thread count.
+template <int D>
+void sample_at_vertices(const Hierarchy<D>& h, const Field& f, std::vector<double>& values);
 
 /// Estimated peak bytes of approximate() for a hierarchy of this size (hierarchy, cached
 /// integrals, matrix, preconditioner and solver vectors); an upper-side model, used for the
@@ -121,6 +129,8 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
                                              IterationStats* stats = nullptr);
 
 extern template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
+extern template void sample_at_vertices<2>(const Hierarchy<2>&, const Field&, std::vector<double>&);
+extern template void sample_at_vertices<3>(const Hierarchy<3>&, const Field&, std::vector<double>&);
 extern template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
 
 }  // namespace mlfe
