@@ -19,10 +19,10 @@
 //       pair with VTK flying edges. Only the simplification is timed.
 // Every mode prints one JSON line on stdout with counts and seconds. --threads N (default 2)
 // may precede the mode.
+#include <meshoptimizer.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/VolumeToMesh.h>
-#include <meshoptimizer.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -248,12 +248,13 @@ int main(int argc, char** argv) {
       for (std::size_t t = 0; t < in.triangles.size(); ++t)
         for (int k = 0; k < 3; ++k) idx[3 * t + k] = in.triangles[t][k];
       float err = 0;
-      const std::size_t n = meshopt_simplify(dst.data(), idx.data(), idx.size(), &in.positions[0][0],
-                                             in.positions.size(), sizeof(float) * 3, target * 3, 1.0f, 0, &err);
+      const std::size_t n =
+          meshopt_simplify(dst.data(), idx.data(), idx.size(), &in.positions[0][0], in.positions.size(),
+                           sizeof(float) * 3, target * 3, 1.0f, 0, &err);
       dst.resize(n);
       std::vector<std::array<float, 3>> pos(in.positions.size());
-      const std::size_t nv = meshopt_optimizeVertexFetch(pos.data(), dst.data(), dst.size(), in.positions.data(),
-                                                         in.positions.size(), sizeof(float) * 3);
+      const std::size_t nv = meshopt_optimizeVertexFetch(
+          pos.data(), dst.data(), dst.size(), in.positions.data(), in.positions.size(), sizeof(float) * 3);
       const double t_simplify = since(t0);
       TriangleMesh m;
       m.positions.assign(pos.begin(), pos.begin() + static_cast<std::ptrdiff_t>(nv));

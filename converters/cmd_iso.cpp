@@ -85,9 +85,11 @@ void run(const IsoState& s, bool convert) {
     prov["vertices"] = b.vertices();
     // The effective target: the default RMS applies only without iso-values (surface-driven
     // refinement otherwise) or alongside another global target.
-    const bool surface_driven = s.params.rms.empty() && s.params.threshold <= 0 && s.params.max_vertices == 0 &&
-                                !isos.empty();
-    prov["options"] = {{"rms", !s.params.rms.empty() ? s.params.rms : surface_driven ? "none (surface-driven)" : "0.5%"},
+    const bool surface_driven =
+        s.params.rms.empty() && s.params.threshold <= 0 && s.params.max_vertices == 0 && !isos.empty();
+    prov["options"] = {{"rms", !s.params.rms.empty() ? s.params.rms
+                               : surface_driven      ? "none (surface-driven)"
+                                                     : "0.5%"},
                        {"threshold", s.params.threshold},
                        {"max_vertices", s.params.max_vertices},
                        {"norm", s.params.norm},

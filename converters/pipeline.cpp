@@ -2,8 +2,8 @@
 
 #include <fmt/format.h>
 #include <sys/resource.h>
-#include <unistd.h>
 #include <tbb/parallel_for.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
@@ -67,12 +67,14 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
                   "with iso-values: refine until surfaces are within this many voxels")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->add_flag("--check-u", p.check_against_u,
-                "surface-driven builds: after the first solve, refine where u's surfaces miss the data's and solve "
-                "again (more vertices; u then follows small parts too)");
-  cmd->add_option("--max-memory", p.max_memory,
-                  "memory budget of the build: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; "
-                  "refinement stops there with a message")
+  cmd->add_flag(
+      "--check-u", p.check_against_u,
+      "surface-driven builds: after the first solve, refine where u's surfaces miss the data's and solve "
+      "again (more vertices; u then follows small parts too)");
+  cmd->add_option(
+         "--max-memory", p.max_memory,
+         "memory budget of the build: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; "
+         "refinement stops there with a message")
       ->capture_default_str();
   cmd->add_flag("--quiet", p.quiet, "no progress on stderr");
 }
@@ -94,11 +96,12 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "extraction)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  cmd->add_option("--simplifier", p.simplifier,
-                  "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
-                  "result, topology kept; ~10 microseconds per triangle), fast (meshoptimizer: collapses while its "
-                  "error estimate stays within the tolerance; seconds for millions of triangles) or auto (bounded "
-                  "for surfaces of up to 200000 extracted triangles, fast above)")
+  cmd->add_option(
+         "--simplifier", p.simplifier,
+         "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
+         "result, topology kept; ~10 microseconds per triangle), fast (meshoptimizer: collapses while its "
+         "error estimate stays within the tolerance; seconds for millions of triangles) or auto (bounded "
+         "for surfaces of up to 200000 extracted triangles, fast above)")
       ->check(CLI::IsMember({"auto", "fast", "bounded"}))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
@@ -167,7 +170,8 @@ std::size_t parse_memory_budget(const std::string& text) {
     v.clear();
   }
   if (v.size() != 1 || v[0] < 0 || (percent && v[0] > 100))
-    throw Error("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" + text + "'");
+    throw Error("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
+                text + "'");
   if (!percent) return static_cast<std::size_t>(v[0] * scale);
   const double ram = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
   return static_cast<std::size_t>(ram * v[0] / 100.0);
@@ -217,15 +221,17 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
     const double grid_bytes = double(grid.voxel_count()) * (sizeof(float) + 1.2);
     const double room = 0.9 * double(budget) - grid_bytes;
     if (room < 8.0 * 1024 * 1024)
-      throw Error(fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
-                              grid.source, grid_bytes / 1048576.0, p.max_memory, double(budget) / 1048576.0));
+      throw Error(
+          fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
+                      grid.source, grid_bytes / 1048576.0, p.max_memory, double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);
   }
   if (!p.quiet) {
     std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices", "elements",
                  "rms", "rms%", "psnr", "cg", "seconds");
     o.surface_progress = [](const SurfacePassStats& s) {
-      std::fprintf(stderr, "surface pass: %zu vertices, %zu elements, %zu near a surface, %zu refined, %.2f s\n",
+      std::fprintf(stderr,
+                   "surface pass: %zu vertices, %zu elements, %zu near a surface, %zu refined, %.2f s\n",
                    s.vertices, s.elements, s.candidates, s.marked, s.seconds);
     };
     o.progress = [](const IterationStats& s) {
@@ -242,10 +248,11 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
     b.a3 = approximate<3>(f, o);
   b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if ((grid.dim == 2 ? b.a2->memory_limited : b.a3->memory_limited))
-    std::fprintf(stderr,
-                 "mlfe: warning: %s: refinement stopped at the memory budget (--max-memory %s, %.0f MiB for the "
-                 "build); the approximation is coarser than asked\n",
-                 grid.source.c_str(), p.max_memory.c_str(), double(o.max_memory_bytes) / 1048576.0);
+    std::fprintf(
+        stderr,
+        "mlfe: warning: %s: refinement stopped at the memory budget (--max-memory %s, %.0f MiB for the "
+        "build); the approximation is coarser than asked\n",
+        grid.source.c_str(), p.max_memory.c_str(), double(o.max_memory_bytes) / 1048576.0);
   return b;
 }
 

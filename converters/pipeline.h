@@ -20,7 +20,7 @@ struct BuildParams {
   /// Target RMS error: "0.5%" of the value range, or absolute. Empty: the default, which is
   /// 0.5% without iso-values and none with them (surface-driven refinement; see build_from_grid).
   std::string rms;
-  double threshold = 0;      ///< the paper's per-element threshold (data units), 0: off
+  double threshold = 0;  ///< the paper's per-element threshold (data units), 0: off
   std::size_t max_vertices = 0;
   int max_level = 20;
   int start_level = -1;
@@ -110,7 +110,7 @@ struct AssetParams {
   /// "bounded" (simplify_within, error verified), "fast" (meshoptimizer, error estimated) or
   /// "auto" (bounded for surfaces of up to 200 000 extracted triangles, fast above).
   std::string simplifier = "auto";
-  double snap = 1.0;         ///< move vertices onto the data's surface, at most this many voxels (0: off)
+  double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
   bool normals_toward_higher = false;
   /// "gradient": the paper's normals (volume-weighted tetrahedron gradients of u, interpolated
   /// along the cut edge), kept through --simplify; "surface": area-weighted normals of the

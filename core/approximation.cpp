@@ -229,15 +229,16 @@ std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const Approx
     // Pick the new leaves and check them (in parallel, each in its own slot).
     const std::size_t ne = h.element_count();
     std::vector<std::uint8_t> decision(ne - fresh, 0);  // bit 0: candidate, bit 1: mark
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(fresh, ne, 256), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        const ElemId e(static_cast<std::uint32_t>(i));
-        if (!h.is_leaf(e)) continue;
-        bool candidate = false;
-        const bool mark = surface_gap_mark(h, e, fv, f, opts, opts.surface_tolerance, &candidate);
-        decision[i - fresh] = std::uint8_t((candidate ? 1 : 0) | (mark ? 2 : 0));
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(fresh, ne, 256), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const ElemId e(static_cast<std::uint32_t>(i));
+            if (!h.is_leaf(e)) continue;
+            bool candidate = false;
+            const bool mark = surface_gap_mark(h, e, fv, f, opts, opts.surface_tolerance, &candidate);
+            decision[i - fresh] = std::uint8_t((candidate ? 1 : 0) | (mark ? 2 : 0));
+          }
+        });
     SurfacePassStats st;
     std::vector<ElemId> marks;
     for (std::size_t i = fresh; i < ne; ++i) {
@@ -433,9 +434,10 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
                                 !opts.iso_values.empty() &&
                                 // u smooths the noise that f's interpolant follows: it is held
                                 // to twice the tolerance (snapping moves vertices the rest).
-                                (surface_driven ? opts.check_surfaces_against_u &&
-                                                      surface_gap_mark(h, e, x, f, opts, 2 * opts.surface_tolerance)
-                                                : surface_needs_refinement(h, e, cache[e.value], x, density, f, opts));
+                                (surface_driven
+                                     ? opts.check_surfaces_against_u &&
+                                           surface_gap_mark(h, e, x, f, opts, 2 * opts.surface_tolerance)
+                                     : surface_needs_refinement(h, e, cache[e.value], x, density, f, opts));
                             decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
                           }
                         });
@@ -465,7 +467,8 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       const double growth = double(st.vertices - prev.vertices) / double(prev.vertices);
       if (growth < opts.min_growth) {
         char buf[96];
-        std::snprintf(buf, sizeof buf, "stalled: the last refinement added %.2f%% of the vertices", 100.0 * growth);
+        std::snprintf(buf, sizeof buf, "stalled: the last refinement added %.2f%% of the vertices",
+                      100.0 * growth);
         stop = buf;
       }
     }
@@ -490,10 +493,9 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaves.size(), &by_memory);
     const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
     const std::size_t cap =
-        limit ? std::min(marked.size(),
-                                     std::max<std::size_t>(
-                                         1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
-                          : marked.size();
+        limit ? std::min(marked.size(), std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) /
+                                                                                          vertices_per_mark)))
+              : marked.size();
     // A strict total order (ties by id), so selecting the prefix first and then sorting it gives
     // the same prefix as a full sort, in O(n + cap log cap) instead of O(n log cap).
     const auto worse_first = [](const Mark& a, const Mark& b) {

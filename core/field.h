@@ -42,7 +42,8 @@ class Field {
   /// A range that contains every value of f on the box [lo, hi] (local frame); it may be wider
   /// (conservative), never narrower. Surface-driven refinement asks it for every candidate
   /// element, so fields should answer without visiting the box's samples. Defaults to range().
-  virtual std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const;
+  virtual std::array<double, 2> range_in_box(const std::array<double, 3>& lo,
+                                             const std::array<double, 3>& hi) const;
   /// The sample grid f interpolates, when f is one (null otherwise): estimators can then test
   /// the samples themselves, the values marching cubes and the scan's own surface come from.
   virtual const ScalarGrid* samples() const { return nullptr; }
@@ -64,7 +65,8 @@ class GridField final : public Field {
   double voxel_size() const override { return voxel_size_; }
   std::array<double, 2> range() const override { return range_; }
   /// From a min/max pyramid of the samples, built on the first call (thread-safe).
-  std::array<double, 2> range_in_box(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const override;
+  std::array<double, 2> range_in_box(const std::array<double, 3>& lo,
+                                     const std::array<double, 3>& hi) const override;
   const ScalarGrid& grid() const { return grid_; }
   const ScalarGrid* samples() const override { return &grid_; }
 

@@ -79,7 +79,9 @@ std::string attribute_text(const Imf::Attribute& a) {
 void check_exr_header(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::vector<char> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto fail = [&](const std::string& what) { throw Error(path + ": not a valid EXR file (" + what + ")"); };
+  const auto fail = [&](const std::string& what) {
+    throw Error(path + ": not a valid EXR file (" + what + ")");
+  };
   if (b.size() < 8) fail("truncated");
   if (static_cast<unsigned char>(b[4]) != 2) fail("unsupported version");
   const unsigned flags = static_cast<unsigned char>(b[5]);
@@ -98,7 +100,7 @@ void check_exr_header(const std::string& path) {
   for (int n = 0;; ++n) {
     if (n > 10000) fail("too many header attributes");
     if (read_string() == 0) return;  // end of the attribute list
-    read_string();                    // type
+    read_string();                   // type
     if (at + 4 > b.size()) fail("header runs past the end of the file");
     std::int32_t size = 0;
     std::memcpy(&size, &b[at], 4);  // little-endian, as EXR is; this machine's order too

@@ -277,8 +277,12 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   // normal the extracted surface has at the same position (so --placement auto keeps the
   // vertices in place: the same positions as --placement input).
   const std::string grad = scratch() + "/simp_gradient.ply", pinned = scratch() + "/simp_pinned.ply";
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --normals gradient -o " + grad).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status, 0);
+  ASSERT_EQ(
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --normals gradient -o " + grad).status,
+      0);
+  ASSERT_EQ(
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status,
+      0);
   const TriangleMesh kept = read_mesh_file(grad);
   ASSERT_EQ(kept.positions, read_mesh_file(pinned).positions);
   ASSERT_NE(kept.positions, b.positions);  // the default moves vertices (optimal placement)
@@ -293,10 +297,14 @@ TEST(Convert, SimplifyShrinksTheAssetWithinItsTolerance) {
   // --normals surface, and the default after --simplify: area-weighted normals of the written
   // triangles instead.
   const std::string surf = scratch() + "/simp_surface.ply";
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --normals surface -o " + surf).status, 0);
-  EXPECT_EQ(read_bytes(surf), read_bytes(simp));
   ASSERT_EQ(
-      run("convert " + common + " --simplify 0.3 --simplifier bounded --normals surface --placement input -o " + surf).status, 0);
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --normals surface -o " + surf).status,
+      0);
+  EXPECT_EQ(read_bytes(surf), read_bytes(simp));
+  ASSERT_EQ(run("convert " + common +
+                " --simplify 0.3 --simplifier bounded --normals surface --placement input -o " + surf)
+                .status,
+            0);
   EXPECT_EQ(read_bytes(surf), read_bytes(pinned));
   const TriangleMesh c = read_mesh_file(surf);
   ASSERT_EQ(c.positions, kept.positions);
@@ -325,9 +333,17 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
                     glb = scratch() + "/opt.glb";
   const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
   ASSERT_EQ(run("convert " + common + " --simplify 0 -o " + full).status, 0);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status, 0);
-  ASSERT_EQ(run("--threads 1 convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + one).status, 0);
-  ASSERT_EQ(run("--threads 2 convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + two).status, 0);
+  ASSERT_EQ(
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status,
+      0);
+  ASSERT_EQ(run("--threads 1 convert " + common +
+                " --simplify 0.3 --simplifier bounded --placement optimal -o " + one)
+                .status,
+            0);
+  ASSERT_EQ(run("--threads 2 convert " + common +
+                " --simplify 0.3 --simplifier bounded --placement optimal -o " + two)
+                .status,
+            0);
   EXPECT_EQ(read_bytes(one), read_bytes(two));
   const std::string dflt = scratch() + "/opt_default.ply";  // auto: optimal with surface normals
   ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded -o " + dflt).status, 0);
@@ -345,19 +361,22 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
   std::size_t moved = 0;
   for (const auto& p : c.positions) moved += !extracted.count(p);
   EXPECT_GT(moved, c.positions.size() / 2);
-  ASSERT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + glb).status, 0);
+  ASSERT_EQ(
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --placement optimal -o " + glb).status,
+      0);
   std::string report;
   EXPECT_TRUE(validator_accepts(glb, &report)) << report;
   EXPECT_EQ(parse_glb(read_bytes(glb)).gltf["asset"]["extras"]["placement"], "optimal");
-  EXPECT_EQ(run("convert " + common + " --simplify 0.3 --simplifier bounded --placement best -o " + glb).status, 1);
+  EXPECT_EQ(
+      run("convert " + common + " --simplify 0.3 --simplifier bounded --placement best -o " + glb).status, 1);
 }
 
 // Several surfaces are simplified at once, each in a fresh process here: OpenMesh's global log
 // streams, first touched concurrently by two surfaces, once crashed about one run in five
 // (README's main command). Every run must succeed, and match the single-threaded output.
 TEST(Convert, ConcurrentSimplificationIsStableAndDeterministic) {
-  const std::string args =
-      " convert " + kSkull + " --iso 1,1.5,2,3 --max-vertices 3000 --simplify 0.3 --simplifier bounded --quiet";
+  const std::string args = " convert " + kSkull +
+                           " --iso 1,1.5,2,3 --max-vertices 3000 --simplify 0.3 --simplifier bounded --quiet";
   const std::string one = scratch() + "/cs1.ply";
   ASSERT_EQ(run("--threads 1" + args + " -o " + one).status, 0);
   for (int i = 0; i < 8; ++i) {
@@ -456,8 +475,12 @@ TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
   const TriangleMesh a = read_mesh_file(full);
   for (const std::string placement : {"input", "optimal"}) {
     const std::string ply = scratch() + "/dem_" + placement + ".ply", sglb = scratch() + "/dem_s.glb";
-    ASSERT_EQ(run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + ply).status, 0);
-    ASSERT_EQ(run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + sglb).status, 0);
+    ASSERT_EQ(
+        run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + ply).status,
+        0);
+    ASSERT_EQ(
+        run(common + " --simplify 0.5 --simplifier bounded --placement " + placement + " -o " + sglb).status,
+        0);
     EXPECT_TRUE(validator_accepts(sglb, &report)) << report;
     const TriangleMesh b = read_mesh_file(ply);
     EXPECT_LT(b.triangle_count(), a.triangle_count() / 2) << placement;
@@ -563,7 +586,8 @@ TEST(Convert, DefaultConvertKeepsSmallPartsAndIsDeterministic) {
   EXPECT_LT(m.triangle_count(), full.triangle_count());
   int near_small = 0;
   for (const auto& p : m.positions) {
-    const double d = std::sqrt((p[0] - 54) * (p[0] - 54) + (p[1] - 54) * (p[1] - 54) + (p[2] - 54) * (p[2] - 54));
+    const double d =
+        std::sqrt((p[0] - 54) * (p[0] - 54) + (p[1] - 54) * (p[1] - 54) + (p[2] - 54) * (p[2] - 54));
     if (d < 1.6) ++near_small;
   }
   EXPECT_GE(near_small, 4);  // a closed little surface around (54, 54, 54)
@@ -581,4 +605,3 @@ TEST(Convert, MemoryBudgetStopsWithAMessage) {
 
 }  // namespace
 }  // namespace mlfe
-
