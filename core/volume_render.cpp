@@ -43,6 +43,43 @@ inline Vec3 normalized(const Vec3& a) {
   return {a[0] / n, a[1] / n, a[2] / n};
 }
 
+// The face a ray o + t d leaves a tetrahedron through after t_in, and where (t_out): the
+// nearest plane n_i · x = h_i among the faces with n_i · d > 0, never `entry` (the face the ray
+// came in by). When rounding leaves no candidate (a ray grazing a face), the least-entering face
+// other than `entry`, at t_in. normal(i) gives n_i in double precision.
+template <typename Normal>
+int exit_face(const Normal& normal, const double (&h)[4], const Vec3& o, const Vec3& d, double t_in,
+              int entry, double& t_out) {
+  int best = -1;
+  double best_t = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 4; ++i) {
+    if (i == entry) continue;
+    const Vec3 n = normal(i);
+    const double den = dot(n, d);
+    if (den <= 0) continue;
+    const double t = (h[i] - dot(n, o)) / den;
+    if (t < best_t) {
+      best_t = t;
+      best = i;
+    }
+  }
+  if (best < 0) {
+    double best_den = -std::numeric_limits<double>::infinity();
+    for (int i = 0; i < 4; ++i) {
+      if (i == entry) continue;
+      const Vec3 n = normal(i);
+      const double den = dot(n, d) / std::sqrt(dot(n, n));
+      if (den > best_den) {
+        best_den = den;
+        best = i;
+      }
+    }
+    best_t = t_in;
+  }
+  t_out = std::max(t_in, best_t);
+  return best;
+}
+
 // Outward face normals (unnormalised) of a tetrahedron, face i opposite vertex i, and the
 // offsets h_i = n_i · (a vertex of face i), so face i's plane is n_i · x = h_i.
 struct TetPlanes {
@@ -56,70 +93,16 @@ struct TetPlanes {
       h[i] = dot(n[i], a);
     }
   }
-  // The face the ray leaves through after t_in, and where: the nearest plane among the faces
-  // with n · d > 0, never `entry` (the face the ray came in by). When rounding leaves no
-  // candidate (a ray grazing a face), the least-entering face other than `entry` at t_in.
   int exit(const Vec3& o, const Vec3& d, double t_in, int entry, double& t_out) const {
-    int best = -1;
-    double best_t = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < 4; ++i) {
-      if (i == entry) continue;
-      const double den = dot(n[i], d);
-      if (den <= 0) continue;
-      const double t = (h[i] - dot(n[i], o)) / den;
-      if (t < best_t) {
-        best_t = t;
-        best = i;
-      }
-    }
-    if (best < 0) {
-      double best_den = -std::numeric_limits<double>::infinity();
-      for (int i = 0; i < 4; ++i) {
-        if (i == entry) continue;
-        const double den = dot(n[i], d) / std::sqrt(dot(n[i], n[i]));
-        if (den > best_den) {
-          best_den = den;
-          best = i;
-        }
-      }
-      best_t = t_in;
-    }
-    t_out = std::max(t_in, best_t);
-    return best;
+    return exit_face([&](int i) { return n[i]; }, h, o, d, t_in, entry, t_out);
   }
 };
 
-// TetPlanes::exit on a precomputed record (same rule, float normals).
+// The same rule on a precomputed record (float normals, widened exactly to double).
 int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in, int entry,
                 double& t_out) {
-  int best = -1;
-  double best_t = std::numeric_limits<double>::infinity();
-  double den[4];
-  for (int i = 0; i < 4; ++i) {
-    den[i] = double(R.n[i][0]) * d[0] + double(R.n[i][1]) * d[1] + double(R.n[i][2]) * d[2];
-    if (i == entry || den[i] <= 0) continue;
-    const double t =
-        (R.h[i] - (double(R.n[i][0]) * o[0] + double(R.n[i][1]) * o[1] + double(R.n[i][2]) * o[2])) / den[i];
-    if (t < best_t) {
-      best_t = t;
-      best = i;
-    }
-  }
-  if (best < 0) {
-    double best_den = -std::numeric_limits<double>::infinity();
-    for (int i = 0; i < 4; ++i) {
-      if (i == entry) continue;
-      const double len = std::sqrt(double(R.n[i][0]) * R.n[i][0] + double(R.n[i][1]) * R.n[i][1] +
-                                   double(R.n[i][2]) * R.n[i][2]);
-      if (den[i] / len > best_den) {
-        best_den = den[i] / len;
-        best = i;
-      }
-    }
-    best_t = t_in;
-  }
-  t_out = std::max(t_in, best_t);
-  return best;
+  const auto normal = [&](int i) { return Vec3{double(R.n[i][0]), double(R.n[i][1]), double(R.n[i][2])}; };
+  return exit_face(normal, R.h, o, d, t_in, entry, t_out);
 }
 
 void load(const Hierarchy<3>& h, ElemId e, Vec3 (&p)[4]) {
