@@ -206,7 +206,9 @@ std::vector<ElemId> refine_within(Hierarchy<D>& h, const std::vector<ElemId>& ma
     vertices_per_mark = std::max(1.0, double(added) / double(count));
     if (!limit || reached <= limit) return remap;
     MLFE_CHECK(h.vertex_count() == before);
-    const std::size_t scaled = static_cast<std::size_t>(double(count) * 0.9 * double(room) / double(added));
+    // (A mesh already over the limit, e.g. its uniform start, has no room: nothing fits.)
+    const std::size_t scaled =
+        added > 0 ? static_cast<std::size_t>(double(count) * 0.9 * double(room) / double(added)) : 0;
     count = std::min(count - 1, scaled);
   }
   return {};
