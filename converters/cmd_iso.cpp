@@ -77,11 +77,16 @@ void run(const IsoState& s, bool convert) {
       if (s.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
       isos = parse_values(s.asset.iso, "--iso");
     }
-    b = build_from_grid(*grid, s.params, isos);
-    const auto& last = b.iterations().back();
-    prov["rms_error"] = last.rms_error;
-    prov["rms_error_percent"] = last.rms_percent;
-    prov["psnr_db"] = last.psnr_db;
+    // u is solved for only when an output holds it (the hierarchy file, the rendered image).
+    BuildParams params = s.params;
+    params.solve_u = !s.hierarchy.empty() || !s.render.empty();
+    b = build_from_grid(*grid, params, isos);
+    if (!b.iterations().empty()) {
+      const auto& last = b.iterations().back();
+      prov["rms_error"] = last.rms_error;
+      prov["rms_error_percent"] = last.rms_percent;
+      prov["psnr_db"] = last.psnr_db;
+    }
     prov["vertices"] = b.vertices();
     // The effective target: the default RMS applies only without iso-values (surface-driven
     // refinement otherwise) or alongside another global target.

@@ -214,6 +214,7 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
   o.iso_values = iso_values;
   o.surface_tolerance = p.surface_tolerance;
   o.check_surfaces_against_u = p.check_against_u;
+  o.solve = p.solve_u || p.check_against_u;
   const std::size_t budget = parse_memory_budget(p.max_memory);
   if (budget > 0) {
     // What the build may use: the budget less the volume (and its min/max pyramid), with a
@@ -306,15 +307,18 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
     r["spacing"] = grid->transform.spacing;
   }
   const auto& its = b.iterations();
-  const auto& last = its.back();
   r["vertices"] = b.vertices();
   r["elements"] = b.leaves();
   r["levels"] = b.levels();
   r["iterations"] = its.size();
-  r["rms_error"] = last.rms_error;
-  r["rms_error_percent"] = last.rms_percent;
-  r["l2_error"] = last.l2_error;
-  r["psnr_db"] = last.psnr_db;
+  if (its.empty()) {
+    r["u"] = "not solved: the outputs need only the mesh and the data's interpolant";
+  } else {
+    r["rms_error"] = its.back().rms_error;
+    r["rms_error_percent"] = its.back().rms_percent;
+    r["l2_error"] = its.back().l2_error;
+    r["psnr_db"] = its.back().psnr_db;
+  }
   r["value_range"] = {b.value_min, b.value_max};
   r["stop_reason"] = b.stop_reason();
   r["seconds"] = b.seconds;

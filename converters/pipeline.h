@@ -28,6 +28,9 @@ struct BuildParams {
   std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
   double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
   bool check_against_u = false;        ///< surface-driven: refine where u misses the data's surfaces
+  /// Surface-driven builds: false skips assembling and solving for u when no output needs it
+  /// (the assets come from the data's interpolant); the build then reports no RMS error.
+  bool solve_u = true;
   /// Memory budget of the build: "50%" of the machine's RAM (default), or bytes with an
   /// optional K/M/G suffix; "0": none. Refinement stops at it with a message.
   std::string max_memory = "50%";

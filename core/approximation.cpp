@@ -345,6 +345,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
   const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
   std::string surface_stop;
   if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out);
+  if (surface_driven && !opts.solve) {
+    out.values = out.data_values;
+    out.stop_reason = surface_stop.empty() ? "surfaces within tolerance (u not solved)" : surface_stop;
+    return out;
+  }
 
   // Integrals cached per element id (valid for leaves); refinement remaps them.
   std::vector<ElementIntegrals<D>> cache;

@@ -74,6 +74,11 @@ struct ApproximationOptions {
   /// or lie more than twice the tolerance from them, and solve once more. u smooths away small
   /// noise blobs that f's interpolant kept, so this adds vertices (bench/RESULTS.md).
   bool check_surfaces_against_u = false;
+  /// With surface_driven: false ends the build after the surface passes, without assembling or
+  /// solving: values are then f's interpolant (data_values), iterations and leaf_errors are
+  /// empty and stop_reason is the surface passes'. For callers whose outputs need only the mesh
+  /// and the data (assets extracted from the interpolant), not u or its error.
+  bool solve = true;
   /// With iso_values, the loop ends when a refinement added fewer than this fraction of
   /// vertices: iso-aware marks can trickle in a few elements per iteration, each a full solve.
   /// 0: off. Not applied to the paper's threshold rule.

@@ -593,6 +593,27 @@ TEST(Convert, DefaultConvertKeepsSmallPartsAndIsDeterministic) {
   EXPECT_GE(near_small, 4);  // a closed little surface around (54, 54, 54)
 }
 
+// A surface-driven convert solves for u only when an output holds it: without --hierarchy the
+// report has no iterations and no RMS error; with it, u is solved and stored. The asset comes
+// from the data's interpolant either way, so its bytes do not change.
+TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
+  const std::string a = scratch() + "/nou.ply", b = scratch() + "/withu.ply", h = scratch() + "/withu.mlfeh";
+  const std::string ra = scratch() + "/nou.json", rb = scratch() + "/withu.json";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra).status, 0);
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h).status,
+            0);
+  EXPECT_EQ(read_bytes(a), read_bytes(b));
+  const json ja = json::parse(read_bytes(ra)), jb = json::parse(read_bytes(rb));
+  EXPECT_EQ(ja["iterations"].get<int>(), 0);
+  EXPECT_FALSE(ja.contains("rms_error"));
+  EXPECT_TRUE(ja.contains("u"));
+  EXPECT_GE(jb["iterations"].get<int>(), 1);
+  EXPECT_GT(jb["rms_error"].get<double>(), 0);
+  EXPECT_EQ(ja["vertices"], jb["vertices"]);  // the same mesh: the surface passes decide it
+  const std::string c = scratch() + "/fromh.ply";
+  ASSERT_EQ(run("iso " + h + " --iso 1.5 --quiet -o " + c).status, 0);  // the stored u extracts
+}
+
 // --max-memory: a build that would not fit stops refining with a message, and still writes.
 TEST(Convert, MemoryBudgetStopsWithAMessage) {
   const std::string out = scratch() + "/mem.ply", rep = scratch() + "/mem.json";
