@@ -438,6 +438,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     s.color = {0.70f, 0.72f, 0.60f, 1.0f};
     surfaces.push_back(std::move(s));
   }
+  const double extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // Gradient normals hold at extracted vertices only, so they keep the vertices in place.
   const std::string placement = p.placement != "auto"     ? p.placement
                                 : p.normals == "gradient" ? "input"
@@ -473,6 +474,8 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
       for (auto& lod : s.lods) compute_area_weighted_normals(lod);
     }
 
+  const double simplify_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - extract_seconds;
   nlohmann::json summary;
   nlohmann::json per = nlohmann::json::array();
   std::size_t total = 0;
@@ -514,6 +517,9 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   summary["bytes"] = std::filesystem::file_size(out);
   summary["tolerance_mm"] = tol;
   summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  summary["stage_seconds"] = {{"extract", extract_seconds},
+                              {"simplify", simplify_seconds},
+                              {"write", summary["seconds"].get<double>() - extract_seconds - simplify_seconds}};
   return summary;
 }
 

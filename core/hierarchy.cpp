@@ -580,6 +580,28 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
     return out;
   };
 
+  // Alive leaves below `below` with ≥ 2 vertices flagged in `flag`, in id order; chunks in
+  // parallel, concatenated in order.
+  const auto leaves_with_two_flagged = [&](const std::vector<std::uint8_t>& flag,
+                                           const std::vector<std::uint8_t>& gone, std::size_t below) {
+    constexpr std::size_t kChunk = 1 << 15;
+    const std::size_t nchunks = (below + kChunk - 1) / kChunk;
+    std::vector<std::vector<ElemId>> found(nchunks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nchunks, 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t k = r.begin(); k != r.end(); ++k)
+                          for (std::size_t i = k * kChunk, end = std::min(below, i + kChunk); i < end; ++i) {
+                            if (num_children_[i] != 0 || gone[i]) continue;
+                            int m = 0;
+                            for (VertexId v : cells_[i]) m += flag[v.value];
+                            if (m >= 2) found[k].push_back(ElemId(static_cast<std::uint32_t>(i)));
+                          }
+                      });
+    std::vector<ElemId> out;
+    for (auto& f : found) out.insert(out.end(), f.begin(), f.end());
+    return out;
+  };
+
   // Parents of green leaves whose new hanging midpoints all lie on the parent's own edges,
   // with an admissible combined pattern: their green children are replaced by a new green
   // closure instead of refining the parent red. (Green elements are still never refined.)
@@ -662,7 +684,12 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
       inc_head.resize(points_.size(), kNone);
       for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
         add_incidence(ElemId(static_cast<std::uint32_t>(e)));
-      candidates = incident_candidates(dirty_list, dirty, round_first_elem);
+      // Many dirty vertices: their incidence lists would be walked at a cache miss per slot,
+      // while one parallel pass over the element arrays streams them (same set, in id order).
+      if (dirty_list.size() * (D + 1) * 8 > round_first_elem)
+        candidates = leaves_with_two_flagged(dirty, dead, round_first_elem);
+      else
+        candidates = incident_candidates(dirty_list, dirty, round_first_elem);
       for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
         candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {

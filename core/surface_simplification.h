@@ -67,13 +67,15 @@ TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& op
                              SimplifyStats* stats = nullptr);
 
 /// Fast simplification with meshoptimizer's meshopt_simplify (A. Kapoulkine; quadric-ordered
-/// edge collapses onto input vertices, sequential): collapses while meshoptimizer's own error
-/// estimate stays within `tolerance` (mesh units), with boundary vertices locked. The estimate
-/// is not a verified bound (simplify_within gives one): use it where throughput matters more,
-/// and measure. Contract: every output vertex is an input vertex, kept with its normal (when
-/// the input has one per vertex) and in input order; triangles with a repeated index are
-/// dropped first; deterministic (no threads). Throws mlfe::Error for a tolerance that is not
-/// positive and finite or an index out of range.
+/// edge collapses onto input vertices): collapses while meshoptimizer's own error estimate
+/// stays within `tolerance` (mesh units), with boundary vertices locked. The estimate is not a
+/// verified bound (simplify_within gives one): use it where throughput matters more, and
+/// measure. Big surfaces are simplified in slabs in parallel, and the triangles around the
+/// slabs' seams once more, so the estimate holds per pass. Contract: every output vertex is an
+/// input vertex, kept with its normal (when the input has one per vertex) and in input order;
+/// triangles with a repeated index are dropped first; the output does not depend on the thread
+/// count. Throws mlfe::Error for a tolerance that is not positive and finite or an index out of
+/// range.
 TriangleMesh simplify_fast(const TriangleMesh& mesh, double tolerance);
 
 }  // namespace mlfe
