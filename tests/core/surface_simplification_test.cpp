@@ -457,6 +457,50 @@ TEST(SurfaceSimplification, BoundaryEdgesStayNearTheInputBoundary) {
   }
 }
 
+// simplify_fast (meshoptimizer): a small surface in one piece, a big one in slabs. Both keep a
+// closed surface closed, keep input vertices with their normals, stay near the input, and give
+// the same output with one or two threads; the slab seams are simplified like the rest.
+TEST(FastSimplification, ClosedSurfacesStayClosedNearTheInputAndDeterministic) {
+  for (const int subdivisions : {4, 7}) {  // 2 560 triangles (one piece), 327 680 (two slabs)
+    TriangleMesh in = icosphere(subdivisions, 10.0f);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> noise(-0.002f, 0.002f);
+    for (auto& p : in.positions)
+      for (float& c : p) c += noise(rng);
+    const double tol = subdivisions == 4 ? 0.1 : 0.02;  // collapses of a few edge lengths
+    TriangleMesh one;
+    {
+      const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+      one = simplify_fast(in, tol);
+    }
+    const TriangleMesh two = simplify_fast(in, tol);
+    EXPECT_EQ(one.positions, two.positions);
+    EXPECT_EQ(one.triangles, two.triangles);
+    EXPECT_EQ(one.normals, two.normals);
+    EXPECT_LT(two.triangle_count() * 4, in.triangle_count()) << subdivisions;
+    expect_closed_oriented_manifold(two);
+    // Every output vertex is an input vertex, with its normal, in input order.
+    std::size_t at = 0;
+    for (std::size_t v = 0; v < two.positions.size(); ++v) {
+      while (at < in.positions.size() && in.positions[at] != two.positions[v]) ++at;
+      ASSERT_LT(at, in.positions.size()) << v;
+      EXPECT_EQ(in.normals[at], two.normals[v]);
+    }
+    // Within a few tolerances of the input (meshoptimizer's estimate is not a bound).
+    EXPECT_LE(one_sided_hausdorff(in, two, 7), 3 * tol) << subdivisions;
+    if (subdivisions < 7) continue;
+    // The seam between the two slabs (at the median of the longest axis, x ≈ 0 here) is not
+    // left at full resolution: no denser in vertices than a band of the same width elsewhere.
+    auto count_in = [&](float lo, float hi) {
+      std::size_t n = 0;
+      for (const auto& p : two.positions) n += p[0] >= lo && p[0] < hi;
+      return n;
+    };
+    const float w = 0.3f;  // about three input edge lengths
+    EXPECT_LT(count_in(-w, w), 2 * count_in(3.0f - w, 3.0f + w) + 10);
+  }
+}
+
 TEST(SurfaceSimplification, RejectsBadInput) {
   const TriangleMesh in = icosphere(1, 1.0f);
   EXPECT_THROW(simplify(in, 0.0), Error);
