@@ -686,7 +686,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
         add_incidence(ElemId(static_cast<std::uint32_t>(e)));
       // Many dirty vertices: their incidence lists would be walked at a cache miss per slot,
       // while one parallel pass over the element arrays streams them (same set, in id order).
-      if (dirty_list.size() * (D + 1) * 8 > round_first_elem)
+      if (dirty_list.size() * 1024 > round_first_elem)
         candidates = leaves_with_two_flagged(dirty, dead, round_first_elem);
       else
         candidates = incident_candidates(dirty_list, dirty, round_first_elem);

@@ -229,9 +229,23 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     return next;
   };
 
+  // The gradient of u on each cut element orients its triangles; computed in parallel (the
+  // element geometry is most of the work), used in order.
+  std::vector<V3> cut_grad(cut.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cut.size(), 2048),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        const auto& c = h.cell(cut[i]);
+                        const P1Element<3> el = element_of(h, cut[i]);
+                        V3 g{0, 0, 0};
+                        for (int j = 0; j < 4; ++j)
+                          for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
+                        cut_grad[i] = g;
+                      }
+                    });
   TriangleMesh mesh;
-  std::vector<std::array<double, 3>> tri_normal_hint;
-  for (ElemId e : cut) {
+  for (std::size_t ci = 0; ci < cut.size(); ++ci) {
+    const ElemId e = cut[ci];
     const auto& c = h.cell(e);
     int up[4], dn[4], nu = 0, nd = 0;
     for (int i = 0; i < 4; ++i) (u[c[i].value] > iso ? up[nu++] : dn[nd++]) = i;
@@ -247,10 +261,7 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
               out_vertex(c[up[1]], c[dn[0]])};
       corners = 4;
     }
-    const P1Element<3> el = element_of(h, e);
-    V3 g{0, 0, 0};
-    for (int i = 0; i < 4; ++i)
-      for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
+    const V3& g = cut_grad[ci];
     const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
     auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
       if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
@@ -278,24 +289,34 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       nhi = std::max(nhi, u[v.value]);
     }
   if (!verts.empty()) {
+    // Pick the elements around needed vertices (walk order), weigh their gradients in
+    // parallel, and add them up in walk order (the sums do not depend on the thread count).
+    std::vector<ElemId> around;
     walk_level(
         h, level, [&](ElemId e) { return double(hi_[e.value]) >= nlo && double(lo_[e.value]) <= nhi; },
         [&](ElemId e) {
-          const auto& c = h.cell(e);
           bool any = false;
-          for (VertexId v : c) any |= slot[v.value] != kNotNeeded;
-          if (!any) return;
-          const P1Element<3> el = element_of(h, e);
-          V3 g{0, 0, 0};
-          for (int i = 0; i < 4; ++i)
-            for (int k = 0; k < 3; ++k) g[k] += u[c[i].value] * el.grad[i][k];
-          for (VertexId v : c)
-            if (slot[v.value] != kNotNeeded) {
-              auto& s = acc[slot[v.value]];
-              for (int k = 0; k < 3; ++k) s[k] += el.measure * g[k];
-              s[3] += el.measure;
-            }
+          for (VertexId v : h.cell(e)) any |= slot[v.value] != kNotNeeded;
+          if (any) around.push_back(e);
         });
+    std::vector<std::array<double, 4>> weighted(around.size());  // measure × gradient, measure
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, around.size(), 2048),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const auto& c = h.cell(around[i]);
+                          const P1Element<3> el = element_of(h, around[i]);
+                          V3 g{0, 0, 0};
+                          for (int j = 0; j < 4; ++j)
+                            for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
+                          weighted[i] = {el.measure * g[0], el.measure * g[1], el.measure * g[2], el.measure};
+                        }
+                      });
+    for (std::size_t i = 0; i < around.size(); ++i)
+      for (VertexId v : h.cell(around[i]))
+        if (slot[v.value] != kNotNeeded) {
+          auto& s = acc[slot[v.value]];
+          for (int k = 0; k < 4; ++k) s[k] += weighted[i][k];
+        }
   }
   auto vertex_gradient = [&](VertexId v) {
     const auto& s = acc[slot[v.value]];
