@@ -198,37 +198,13 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       });
 
   // 2. Output vertices: one per cut edge, or the mesh vertex itself when u equals iso there.
+  // The cut list is split into chunks (by its length alone), each numbering its own vertices
+  // in order of first use, in parallel; a sequential merge then gives every vertex the
+  // number of its first use in the whole list, so the mesh is the one a single pass makes.
   struct OutVertex {
     VertexId a, b;
     double t;
   };
-  std::vector<OutVertex> verts;
-  std::vector<V3> local;  // per output vertex: its point on the cut edge, local frame
-  auto add_vertex = [&](VertexId a, VertexId b, double t) {
-    verts.push_back({a, b, t});
-    const auto& pa = h.point(a);
-    const auto& pb = h.point(b);
-    local.push_back({pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1]), pa[2] + t * (pb[2] - pa[2])});
-  };
-  EdgeMap on_edge;  // cut edge -> output vertex (flat hash: this runs once per cut edge)
-  on_edge.reserve(cut.size() * 2);
-  std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;  // rare: u == iso at a vertex
-  auto out_vertex = [&](VertexId a, VertexId b) -> std::uint32_t {
-    // a above, b at or below.
-    const double ua = u[a.value], ub = u[b.value];
-    const auto next = static_cast<std::uint32_t>(verts.size());
-    if (ub == iso) {  // the cut is the vertex b itself, shared by every edge through it
-      auto [it, inserted] = on_vertex.emplace(b.value, next);
-      if (inserted) add_vertex(a, b, 1.0);
-      return it->second;
-    }
-    const VertexId found = on_edge.find(a, b);
-    if (found.valid()) return found.value;
-    on_edge.insert(a, b, VertexId(next));
-    add_vertex(a, b, (ua - iso) / (ua - ub));
-    return next;
-  };
-
   // The gradient of u on each cut element orients its triangles; computed in parallel (the
   // element geometry is most of the work), used in order.
   std::vector<V3> cut_grad(cut.size());
@@ -243,34 +219,116 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
                         cut_grad[i] = g;
                       }
                     });
-  TriangleMesh mesh;
-  for (std::size_t ci = 0; ci < cut.size(); ++ci) {
-    const ElemId e = cut[ci];
-    const auto& c = h.cell(e);
-    int up[4], dn[4], nu = 0, nd = 0;
-    for (int i = 0; i < 4; ++i) (u[c[i].value] > iso ? up[nu++] : dn[nd++]) = i;
-    std::array<std::uint32_t, 4> poly{};
-    int corners = 3;
-    if (nu == 1) {
-      for (int k = 0; k < 3; ++k) poly[k] = out_vertex(c[up[0]], c[dn[k]]);
-    } else if (nu == 3) {
-      for (int k = 0; k < 3; ++k) poly[k] = out_vertex(c[up[k]], c[dn[0]]);
-    } else {
-      // Quadrilateral in cyclic order around the tetrahedron.
-      poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]), out_vertex(c[up[1]], c[dn[1]]),
-              out_vertex(c[up[1]], c[dn[0]])};
-      corners = 4;
-    }
-    const V3& g = cut_grad[ci];
-    const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
-    auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
-      if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
-      const V3 n = cross(sub(local[i1], local[i0]), sub(local[i2], local[i0]));
-      if (dot(n, want) < 0) std::swap(i1, i2);
-      mesh.triangles.push_back({i0, i1, i2});
+  struct Chunk {
+    std::vector<OutVertex> verts;
+    std::vector<V3> local;  // per vertex: its point on the cut edge, local frame
+    std::vector<std::array<std::uint32_t, 3>> tris;
+  };
+  constexpr std::size_t kChunkElements = 1 << 16;
+  const std::size_t nchunks = std::max<std::size_t>(1, (cut.size() + kChunkElements - 1) / kChunkElements);
+  std::vector<Chunk> chunks(nchunks);
+  tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
+    Chunk& ch = chunks[k];
+    const std::size_t first = k * kChunkElements, last = std::min(cut.size(), first + kChunkElements);
+    auto add_vertex = [&](VertexId a, VertexId b, double t) {
+      ch.verts.push_back({a, b, t});
+      const auto& pa = h.point(a);
+      const auto& pb = h.point(b);
+      ch.local.push_back(
+          {pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1]), pa[2] + t * (pb[2] - pa[2])});
     };
-    emit(poly[0], poly[1], poly[2]);
-    if (corners == 4) emit(poly[0], poly[2], poly[3]);
+    EdgeMap on_edge;  // cut edge -> output vertex (flat hash: this runs once per cut edge)
+    on_edge.reserve((last - first) * 2);
+    std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;  // rare: u == iso at a vertex
+    auto out_vertex = [&](VertexId a, VertexId b) -> std::uint32_t {
+      // a above, b at or below.
+      const double ua = u[a.value], ub = u[b.value];
+      const auto next = static_cast<std::uint32_t>(ch.verts.size());
+      if (ub == iso) {  // the cut is the vertex b itself, shared by every edge through it
+        auto [it, inserted] = on_vertex.emplace(b.value, next);
+        if (inserted) add_vertex(a, b, 1.0);
+        return it->second;
+      }
+      const VertexId found = on_edge.find(a, b);
+      if (found.valid()) return found.value;
+      on_edge.insert(a, b, VertexId(next));
+      add_vertex(a, b, (ua - iso) / (ua - ub));
+      return next;
+    };
+    for (std::size_t ci = first; ci < last; ++ci) {
+      const auto& c = h.cell(cut[ci]);
+      int up[4], dn[4], nu = 0, nd = 0;
+      for (int i = 0; i < 4; ++i) (u[c[i].value] > iso ? up[nu++] : dn[nd++]) = i;
+      std::array<std::uint32_t, 4> poly{};
+      int corners = 3;
+      if (nu == 1) {
+        for (int j = 0; j < 3; ++j) poly[j] = out_vertex(c[up[0]], c[dn[j]]);
+      } else if (nu == 3) {
+        for (int j = 0; j < 3; ++j) poly[j] = out_vertex(c[up[j]], c[dn[0]]);
+      } else {
+        // Quadrilateral in cyclic order around the tetrahedron.
+        poly = {out_vertex(c[up[0]], c[dn[0]]), out_vertex(c[up[0]], c[dn[1]]),
+                out_vertex(c[up[1]], c[dn[1]]), out_vertex(c[up[1]], c[dn[0]])};
+        corners = 4;
+      }
+      const V3& g = cut_grad[ci];
+      const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
+      auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
+        if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
+        const V3 n = cross(sub(ch.local[i1], ch.local[i0]), sub(ch.local[i2], ch.local[i0]));
+        if (dot(n, want) < 0) std::swap(i1, i2);
+        ch.tris.push_back({i0, i1, i2});
+      };
+      emit(poly[0], poly[1], poly[2]);
+      if (corners == 4) emit(poly[0], poly[2], poly[3]);
+    }
+  });
+  // Merge: chunk by chunk, a vertex keeps the number of its first use.
+  std::vector<OutVertex> verts;
+  std::vector<V3> local;
+  std::vector<std::vector<std::uint32_t>> to_global(nchunks);
+  {
+    EdgeMap on_edge;
+    std::size_t total = 0;
+    for (const auto& ch : chunks) total += ch.verts.size();
+    on_edge.reserve(total);
+    std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;
+    for (std::size_t k = 0; k < nchunks; ++k) {
+      const Chunk& ch = chunks[k];
+      auto& map = to_global[k];
+      map.resize(ch.verts.size());
+      for (std::size_t j = 0; j < ch.verts.size(); ++j) {
+        const OutVertex& ov = ch.verts[j];
+        const auto next = static_cast<std::uint32_t>(verts.size());
+        std::uint32_t id = next;
+        if (ov.t == 1.0 && u[ov.b.value] == iso) {
+          id = on_vertex.emplace(ov.b.value, next).first->second;
+        } else if (nchunks > 1) {
+          const VertexId found = on_edge.find(ov.a, ov.b);
+          if (found.valid())
+            id = found.value;
+          else
+            on_edge.insert(ov.a, ov.b, VertexId(next));
+        }
+        if (id == next) {
+          verts.push_back(ov);
+          local.push_back(ch.local[j]);
+        }
+        map[j] = id;
+      }
+    }
+  }
+  TriangleMesh mesh;
+  {
+    std::vector<std::size_t> offset(nchunks + 1, 0);
+    for (std::size_t k = 0; k < nchunks; ++k) offset[k + 1] = offset[k] + chunks[k].tris.size();
+    mesh.triangles.resize(offset.back());
+    tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
+      const auto& map = to_global[k];
+      std::size_t at = offset[k];
+      for (const auto& t : chunks[k].tris) mesh.triangles[at++] = {map[t[0]], map[t[1]], map[t[2]]};
+    });
+    std::vector<Chunk>().swap(chunks);
   }
 
   // 3. Vertex normals at the mesh vertices that carry output vertices: volume-weighted mean of
