@@ -1,7 +1,12 @@
-// mlfe info FILE: what a volume file holds and what reading it costs, without computing anything.
+// mlfe info FILE: what a volume file holds and what reading it costs, without computing
+// anything; for a hierarchy file (.mlfeh), its levels, counts, error figures and bytes per
+// section.
 #include <fmt/format.h>
 
+#include <array>
 #include <chrono>
+#include <cmath>
+#include <variant>
 #include <cstdio>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -9,6 +14,7 @@
 
 #include "converters/commands.h"
 #include "converters/volume_options.h"
+#include "formats/hierarchy_io.h"
 #include "formats/vdb_reader.h"
 #include "formats/volume_reader.h"
 
@@ -21,7 +27,86 @@ struct InfoArgs {
   bool json = false;
 };
 
+// Per level k: vertices of level k, elements of level k, leaves of level k.
+template <int D>
+std::vector<std::array<std::size_t, 3>> level_counts(const Hierarchy<D>& h) {
+  std::vector<std::array<std::size_t, 3>> c(static_cast<std::size_t>(h.max_level()) + 1, {0, 0, 0});
+  for (std::uint32_t v = 0; v < h.vertex_count(); ++v) ++c[h.vertex_level(VertexId(v))][0];
+  for (std::uint32_t e = 0; e < h.element_count(); ++e) {
+    ++c[h.level(ElemId(e))][1];
+    if (h.is_leaf(ElemId(e))) ++c[h.level(ElemId(e))][2];
+  }
+  return c;
+}
+
+void run_hierarchy_info(const InfoArgs& a) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const HierarchyFile f = read_hierarchy(a.file);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const auto counts = std::visit([](const auto& h) { return level_counts(h); }, f.hierarchy);
+  const std::size_t nv = std::visit([](const auto& h) { return h.vertex_count(); }, f.hierarchy);
+  const std::size_t ne = std::visit([](const auto& h) { return h.element_count(); }, f.hierarchy);
+  const std::size_t nl = std::visit([](const auto& h) { return h.leaves().size(); }, f.hierarchy);
+  const auto num = [](double x) { return std::isnan(x) ? nlohmann::json(nullptr) : nlohmann::json(x); };
+  if (a.json) {
+    nlohmann::json j;
+    j["file"] = a.file;
+    j["format"] = "mlfeh";
+    j["version"] = f.version;
+    j["dim"] = f.dim;
+    j["vertices"] = nv;
+    j["elements"] = ne;
+    j["leaves"] = nl;
+    j["levels"] = f.file_levels + 1;
+    j["values"] = f.values.empty() ? "none" : f.value_bound > 0 ? "quantized" : "exact";
+    j["value_bound"] = f.value_bound;
+    j["range"] = {f.value_min, f.value_max};
+    j["norm"] = f.norm;
+    j["rms_error"] = num(f.rms_error);
+    j["max_error"] = num(f.max_error);
+    j["psnr_db"] = f.psnr_db > 0 && std::isinf(f.psnr_db) ? nlohmann::json("inf") : num(f.psnr_db);
+    j["spacing"] = f.transform.spacing;
+    j["origin"] = f.transform.origin;
+    j["direction"] = f.transform.direction;
+    j["space"] = f.space;
+    j["metadata"] = f.metadata;
+    for (std::size_t k = 0; k < counts.size(); ++k)
+      j["per_level"].push_back({{"level", k}, {"vertices", counts[k][0]}, {"elements", counts[k][1]}, {"leaves", counts[k][2]}});
+    for (const auto& s : f.sections)
+      j["sections"].push_back({{"name", s.name}, {"file_bytes", s.file_bytes}, {"raw_bytes", s.raw_bytes}});
+    j["read_seconds"] = seconds;
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::uint64_t total = 0;
+  for (const auto& s : f.sections) total += s.file_bytes;
+  fmt::print("file:      {}\n", a.file);
+  fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", f.version, f.dim, total, seconds);
+  fmt::print("mesh:      {} vertices, {} elements, {} leaves, {} levels\n", nv, ne, nl, f.file_levels + 1);
+  fmt::print("values:    {}\n", f.values.empty()       ? std::string("none")
+                                  : f.value_bound > 0 ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
+                                                      : std::string("exact (f64)"));
+  fmt::print("range:     {} .. {}\n", f.value_min, f.value_max);
+  if (!f.norm.empty()) fmt::print("norm:      {}\n", f.norm);
+  if (!std::isnan(f.rms_error))
+    fmt::print("error:     RMS {:.6g}, max {:.6g}, PSNR {:.2f} dB (stored approximation against its source)\n",
+               f.rms_error, f.max_error, f.psnr_db);
+  const auto& t = f.transform;
+  fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
+  fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
+  const auto& d = t.direction;
+  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7], d[8]);
+  fmt::print("space:     {}\n", f.space.empty() ? "(not given)" : f.space);
+  if (!f.metadata.empty()) fmt::print("metadata:  {}\n", f.metadata.dump());
+  fmt::print("{:>7} {:>12} {:>12} {:>12}\n", "level", "vertices", "elements", "leaves");
+  for (std::size_t k = 0; k < counts.size(); ++k)
+    fmt::print("{:>7} {:>12} {:>12} {:>12}\n", k, counts[k][0], counts[k][1], counts[k][2]);
+  fmt::print("{:<10} {:>12} {:>12}\n", "section", "file bytes", "raw bytes");
+  for (const auto& s : f.sections) fmt::print("{:<10} {:>12} {:>12}\n", s.name, s.file_bytes, s.raw_bytes);
+}
+
 void run_info(const InfoArgs& a) {
+  if (is_hierarchy_file(a.file)) return run_hierarchy_info(a);
   const auto t0 = std::chrono::steady_clock::now();
   ScalarGrid g = read_volume(a.file, a.read);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -75,8 +160,8 @@ void run_info(const InfoArgs& a) {
 
 void add_info_command(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
-  CLI::App* cmd = app.add_subcommand("info", "print the format, grid, transform and value range of a volume file");
-  cmd->add_option("FILE", args->file, "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png)")
+  CLI::App* cmd = app.add_subcommand("info", "print the format, grid, transform and value range of a volume file, or the levels, errors and sections of a hierarchy file");
+  cmd->add_option("FILE", args->file, "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png) or hierarchy (.mlfeh)")
       ->required()
       ->check(CLI::ExistingFile);
   add_volume_read_options(cmd, args->read);

@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "formats/atomic_file.h"
+#include "formats/hierarchy_levels.h"
 
 namespace mlfe {
 
@@ -21,7 +22,7 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "hierarchy_io assumes a
 namespace {
 
 constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'H', 'I', 'E', 'R'};
-constexpr std::uint32_t kVersion = 1;
+constexpr std::uint32_t kVersion = 1, kVersion2 = 2;
 constexpr std::size_t kHeaderSize = 200;
 constexpr std::uint32_t kFlagZstd = 1u, kFlagValues = 2u;
 constexpr std::uint64_t kMaxSpace = 64;
@@ -135,6 +136,142 @@ Hierarchy<D> read_arrays(const std::string& path, Cursor& c, std::size_t nv, std
   return Hierarchy<D>::from_arrays(std::move(a), path + ": invalid hierarchy");
 }
 
+
+// ---- version 2 (docs/mlfeh-v2.md) ----
+
+constexpr std::uint32_t tag_of(const char (&s)[5]) {
+  return std::uint32_t(std::uint8_t(s[0])) | std::uint32_t(std::uint8_t(s[1])) << 8 |
+         std::uint32_t(std::uint8_t(s[2])) << 16 | std::uint32_t(std::uint8_t(s[3])) << 24;
+}
+constexpr std::uint32_t kTagHead = tag_of("HEAD"), kTagMesh = tag_of("MESH"), kTagLevel = tag_of("LEVL");
+constexpr std::uint32_t kCodecRaw = 0, kCodecZstd = 1;
+constexpr std::uint32_t kCodingNone = 0, kCodingQuantized = 1, kCodingExact = 2;
+constexpr std::size_t kPreambleSize = 16, kSectionHeaderSize = 28, kHeadFixedSize = 204;
+constexpr int kMaxLevels = 60;
+
+std::uint32_t norm_code(const std::string& norm) { return norm == "l2" ? 1 : norm == "h1" ? 2 : 0; }
+
+void put_varint(Bytes& out, std::int64_t q) {
+  std::uint64_t z = (static_cast<std::uint64_t>(q) << 1) ^ static_cast<std::uint64_t>(q >> 63);  // zigzag
+  while (z >= 0x80) {
+    out.push_back(static_cast<std::uint8_t>(z | 0x80));
+    z >>= 7;
+  }
+  out.push_back(static_cast<std::uint8_t>(z));
+}
+
+// Appends one section (header + payload) to `file`.
+// The HEAD section's CRC starts from the preamble's (crc_seed), so the version and dimension
+// are covered too.
+void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const Bytes& raw, bool compress, int level,
+                 std::uint32_t crc_seed = 0) {
+  Bytes packed;
+  if (compress) {
+    packed.resize(ZSTD_compressBound(raw.size()));
+    const std::size_t n = ZSTD_compress(packed.data(), packed.size(), raw.data(), raw.size(), level);
+    if (ZSTD_isError(n)) throw Error(path + ": zstd compression failed (" + ZSTD_getErrorName(n) + ")");
+    packed.resize(n);
+  }
+  const Bytes& payload = compress ? packed : raw;
+  const std::size_t at = file.size();
+  put(file, tag);
+  put(file, compress ? kCodecZstd : kCodecRaw);
+  put(file, static_cast<std::uint64_t>(payload.size()));
+  put(file, static_cast<std::uint64_t>(raw.size()));
+  const std::uint32_t crc = crc32_of(payload.data(), payload.size(), crc32_of(file.data() + at, 24, crc_seed));
+  put(file, crc);
+  put_bytes(file, payload.data(), payload.size());
+}
+
+template <int D>
+void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
+              const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
+  if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
+    throw Error(path + ": max error must be finite and >= 0");
+  if (h.max_level() > kMaxLevels) throw Error(path + ": more than 60 levels");
+  const std::uint32_t coding =
+      values.empty() ? kCodingNone : options.max_error > 0 ? kCodingQuantized : kCodingExact;
+  const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
+  if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
+
+  // Step 1: the canonical level-by-level description and the values in its vertex order.
+  LevelEncoding<D> enc;
+  try {
+    enc = encode_levels(h);
+  } catch (const LevelRebuildError& e) {
+    throw LevelRebuildError(path + ": " + e.what());
+  }
+  std::vector<double> u(values.empty() ? 0 : h.vertex_count());
+  for (std::size_t v = 0; v < u.size(); ++v) u[v] = values[enc.to_original[v].value];
+  std::vector<std::int64_t> codes;
+  if (coding == kCodingQuantized) {
+    try {
+      quantize_hierarchical(enc.rebuilt, u, options.max_error, &codes);
+    } catch (const Error& e) {
+      throw Error(path + ": " + e.what());
+    }
+  }
+  const auto put_values = [&](Bytes& out, std::size_t from, std::size_t to) {
+    for (std::size_t v = from; v < to; ++v) {
+      if (coding == kCodingQuantized) put_varint(out, codes[v]);
+      if (coding == kCodingExact) put(out, u[v]);
+    }
+  };
+
+  Bytes file;
+  put_bytes(file, kMagic, 8);
+  put(file, kVersion2);
+  put(file, static_cast<std::uint32_t>(D));
+
+  // Step 2: HEAD.
+  Bytes head;
+  put(head, static_cast<std::uint64_t>(h.vertex_count()));
+  put(head, static_cast<std::uint64_t>(h.element_count()));
+  put(head, static_cast<std::uint32_t>(h.max_level()));
+  put(head, coding);
+  put(head, coding == kCodingQuantized ? options.max_error : 0.0);
+  for (double x : info.transform.spacing) put(head, x);
+  for (double x : info.transform.origin) put(head, x);
+  for (double x : info.transform.direction) put(head, x);
+  put(head, info.value_min);
+  put(head, info.value_max);
+  put(head, info.rms_error);
+  put(head, info.max_error);
+  put(head, info.psnr_db);
+  put(head, norm_code(info.norm));
+  put(head, static_cast<std::uint32_t>(info.space.size()));
+  put(head, static_cast<std::uint32_t>(meta.size()));
+  put_bytes(head, info.space.data(), info.space.size());
+  put_bytes(head, meta.data(), meta.size());
+  put_section(path, file, kTagHead, head, false, 0, crc32_of(file.data(), kPreambleSize));
+
+  // Step 3: MESH (T0 and its values).
+  Bytes mesh;
+  put(mesh, static_cast<std::uint32_t>(enc.coarse_points.size()));
+  put(mesh, static_cast<std::uint32_t>(enc.coarse_cells.size()));
+  put_array(mesh, enc.coarse_points);
+  put_array(mesh, enc.coarse_cells);
+  put_values(mesh, 0, enc.vertex_end[0]);
+  put_section(path, file, kTagMesh, mesh, options.compress, options.zstd_level);
+
+  // Step 4: one LEVL per refinement step.
+  for (std::size_t k = 1; k < enc.vertex_end.size(); ++k) {
+    const auto& marks = enc.marks[k - 1];
+    Bytes level;
+    put(level, static_cast<std::uint32_t>(k));
+    put(level, static_cast<std::uint32_t>(marks.size()));
+    put(level, static_cast<std::uint32_t>(enc.vertex_end[k] - enc.vertex_end[k - 1]));
+    Bytes bits((marks.size() + 7) / 8, 0);
+    for (std::size_t i = 0; i < marks.size(); ++i)
+      if (marks[i]) bits[i / 8] |= static_cast<std::uint8_t>(1u << (i % 8));
+    put_array(level, bits);
+    put_values(level, enc.vertex_end[k - 1], enc.vertex_end[k]);
+    put_section(path, file, kTagLevel, level, options.compress, options.zstd_level);
+  }
+  write_file_atomically(path, [&](std::ostream& out) {
+    out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
+  });
+}
 }  // namespace
 
 template <int D>
@@ -144,6 +281,17 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
                     sizeof(ElemId) == 4 && sizeof(ElemKind) == 1,
                 "arrays are copied as raw bytes");
   check_info(path, info);
+  if (options.version != 1 && options.version != 2)
+    throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
+  if (options.version == 2) {
+    if (!values.empty() && values.size() != h.vertex_count())
+      throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(h.vertex_count()) +
+                  " vertices");
+    for (double v : values)
+      if (!std::isfinite(v)) throw Error(path + ": values must be finite");
+    write_v2(path, h, values, info, options);
+    return;
+  }
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
   if (!values.empty() && values.size() != nv)
     throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(nv) + " vertices");
@@ -214,7 +362,8 @@ void write_hierarchy(const std::string& path, const HierarchyFile& file, const H
     throw Error(path + ": HierarchyFile::dim does not match the hierarchy it holds");
 }
 
-HierarchyFile read_hierarchy(const std::string& path) {
+namespace {
+HierarchyFile read_v1(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error(path + ": cannot open file");
   in.seekg(0, std::ios::end);
@@ -311,6 +460,264 @@ HierarchyFile read_hierarchy(const std::string& path) {
     f.hierarchy = read_arrays<3>(path, c, nv, ne, has_values, f.values);
   for (std::size_t i = 0; i < f.values.size(); ++i)
     if (std::isnan(f.values[i])) throw Error(path + ": value of vertex " + std::to_string(i) + " is NaN");
+  f.version = 1;
+  f.file_levels = std::visit([](const auto& hh) { return hh.max_level(); }, f.hierarchy);
+  f.sections.push_back({"header", -1, kHeaderSize + ls + lm, kHeaderSize + ls + lm});
+  f.sections.push_back({"arrays", -1, ss + 4, rs});
+  return f;
+}
+// ---- version 2 reader ----
+
+// Reads the sections of a v2 file one after the other, each checked before it is used.
+class SectionReader {
+ public:
+  SectionReader(const std::string& path, std::ifstream& in, std::uint64_t file_size)
+      : path_(path), in_(in), size_(file_size), pos_(kPreambleSize) {}
+
+  // crc_seed: the CRC of the preamble for HEAD, else 0.
+  Bytes next(std::uint32_t tag, const std::string& name, HierarchyFile& f, int level, std::uint32_t crc_seed = 0) {
+    if (size_ - pos_ < kSectionHeaderSize) throw Error(path_ + ": truncated file (" + name + " section missing)");
+    std::uint8_t head[kSectionHeaderSize];
+    read(head, kSectionHeaderSize);
+    Cursor c(path_, head, kSectionHeaderSize);
+    const auto got_tag = c.get<std::uint32_t>("section header");
+    const auto codec = c.get<std::uint32_t>("section header");
+    const auto stored = c.get<std::uint64_t>("section header");
+    const auto raw = c.get<std::uint64_t>("section header");
+    const auto stored_crc = c.get<std::uint32_t>("section header");
+    if (got_tag != tag) throw Error(path_ + ": expected the " + name + " section, found another tag");
+    if (codec != kCodecRaw && codec != kCodecZstd) throw Error(path_ + ": " + name + " section has unknown codec");
+    if (stored > size_ - pos_) throw Error(path_ + ": truncated " + name + " section");
+    if (codec == kCodecRaw && raw != stored) throw Error(path_ + ": " + name + " section sizes disagree");
+    if (codec == kCodecZstd && raw > kMaxRatio * stored + kRatioSlack)
+      throw Error(path_ + ": implausible compression ratio in the " + name + " section");
+    Bytes payload(static_cast<std::size_t>(stored));
+    read(payload.data(), payload.size());
+    if (crc32_of(payload.data(), payload.size(), crc32_of(head, 24, crc_seed)) != stored_crc)
+      throw Error(path_ + ": checksum mismatch in the " + name + " section (file corrupted)");
+    f.sections.push_back({name, level, kSectionHeaderSize + stored, raw});
+    if (codec == kCodecRaw) return payload;
+    if (ZSTD_getFrameContentSize(payload.data(), payload.size()) != raw)
+      throw Error(path_ + ": " + name + " section decompresses to the wrong size");
+    Bytes out(static_cast<std::size_t>(raw));
+    const std::size_t n = ZSTD_decompress(out.data(), out.size(), payload.data(), payload.size());
+    if (ZSTD_isError(n) || n != raw) throw Error(path_ + ": corrupt compressed " + name + " section");
+    return out;
+  }
+  bool at_end() const { return pos_ == size_; }
+
+ private:
+  void read(std::uint8_t* p, std::size_t n) {
+    in_.read(reinterpret_cast<char*>(p), static_cast<std::streamsize>(n));
+    if (!in_) throw Error(path_ + ": read error");
+    pos_ += n;
+  }
+  const std::string& path_;
+  std::ifstream& in_;
+  std::uint64_t size_, pos_;
+};
+
+std::int64_t get_varint(const std::string& path, Cursor& c, const char* what) {
+  std::uint64_t z = 0;
+  for (int shift = 0;; shift += 7) {
+    if (shift > 63) throw Error(path + ": malformed value code in " + what);
+    const auto b = c.get<std::uint8_t>(what);
+    z |= static_cast<std::uint64_t>(b & 0x7f) << shift;
+    if (!(b & 0x80)) break;
+  }
+  return static_cast<std::int64_t>(z >> 1) ^ -static_cast<std::int64_t>(z & 1);
+}
+
+struct HeadV2 {
+  std::uint64_t nv = 0, ne = 0;
+  std::uint32_t levels = 0, coding = 0;
+  double bound = 0;
+};
+
+// Decodes the values of vertices [from, to) of h: see docs/mlfeh-v2.md, "Values".
+template <int D>
+void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const HeadV2& head, std::size_t from,
+                std::size_t to, std::vector<double>& d, const char* what) {
+  if (head.coding == kCodingNone) return;
+  d.resize(to);
+  for (std::size_t v = from; v < to; ++v) {
+    if (head.coding == kCodingExact) {
+      d[v] = c.get<double>(what);
+    } else {
+      const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+      const double pred = p[0].valid() ? 0.5 * (d[p[0].value] + d[p[1].value]) : 0.0;
+      d[v] = pred + static_cast<double>(get_varint(path, c, what)) * (2 * head.bound);
+    }
+    if (!std::isfinite(d[v])) throw Error(path + ": value of a vertex in " + what + " is not finite");
+  }
+}
+
+template <int D>
+void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head, int max_level, HierarchyFile& f) {
+  // Step 1: T0 and its values.
+  const Bytes mesh = r.next(kTagMesh, "T0", f, 0);
+  Cursor c(path, mesh.data(), mesh.size());
+  const auto nv0 = c.get<std::uint32_t>("T0 counts");
+  const auto ne0 = c.get<std::uint32_t>("T0 counts");
+  if (nv0 > head.nv || ne0 == 0 || ne0 > head.ne) throw Error(path + ": T0 counts disagree with the header");
+  typename Hierarchy<D>::Arrays a;
+  a.points = c.get_array<typename Hierarchy<D>::Point>(nv0, "T0 points");
+  a.cells = c.get_array<typename Hierarchy<D>::Cell>(ne0, "T0 cells");
+  a.vertex_parents.assign(nv0, {VertexId::invalid(), VertexId::invalid()});
+  a.vertex_level.assign(nv0, 0);
+  a.parent.assign(ne0, ElemId::invalid());
+  a.first_child.assign(ne0, ElemId::invalid());
+  a.num_children.assign(ne0, 0);
+  a.level.assign(ne0, 0);
+  a.kind.assign(ne0, ElemKind::kCoarse);
+  Hierarchy<D> h = Hierarchy<D>::from_arrays(std::move(a), path + ": invalid T0");
+  get_values(path, c, h, head, 0, nv0, f.values, "T0");
+  if (c.left() != 0) throw Error(path + ": trailing bytes in the T0 section");
+
+  // Step 2: the levels, each rebuilt before its values are read (they need the parents).
+  const int last = max_level < 0 ? static_cast<int>(head.levels) : std::min<int>(max_level, head.levels);
+  for (int k = 1; k <= last; ++k) {
+    const std::string name = "level " + std::to_string(k);
+    const Bytes level = r.next(kTagLevel, name, f, k);
+    Cursor lc(path, level.data(), level.size());
+    const auto got_k = lc.get<std::uint32_t>(name.c_str());
+    const auto n = lc.get<std::uint32_t>(name.c_str());
+    const auto m = lc.get<std::uint32_t>(name.c_str());
+    if (got_k != static_cast<std::uint32_t>(k)) throw Error(path + ": " + name + " section is out of order");
+    const std::vector<ElemId> cand = refinement_candidates(h, k);
+    if (n != cand.size())
+      throw Error(path + ": " + name + " has " + std::to_string(n) + " marks for " + std::to_string(cand.size()) +
+                  " candidate elements");
+    if (h.vertex_count() + std::uint64_t(m) > head.nv) throw Error(path + ": " + name + " exceeds the vertex count");
+    const Bytes bits = lc.get_array<std::uint8_t>((std::size_t(n) + 7) / 8, name.c_str());
+    if (n % 8 && (bits.back() >> (n % 8))) throw Error(path + ": " + name + " has marks past its candidates");
+    std::vector<std::uint8_t> marks(n);
+    for (std::size_t i = 0; i < n; ++i) marks[i] = (bits[i / 8] >> (i % 8)) & 1u;
+    const std::size_t before = h.vertex_count();
+    apply_refinement_marks(h, cand, marks);
+    if (h.vertex_count() - before != m || h.element_count() > head.ne)
+      throw Error(path + ": " + name + " does not rebuild the stored counts");
+    get_values(path, lc, h, head, before, h.vertex_count(), f.values, name.c_str());
+    if (lc.left() != 0) throw Error(path + ": trailing bytes in the " + name + " section");
+  }
+  if (max_level < 0 || max_level >= static_cast<int>(head.levels)) {
+    if (h.vertex_count() != head.nv || h.element_count() != head.ne)
+      throw Error(path + ": the rebuilt hierarchy does not have the stored counts");
+    if (max_level < 0 && !r.at_end()) throw Error(path + ": trailing bytes after the last level");
+  }
+  f.hierarchy = std::move(h);
+}
+
+HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t file_size,
+                      const std::uint8_t (&preamble)[kPreambleSize], int max_level) {
+  std::uint32_t dim;
+  std::memcpy(&dim, preamble + 12, 4);
+  if (dim != 2 && dim != 3) throw Error(path + ": dimension " + std::to_string(dim) + " is not 2 or 3");
+  HierarchyFile f;
+  f.version = 2;
+  f.dim = static_cast<int>(dim);
+  f.sections.push_back({"preamble", -1, kPreambleSize, kPreambleSize});
+  SectionReader r(path, in, file_size);
+  const Bytes hb = r.next(kTagHead, "header", f, -1, crc32_of(preamble, kPreambleSize));
+  Cursor c(path, hb.data(), hb.size());
+  HeadV2 head;
+  head.nv = c.get<std::uint64_t>("header");
+  head.ne = c.get<std::uint64_t>("header");
+  head.levels = c.get<std::uint32_t>("header");
+  head.coding = c.get<std::uint32_t>("header");
+  head.bound = c.get<double>("header");
+  for (double& x : f.transform.spacing) x = c.get<double>("header");
+  for (double& x : f.transform.origin) x = c.get<double>("header");
+  for (double& x : f.transform.direction) x = c.get<double>("header");
+  f.value_min = c.get<double>("header");
+  f.value_max = c.get<double>("header");
+  f.rms_error = c.get<double>("header");
+  f.max_error = c.get<double>("header");
+  f.psnr_db = c.get<double>("header");
+  const auto norm = c.get<std::uint32_t>("header");
+  const auto ls = c.get<std::uint32_t>("header");
+  const auto lm = c.get<std::uint32_t>("header");
+  if (head.nv >= VertexId::kInvalidValue) throw Error(path + ": vertex count too large");
+  if (head.ne == 0 || head.ne >= ElemId::kInvalidValue) throw Error(path + ": element count out of range");
+  if (head.levels > kMaxLevels) throw Error(path + ": more than 60 levels");
+  if (head.coding > kCodingExact) throw Error(path + ": unknown value coding " + std::to_string(head.coding));
+  if (head.coding == kCodingQuantized ? !(head.bound > 0 && std::isfinite(head.bound)) : head.bound != 0)
+    throw Error(path + ": value bound does not fit the value coding");
+  for (double e : {f.rms_error, f.max_error})
+    if (!std::isnan(e) && !(e >= 0 && std::isfinite(e))) throw Error(path + ": error figures out of range");
+  if (norm > 2) throw Error(path + ": unknown norm " + std::to_string(norm));
+  if (ls > kMaxSpace) throw Error(path + ": space string longer than 64 bytes");
+  if (lm > kMaxMetadata) throw Error(path + ": metadata longer than 16 MiB");
+  if (c.left() != std::uint64_t(ls) + lm) throw Error(path + ": header section size does not match its strings");
+  f.norm = norm == 1 ? "l2" : norm == 2 ? "h1" : "";
+  const auto sp = c.get_array<char>(ls, "space");
+  f.space.assign(sp.begin(), sp.end());
+  if (!printable(f.space)) throw Error(path + ": space string is not printable ASCII");
+  if (lm > 0) {
+    const auto meta = c.get_array<char>(lm, "metadata");
+    f.metadata = nlohmann::json::parse(meta.begin(), meta.end(), nullptr, /*allow_exceptions=*/false);
+    if (!f.metadata.is_object()) throw Error(path + ": metadata is not a JSON object");
+  }
+  check_info(path, f);
+  f.file_levels = static_cast<int>(head.levels);
+  f.value_bound = head.bound;
+  if (dim == 2)
+    read_v2_body<2>(path, r, head, max_level, f);
+  else
+    read_v2_body<3>(path, r, head, max_level, f);
+  return f;
+}
+
+// T_max_level of a v1 file's hierarchy, with the values at its vertices.
+template <int D>
+void truncate_levels(const std::string& path, HierarchyFile& f, int max_level) {
+  const Hierarchy<D>& h = std::get<Hierarchy<D>>(f.hierarchy);
+  LevelEncoding<D> enc;
+  try {
+    enc = encode_levels(h, max_level);
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
+  }
+  if (!f.values.empty()) {
+    std::vector<double> u(enc.rebuilt.vertex_count());
+    for (std::size_t v = 0; v < u.size(); ++v) u[v] = f.values[enc.to_original[v].value];
+    f.values = std::move(u);
+  }
+  f.hierarchy = std::move(enc.rebuilt);
+}
+
+}  // namespace
+
+HierarchyFile read_hierarchy(const std::string& path, int max_level) {
+  std::uint32_t version = 0;
+  std::uint64_t file_size = 0;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(path + ": cannot open file");
+    in.seekg(0, std::ios::end);
+    const std::streamoff size_signed = in.tellg();
+    if (size_signed < 0) throw Error(path + ": cannot determine the file size");
+    file_size = static_cast<std::uint64_t>(size_signed);
+    in.seekg(0);
+    std::uint8_t pre[kPreambleSize] = {};
+    in.read(reinterpret_cast<char*>(pre), static_cast<std::streamsize>(std::min<std::uint64_t>(file_size, kPreambleSize)));
+    if (file_size < 8 || std::memcmp(pre, kMagic, 8) != 0) throw Error(path + ": not an mlfe hierarchy file (bad magic)");
+    if (file_size < 12) throw Error(path + ": truncated header");
+    std::memcpy(&version, pre + 8, 4);
+    if (version == kVersion2) {
+      if (file_size < kPreambleSize) throw Error(path + ": truncated header");
+      return read_v2(path, in, file_size, pre, max_level);
+    }
+  }
+  if (version != kVersion)
+    throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) + " (this mlfe reads 1 and 2)");
+  HierarchyFile f = read_v1(path);
+  if (max_level >= 0 && max_level < f.file_levels) {
+    if (f.dim == 2)
+      truncate_levels<2>(path, f, max_level);
+    else
+      truncate_levels<3>(path, f, max_level);
+  }
   return f;
 }
 

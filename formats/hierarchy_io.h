@@ -45,7 +45,19 @@
 //
 // Versioning: a reader rejects versions it does not know; any change to the layout above
 // increments the version.
+// ---- Format, version 2 (docs/mlfeh-v2.md is the full specification) ----
+//
+// A 16-byte preamble (magic, u32 version = 2, u32 dim), then sections, each with a 28-byte
+// header (u32 tag, u32 codec, u64 stored size, u64 raw size, u32 CRC-32 of the header's first
+// 24 bytes and the payload): HEAD (frame, value range, coding, error figures, provenance),
+// MESH (T0 and its values), then one LEVL per level k = 1 .. L: the refinement marks over the
+// canonical candidates (formats/hierarchy_levels.h) and the values of the vertices that step
+// adds, as hierarchical-basis codes quantized against the decoded coarser level (or exact
+// f64). Any prefix of complete levels is a valid, coarser file content.
+//
 #pragma once
+#include <cstdint>
+#include <limits>
 #include <string>
 #include <variant>
 #include <vector>
@@ -64,19 +76,46 @@ struct HierarchyFileInfo {
   double value_min = 0.0;    ///< value range of the source data
   double value_max = 0.0;
   nlohmann::json metadata = nlohmann::json::object();  ///< provenance (must be an object)
+  // Error figures of the stored approximation against its source, in data units (v2 only;
+  // NaN: not known). `norm` is the build's norm: "l2", "h1" or "" (not known).
+  std::string norm;
+  double rms_error = std::numeric_limits<double>::quiet_NaN();
+  double max_error = std::numeric_limits<double>::quiet_NaN();
+  double psnr_db = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// One section of a file as read: name ("header", "preamble", "T0", "level k", "arrays"),
+/// bytes in the file (with its section header) and after decompression.
+struct HierarchySection {
+  std::string name;
+  int level = -1;  ///< refinement step of a level section, else −1
+  std::uint64_t file_bytes = 0;
+  std::uint64_t raw_bytes = 0;
 };
 
 struct HierarchyFile : HierarchyFileInfo {
   int dim = 3;  ///< 2 or 3: which alternative `hierarchy` holds
   std::variant<Hierarchy<2>, Hierarchy<3>> hierarchy;
   std::vector<double> values;  ///< u per vertex, or empty when the file stores none
+  int version = 1;             ///< format version of the file read
+  int file_levels = 0;         ///< max element level the file holds (v1: of its hierarchy)
+  /// v2 with quantized values: every value is within this bound of the writer's (0: exact
+  /// values or none).
+  double value_bound = 0;
+  std::vector<HierarchySection> sections;  ///< what was read, in file order
 };
 
 struct HierarchyWriteOptions {
-  bool compress = true;  ///< zstd-compress the array section
+  bool compress = true;  ///< zstd-compress the array section (v1) or the sections (v2)
   int zstd_level = 3;
+  int version = 1;       ///< 1 keeps the ids and exact values; 2 is the compact progressive file
+  /// v2: quantize values so every decoded vertex value is within this bound (data units) of
+  /// the given one; 0 stores them exactly (f64).
+  double max_error = 0;
 };
 
+/// Version 2 throws LevelRebuildError (formats/hierarchy_levels.h) for a hierarchy its
+/// level-by-level rebuild does not reproduce; callers may write version 1 instead.
 /// Writes `h` and its per-vertex `values` (size vertex_count, or empty for none; no NaN) to
 /// `path` atomically, in the format above. The bytes depend only on the arguments (not on the
 /// thread count or the time). Throws mlfe::Error ("<path>: <problem>") on invalid arguments
@@ -89,12 +128,17 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
                      const HierarchyWriteOptions& options = {});
 
-/// Reads and fully validates a hierarchy file. Checks, in order: magic, version, the header
-/// fields, the section sizes against the file size (before allocating anything large), the
-/// CRC, the decompressed size, every array (Hierarchy::from_arrays) and the values (no NaN).
-/// Throws mlfe::Error with a one-line "<path>: <problem>" message on any violation; never
-/// crashes or aborts on a malformed file.
-HierarchyFile read_hierarchy(const std::string& path);
+/// Reads and fully validates a hierarchy file (v1 or v2). Checks, in order: magic, version, the
+/// header fields, the section sizes against the file size (before allocating anything large),
+/// the CRCs, the decompressed sizes, every array (v1: Hierarchy::from_arrays; v2: T0, marks and
+/// counts as the rebuild proceeds) and the values (finite). Throws mlfe::Error with a one-line
+/// "<path>: <problem>" message on any violation; never crashes or aborts on a malformed file.
+///
+/// With max_level ≥ 0, returns T_max_level (elements of level ≤ max_level) and the values at
+/// its vertices, which are those of the level-max_level hierarchical-basis approximation; a v2
+/// reader then reads only the sections up to that level (a file cut after them reads). A v2
+/// file's hierarchy is the writer's up to element and vertex numbering.
+HierarchyFile read_hierarchy(const std::string& path, int max_level = -1);
 
 /// True when `path` starts with the hierarchy file's magic (nothing else is checked; an
 /// unreadable or short file gives false).

@@ -31,8 +31,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         mlfe::read_gltf(path);
       else if (kind == "exr")
         mlfe::read_image(path);
-      else
+      else {
+        // v2 files also decode level prefixes: the reader stops after the sections level k needs.
+        const int level = size > 0 ? data[size - 1] % 4 : 0;
+        try {
+          mlfe::read_hierarchy(path, level);
+        } catch (const mlfe::Error&) {
+        }
         mlfe::read_hierarchy(path);
+      }
     }
   } catch (const mlfe::Error&) {
   }

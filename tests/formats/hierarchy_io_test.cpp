@@ -158,9 +158,9 @@ TEST(HierarchyFileRead, NamesAnUnsupportedVersion) {
   const fs::path p = temp_file("version.mlfeh");
   write_hierarchy<2>(p.string(), h, {}, sample_info());
   Bytes b = read_bytes(p);
-  b[8] = 2;
+  b[8] = 3;
   write_bytes(p, b);
-  EXPECT_EQ(read_error(p), p.string() + ": unsupported hierarchy file version 2 (this mlfe reads 1)");
+  EXPECT_EQ(read_error(p), p.string() + ": unsupported hierarchy file version 3 (this mlfe reads 1 and 2)");
 }
 
 TEST(HierarchyFileRead, RejectsHugeCountsAgainstTheFileSizeBeforeAllocating) {

@@ -1,0 +1,183 @@
+// Level-by-level rebuild and hierarchical-basis quantization of the .mlfeh v2 file (Grosso,
+// Lürig & Ertl 1997; Yserentant 1986; Di & Cappello 2016); see hierarchy_levels.h.
+#include "formats/hierarchy_levels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <unordered_set>
+
+#include "core/check.h"
+#include "core/error.h"
+
+namespace mlfe {
+namespace {
+
+// An element as the sorted ids of its vertices (in the input hierarchy's numbering).
+template <int D>
+struct CellKeyHash {
+  std::size_t operator()(const std::array<std::uint32_t, D + 1>& k) const {
+    std::uint64_t x = 0x9e3779b97f4a7c15ull;
+    for (std::uint32_t v : k) x = (x ^ v) * 0xff51afd7ed558ccdull, x ^= x >> 29;
+    return static_cast<std::size_t>(x);
+  }
+};
+template <int D>
+using CellKeySet = std::unordered_set<std::array<std::uint32_t, D + 1>, CellKeyHash<D>>;
+
+template <int D>
+std::array<std::uint32_t, D + 1> key_of(const typename Hierarchy<D>::Cell& c,
+                                        const std::vector<VertexId>* map) {
+  std::array<std::uint32_t, D + 1> k;
+  for (int i = 0; i <= D; ++i) k[i] = map ? (*map)[c[i].value].value : c[i].value;
+  std::sort(k.begin(), k.end());
+  return k;
+}
+
+}  // namespace
+
+template <int D>
+std::vector<ElemId> refinement_candidates(const Hierarchy<D>& h, int level) {
+  MLFE_CHECK(level >= 1);
+  std::vector<ElemId> out;
+  for (std::uint32_t e = 0; e < h.element_count(); ++e)
+    if (h.level(ElemId(e)) == level - 1 && h.kind(ElemId(e)) != ElemKind::kGreen) out.push_back(ElemId(e));
+  return out;
+}
+
+template <int D>
+void apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
+                            const std::vector<std::uint8_t>& marks) {
+  MLFE_CHECK(candidates.size() == marks.size());
+  std::vector<ElemId> marked;
+  for (std::size_t i = 0; i < candidates.size(); ++i) {
+    if (!marks[i]) continue;
+    const ElemId e = candidates[i];
+    if (h.is_leaf(e))
+      marked.push_back(e);
+    else if (h.kind(h.first_child(e)) == ElemKind::kGreen)
+      marked.push_back(h.first_child(e));
+    // else: already red-refined by an earlier closure; nothing to do.
+  }
+  if (!marked.empty()) h.refine(std::move(marked));
+}
+
+template <int D>
+LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
+  const int levels = max_level < 0 ? h.max_level() : std::min(max_level, h.max_level());
+  LevelEncoding<D> enc;
+
+  // Step 1: T0 with its vertices renumbered densely in id order.
+  std::vector<VertexId> coarse_id(h.vertex_count(), VertexId::invalid());
+  for (std::uint32_t v = 0; v < h.vertex_count(); ++v)
+    if (!h.vertex_parents(VertexId(v))[0].valid()) {
+      coarse_id[v] = VertexId(static_cast<std::uint32_t>(enc.coarse_points.size()));
+      enc.coarse_points.push_back(h.point(VertexId(v)));
+      enc.to_original.push_back(VertexId(v));
+    }
+  for (std::uint32_t e = 0; e < h.coarse_count(); ++e) {
+    typename Hierarchy<D>::Cell c = h.cell(ElemId(e));
+    for (auto& v : c) v = coarse_id[v.value];
+    enc.coarse_cells.push_back(c);
+  }
+  enc.rebuilt = Hierarchy<D>::from_coarse(enc.coarse_points, enc.coarse_cells);
+  enc.vertex_end.push_back(enc.rebuilt.vertex_count());
+
+  // Step 2: the red-refined elements of h, by vertex set.
+  CellKeySet<D> red;
+  for (std::uint32_t e = 0; e < h.element_count(); ++e) {
+    const ElemId id(e);
+    if (!h.is_leaf(id) && h.kind(h.first_child(id)) == ElemKind::kRed)
+      red.insert(key_of<D>(h.cell(id), nullptr));
+  }
+
+  // Step 3: per level, mark the candidates h red-refined, refine, and map the new vertices
+  // to h's through its edge→midpoint map.
+  for (int k = 1; k <= levels; ++k) {
+    const std::vector<ElemId> cand = refinement_candidates(enc.rebuilt, k);
+    std::vector<std::uint8_t> marks(cand.size());
+    for (std::size_t i = 0; i < cand.size(); ++i)
+      marks[i] = red.count(key_of<D>(enc.rebuilt.cell(cand[i]), &enc.to_original)) ? 1 : 0;
+    apply_refinement_marks(enc.rebuilt, cand, marks);
+    for (std::size_t v = enc.to_original.size(); v < enc.rebuilt.vertex_count(); ++v) {
+      const auto& p = enc.rebuilt.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+      const VertexId o = h.edge_midpoints().find(enc.to_original[p[0].value], enc.to_original[p[1].value]);
+      if (!o.valid())
+        throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (step " + std::to_string(k) +
+                                " creates a vertex it does not have)");
+      enc.to_original.push_back(o);
+    }
+    enc.marks.push_back(std::move(marks));
+    enc.vertex_end.push_back(enc.rebuilt.vertex_count());
+  }
+
+  // Step 4: the full rebuild is h (the file format relies on it).
+  if (levels == h.max_level()) {
+    bool same =
+        enc.rebuilt.vertex_count() == h.vertex_count() && enc.rebuilt.element_count() == h.element_count();
+    CellKeySet<D> leaves;
+    for (ElemId e : h.leaves()) leaves.insert(key_of<D>(h.cell(e), nullptr));
+    const std::vector<ElemId> rebuilt_leaves = enc.rebuilt.leaves();
+    same = same && rebuilt_leaves.size() == leaves.size();
+    for (std::size_t i = 0; same && i < rebuilt_leaves.size(); ++i)
+      same = leaves.count(key_of<D>(enc.rebuilt.cell(rebuilt_leaves[i]), &enc.to_original)) > 0;
+    if (!same)
+      throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (the rebuild has " +
+                              std::to_string(enc.rebuilt.vertex_count()) + " vertices and " +
+                              std::to_string(enc.rebuilt.element_count()) + " elements, it has " +
+                              std::to_string(h.vertex_count()) + " and " + std::to_string(h.element_count()) +
+                              ")");
+  }
+  return enc;
+}
+
+template <int D>
+std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vector<double>& u,
+                                          double max_error, std::vector<std::int64_t>* codes) {
+  MLFE_CHECK(u.size() == h.vertex_count());
+  MLFE_CHECK(max_error > 0 && std::isfinite(max_error));
+  const double step = 2 * max_error;
+  constexpr double kMaxCode = 4503599627370496.0;  // 2^52: q·step stays exact enough
+  std::vector<double> d(u.size());
+  if (codes) codes->assign(u.size(), 0);
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+    const double pred = p[0].valid() ? 0.5 * (d[p[0].value] + d[p[1].value]) : 0.0;
+    const double x = std::nearbyint((u[v] - pred) / step);
+    if (!(std::fabs(x) < kMaxCode))
+      throw Error("max error " + std::to_string(max_error) + " is too small for values of magnitude " +
+                  std::to_string(std::fabs(u[v])));
+    auto q = static_cast<std::int64_t>(x);
+    double dv = pred + static_cast<double>(q) * step;
+    if (std::fabs(dv - u[v]) > max_error) {
+      // Rounding of the product or the sum: the neighbouring code is within the bound.
+      const std::int64_t alt = dv > u[v] ? q - 1 : q + 1;
+      const double da = pred + static_cast<double>(alt) * step;
+      if (!(std::fabs(da - u[v]) <= max_error))
+        throw Error("max error " + std::to_string(max_error) +
+                    " is below the rounding of values of magnitude " + std::to_string(std::fabs(u[v])));
+      q = alt;
+      dv = da;
+    }
+    d[v] = dv;
+    if (codes) (*codes)[v] = q;
+  }
+  return d;
+}
+
+template struct LevelEncoding<2>;
+template struct LevelEncoding<3>;
+template std::vector<ElemId> refinement_candidates<2>(const Hierarchy<2>&, int);
+template std::vector<ElemId> refinement_candidates<3>(const Hierarchy<3>&, int);
+template void apply_refinement_marks<2>(Hierarchy<2>&, const std::vector<ElemId>&,
+                                        const std::vector<std::uint8_t>&);
+template void apply_refinement_marks<3>(Hierarchy<3>&, const std::vector<ElemId>&,
+                                        const std::vector<std::uint8_t>&);
+template LevelEncoding<2> encode_levels<2>(const Hierarchy<2>&, int);
+template LevelEncoding<3> encode_levels<3>(const Hierarchy<3>&, int);
+template std::vector<double> quantize_hierarchical<2>(const Hierarchy<2>&, const std::vector<double>&, double,
+                                                      std::vector<std::int64_t>*);
+template std::vector<double> quantize_hierarchical<3>(const Hierarchy<3>&, const std::vector<double>&, double,
+                                                      std::vector<std::int64_t>*);
+
+}  // namespace mlfe

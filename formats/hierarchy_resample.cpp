@@ -1,0 +1,158 @@
+// Leaf mesh → voxel grid by barycentric interpolation (see hierarchy_resample.h).
+#include "formats/hierarchy_resample.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "core/check.h"
+#include "core/error.h"
+
+namespace mlfe {
+
+template <int D>
+std::array<std::int64_t, 3> hierarchy_grid_dims(const Hierarchy<D>& h, const std::array<double, 3>& spacing) {
+  std::array<std::int64_t, 3> dims{1, 1, 1};
+  for (int a = 0; a < D; ++a) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (const auto& p : h.points()) lo = std::min(lo, p[a]), hi = std::max(hi, p[a]);
+    const double n = hi / spacing[a];
+    if (std::fabs(lo) > 1e-6 * spacing[a] || !(n >= 1) || n > 1e7 ||
+        std::fabs(n - std::round(n)) > 1e-6 * std::max(1.0, n))
+      throw Error("the hierarchy's domain is not a voxel grid's box (axis " + std::to_string(a) + ")");
+    dims[a] = static_cast<std::int64_t>(std::round(n)) + 1;
+  }
+  return dims;
+}
+
+template <int D>
+std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<double>& values,
+                                    const std::array<std::int64_t, 3>& dims,
+                                    const std::array<double, 3>& spacing) {
+  MLFE_CHECK(values.size() == h.vertex_count());
+  const std::int64_t nx = dims[0], ny = dims[1], nz = dims[2];
+  std::vector<float> out(static_cast<std::size_t>(nx * ny * nz), std::numeric_limits<float>::quiet_NaN());
+  const std::vector<ElemId> leaves = h.leaves();
+  constexpr double kTol = 1e-9;
+
+  // Step 1: bucket the leaves by the slabs (along the last axis) their boxes touch, in leaf
+  // order, so each slab is filled by one task in a fixed order.
+  constexpr int A = D - 1;  // slab axis
+  const std::int64_t n_slab_axis = dims[A];
+  const std::int64_t slab = std::max<std::int64_t>(1, n_slab_axis / 64);
+  const std::int64_t n_slabs = (n_slab_axis + slab - 1) / slab;
+  std::vector<std::vector<std::uint32_t>> buckets(static_cast<std::size_t>(n_slabs));
+  std::vector<std::array<std::int64_t, 2 * D>> box(leaves.size());
+  for (std::size_t l = 0; l < leaves.size(); ++l) {
+    const auto& c = h.cell(leaves[l]);
+    for (int a = 0; a < D; ++a) {
+      double lo = h.point(c[0])[a], hi = lo;
+      for (int i = 1; i <= D; ++i) lo = std::min(lo, h.point(c[i])[a]), hi = std::max(hi, h.point(c[i])[a]);
+      box[l][a] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(lo / spacing[a] - kTol)));
+      box[l][D + a] =
+          std::min<std::int64_t>(dims[a] - 1, static_cast<std::int64_t>(std::floor(hi / spacing[a] + kTol)));
+    }
+    if (box[l][A] > box[l][D + A]) continue;
+    for (std::int64_t s = box[l][A] / slab; s <= box[l][D + A] / slab; ++s)
+      buckets[s].push_back(static_cast<std::uint32_t>(l));
+  }
+
+  // Step 2: per slab, barycentric coordinates of every grid point in each leaf's box.
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n_slabs),
+                    [&](const tbb::blocked_range<std::int64_t>& r) {
+                      for (std::int64_t s = r.begin(); s < r.end(); ++s) {
+                        const std::int64_t s_lo = s * slab, s_hi = std::min(n_slab_axis - 1, s_lo + slab - 1);
+                        for (std::uint32_t l : buckets[s]) {
+                          const auto& c = h.cell(leaves[l]);
+                          // Barycentric map: λ_{1..D} = M⁻¹ (x − p0), λ_0 = 1 − Σ.
+                          double m[3][3] = {}, inv[3][3] = {};
+                          const auto& p0 = h.point(c[0]);
+                          for (int i = 0; i < D; ++i)
+                            for (int a = 0; a < D; ++a) m[a][i] = h.point(c[i + 1])[a] - p0[a];
+                          double det;
+                          if (D == 2) {
+                            det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+                            inv[0][0] = m[1][1] / det, inv[0][1] = -m[0][1] / det;
+                            inv[1][0] = -m[1][0] / det, inv[1][1] = m[0][0] / det;
+                          } else {
+                            det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                                  m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                                  m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+                            inv[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
+                            inv[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
+                            inv[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
+                            inv[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
+                            inv[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
+                            inv[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
+                            inv[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
+                            inv[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
+                            inv[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
+                          }
+                          double u[D + 1];
+                          for (int i = 0; i <= D; ++i) u[i] = values[c[i].value];
+                          const std::int64_t k_lo = D == 3 ? std::max(box[l][2], s_lo) : 0,
+                                             k_hi = D == 3 ? std::min(box[l][5], s_hi) : 0;
+                          const std::int64_t j_lo = D == 2 ? std::max(box[l][1], s_lo) : box[l][1];
+                          const std::int64_t j_hi = D == 2 ? std::min(box[l][3], s_hi) : box[l][1 + D];
+                          for (std::int64_t k = k_lo; k <= k_hi; ++k)
+                            for (std::int64_t j = j_lo; j <= j_hi; ++j)
+                              for (std::int64_t i = box[l][0]; i <= box[l][D]; ++i) {
+                                float& o = out[static_cast<std::size_t>(i + nx * (j + ny * k))];
+                                if (!std::isnan(o)) continue;
+                                const double x[3] = {i * spacing[0] - p0[0], j * spacing[1] - p0[1],
+                                                     D == 3 ? k * spacing[2] - p0[2] : 0.0};
+                                double lam[D + 1], sum = 0;
+                                bool inside = true;
+                                for (int a = 0; a < D; ++a) {
+                                  double t = 0;
+                                  for (int b = 0; b < D; ++b) t += inv[a][b] * x[b];
+                                  lam[a + 1] = t;
+                                  sum += t;
+                                  inside = inside && t >= -kTol;
+                                }
+                                lam[0] = 1 - sum;
+                                if (!inside || lam[0] < -kTol) continue;
+                                double v = 0;
+                                for (int a = 0; a <= D; ++a) v += lam[a] * u[a];
+                                o = static_cast<float>(v);
+                              }
+                        }
+                      }
+                    });
+  return out;
+}
+
+GridErrors grid_errors(const std::vector<float>& a, const std::vector<float>& b, double range,
+                       const std::string& what) {
+  MLFE_CHECK(a.size() == b.size());
+  double sum = 0, mx = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (std::isnan(a[i]) || std::isnan(b[i])) throw Error(what + ": a grid point has no value (NaN)");
+    const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
+    sum += d * d;
+    mx = std::max(mx, std::fabs(d));
+  }
+  GridErrors e;
+  e.rms = a.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(a.size()));
+  e.max = mx;
+  e.psnr = e.rms > 0 ? 20 * std::log10((range > 0 ? range : 1.0) / e.rms)
+                     : std::numeric_limits<double>::infinity();
+  return e;
+}
+
+template std::array<std::int64_t, 3> hierarchy_grid_dims<2>(const Hierarchy<2>&,
+                                                            const std::array<double, 3>&);
+template std::array<std::int64_t, 3> hierarchy_grid_dims<3>(const Hierarchy<3>&,
+                                                            const std::array<double, 3>&);
+template std::vector<float> resample_to_grid<2>(const Hierarchy<2>&, const std::vector<double>&,
+                                                const std::array<std::int64_t, 3>&,
+                                                const std::array<double, 3>&);
+template std::vector<float> resample_to_grid<3>(const Hierarchy<3>&, const std::vector<double>&,
+                                                const std::array<std::int64_t, 3>&,
+                                                const std::array<double, 3>&);
+
+}  // namespace mlfe

@@ -1,0 +1,107 @@
+// `mlfe build` writes the compact v2 hierarchy file; `mlfe info` reports it; bad files exit 2.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "formats/hierarchy_io.h"
+
+namespace fs = std::filesystem;
+
+namespace mlfe {
+namespace {
+
+const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.nrrd";
+
+struct RunResult {
+  int status;
+  std::string out, err;
+};
+
+std::string scratch() {
+  static const std::string dir = [] {
+    const fs::path d = fs::temp_directory_path() / ("mlfe_hfile_cmd_test_" + std::to_string(::getpid()));
+    fs::create_directories(d);
+    return d.string();
+  }();
+  return dir;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+RunResult run(const std::string& args) {
+  const std::string out = scratch() + "/out.txt", err = scratch() + "/err.txt";
+  const int rc = std::system((std::string(MLFE_BINARY) + " " + args + " > " + out + " 2> " + err).c_str());
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(out), slurp(err)};
+}
+
+TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
+  const std::string h = scratch() + "/skull.mlfeh", rep = scratch() + "/skull.json";
+  const RunResult r = run("build " + kSkull + " -o " + h + " --report " + rep + " --max-error 0.02");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const HierarchyFile f = read_hierarchy(h);
+  EXPECT_EQ(f.version, 2);
+  EXPECT_EQ(f.value_bound, 0.02);
+  const auto report = nlohmann::json::parse(slurp(rep));
+  // The input is 1 MiB of float32; the target is ≤ 1/10 of gzip -9 of it.
+  EXPECT_LT(fs::file_size(h), fs::file_size(kSkull) / 20);
+  EXPECT_EQ(report["file"]["bytes"].get<double>(), static_cast<double>(fs::file_size(h)));
+  EXPECT_EQ(report["file"]["rms_error"].get<double>(), f.rms_error);
+  EXPECT_EQ(report["file"]["max_error"].get<double>(), f.max_error);
+  // The file's figures are on the voxels, the solver's on the quadrature of the trilinear
+  // interpolant: the same order, the quantization adding a little.
+  EXPECT_GT(f.rms_error, 0.5 * report["rms_error"].get<double>());
+  EXPECT_LT(f.rms_error, 3 * report["rms_error"].get<double>());
+  EXPECT_GE(f.max_error, f.rms_error);
+  EXPECT_EQ(f.norm, "l2");
+}
+
+TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
+  const std::string h = scratch() + "/info.mlfeh";
+  ASSERT_EQ(run("build " + kSkull + " -o " + h + " --psnr 50").status, 0);
+  const RunResult r = run("info " + h + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["version"], 2);
+  EXPECT_EQ(j["values"], "quantized");
+  const int levels = j["levels"];
+  ASSERT_GE(levels, 3);
+  EXPECT_EQ(j["per_level"].size(), static_cast<std::size_t>(levels));
+  std::uint64_t bytes = 0;
+  for (const auto& s : j["sections"]) bytes += s["file_bytes"].get<std::uint64_t>();
+  EXPECT_EQ(bytes, fs::file_size(h));
+  EXPECT_EQ(j["sections"].size(), static_cast<std::size_t>(levels) + 2);  // preamble, header, T0, levels 1..L
+  const RunResult t = run("info " + h);
+  EXPECT_NE(t.out.find("level 1"), std::string::npos) << t.out;
+  EXPECT_NE(t.out.find("PSNR"), std::string::npos) << t.out;
+}
+
+TEST(HierarchyFileCommand, ACorruptFileExitsWithStatus2AndNamesIt) {
+  const std::string h = scratch() + "/corrupt.mlfeh";
+  ASSERT_EQ(run("build " + kSkull + " -o " + h + " --max-vertices 3000").status, 0);
+  const std::string good = slurp(h);
+  std::string bytes = good;
+  bytes[bytes.size() / 2] ^= 0x10;
+  std::ofstream(h, std::ios::binary | std::ios::trunc) << bytes;
+  const RunResult r = run("info " + h);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find(h + ": checksum mismatch"), std::string::npos) << r.err;
+  std::ofstream(h, std::ios::binary | std::ios::trunc) << good.substr(0, good.size() - 7);
+  const RunResult t = run("iso " + h + " --iso 3 -o " + scratch() + "/x.ply");
+  EXPECT_EQ(t.status, 2);
+  EXPECT_NE(t.err.find("truncated"), std::string::npos) << t.err;
+  EXPECT_FALSE(fs::exists(scratch() + "/x.ply"));
+}
+
+}  // namespace
+}  // namespace mlfe
