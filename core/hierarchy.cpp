@@ -430,7 +430,9 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
       } else {
         // Two hanging edges (s,p), (s,q) sharing s. The quadrilateral m_sp, p, q, m_sq is cut by
         // a diagonal that the element across the face must choose identically: it starts at
-        // the midpoint of the longer edge, ties broken by global vertex ids.
+        // the midpoint of the longer edge, ties broken by the points' coordinates (not their
+        // ids, so a hierarchy rebuilt with other vertex numbers, as a file reader does, has
+        // the same diagonals).
         const int e0 = edge;
         int e1 = e0 + 1;
         while (!(mask & (1u << e1))) ++e1;
@@ -450,7 +452,7 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
         };
         const double lp = len2(vs, vp), lq = len2(vs, vq);
         const VertexId msp = mid(vs, vp), msq = mid(vs, vq);
-        const bool from_p = lp > lq || (lp == lq && vp < vq);
+        const bool from_p = lp > lq || (lp == lq && points_[vp.value] < points_[vq.value]);
         tris[0] = {vs, msp, msq};
         if (from_p) {
           tris[1] = {msp, vp, vq};
