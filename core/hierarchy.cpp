@@ -17,6 +17,11 @@ namespace mlfe {
 
 namespace {
 
+// The i-th of the contiguous children from `first`; an id from a count or loop position.
+ElemId child(ElemId first, std::size_t i) { return ElemId(static_cast<std::uint32_t>(first.value + i)); }
+ElemId elem_id(std::size_t i) { return ElemId(static_cast<std::uint32_t>(i)); }
+VertexId vertex_id(std::size_t i) { return VertexId(static_cast<std::uint32_t>(i)); }
+
 int popcount(unsigned m) { return __builtin_popcount(m); }
 
 // Faces of a tetrahedron as masks of their three edges; face i is opposite vertex i.
@@ -94,11 +99,11 @@ Hierarchy<D> Hierarchy<D>::box(const Point& lo, const Point& hi) {
 template <int D>
 Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Cell> cells) {
   Hierarchy h;
-  h.points_ = std::move(points);
-  h.vertex_parents_.assign(h.points_.size(), {VertexId::invalid(), VertexId::invalid()});
-  h.vertex_level_.assign(h.points_.size(), 0);
+  h.vx_.points = IndexVector<VertexId, Point>(std::move(points));
+  h.vx_.parents.resize(h.vx_.points.size(), {VertexId::invalid(), VertexId::invalid()});
+  h.vx_.level.resize(h.vx_.points.size(), 0);
   for (const Cell& c : cells) {
-    for (VertexId v : c) MLFE_CHECK(v.valid() && v.value < h.points_.size());
+    for (VertexId v : c) MLFE_CHECK(v.valid() && v.value < h.vx_.points.size());
     h.add_element(c, ElemId::invalid(), 0, ElemKind::kCoarse);
     MLFE_CHECK_MSG(h.cell_measure(c) != 0.0, "degenerate coarse element");
   }
@@ -156,9 +161,9 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
       fail("edge (" + vs(par[0].value) + ", " + vs(par[1].value) + ") is bisected twice");
     h.edge_mid_.insert(par[0], par[1], VertexId(static_cast<std::uint32_t>(v)));
   }
-  h.points_ = std::move(a.points);
-  h.vertex_parents_ = std::move(a.vertex_parents);
-  h.vertex_level_ = std::move(a.vertex_level);
+  h.vx_.points = IndexVector<VertexId, Point>(std::move(a.points));
+  h.vx_.parents = IndexVector<VertexId, std::array<VertexId, 2>>(std::move(a.vertex_parents));
+  h.vx_.level = IndexVector<VertexId, std::uint8_t>(std::move(a.vertex_level));
 
   // ---- elements: local checks ----
   std::size_t coarse = 0;
@@ -201,34 +206,34 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
     for (std::size_t i = 0; i < n; ++i)
       if (a.parent[f.value + i].value != e) fail(el + ": child " + vs(f.value + i) + " names another parent");
   }
-  h.cells_ = std::move(a.cells);
-  h.parent_ = std::move(a.parent);
-  h.first_child_ = std::move(a.first_child);
-  h.num_children_ = std::move(a.num_children);
-  h.level_ = std::move(a.level);
-  h.kind_ = std::move(a.kind);
+  h.el_.cells = IndexVector<ElemId, Cell>(std::move(a.cells));
+  h.el_.parent = IndexVector<ElemId, ElemId>(std::move(a.parent));
+  h.el_.first_child = IndexVector<ElemId, ElemId>(std::move(a.first_child));
+  h.el_.num_children = IndexVector<ElemId, std::uint8_t>(std::move(a.num_children));
+  h.el_.level = IndexVector<ElemId, std::uint8_t>(std::move(a.level));
+  h.el_.kind = IndexVector<ElemId, ElemKind>(std::move(a.kind));
   h.coarse_count_ = coarse;
 
   // ---- elements: geometry of each refinement (links are consistent from here on) ----
-  for (std::size_t e = 0; e < ne; ++e) {
-    const std::string el = "element " + vs(e);
-    const Cell& c = h.cells_[e];
+  for (ElemId e(0); e < h.el_.cells.end_id(); ++e.value) {
+    const std::string el = "element " + vs(e.value);
+    const Cell& c = h.el_.cells[e];
     const double m = h.cell_measure(c);
     if (!(m != 0.0) || !std::isfinite(m)) fail(el + " is degenerate");
-    const std::size_t n = h.num_children_[e];
+    const std::size_t n = h.el_.num_children[e];
     if (n == 0) continue;
-    const std::uint32_t f = h.first_child_[e].value;
+    const ElemId f = h.el_.first_child[e];
     std::array<VertexId, T::kEdges> mid;
     for (int i = 0; i < T::kEdges; ++i)
       mid[i] = h.edge_mid_.find(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]]);
-    if (h.kind_[f] == ElemKind::kRed) {
+    if (h.el_.kind[f] == ElemKind::kRed) {
       if (n != T::kRedChildren) fail(el + " has " + vs(n) + " red children");
       for (int i = 0; i < T::kEdges; ++i)
         if (!mid[i].valid()) fail(el + " is red-refined but edge " + vs(i) + " has no midpoint");
       const auto kids = red_children(c, mid);
       for (std::size_t i = 0; i < n; ++i)
-        if (h.cells_[f + i] != kids[i])
-          fail(el + ": red child " + vs(f + i) + " does not match the red pattern");
+        if (h.el_.cells[child(f, i)] != kids[i])
+          fail(el + ": red child " + vs(f.value + i) + " does not match the red pattern");
       continue;
     }
     // Green: every child vertex is a corner or an edge midpoint of e; the split edges form an
@@ -236,7 +241,7 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
     unsigned mask = 0;
     double sum = 0;
     for (std::size_t i = 0; i < n; ++i) {
-      const Cell& k = h.cells_[f + i];
+      const Cell& k = h.el_.cells[child(f, i)];
       for (VertexId v : k) {
         bool ok = std::find(c.begin(), c.end(), v) != c.end();
         for (int j = 0; j < T::kEdges && !ok; ++j)
@@ -245,7 +250,8 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
             ok = true;
           }
         if (!ok)
-          fail(el + ": green child " + vs(f + i) + " uses vertex " + vs(v.value) + " outside its parent");
+          fail(el + ": green child " + vs(f.value + i) + " uses vertex " + vs(v.value) +
+               " outside its parent");
       }
       sum += std::abs(h.cell_measure(k));
     }
@@ -260,15 +266,15 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
 
 template <int D>
 ElemId Hierarchy<D>::add_element(const Cell& c, ElemId parent, int level, ElemKind kind) {
-  MLFE_CHECK(cells_.size() < ElemId::kInvalidValue);
+  MLFE_CHECK(el_.cells.size() < ElemId::kInvalidValue);
   MLFE_CHECK_MSG(level < 255, "refinement level limit (254) reached");
-  ElemId id(static_cast<std::uint32_t>(cells_.size()));
-  cells_.push_back(c);
-  parent_.push_back(parent);
-  first_child_.push_back(ElemId::invalid());
-  num_children_.push_back(0);
-  level_.push_back(static_cast<std::uint8_t>(level));
-  kind_.push_back(kind);
+  ElemId id(static_cast<std::uint32_t>(el_.cells.size()));
+  el_.cells.push_back(c);
+  el_.parent.push_back(parent);
+  el_.first_child.push_back(ElemId::invalid());
+  el_.num_children.push_back(0);
+  el_.level.push_back(static_cast<std::uint8_t>(level));
+  el_.kind.push_back(kind);
   return id;
 }
 
@@ -276,17 +282,17 @@ template <int D>
 VertexId Hierarchy<D>::midpoint(VertexId a, VertexId b, int level) {
   VertexId m = edge_mid_.find(a, b);
   if (m.valid()) return m;
-  MLFE_CHECK(points_.size() < VertexId::kInvalidValue);
-  m = VertexId(static_cast<std::uint32_t>(points_.size()));
+  MLFE_CHECK(vx_.points.size() < VertexId::kInvalidValue);
+  m = VertexId(static_cast<std::uint32_t>(vx_.points.size()));
   Point p;
-  const Point& pa = points_[a.value];
-  const Point& pb = points_[b.value];
+  const Point& pa = vx_.points[a];
+  const Point& pb = vx_.points[b];
   for (int i = 0; i < D; ++i) p[i] = 0.5 * (pa[i] + pb[i]);
-  points_.push_back(p);
+  vx_.points.push_back(p);
   // Parents in increasing id order so that the vertex data does not depend on which
   // element created the midpoint.
-  vertex_parents_.push_back(a < b ? std::array<VertexId, 2>{a, b} : std::array<VertexId, 2>{b, a});
-  vertex_level_.push_back(static_cast<std::uint8_t>(level));
+  vx_.parents.push_back(a < b ? std::array<VertexId, 2>{a, b} : std::array<VertexId, 2>{b, a});
+  vx_.level.push_back(static_cast<std::uint8_t>(level));
   edge_mid_.insert(a, b, m);
   return m;
 }
@@ -318,21 +324,21 @@ template <int D>
 void Hierarchy<D>::red_refine(ElemId e) {
   using T = SimplexTraits<D>;
   MLFE_CHECK(is_leaf(e) && kind(e) != ElemKind::kGreen);
-  const Cell c = cells_[e.value];
-  const int lvl = level_[e.value] + 1;
+  const Cell c = el_.cells[e];
+  const int lvl = el_.level[e] + 1;
   std::array<VertexId, T::kEdges> m;
   for (int i = 0; i < T::kEdges; ++i) m[i] = midpoint(c[T::kEdgeVerts[i][0]], c[T::kEdgeVerts[i][1]], lvl);
   const std::array<Cell, T::kRedChildren> kids = red_children(c, m);
-  const ElemId first(static_cast<std::uint32_t>(cells_.size()));
+  const ElemId first(static_cast<std::uint32_t>(el_.cells.size()));
   for (const Cell& k : kids) add_element(k, e, lvl, ElemKind::kRed);
-  first_child_[e.value] = first;
-  num_children_[e.value] = static_cast<std::uint8_t>(kids.size());
+  el_.first_child[e] = first;
+  el_.num_children[e] = static_cast<std::uint8_t>(kids.size());
 }
 
 template <int D>
 unsigned Hierarchy<D>::hanging_mask(ElemId e, const std::vector<std::uint8_t>* flagged) const {
   using T = SimplexTraits<D>;
-  const Cell& c = cells_[e.value];
+  const Cell& c = el_.cells[e];
   unsigned mask = 0;
   for (int i = 0; i < T::kEdges; ++i) {
     const VertexId a = c[T::kEdgeVerts[i][0]], b = c[T::kEdgeVerts[i][1]];
@@ -345,8 +351,8 @@ unsigned Hierarchy<D>::hanging_mask(ElemId e, const std::vector<std::uint8_t>* f
 template <int D>
 bool Hierarchy<D>::hanging_on_parent_edges(ElemId e, unsigned mask) const {
   using T = SimplexTraits<D>;
-  const Cell& c = cells_[e.value];
-  const Cell& pc = cells_[parent(e).value];
+  const Cell& c = el_.cells[e];
+  const Cell& pc = el_.cells[parent(e)];
   auto corner = [&](VertexId v) { return std::find(pc.begin(), pc.end(), v) != pc.end(); };
   for (int i = 0; i < T::kEdges; ++i)
     if ((mask & (1u << i)) && !(corner(c[T::kEdgeVerts[i][0]]) && corner(c[T::kEdgeVerts[i][1]])))
@@ -384,7 +390,7 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
   using T = SimplexTraits<D>;
   const int type = green_type(D, mask);
   MLFE_CHECK(type > 0 && kind(e) != ElemKind::kGreen);
-  const Cell& c = cells_[e.value];
+  const Cell& c = el_.cells[e];
   auto mid = [&](VertexId a, VertexId b) {
     VertexId m = edge_mid_.find(a, b);
     MLFE_CHECK(m.valid());
@@ -445,14 +451,14 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
         auto len2 = [&](VertexId x, VertexId y) {
           double l = 0;
           for (int i = 0; i < 3; ++i) {
-            const double t = points_[x.value][i] - points_[y.value][i];
+            const double t = vx_.points[x][i] - vx_.points[y][i];
             l += t * t;
           }
           return l;
         };
         const double lp = len2(vs, vp), lq = len2(vs, vq);
         const VertexId msp = mid(vs, vp), msq = mid(vs, vq);
-        const bool from_p = lp > lq || (lp == lq && points_[vp.value] < points_[vq.value]);
+        const bool from_p = lp > lq || (lp == lq && vx_.points[vp] < vx_.points[vq]);
         tris[0] = {vs, msp, msq};
         if (from_p) {
           tris[1] = {msp, vp, vq};
@@ -480,22 +486,15 @@ void Hierarchy<D>::reserve_for(std::size_t red_count) {
   // Growing the parallel arrays geometrically would copy them about twice per refine() of a
   // big mesh; reserve what the red refinements need (closure adds little beyond).
   using T = SimplexTraits<D>;
-  const std::size_t ne = cells_.size() + T::kRedChildren * red_count;
-  const std::size_t nv = points_.size() + T::kEdges * red_count / 2;
-  if (ne > cells_.capacity()) {
-    const std::size_t cap = std::max(ne, cells_.size() + cells_.size() / 4);
-    cells_.reserve(cap);
-    parent_.reserve(cap);
-    first_child_.reserve(cap);
-    num_children_.reserve(cap);
-    level_.reserve(cap);
-    kind_.reserve(cap);
+  const std::size_t ne = el_.cells.size() + T::kRedChildren * red_count;
+  const std::size_t nv = vx_.points.size() + T::kEdges * red_count / 2;
+  if (ne > el_.cells.capacity()) {
+    const std::size_t cap = std::max(ne, el_.cells.size() + el_.cells.size() / 4);
+    el_.for_each([&](auto& a) { a.reserve(cap); });
   }
-  if (nv > points_.capacity()) {
-    const std::size_t cap = std::max(nv, points_.size() + points_.size() / 4);
-    points_.reserve(cap);
-    vertex_parents_.reserve(cap);
-    vertex_level_.reserve(cap);
+  if (nv > vx_.points.capacity()) {
+    const std::size_t cap = std::max(nv, vx_.points.size() + vx_.points.size() / 4);
+    vx_.for_each([&](auto& a) { a.reserve(cap); });
   }
   edge_mid_.reserve(edge_mid_.size() + T::kEdges * red_count / 2);
 }
@@ -503,23 +502,23 @@ void Hierarchy<D>::reserve_for(std::size_t red_count) {
 template <int D>
 std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t vertex_limit,
                                          std::size_t* vertices_reached) {
-  const std::size_t old_count = cells_.size();
-  const std::size_t old_vertex_count = points_.size();
+  const std::size_t old_count = el_.cells.size();
+  const std::size_t old_vertex_count = vx_.points.size();
   if (vertices_reached) *vertices_reached = old_vertex_count;
   std::vector<ElemId> to_red;
   to_red.reserve(marked.size());
   for (ElemId e : marked) {
-    MLFE_CHECK_MSG(e.valid() && e.value < cells_.size() && is_leaf(e), "refine() needs leaf ids");
+    MLFE_CHECK_MSG(e.valid() && e.value < el_.cells.size() && is_leaf(e), "refine() needs leaf ids");
     to_red.push_back(kind(e) == ElemKind::kGreen ? parent(e) : e);
   }
   std::sort(to_red.begin(), to_red.end());
   to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
-  if (to_red.empty()) return compact(std::vector<std::uint8_t>(cells_.size(), 0), old_count);
+  if (to_red.empty()) return compact(std::vector<std::uint8_t>(el_.cells.size(), 0), old_count);
 
-  std::vector<std::uint8_t> dead(cells_.size(), 0);
+  std::vector<std::uint8_t> dead(el_.cells.size(), 0);
   // dirty: endpoints of edges split in this round; touched: in any round of this call (and the
   // corners of parents whose green children go, which have older midpoints on their edges).
-  std::vector<std::uint8_t> dirty(points_.size(), 0), touched(points_.size(), 0);
+  std::vector<std::uint8_t> dirty(vx_.points.size(), 0), touched(vx_.points.size(), 0);
   std::vector<VertexId> dirty_list;
   std::vector<ElemId> leaf_list = leaves();
   const auto alive_leaf = [&](ElemId e) { return !dead[e.value] && is_leaf(e); };
@@ -538,7 +537,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   const auto add_incidence = [&](ElemId e) {
     const auto idx = static_cast<std::uint32_t>(inc_elem.size());
     inc_elem.push_back(e);
-    const Cell& c = cells_[e.value];
+    const Cell& c = el_.cells[e];
     for (int k = 0; k <= D; ++k) {
       const std::uint32_t slot = idx * (D + 1) + static_cast<std::uint32_t>(k);
       inc_next.push_back(inc_head[c[k].value]);
@@ -554,21 +553,21 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   const auto incident_candidates = [&](const std::vector<VertexId>& verts,
                                        const std::vector<std::uint8_t>& flag, std::size_t below) {
     std::vector<ElemId> out;
-    seen.resize(cells_.size(), 0);
+    seen.resize(el_.cells.size(), 0);
     for (VertexId v : verts) {
       if (v.value >= inc_head.size()) continue;
       for (std::uint32_t s = inc_head[v.value]; s != kNone; s = inc_next[s]) {
         const ElemId e = inc_elem[s / (D + 1)];
         if (e.value >= below || seen[e.value] || !alive_leaf(e)) continue;
         int n = 0;
-        for (VertexId w : cells_[e.value]) n += flag[w.value];
+        for (VertexId w : el_.cells[e]) n += flag[w.value];
         if (n >= 2) {
           seen[e.value] = 1;
           out.push_back(e);
         }
       }
     }
-    if (out.size() > cells_.size() / 32) {
+    if (out.size() > el_.cells.size() / 32) {
       out.clear();
       for (std::size_t i = 0; i < below && i < seen.size(); ++i)
         if (seen[i]) {
@@ -593,10 +592,11 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t k = r.begin(); k != r.end(); ++k)
                           for (std::size_t i = k * kChunk, end = std::min(below, i + kChunk); i < end; ++i) {
-                            if (num_children_[i] != 0 || gone[i]) continue;
+                            const ElemId e = elem_id(i);
+                            if (el_.num_children[e] != 0 || gone[i]) continue;
                             int m = 0;
-                            for (VertexId v : cells_[i]) m += flag[v.value];
-                            if (m >= 2) found[k].push_back(ElemId(static_cast<std::uint32_t>(i)));
+                            for (VertexId v : el_.cells[e]) m += flag[v.value];
+                            if (m >= 2) found[k].push_back(e);
                           }
                       });
     std::vector<ElemId> out;
@@ -618,26 +618,26 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   };
   std::vector<UndoLink> undo_links;
   while (!to_red.empty() || !to_regreen.empty()) {
-    const std::size_t round_first_elem = cells_.size();
-    const std::size_t first_new_vertex = points_.size();
+    const std::size_t round_first_elem = el_.cells.size();
+    const std::size_t first_new_vertex = vx_.points.size();
     reserve_for(to_red.size());
     // A parent whose green children go becomes a leaf again.
     const auto drop_green_children = [&](ElemId e) {
       if (vertex_limit > 0 && e.value < old_count)
-        undo_links.push_back({e, first_child_[e.value], num_children_[e.value]});
+        undo_links.push_back({e, el_.first_child[e], el_.num_children[e]});
       for (int i = 0; i < num_children(e); ++i) {
         const ElemId ch(first_child(e).value + i);
         MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
         dead[ch.value] = 1;
       }
-      num_children_[e.value] = 0;
-      first_child_[e.value] = ElemId::invalid();
+      el_.num_children[e] = 0;
+      el_.first_child[e] = ElemId::invalid();
     };
     for (ElemId e : to_regreen) {
       drop_green_children(e);
       // e is a leaf again, with midpoints from earlier calls on its edges: flag its corners so
       // hanging_mask(e, &touched) probes all of its edges.
-      for (VertexId v : cells_[e.value]) touched[v.value] = 1;
+      for (VertexId v : el_.cells[e]) touched[v.value] = 1;
       if (use_incidence)
         add_incidence(e);
       else
@@ -650,9 +650,9 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
       if (!use_incidence)
         for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
     }
-    dead.resize(cells_.size(), 0);
-    dirty.resize(points_.size(), 0);
-    touched.resize(points_.size(), 0);
+    dead.resize(el_.cells.size(), 0);
+    dirty.resize(vx_.points.size(), 0);
+    touched.resize(vx_.points.size(), 0);
     const auto mark = [&](VertexId v) {
       if (!dirty[v.value]) {
         dirty[v.value] = 1;
@@ -673,18 +673,18 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
         dirty_list.push_back(v);
       }
     };
-    for (std::size_t v = first_new_vertex; v < points_.size(); ++v)
-      for (VertexId p : vertex_parents_[v]) {
+    for (VertexId v = vertex_id(first_new_vertex); v < vx_.points.end_id(); ++v.value)
+      for (VertexId p : vx_.parents[v]) {
         mark(p);
-        for (VertexId g : vertex_parents_[p.value])
+        for (VertexId g : vx_.parents[p])
           if (g.valid()) mark_dirty(g);
       }
 
     // Candidates: every element created in this round, and older leaves with ≥ 2 dirty vertices.
     std::vector<ElemId> candidates;
     if (use_incidence) {
-      inc_head.resize(points_.size(), kNone);
-      for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
+      inc_head.resize(vx_.points.size(), kNone);
+      for (std::size_t e = round_first_elem; e < el_.cells.size(); ++e)
         add_incidence(ElemId(static_cast<std::uint32_t>(e)));
       // Many dirty vertices: their incidence lists would be walked at a cache miss per slot,
       // while one parallel pass over the element arrays streams them (same set, in id order).
@@ -692,7 +692,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
         candidates = leaves_with_two_flagged(dirty, dead, round_first_elem);
       else
         candidates = incident_candidates(dirty_list, dirty, round_first_elem);
-      for (std::size_t e = round_first_elem; e < cells_.size(); ++e)
+      for (std::size_t e = round_first_elem; e < el_.cells.size(); ++e)
         candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {
       // Drop refined and removed elements from the leaf list.
@@ -712,7 +712,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           const ElemId e = candidates[i];
                           if (e.value < round_first_elem) {
                             int n = 0;
-                            for (VertexId v : cells_[e.value]) n += dirty[v.value];
+                            for (VertexId v : el_.cells[e]) n += dirty[v.value];
                             if (n < 2) continue;  // no edge of e was split in this round
                           }
                           const unsigned mask = hanging_mask(e, &touched);
@@ -747,7 +747,7 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
       if (!to_red.empty() || !to_regreen.empty()) {
         // Another round follows: switch to the incidence from here on.
         use_incidence = true;
-        inc_head.assign(points_.size(), kNone);
+        inc_head.assign(vx_.points.size(), kNone);
         inc_elem.reserve(leaf_list.size());
         inc_next.reserve(leaf_list.size() * (D + 1));
         for (ElemId e : leaf_list) add_incidence(e);
@@ -757,24 +757,17 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   }
 
   // Only red refinement adds vertices, so the count is final here.
-  if (vertices_reached) *vertices_reached = points_.size();
-  if (vertex_limit > 0 && points_.size() > vertex_limit) {
+  if (vertices_reached) *vertices_reached = vx_.points.size();
+  if (vertex_limit > 0 && vx_.points.size() > vertex_limit) {
     // Newest first, so an element changed twice ends with its state before the call.
     for (auto u = undo_links.rbegin(); u != undo_links.rend(); ++u) {
-      first_child_[u->e.value] = u->first_child;
-      num_children_[u->e.value] = u->num_children;
+      el_.first_child[u->e] = u->first_child;
+      el_.num_children[u->e] = u->num_children;
     }
-    for (std::size_t v = points_.size(); v-- > old_vertex_count;)
-      edge_mid_.erase(vertex_parents_[v][0], vertex_parents_[v][1]);
-    points_.resize(old_vertex_count);
-    vertex_parents_.resize(old_vertex_count);
-    vertex_level_.resize(old_vertex_count);
-    cells_.resize(old_count);
-    parent_.resize(old_count);
-    first_child_.resize(old_count);
-    num_children_.resize(old_count);
-    level_.resize(old_count);
-    kind_.resize(old_count);
+    for (std::size_t v = vx_.points.size(); v-- > old_vertex_count;)
+      edge_mid_.erase(vx_.parents[vertex_id(v)][0], vx_.parents[vertex_id(v)][1]);
+    vx_.for_each([&](auto& a) { a.resize(old_vertex_count); });
+    el_.for_each([&](auto& a) { a.resize(old_count); });
     return {};
   }
 
@@ -785,18 +778,18 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   std::vector<std::pair<ElemId, unsigned>> closure;
   {
     constexpr std::size_t kChunk = 1 << 15;
-    const std::size_t n = cells_.size(), nchunks = (n + kChunk - 1) / kChunk;
+    const std::size_t n = el_.cells.size(), nchunks = (n + kChunk - 1) / kChunk;
     dead.resize(n, 0);
     std::vector<std::vector<std::pair<ElemId, unsigned>>> found(nchunks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nchunks, 1),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t k = r.begin(); k != r.end(); ++k)
                           for (std::size_t i = k * kChunk, end = std::min(n, i + kChunk); i < end; ++i) {
-                            if (num_children_[i] != 0 || dead[i]) continue;
+                            const ElemId e = elem_id(i);
+                            if (el_.num_children[e] != 0 || dead[i]) continue;
                             int m = 0;
-                            for (VertexId v : cells_[i]) m += touched[v.value];
+                            for (VertexId v : el_.cells[e]) m += touched[v.value];
                             if (m < 2) continue;
-                            const ElemId e(static_cast<std::uint32_t>(i));
                             if (const unsigned mask = hanging_mask(e, &touched))
                               found[k].emplace_back(e, mask);
                           }
@@ -807,18 +800,15 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   // over the child counts of the ones before it; the children themselves (hash look-ups and
   // orientation tests) are then computed in parallel into their ranges.
   if (!closure.empty()) {
-    const std::size_t first = cells_.size();
+    const std::size_t first = el_.cells.size();
     std::vector<std::size_t> offset(closure.size() + 1, 0);
     for (std::size_t i = 0; i < closure.size(); ++i)
       offset[i + 1] = offset[i] + kGreenChildren[std::max(0, green_type(D, closure[i].second))];
     const std::size_t ne = first + offset.back();
     MLFE_CHECK(ne < ElemId::kInvalidValue);
-    cells_.resize(ne);
-    parent_.resize(ne);
-    first_child_.resize(ne, ElemId::invalid());
-    num_children_.resize(ne, 0);
-    level_.resize(ne);
-    kind_.resize(ne, ElemKind::kGreen);
+    // New entries: no children (invalid first child, count 0), green; the rest is set below.
+    el_.for_each([&](auto& a) { a.resize(ne); });
+    std::fill(el_.kind.begin() + static_cast<std::ptrdiff_t>(first), el_.kind.end(), ElemKind::kGreen);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, closure.size(), 1024),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         std::array<Cell, 4> kids;
@@ -829,19 +819,20 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           MLFE_CHECK_MSG(!any_edge_split(kids, n, touched), "green child with a split edge");
                           const std::size_t at = first + offset[i];
                           MLFE_CHECK(at + n == first + offset[i + 1]);
-                          const int lvl = level_[e.value] + 1;
+                          const int lvl = el_.level[e] + 1;
                           MLFE_CHECK_MSG(lvl < 255, "refinement level limit (254) reached");
                           for (int k = 0; k < n; ++k) {
-                            cells_[at + k] = kids[k];
-                            parent_[at + k] = e;
-                            level_[at + k] = static_cast<std::uint8_t>(lvl);
+                            const ElemId kid = elem_id(at + k);
+                            el_.cells[kid] = kids[k];
+                            el_.parent[kid] = e;
+                            el_.level[kid] = static_cast<std::uint8_t>(lvl);
                           }
-                          first_child_[e.value] = ElemId(static_cast<std::uint32_t>(at));
-                          num_children_[e.value] = static_cast<std::uint8_t>(n);
+                          el_.first_child[e] = elem_id(at);
+                          el_.num_children[e] = static_cast<std::uint8_t>(n);
                         }
                       });
   }
-  dead.resize(cells_.size(), 0);
+  dead.resize(el_.cells.size(), 0);
   return compact(dead, old_count);
 }
 
@@ -852,57 +843,48 @@ void Hierarchy<D>::refine_uniform() {
 
 template <int D>
 std::vector<ElemId> Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead, std::size_t old_count) {
-  MLFE_CHECK(dead.size() == cells_.size());
-  std::vector<std::uint32_t> new_id(cells_.size(), ElemId::kInvalidValue);
+  MLFE_CHECK(dead.size() == el_.cells.size());
+  std::vector<std::uint32_t> new_id(el_.cells.size(), ElemId::kInvalidValue);
   std::uint32_t n = 0;
-  for (std::size_t i = 0; i < cells_.size(); ++i)
+  for (std::size_t i = 0; i < el_.cells.size(); ++i)
     if (!dead[i]) new_id[i] = n++;
   std::vector<ElemId> old_to_new(old_count);
   for (std::size_t i = 0; i < old_count; ++i) old_to_new[i] = ElemId(new_id[i]);
-  if (n == cells_.size()) return old_to_new;
+  if (n == el_.cells.size()) return old_to_new;
   auto remap = [&](ElemId e) { return e.valid() ? ElemId(new_id[e.value]) : e; };
-  for (std::size_t i = 0; i < cells_.size(); ++i) {
-    if (dead[i]) continue;
-    const std::size_t j = new_id[i];
-    cells_[j] = cells_[i];
-    parent_[j] = remap(parent_[i]);
-    first_child_[j] = remap(first_child_[i]);
-    MLFE_CHECK(!parent_[i].valid() || !dead[parent_[i].value]);
-    num_children_[j] = num_children_[i];
-    level_[j] = level_[i];
-    kind_[j] = kind_[i];
+  for (ElemId i(0); i < el_.cells.end_id(); ++i.value) {
+    if (dead[i.value]) continue;
+    const ElemId j(new_id[i.value]);
+    MLFE_CHECK(!el_.parent[i].valid() || !dead[el_.parent[i].value]);
+    el_.for_each([&](auto& a) { a[j] = a[i]; });
+    el_.parent[j] = remap(el_.parent[j]);
+    el_.first_child[j] = remap(el_.first_child[j]);
   }
-  cells_.resize(n);
-  parent_.resize(n);
-  first_child_.resize(n);
-  num_children_.resize(n);
-  level_.resize(n);
-  kind_.resize(n);
+  el_.for_each([&](auto& a) { a.resize(n); });
   return old_to_new;
 }
 
 template <int D>
 int Hierarchy<D>::max_level() const {
   int m = 0;
-  for (auto l : level_) m = std::max<int>(m, l);
+  for (auto l : el_.level) m = std::max<int>(m, l);
   return m;
 }
 
 template <int D>
 std::vector<ElemId> Hierarchy<D>::leaves() const {
   std::vector<ElemId> out;
-  out.reserve(cells_.size());
-  for (std::size_t i = 0; i < cells_.size(); ++i)
-    if (num_children_[i] == 0) out.push_back(ElemId(static_cast<std::uint32_t>(i)));
+  out.reserve(el_.cells.size());
+  for (ElemId e(0); e < el_.cells.end_id(); ++e.value)
+    if (el_.num_children[e] == 0) out.push_back(e);
   return out;
 }
 
 template <int D>
 std::vector<ElemId> Hierarchy<D>::level_elements(int k) const {
   std::vector<ElemId> out;
-  for (std::size_t i = 0; i < cells_.size(); ++i)
-    if (level_[i] == k || (level_[i] < k && num_children_[i] == 0))
-      out.push_back(ElemId(static_cast<std::uint32_t>(i)));
+  for (ElemId e(0); e < el_.cells.end_id(); ++e.value)
+    if (el_.level[e] == k || (el_.level[e] < k && el_.num_children[e] == 0)) out.push_back(e);
   return out;
 }
 
@@ -917,7 +899,7 @@ std::vector<std::array<std::int32_t, D + 1>> Hierarchy<D>::face_neighbors(
   std::vector<FaceRec> faces;
   faces.reserve(elems.size() * (D + 1));
   for (std::size_t i = 0; i < elems.size(); ++i) {
-    const Cell& c = cells_[elems[i].value];
+    const Cell& c = el_.cells[elems[i]];
     for (int f = 0; f <= D; ++f) {
       FaceRec r;
       int n = 0;
@@ -947,13 +929,13 @@ std::vector<std::array<std::int32_t, D + 1>> Hierarchy<D>::face_neighbors(
 template <int D>
 double Hierarchy<D>::cell_measure(const Cell& c) const {
   std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = points_[c[i].value];
+  for (int i = 0; i <= D; ++i) p[i] = vx_.points[c[i]];
   return det_measure<D>(p);
 }
 
 template <int D>
 double Hierarchy<D>::signed_measure(ElemId e) const {
-  return cell_measure(cells_[e.value]);
+  return cell_measure(el_.cells[e]);
 }
 
 template <int D>
@@ -963,10 +945,11 @@ double Hierarchy<D>::measure(ElemId e) const {
 
 template <int D>
 std::size_t Hierarchy<D>::memory_bytes() const {
-  return points_.capacity() * sizeof(Point) + vertex_parents_.capacity() * sizeof(vertex_parents_[0]) +
-         vertex_level_.capacity() + cells_.capacity() * sizeof(Cell) + parent_.capacity() * 4 +
-         first_child_.capacity() * 4 + num_children_.capacity() + level_.capacity() + kind_.capacity() +
-         edge_mid_.memory_bytes();
+  std::size_t bytes = edge_mid_.memory_bytes();
+  const auto add = [&](const auto& a) { bytes += a.capacity() * sizeof(*a.begin()); };
+  vx_.for_each(add);
+  el_.for_each(add);
+  return bytes;
 }
 
 template class Hierarchy<2>;

@@ -131,35 +131,35 @@ class Hierarchy {
   void refine_uniform();
 
   // ---- vertices ----
-  std::size_t vertex_count() const { return points_.size(); }
-  const Point& point(VertexId v) const { return points_[v.value]; }
-  const std::vector<Point>& points() const { return points_; }
+  std::size_t vertex_count() const { return vx_.points.size(); }
+  const Point& point(VertexId v) const { return vx_.points[v]; }
+  const std::vector<Point>& points() const { return vx_.points.vector(); }
   /// The endpoints of the edge whose midpoint v is; both invalid for vertices of T0.
-  const std::array<VertexId, 2>& vertex_parents(VertexId v) const { return vertex_parents_[v.value]; }
+  const std::array<VertexId, 2>& vertex_parents(VertexId v) const { return vx_.parents[v]; }
   /// 0 for vertices of T0, else 1 + the level of the element whose edge v bisects.
-  int vertex_level(VertexId v) const { return vertex_level_[v.value]; }
+  int vertex_level(VertexId v) const { return vx_.level[v]; }
   const EdgeMap& edge_midpoints() const { return edge_mid_; }
   /// Whole per-vertex arrays (see vertex_parents(v), vertex_level(v)), for serialization.
-  const std::vector<std::array<VertexId, 2>>& vertex_parents_array() const { return vertex_parents_; }
-  const std::vector<std::uint8_t>& vertex_level_array() const { return vertex_level_; }
+  const std::vector<std::array<VertexId, 2>>& vertex_parents_array() const { return vx_.parents.vector(); }
+  const std::vector<std::uint8_t>& vertex_level_array() const { return vx_.level.vector(); }
 
   // ---- elements ----
-  std::size_t element_count() const { return cells_.size(); }
+  std::size_t element_count() const { return el_.cells.size(); }
   std::size_t coarse_count() const { return coarse_count_; }
-  const Cell& cell(ElemId e) const { return cells_[e.value]; }
-  ElemId parent(ElemId e) const { return parent_[e.value]; }
-  ElemId first_child(ElemId e) const { return first_child_[e.value]; }
-  int num_children(ElemId e) const { return num_children_[e.value]; }
-  int level(ElemId e) const { return level_[e.value]; }
-  ElemKind kind(ElemId e) const { return kind_[e.value]; }
-  bool is_leaf(ElemId e) const { return num_children_[e.value] == 0; }
+  const Cell& cell(ElemId e) const { return el_.cells[e]; }
+  ElemId parent(ElemId e) const { return el_.parent[e]; }
+  ElemId first_child(ElemId e) const { return el_.first_child[e]; }
+  int num_children(ElemId e) const { return el_.num_children[e]; }
+  int level(ElemId e) const { return el_.level[e]; }
+  ElemKind kind(ElemId e) const { return el_.kind[e]; }
+  bool is_leaf(ElemId e) const { return el_.num_children[e] == 0; }
   /// Whole per-element arrays, indexed by ElemId, for serialization and bulk readers.
-  const std::vector<Cell>& cells() const { return cells_; }
-  const std::vector<ElemId>& parent_array() const { return parent_; }
-  const std::vector<ElemId>& first_child_array() const { return first_child_; }
-  const std::vector<std::uint8_t>& num_children_array() const { return num_children_; }
-  const std::vector<std::uint8_t>& level_array() const { return level_; }
-  const std::vector<ElemKind>& kind_array() const { return kind_; }
+  const std::vector<Cell>& cells() const { return el_.cells.vector(); }
+  const std::vector<ElemId>& parent_array() const { return el_.parent.vector(); }
+  const std::vector<ElemId>& first_child_array() const { return el_.first_child.vector(); }
+  const std::vector<std::uint8_t>& num_children_array() const { return el_.num_children.vector(); }
+  const std::vector<std::uint8_t>& level_array() const { return el_.level.vector(); }
+  const std::vector<ElemKind>& kind_array() const { return el_.kind.vector(); }
   int max_level() const;
 
   /// Leaf elements in id order: the finest, conforming triangulation Tj.
@@ -209,16 +209,39 @@ class Hierarchy {
   bool hanging_on_parent_edges(ElemId e, unsigned mask) const;
   std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);
 
-  std::vector<Point> points_;
-  std::vector<std::array<VertexId, 2>> vertex_parents_;
-  std::vector<std::uint8_t> vertex_level_;
-
-  std::vector<Cell> cells_;
-  std::vector<ElemId> parent_;
-  std::vector<ElemId> first_child_;
-  std::vector<std::uint8_t> num_children_;
-  std::vector<std::uint8_t> level_;
-  std::vector<ElemKind> kind_;
+  // The parallel arrays, declared once: whatever applies to all of them (sizing, reserving,
+  // truncating, moving an entry, memory) goes through for_each.
+  struct VertexArrays {
+    IndexVector<VertexId, Point> points;
+    IndexVector<VertexId, std::array<VertexId, 2>> parents;  // the bisected edge's endpoints
+    IndexVector<VertexId, std::uint8_t> level;
+    template <class F>
+    void for_each(F&& f) {
+      f(points), f(parents), f(level);
+    }
+    template <class F>
+    void for_each(F&& f) const {
+      f(points), f(parents), f(level);
+    }
+  };
+  struct ElementArrays {
+    IndexVector<ElemId, Cell> cells;
+    IndexVector<ElemId, ElemId> parent;
+    IndexVector<ElemId, ElemId> first_child;  // children are contiguous
+    IndexVector<ElemId, std::uint8_t> num_children;
+    IndexVector<ElemId, std::uint8_t> level;
+    IndexVector<ElemId, ElemKind> kind;
+    template <class F>
+    void for_each(F&& f) {
+      f(cells), f(parent), f(first_child), f(num_children), f(level), f(kind);
+    }
+    template <class F>
+    void for_each(F&& f) const {
+      f(cells), f(parent), f(first_child), f(num_children), f(level), f(kind);
+    }
+  };
+  VertexArrays vx_;
+  ElementArrays el_;
   std::size_t coarse_count_ = 0;
 
   EdgeMap edge_mid_;
