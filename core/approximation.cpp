@@ -18,6 +18,7 @@
 #include "core/check.h"
 #include "core/fe_assembly.h"
 #include "core/hierarchical_basis.h"
+#include "core/marking.h"
 #include "core/p1_element.h"
 #include "core/surface_estimator.h"
 
@@ -71,100 +72,6 @@ Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& 
   st.cg_iterations = r.iterations;
   st.cg_residual = r.relative_residual;
   return x;
-}
-
-// The iso-aware rule: for an element that an iso-surface crosses (in f or in u), the distance
-// between the surfaces of f and u is about |f - u| / |∇u|; refine while that exceeds the
-// tolerance, or while u misses a crossing that f has, until elements are voxel-sized.
-template <int D>
-bool surface_needs_refinement(const Hierarchy<D>& h, ElemId e, const ElementIntegrals<D>& in, const Vector& u,
-                              double density, const Field& f, const ApproximationOptions& opts) {
-  const double size = std::pow(h.measure(e) * (D == 2 ? 2.0 : 6.0), 1.0 / D);
-  if (size <= f.resolution()) return false;
-  const auto& c = h.cell(e);
-  double umin = 1e300, umax = -1e300;
-  for (VertexId v : c) {
-    umin = std::min(umin, u[v.value]);
-    umax = std::max(umax, u[v.value]);
-  }
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(c[i]);
-  const P1Element<D> el(p);
-  double g2 = 0;
-  for (int k = 0; k < D; ++k) {
-    double g = 0;
-    for (int i = 0; i <= D; ++i) g += u[c[i].value] * el.grad[i][k];
-    g2 += g * g;
-  }
-  const double rms = std::sqrt(density);
-  for (double iso : opts.iso_values) {
-    const bool f_cuts = in.fmin <= iso && iso <= in.fmax;
-    const bool u_cuts = umin <= iso && iso <= umax;
-    if (!f_cuts && !u_cuts) continue;
-    if (f_cuts && !u_cuts) return true;  // u misses this piece of the surface
-    if (rms > opts.surface_tolerance * f.resolution() * std::sqrt(g2)) return true;
-  }
-  return false;
-}
-
-template <int D>
-std::array<std::array<double, D>, D + 1> corner_points(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
-  return p;
-}
-
-// (D!·|T|)^(1/D): the side of the cube D! copies of T would fill; a Kuhn simplex of a voxel has
-// size one voxel.
-template <int D>
-double element_size(const Hierarchy<D>& h, ElemId e) {
-  return D == 2 ? std::sqrt(h.measure(e) * 2.0) : std::cbrt(h.measure(e) * 6.0);
-}
-
-// Whether the data can have one of the iso-surfaces in e (range_in_box is conservative).
-template <int D>
-bool data_brackets(const Hierarchy<D>& h, ElemId e, const Field& f, const std::vector<double>& isos) {
-  std::array<double, 3> lo{0, 0, 0}, hi{0, 0, 0};
-  for (int a = 0; a < D; ++a) lo[a] = hi[a] = h.point(h.cell(e)[0])[a];
-  for (VertexId v : h.cell(e))
-    for (int a = 0; a < D; ++a) {
-      lo[a] = std::min(lo[a], h.point(v)[a]);
-      hi[a] = std::max(hi[a], h.point(v)[a]);
-    }
-  const auto r = f.range_in_box(lo, hi);
-  for (double iso : isos)
-    if (r[0] <= iso && iso <= r[1]) return true;
-  return false;
-}
-
-// The surface-driven rule for leaf e and the linear function with nodal values `nodal` (f's
-// interpolant while the mesh is built, u after a solve). Surfaces farther apart than the
-// tolerance are refined down to elements of two voxels: below that, noise and voxel-scale
-// detail would refine whole surfaces to the grid, and snapping puts the asset's vertices on
-// the data's surface anyway. A piece of surface that the linear function misses altogether is
-// refined down to one voxel, so small parts survive.
-template <int D, typename Values>
-bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, const Field& f,
-                      const ApproximationOptions& opts, double tolerance_voxels, bool* candidate = nullptr) {
-  const double size = element_size(h, e), voxel = f.voxel_size();
-  if (h.level(e) >= opts.max_level || size <= voxel) return false;
-  std::array<double, D + 1> c;
-  double cmin = 1e300, cmax = -1e300;
-  for (int i = 0; i <= D; ++i) {
-    c[i] = nodal[h.cell(e)[i].value];
-    cmin = std::min(cmin, c[i]);
-    cmax = std::max(cmax, c[i]);
-  }
-  bool linear_cuts = false;
-  for (double iso : opts.iso_values) linear_cuts |= cmin <= iso && iso <= cmax;
-  if (!linear_cuts && !data_brackets(h, e, f, opts.iso_values)) return false;
-  if (candidate) *candidate = true;
-  // Samples one voxel apart along the axes of a Kuhn simplex (its longest edge is the cube's
-  // diagonal, √3 voxels per voxel): a feature of two voxels cannot fall between them.
-  const bool coarse = size > 2.0 * voxel;
-  const SurfaceGap gap = surface_gap<D>(corner_points(h, e), c, f, opts.iso_values, tolerance_voxels * voxel,
-                                        std::sqrt(double(D)) * voxel, coarse);
-  return gap == SurfaceGap::kMissing || (gap == SurfaceGap::kDistant && coarse);
 }
 
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
@@ -408,58 +315,17 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     st.rms_percent = 100.0 * st.rms_error / value_span;
     st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
 
-    // Marking.
-    // Marks: with iso-values, elements the surfaces need come first (an asset's accuracy is
-    // its surfaces'), then the worst absolute errors (most error removed per new vertex).
-    struct Mark {
-      bool surface;
-      double e;
-      ElemId id;
-    };
-    std::vector<Mark> marked;
-    std::size_t surface_marks = 0;
-    std::string stop;
+    // Mark.
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
-    {
-      // Once the RMS target is met only the iso-aware rule (if any) still marks.
-      const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
-      const double thr2 = opts.threshold * opts.threshold;
-      // Decided in parallel (bit 0: mark, bit 1: surface), collected in leaf order.
-      std::vector<std::uint8_t> decision(leaves.size(), 0);
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 4096),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                            const ElemId e = leaves[i];
-                            if (h.level(e) >= opts.max_level) continue;
-                            const double density = err[i] / h.measure(e);  // mean square error on T
-                            bool mark = false;
-                            if (opts.threshold > 0) mark |= density > thr2;
-                            // Equidistribution: if no element's mean square error exceeds tau²,
-                            // Σ E ≤ tau² |Ω|.
-                            if (tau2 > 0) mark |= density > tau2;
-                            const bool surface =
-                                !opts.iso_values.empty() &&
-                                // u smooths the noise that f's interpolant follows: it is held
-                                // to twice the tolerance (snapping moves vertices the rest).
-                                (surface_driven
-                                     ? opts.check_surfaces_against_u &&
-                                           surface_gap_mark(h, e, x, f, opts, 2 * opts.surface_tolerance)
-                                     : surface_needs_refinement(h, e, cache[e.value], x, density, f, opts));
-                            decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
-                          }
-                        });
-      for (std::size_t i = 0; i < leaves.size(); ++i) {
-        if (!decision[i]) continue;
-        const bool surface = decision[i] & 2;
-        marked.push_back({surface, err[i], leaves[i]});
-        surface_marks += surface;
-      }
-      if (marked.empty())
-        stop = target_met           ? "target RMS error reached"
-               : surface_driven     ? (surface_stop.empty() ? "surfaces within tolerance" : surface_stop)
-               : opts.threshold > 0 ? "no element above the threshold"
-                                    : "maximum level reached";
-    }
+    std::size_t surface_marks = 0;
+    std::vector<Mark> marked =
+        mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks);
+    std::string stop;
+    if (marked.empty())
+      stop = target_met           ? "target RMS error reached"
+             : surface_driven     ? (surface_stop.empty() ? "surfaces within tolerance" : surface_stop)
+             : opts.threshold > 0 ? "no element above the threshold"
+                                  : "maximum level reached";
     if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
     if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
     if (stop.empty() && !surface_stop.empty()) stop = surface_stop;  // a budget ended the surface passes
@@ -503,27 +369,12 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
         limit ? std::min(marked.size(), std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) /
                                                                                           vertices_per_mark)))
               : marked.size();
-    // A strict total order (ties by id), so selecting the prefix first and then sorting it gives
-    // the same prefix as a full sort, in O(n + cap log cap) instead of O(n log cap).
-    const auto worse_first = [](const Mark& a, const Mark& b) {
-      if (a.surface != b.surface) return a.surface;
-      return a.e != b.e ? a.e > b.e : a.id < b.id;
-    };
-    if (cap < marked.size())
-      std::nth_element(marked.begin(), marked.begin() + cap, marked.end(), worse_first);
-    std::sort(marked.begin(), marked.begin() + cap, worse_first);
-    std::size_t count = cap;
-    if (opts.target_rms > 0 && opts.threshold <= 0 && !target_met) {
-      // Bulk criterion (Dörfler-like): refine only the worst elements that together carry
-      // 60% of the excess error Σ E − τ²|Ω|, so the last step does not overshoot the target
-      // by a whole level (noisy scans would otherwise double their vertex count for nothing).
-      const double excess = total - opts.target_rms * opts.target_rms * out.domain_measure;
-      double acc = 0;
-      std::size_t k = 0;
-      for (; k < std::min(surface_marks, cap); ++k) acc += marked[k].e;  // surfaces always go
-      while (k < cap && acc < 0.6 * excess) acc += marked[k++].e;
-      count = std::max<std::size_t>(k, 1);
-    }
+    // Rank and select: the worst `cap` first; with an RMS target, only as many as carry 60 %
+    // of the excess error.
+    const double excess = opts.target_rms > 0 && opts.threshold <= 0 && !target_met
+                              ? total - opts.target_rms * opts.target_rms * out.domain_measure
+                              : -1.0;
+    std::size_t count = rank_and_select(marked, cap, surface_marks, excess);
     // Within half a percent of the budget, further attempts would mostly be undone.
     if (limit && room < std::max<std::size_t>(8, limit / 200)) count = 0;
     std::vector<ElemId> sel(count);
