@@ -97,7 +97,16 @@ class TetRenderMesh {
   int level() const { return level_; }
   const Hierarchy<3>& hierarchy() const { return h_; }
   ElemId element(std::uint32_t r) const { return elems_[r]; }
-  const std::array<std::int32_t, 4>& neighbors(std::uint32_t r) const { return nb_[r]; }
+  /// Face neighbours of element r (render indices; −1 on the boundary), face f opposite local
+  /// vertex f.
+  std::array<std::int32_t, 4> neighbors(std::uint32_t r) const {
+    std::array<std::int32_t, 4> nb;
+    for (int f = 0; f < 4; ++f) {
+      const std::uint32_t x = records_[r].next[f];
+      nb[f] = x == kNoNeighbor ? -1 : std::int32_t(x >> 2);
+    }
+    return nb;
+  }
   double value(VertexId v) const { return (*u_)[v.value]; }
   const std::array<double, 3>& box_lo() const { return lo_box_; }
   const std::array<double, 3>& box_hi() const { return hi_box_; }
@@ -119,16 +128,20 @@ class TetRenderMesh {
   /// 32 steps or at the mesh boundary.
   std::uint32_t walk_to(std::uint32_t start, const std::array<double, 3>& p,
                         const std::array<double, 3>& d) const;
-  /// What a ray step needs of element r, precomputed once: the outward face planes
-  /// n_f · x = h_f (face f opposite local vertex f; normals rounded to float, offsets in double
-  /// through the face's lowest-id vertex, so the two elements sharing a face hold the same
-  /// plane with opposite signs) and u(x) = b + g · x.
+  /// What a ray step needs of element r, precomputed once, in one record so that a step reads
+  /// one place: the outward face planes n_f · x = h_f (face f opposite local vertex f; normals
+  /// rounded to float, offsets in double through the face's lowest-id vertex, so the two
+  /// elements sharing a face hold the same plane with opposite signs), u(x) = b + g · x, and
+  /// the face neighbours, each as 4 × render index + the index of the shared face in the
+  /// neighbour (kNoNeighbor on the boundary), so a step needs no search for its entry face.
   struct StepRecord {
-    float n[4][3];
     double h[4];
-    float g[3];
     double b;
+    float n[4][3];
+    float g[3];
+    std::uint32_t next[4];
   };
+  static constexpr std::uint32_t kNoNeighbor = 0xFFFFFFFFu;
   const StepRecord& record(std::uint32_t r) const { return records_[r]; }
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
@@ -139,7 +152,6 @@ class TetRenderMesh {
   std::vector<double> coarse_values_;
   const std::vector<double>* u_;
   std::vector<ElemId> elems_;
-  std::vector<std::array<std::int32_t, 4>> nb_;
   std::vector<StepRecord> records_;
   std::vector<std::uint32_t> render_of_;
   std::vector<float> lo_, hi_;
