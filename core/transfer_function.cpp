@@ -18,11 +18,14 @@ constexpr double kSqrtPi = 1.7724538509055160273;
 constexpr double kMaxOpacity = 1.0 - 1e-6;
 
 // m[n] = ∫₀¹ uⁿ e^{−a u} du for the even n = 0..8 (odd entries are not needed and may be left
-// unset). The upward recurrence loses digits for small a (it divides by a), the power series for
-// large a (alternating terms of size e^a), so each is used where it is stable; the series shares
-// its terms (−a)^j / j! between the five moments.
+// unset). The upward recurrence loses digits for small a (it divides by a: the error of m[n]
+// grows like n! / aⁿ), the power series for large a (alternating terms of size e^a), so each is
+// used where it is stable; the series shares its terms (−a)^j / j! between the five moments.
+// The recurrence from a = 0.25 on: its worst loss (m[8], ~3e-7 relative at a = 0.25) is
+// weighted by k⁴ / 384 ≤ 2.6e-7 in mean_transmittance, so ψ keeps ~1e-13; the series below
+// that converges in ≤ 12 terms instead of up to 40 below a = 4.
 void exp_moments(double a, double m[9]) {
-  if (a < 4.0) {
+  if (a < 0.25) {
     static const auto inv = [] {
       std::array<double, 128> r{};
       for (std::size_t i = 1; i < r.size(); ++i) r[i] = 1.0 / double(i);

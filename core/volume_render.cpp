@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 #include "core/check.h"
 #include "core/field.h"
@@ -99,11 +100,33 @@ struct TetPlanes {
   }
 };
 
-// The same rule on a precomputed record (float normals, widened exactly to double).
-int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in, int entry,
-                double& t_out) {
-  const auto normal = [&](int i) { return Vec3{double(R.n[i][0]), double(R.n[i][1]), double(R.n[i][2])}; };
-  return exit_face(normal, R.h, o, d, t_in, entry, t_out);
+// The same rule on a precomputed record (float normals, widened exactly to double), with the
+// same arithmetic, but all four faces computed and the nearest picked without branches (the
+// branches of exit_face's loop depend on the ray and mispredict); exit_face itself only for
+// the grazing fallback.
+inline int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in,
+                       int entry, double& t_out) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double t[4];
+  for (int i = 0; i < 4; ++i) {
+    const double nx = R.n[0][i], ny = R.n[1][i], nz = R.n[2][i];
+    const double den = nx * d[0] + ny * d[1] + nz * d[2];
+    const double num = R.h[i] - (nx * o[0] + ny * o[1] + nz * o[2]);
+    t[i] = den > 0 && i != entry ? num / den : kInf;
+  }
+  int best = -1;
+  double best_t = kInf;
+  for (int i = 0; i < 4; ++i) {
+    const bool nearer = t[i] < best_t;  // the first of equal ones, as exit_face
+    best_t = nearer ? t[i] : best_t;
+    best = nearer ? i : best;
+  }
+  if (best < 0) {
+    const auto normal = [&](int i) { return Vec3{double(R.n[0][i]), double(R.n[1][i]), double(R.n[2][i])}; };
+    return exit_face(normal, R.h, o, d, t_in, entry, t_out);
+  }
+  t_out = std::max(t_in, best_t);
+  return best;
 }
 
 void load(const Hierarchy<3>& h, ElemId e, Vec3 (&p)[4]) {
@@ -167,6 +190,44 @@ std::vector<std::array<std::uint32_t, 4>> face_adjacency(const Hierarchy<3>& h,
     ++i;
   }
   return nb;
+}
+
+// Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
+// neighbours, and the pixels of a tile cross neighbouring elements, so records close in space
+// should be close in memory (the hierarchy's order follows refinement, not space).
+void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
+  Vec3 lo, hi;
+  lo.fill(std::numeric_limits<double>::infinity());
+  hi.fill(-std::numeric_limits<double>::infinity());
+  for (const auto& q : h.points())
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], q[a]);
+      hi[a] = std::max(hi[a], q[a]);
+    }
+  // Spreads the low 21 bits of x to every third bit.
+  const auto spread = [](std::uint64_t x) {
+    x &= 0x1FFFFF;
+    x = (x | x << 32) & 0x1F00000000FFFFull;
+    x = (x | x << 16) & 0x1F0000FF0000FFull;
+    x = (x | x << 8) & 0x100F00F00F00F00Full;
+    x = (x | x << 4) & 0x10C30C30C30C30C3ull;
+    x = (x | x << 2) & 0x1249249249249249ull;
+    return x;
+  };
+  std::vector<std::pair<std::uint64_t, ElemId>> keyed(elems.size());
+  tbb::parallel_for(std::size_t(0), elems.size(), [&](std::size_t i) {
+    const auto& c = h.cell(elems[i]);
+    std::uint64_t key = 0;
+    for (int a = 0; a < 3; ++a) {
+      double m = 0;
+      for (VertexId v : c) m += h.point(v)[a];
+      const double f = hi[a] > lo[a] ? (0.25 * m - lo[a]) / (hi[a] - lo[a]) : 0.0;
+      key |= spread(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
+    }
+    keyed[i] = {key, elems[i]};
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  for (std::size_t i = 0; i < elems.size(); ++i) elems[i] = keyed[i].second;
 }
 
 }  // namespace
@@ -317,6 +378,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // 2. the rendered elements and their face neighbours.
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
   MLFE_CHECK(elems_.size() < (std::size_t(1) << 30));  // 4 × index + face fits 32 bits
+  morton_order(h, elems_);
   const auto nb = face_adjacency(h, elems_);
   records_.resize(elems_.size());
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
@@ -333,7 +395,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
       if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
       const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
-      for (int a = 0; a < 3; ++a) R.n[i][a] = float(nf[a]);
+      for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
       R.h[i] = dot(nf, p[f[0]]);
       // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
       const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
@@ -475,19 +537,115 @@ ElemId largest_transparent(const TetRenderMesh& m, const CompiledTransferFunctio
   return a;
 }
 
-EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& skip, std::uint32_t r) {
-  const ElemId e = m.element(r);
+EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& skip, ElemId e) {
   if (!skip.transparent(m.range_lo(e), m.range_hi(e))) return kVisible;
   const Hierarchy<3>& h = m.hierarchy();
   return h.level(e) - h.level(largest_transparent(m, skip, e)) >= kSkipLevels ? kSkipAncestor : kEmptyLeaf;
 }
+
+// Empty space in front of the data: a coarse grid over the domain box marking every cell that
+// the (padded) bounding box of a visible element overlaps. Every element containing a point of
+// an unmarked cell is transparent, so a ray may start at its first marked cell (backed off a
+// little) instead of at the box: the elements before contribute nothing, and the entry is then
+// located next to the previous pixel's, where the walk is short. Made once per image (it
+// depends on the transfer function).
+class Occupancy {
+ public:
+  Occupancy(const TetRenderMesh& m, const std::vector<std::uint8_t>& state) : lo_(m.box_lo()) {
+    const Vec3 ext = sub(m.box_hi(), m.box_lo());
+    const double longest = std::max({ext[0], ext[1], ext[2]});
+    for (int a = 0; a < 3; ++a) {
+      n_[a] = std::max(1, int(std::ceil(kCells * ext[a] / longest)));
+      cell_[a] = ext[a] > 0 ? ext[a] / n_[a] : 1.0;
+    }
+    back_off_ = 1e-3 * std::min({cell_[0], cell_[1], cell_[2]});
+    const std::size_t cells = std::size_t(n_[0]) * n_[1] * n_[2];
+    std::unique_ptr<std::atomic<std::uint8_t>[]> marks(new std::atomic<std::uint8_t>[cells]);
+    for (std::size_t i = 0; i < cells; ++i) marks[i].store(0, std::memory_order_relaxed);
+    const Hierarchy<3>& h = m.hierarchy();
+    const double pad = 1e-6 * longest;
+    // In the hierarchy's element order, in which its cells are stored.
+    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(h.element_count()), 4096),
+                      [&](const auto& range) {
+                        for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
+                          const std::int32_t r = m.render_index(ElemId(e));
+                          if (r < 0 || state[std::size_t(r)] != kVisible) continue;
+                          Vec3 blo, bhi;
+                          blo.fill(std::numeric_limits<double>::infinity());
+                          bhi.fill(-std::numeric_limits<double>::infinity());
+                          for (VertexId v : h.cell(ElemId(e)))
+                            for (int a = 0; a < 3; ++a) {
+                              blo[a] = std::min(blo[a], h.point(v)[a]);
+                              bhi[a] = std::max(bhi[a], h.point(v)[a]);
+                            }
+                          int i0[3], i1[3];
+                          for (int a = 0; a < 3; ++a) {
+                            i0[a] = index(a, blo[a] - pad);
+                            i1[a] = index(a, bhi[a] + pad);
+                          }
+                          for (int z = i0[2]; z <= i1[2]; ++z)
+                            for (int y = i0[1]; y <= i1[1]; ++y)
+                              for (int x = i0[0]; x <= i1[0]; ++x)
+                                marks[flat(x, y, z)].store(1, std::memory_order_relaxed);
+                        }
+                      });
+    marked_.resize(cells);
+    for (std::size_t i = 0; i < cells; ++i) marked_[i] = marks[i].load(std::memory_order_relaxed);
+  }
+
+  /// Where the ray o + t d, t in [t0, t1], should start: a little before its first marked
+  /// cell (3D DDA, Amanatides & Woo 1987), at least t0; t1 when it meets none.
+  double start(const Vec3& o, const Vec3& d, double t0, double t1) const {
+    const Vec3 p = axpy(o, t0, d);
+    int i[3], step[3];
+    double t_next[3], t_delta[3];
+    for (int a = 0; a < 3; ++a) {
+      i[a] = index(a, p[a]);
+      if (d[a] > 0) {
+        step[a] = 1;
+        t_next[a] = t0 + (lo_[a] + (i[a] + 1) * cell_[a] - p[a]) / d[a];
+        t_delta[a] = cell_[a] / d[a];
+      } else if (d[a] < 0) {
+        step[a] = -1;
+        t_next[a] = t0 + (lo_[a] + i[a] * cell_[a] - p[a]) / d[a];
+        t_delta[a] = -cell_[a] / d[a];
+      } else {
+        step[a] = 0;
+        t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+      }
+    }
+    const double back = back_off_ / std::sqrt(dot(d, d));
+    double t = t0;
+    while (true) {
+      if (marked_[flat(i[0], i[1], i[2])]) return std::max(t0, t - back);
+      const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+      t = t_next[a];
+      if (t >= t1) return t1;
+      i[a] += step[a];
+      if (i[a] < 0 || i[a] >= n_[a]) return t1;
+      t_next[a] += t_delta[a];
+    }
+  }
+
+ private:
+  static constexpr int kCells = 64;  // along the longest axis of the box
+  int index(int a, double x) const {
+    return std::clamp(int(std::floor((x - lo_[a]) / cell_[a])), 0, n_[a] - 1);
+  }
+  std::size_t flat(int x, int y, int z) const { return (std::size_t(z) * n_[1] + y) * n_[0] + x; }
+  Vec3 lo_;
+  int n_[3];
+  Vec3 cell_;
+  double back_off_;
+  std::vector<std::uint8_t> marked_;
+};
 
 // Walks the ray o + t d through m (steps 1–5 of volume_render.h). state(r) gives the
 // EmptyState of element r (only called with skip set): computed per element crossed for a
 // single ray, looked up in a table made once per image when rendering.
 template <class State, class Visit>
 TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
-                  State&& state, Visit&& visit, ElemId* entry_hint) {
+                  State&& state, const Occupancy* occupancy, Visit&& visit, ElemId* entry_hint) {
   TraceResult res;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
   res.hit = true;
@@ -496,6 +654,10 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   const std::uint64_t bound = m.size() + 64;
 
   double t = res.t_near;
+  if (occupancy) {
+    t = occupancy->start(o, d, t, res.t_far);
+    if (t >= res.t_far) return res;
+  }
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
   // else descend the hierarchy.
   const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
@@ -529,6 +691,14 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
     }
     const bool empty = es != kVisible;
     const TetRenderMesh::StepRecord& R = m.record(r);
+    // The next record is one of three: ask for them now, so their loads overlap this step's
+    // work instead of stalling the next one.
+    for (int i = 0; i < 4; ++i)
+      if (i != entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
+        const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
+        __builtin_prefetch(q);
+        __builtin_prefetch(q + 64);
+      }
     double t_out;
     const int f = record_exit(R, o, d, t, entry, t_out);
     t_out = std::min(t_out, res.t_far);
@@ -561,7 +731,8 @@ TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origi
                       const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
   return trace(
-      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, r); }, visit, entry_hint);
+      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r)); }, nullptr,
+      visit, entry_hint);
 }
 
 // ---------------------------------------------------------------- images
@@ -629,12 +800,18 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
   std::vector<std::uint8_t> state;
   if (opt.skip_empty) {
     state.resize(m.size());
-    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(m.size()), 4096),
-                      [&](const auto& range) {
-                        for (std::uint32_t r = range.begin(); r != range.end(); ++r)
-                          state[r] = empty_state(m, ctf, r);
-                      });
+    // In the hierarchy's element order, in which its per-element arrays are read.
+    tbb::parallel_for(
+        tbb::blocked_range<std::uint32_t>(0, std::uint32_t(m.hierarchy().element_count()), 4096),
+        [&](const auto& range) {
+          for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
+            const std::int32_t r = m.render_index(ElemId(e));
+            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e));
+          }
+        });
   }
+  std::unique_ptr<Occupancy> occupancy;
+  if (opt.skip_empty) occupancy = std::make_unique<Occupancy>(m, state);
   Counters n;
   RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId& hint) {
     Vec3 ow, dw;
@@ -642,7 +819,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     const Vec3 o = to_local.point(ow), d = to_local.direction(dw);
     std::uint64_t segs = 0;
     const TraceResult r = trace(
-        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; },
+        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; }, occupancy.get(),
         [&](const TraceSegment& s) {
           if (s.tet >= 0) ++segs;
           if (!s.empty) {
