@@ -26,11 +26,12 @@ namespace {
 using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
-// Skip a transparent ancestor only when it is at least this many levels above the leaf: a
-// skip ends in a point location (climb + descent, ~0.4 µs on the CT skull), a leaf step costs
-// ~0.1 µs; skipping at every level was slower than walking on the skull and no faster on the
-// MRI, 3 levels the fastest of those tried (bench/RESULTS.md, render_bench).
-constexpr int kSkipLevels = 3;
+// trace_ray's default for RenderOptions::skip_levels: skip a transparent ancestor only when it
+// is at least this many levels above the leaf: a
+// skip ends in a point location (climb + descent, ~0.2 µs), a leaf step costs ~15 ns. With
+// rays starting at the range grid's first visible cell and ending after its last, 5 levels
+// measured 3-5 % faster than 3 and the same as never skipping (bench/RESULTS.md, render_bench).
+constexpr int kSkipLevels = 5;
 
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -439,6 +440,80 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
         hi_box_[a] = std::max(hi_box_[a], h.point(v)[a]);
       }
   diag_ = std::sqrt(dot(sub(hi_box_, lo_box_), sub(hi_box_, lo_box_)));
+  // 5. the range grid: about one cell per 8 rendered elements (at most 64 along the longest
+  // axis), each with the union of the ranges of the elements whose (padded) bounding boxes
+  // overlap it; in the hierarchy's element order, in which its cells are stored.
+  const Vec3 ext = sub(hi_box_, lo_box_);
+  const double longest = std::max({ext[0], ext[1], ext[2]});
+  const double per_axis = std::clamp(std::cbrt(double(elems_.size()) / 8.0), 1.0, 64.0);
+  for (int a = 0; a < 3; ++a) {
+    grid_n_[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
+    grid_cell_[a] = ext[a] > 0 ? ext[a] / grid_n_[a] : 1.0;
+  }
+  const std::size_t cells = std::size_t(grid_n_[0]) * grid_n_[1] * grid_n_[2];
+  grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
+  grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
+  const double pad = 1e-6 * longest;
+  for (std::size_t i = 0; i < h.element_count(); ++i) {
+    if (render_of_[i] == kNone) continue;
+    Vec3 blo, bhi;
+    blo.fill(std::numeric_limits<double>::infinity());
+    bhi.fill(-std::numeric_limits<double>::infinity());
+    for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
+      for (int a = 0; a < 3; ++a) {
+        blo[a] = std::min(blo[a], h.point(v)[a]);
+        bhi[a] = std::max(bhi[a], h.point(v)[a]);
+      }
+    int c0[3], c1[3];
+    for (int a = 0; a < 3; ++a) {
+      c0[a] = grid_index(a, blo[a] - pad);
+      c1[a] = grid_index(a, bhi[a] + pad);
+    }
+    for (int z = c0[2]; z <= c1[2]; ++z)
+      for (int y = c0[1]; y <= c1[1]; ++y)
+        for (int x = c0[0]; x <= c1[0]; ++x) {
+          const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
+          grid_lo_[c] = std::min(grid_lo_[c], lo_[i]);
+          grid_hi_[c] = std::max(grid_hi_[c], hi_[i]);
+        }
+  }
+}
+
+int TetRenderMesh::grid_index(int a, double x) const {
+  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
+}
+
+double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0,
+                                    double t1, const CompiledTransferFunction& tf) const {
+  // 3D DDA (Amanatides & Woo 1987) from the cell of o + t0 d.
+  const Vec3 p = axpy(o, t0, d);
+  int i[3], step[3];
+  double t_next[3], t_delta[3];
+  for (int a = 0; a < 3; ++a) {
+    i[a] = grid_index(a, p[a]);
+    step[a] = d[a] > 0 ? 1 : d[a] < 0 ? -1 : 0;
+    if (step[a] == 0) {
+      t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+      continue;
+    }
+    const double face = lo_box_[a] + (i[a] + (step[a] > 0 ? 1 : 0)) * grid_cell_[a];
+    t_next[a] = t0 + (face - p[a]) / d[a];
+    t_delta[a] = grid_cell_[a] / std::abs(d[a]);
+  }
+  // Back off into the transparent cell before (by far more than locate's nudge).
+  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / std::sqrt(dot(d, d));
+  double t = t0;
+  while (true) {
+    const std::size_t c = (std::size_t(i[2]) * grid_n_[1] + i[1]) * grid_n_[0] + i[0];
+    if (!(grid_lo_[c] > grid_hi_[c]) && !tf.transparent(grid_lo_[c], grid_hi_[c]))
+      return std::max(t0, t - back);
+    const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+    t = t_next[a];
+    if (t >= t1) return t1;
+    i[a] += step[a];
+    if (i[a] < 0 || i[a] >= grid_n_[a]) return t1;
+    t_next[a] += t_delta[a];
+  }
 }
 
 std::size_t TetRenderMesh::memory_bytes() const {
@@ -537,115 +612,18 @@ ElemId largest_transparent(const TetRenderMesh& m, const CompiledTransferFunctio
   return a;
 }
 
-EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& skip, ElemId e) {
+EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& skip, ElemId e, int levels) {
   if (!skip.transparent(m.range_lo(e), m.range_hi(e))) return kVisible;
   const Hierarchy<3>& h = m.hierarchy();
-  return h.level(e) - h.level(largest_transparent(m, skip, e)) >= kSkipLevels ? kSkipAncestor : kEmptyLeaf;
+  return h.level(e) - h.level(largest_transparent(m, skip, e)) >= levels ? kSkipAncestor : kEmptyLeaf;
 }
-
-// Empty space in front of the data: a coarse grid over the domain box marking every cell that
-// the (padded) bounding box of a visible element overlaps. Every element containing a point of
-// an unmarked cell is transparent, so a ray may start at its first marked cell (backed off a
-// little) instead of at the box: the elements before contribute nothing, and the entry is then
-// located next to the previous pixel's, where the walk is short. Made once per image (it
-// depends on the transfer function).
-class Occupancy {
- public:
-  Occupancy(const TetRenderMesh& m, const std::vector<std::uint8_t>& state) : lo_(m.box_lo()) {
-    const Vec3 ext = sub(m.box_hi(), m.box_lo());
-    const double longest = std::max({ext[0], ext[1], ext[2]});
-    for (int a = 0; a < 3; ++a) {
-      n_[a] = std::max(1, int(std::ceil(kCells * ext[a] / longest)));
-      cell_[a] = ext[a] > 0 ? ext[a] / n_[a] : 1.0;
-    }
-    back_off_ = 1e-3 * std::min({cell_[0], cell_[1], cell_[2]});
-    const std::size_t cells = std::size_t(n_[0]) * n_[1] * n_[2];
-    std::unique_ptr<std::atomic<std::uint8_t>[]> marks(new std::atomic<std::uint8_t>[cells]);
-    for (std::size_t i = 0; i < cells; ++i) marks[i].store(0, std::memory_order_relaxed);
-    const Hierarchy<3>& h = m.hierarchy();
-    const double pad = 1e-6 * longest;
-    // In the hierarchy's element order, in which its cells are stored.
-    tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, std::uint32_t(h.element_count()), 4096),
-                      [&](const auto& range) {
-                        for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
-                          const std::int32_t r = m.render_index(ElemId(e));
-                          if (r < 0 || state[std::size_t(r)] != kVisible) continue;
-                          Vec3 blo, bhi;
-                          blo.fill(std::numeric_limits<double>::infinity());
-                          bhi.fill(-std::numeric_limits<double>::infinity());
-                          for (VertexId v : h.cell(ElemId(e)))
-                            for (int a = 0; a < 3; ++a) {
-                              blo[a] = std::min(blo[a], h.point(v)[a]);
-                              bhi[a] = std::max(bhi[a], h.point(v)[a]);
-                            }
-                          int i0[3], i1[3];
-                          for (int a = 0; a < 3; ++a) {
-                            i0[a] = index(a, blo[a] - pad);
-                            i1[a] = index(a, bhi[a] + pad);
-                          }
-                          for (int z = i0[2]; z <= i1[2]; ++z)
-                            for (int y = i0[1]; y <= i1[1]; ++y)
-                              for (int x = i0[0]; x <= i1[0]; ++x)
-                                marks[flat(x, y, z)].store(1, std::memory_order_relaxed);
-                        }
-                      });
-    marked_.resize(cells);
-    for (std::size_t i = 0; i < cells; ++i) marked_[i] = marks[i].load(std::memory_order_relaxed);
-  }
-
-  /// Where the ray o + t d, t in [t0, t1], should start: a little before its first marked
-  /// cell (3D DDA, Amanatides & Woo 1987), at least t0; t1 when it meets none.
-  double start(const Vec3& o, const Vec3& d, double t0, double t1) const {
-    const Vec3 p = axpy(o, t0, d);
-    int i[3], step[3];
-    double t_next[3], t_delta[3];
-    for (int a = 0; a < 3; ++a) {
-      i[a] = index(a, p[a]);
-      if (d[a] > 0) {
-        step[a] = 1;
-        t_next[a] = t0 + (lo_[a] + (i[a] + 1) * cell_[a] - p[a]) / d[a];
-        t_delta[a] = cell_[a] / d[a];
-      } else if (d[a] < 0) {
-        step[a] = -1;
-        t_next[a] = t0 + (lo_[a] + i[a] * cell_[a] - p[a]) / d[a];
-        t_delta[a] = -cell_[a] / d[a];
-      } else {
-        step[a] = 0;
-        t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
-      }
-    }
-    const double back = back_off_ / std::sqrt(dot(d, d));
-    double t = t0;
-    while (true) {
-      if (marked_[flat(i[0], i[1], i[2])]) return std::max(t0, t - back);
-      const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
-      t = t_next[a];
-      if (t >= t1) return t1;
-      i[a] += step[a];
-      if (i[a] < 0 || i[a] >= n_[a]) return t1;
-      t_next[a] += t_delta[a];
-    }
-  }
-
- private:
-  static constexpr int kCells = 64;  // along the longest axis of the box
-  int index(int a, double x) const {
-    return std::clamp(int(std::floor((x - lo_[a]) / cell_[a])), 0, n_[a] - 1);
-  }
-  std::size_t flat(int x, int y, int z) const { return (std::size_t(z) * n_[1] + y) * n_[0] + x; }
-  Vec3 lo_;
-  int n_[3];
-  Vec3 cell_;
-  double back_off_;
-  std::vector<std::uint8_t> marked_;
-};
 
 // Walks the ray o + t d through m (steps 1–5 of volume_render.h). state(r) gives the
 // EmptyState of element r (only called with skip set): computed per element crossed for a
 // single ray, looked up in a table made once per image when rendering.
 template <class State, class Visit>
 TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
-                  State&& state, const Occupancy* occupancy, Visit&& visit, ElemId* entry_hint) {
+                  State&& state, Visit&& visit, ElemId* entry_hint) {
   TraceResult res;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
   res.hit = true;
@@ -654,8 +632,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   const std::uint64_t bound = m.size() + 64;
 
   double t = res.t_near;
-  if (occupancy) {
-    t = occupancy->start(o, d, t, res.t_far);
+  if (skip) {
+    t = m.first_visible(o, d, t, res.t_far, *skip);
     if (t >= res.t_far) return res;
   }
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
@@ -666,6 +644,7 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   if (entry_hint) *entry_hint = m.element(r);
   int entry = -1;
   Vec3 p[4];
+  double recheck = t;
   while (true) {
     if (++res.steps > bound) {
       res.step_bound_hit = true;
@@ -675,6 +654,13 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
     // least kSkipLevels above (locating again behind it costs about as much as walking a few
     // leaves); a transparent leaf is walked without evaluating u.
     const EmptyState es = skip ? EmptyState(state(r)) : kVisible;
+    // Leaving the data: once the rest of the ray crosses no range-grid cell that could be
+    // visible, the ray ends (checked again only past the next such cell).
+    if (es != kVisible && t >= recheck) {
+      const double next_visible = m.first_visible(o, d, t, res.t_far, *skip);
+      if (next_visible >= res.t_far) break;
+      recheck = next_visible + m.grid_cell_diagonal() / std::sqrt(dot(d, d));
+    }
     if (es == kSkipAncestor) {
       const ElemId a = largest_transparent(m, *skip, m.element(r));
       load(m.hierarchy(), a, p);
@@ -731,7 +717,7 @@ TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origi
                       const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
   return trace(
-      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r)); }, nullptr,
+      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r), kSkipLevels); },
       visit, entry_hint);
 }
 
@@ -806,12 +792,10 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
         [&](const auto& range) {
           for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
             const std::int32_t r = m.render_index(ElemId(e));
-            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e));
+            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e), opt.skip_levels);
           }
         });
   }
-  std::unique_ptr<Occupancy> occupancy;
-  if (opt.skip_empty) occupancy = std::make_unique<Occupancy>(m, state);
   Counters n;
   RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId& hint) {
     Vec3 ow, dw;
@@ -819,7 +803,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     const Vec3 o = to_local.point(ow), d = to_local.direction(dw);
     std::uint64_t segs = 0;
     const TraceResult r = trace(
-        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; }, occupancy.get(),
+        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; },
         [&](const TraceSegment& s) {
           if (s.tet >= 0) ++segs;
           if (!s.empty) {

@@ -18,8 +18,9 @@
 //      of tetrahedra around it toward the direction of the ray instead of bouncing back;
 //   4. empty space: a tetrahedron whose value range maps to zero opacity is walked without
 //      evaluating u; when its largest ancestor with the same property (per-element ranges of
-//      u, as for iso-surfaces) lies 3 or more levels above, that ancestor is crossed in one
-//      step and the ray located again behind it (a location costs several leaf steps);
+//      u, as for iso-surfaces) lies 5 (RenderOptions::skip_levels) or more levels above, that ancestor is
+//      crossed in one step and the ray located again behind it (a location costs several leaf steps); a ray
+//      whose remaining cells of the range grid (step 1) are all transparent ends;
 //   5. a ray that leaves the mesh before the box exit (rounding) is located again, not lost;
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
 // The rendered elements are kept in Z-order of their centroids, so that the records a tile of
@@ -28,6 +29,7 @@
 // entry-face exclusion as tie-break, not Plücker coordinates (Platis & Theoharis 2003).
 #pragma once
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -70,6 +72,7 @@ struct RenderOptions {
   double z_opacity = 0.5;      ///< Z = distance where the accumulated opacity reaches this
   bool shading = false;        ///< scale colours by 0.35 + 0.65 |cos(gradient, ray)|
   bool skip_empty = true;      ///< cross transparent coarse elements in one step (mesh only)
+  int skip_levels = 5;         ///< ... when they are at least this many levels above the leaf
 };
 
 /// Premultiplied linear RGBA (4 floats per pixel, row 0 at the top) and Z (distance along the
@@ -149,6 +152,17 @@ class TetRenderMesh {
   };
   static constexpr std::uint32_t kNoNeighbor = 0xFFFFFFFFu;
   const StepRecord& record(std::uint32_t r) const { return records_[r]; }
+  /// Where the ray o + t d, t in [t0, t1], may start for transfer function tf: a little before
+  /// the first cell of a coarse grid over the box (about one cell per 8 elements) whose value
+  /// range — the union of those of the elements overlapping it — is not transparent; t1 when
+  /// there is none. Every element holding a point of the ray in front is transparent.
+  double first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0, double t1,
+                       const CompiledTransferFunction& tf) const;
+  /// Diagonal of a cell of that grid.
+  double grid_cell_diagonal() const {
+    return std::sqrt(grid_cell_[0] * grid_cell_[0] + grid_cell_[1] * grid_cell_[1] +
+                     grid_cell_[2] * grid_cell_[2]);
+  }
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
 
@@ -163,6 +177,10 @@ class TetRenderMesh {
   std::vector<float> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
   double diag_ = 0;
+  int grid_n_[3];
+  std::array<double, 3> grid_cell_;
+  std::vector<float> grid_lo_, grid_hi_;  // per cell of the range grid (empty: lo > hi)
+  int grid_index(int a, double x) const;
 };
 
 /// One piece of a traced ray: tetrahedron `tet` (render index; −1 for a skipped transparent
@@ -186,7 +204,10 @@ struct TraceResult {
 
 /// Traces the ray origin + t·dir (local frame, t ≥ 0) through m, calling visit(segment) per
 /// tetrahedron in ray order until it returns false or the ray leaves the box. With `skip`,
-/// elements whose range it reports transparent (skip->transparent) are crossed in one step.
+/// elements whose range it reports transparent (skip->transparent) are crossed in one step,
+/// the walk starts at first_visible() and ends where the rest of the ray meets no cell that
+/// first_visible() would stop at (the transparent elements in front and behind are not
+/// visited).
 /// `entry_hint` (may be null): in, an element to start the entry search from; out, the entry
 /// element of this ray (for the next pixel).
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,

@@ -180,6 +180,7 @@ TEST(RenderMesh, EmptySpaceSkippingKeepsTheImage) {
   tf.unit_length = 0.05;
   const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 20, 30, false, 40, 40);
   RenderOptions with, without;
+  with.skip_levels = 1;  // the blob has 4 levels: let ancestors be crossed too
   without.skip_empty = false;
   RenderStats sw, so;
   const RenderImage a = render_mesh(m, GridTransform{}, tf, cam, with, &sw);
@@ -227,7 +228,9 @@ TEST(RenderMesh, CompactAdjacency) {
     for (int f = 0; f < 4; ++f) {
       const std::int32_t n = m.neighbors(r)[f], e = expected[std::size_t(i)][f];
       ASSERT_EQ(n < 0, e < 0) << r << " face " << f;
-      if (n >= 0) EXPECT_EQ(m.element(std::uint32_t(n)), leaves[std::size_t(e)]) << r << " face " << f;
+      if (n >= 0) {
+        EXPECT_EQ(m.element(std::uint32_t(n)), leaves[std::size_t(e)]) << r << " face " << f;
+      }
     }
   }
   for (std::uint32_t r = 0; r < m.size(); ++r)
