@@ -27,10 +27,10 @@ using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // trace_ray's default for RenderOptions::skip_levels: skip a transparent ancestor only when it
-// is at least this many levels above the leaf: a
-// skip ends in a point location (climb + descent, ~0.2 µs), a leaf step costs ~15 ns. With
-// rays starting at the range grid's first visible cell and ending after its last, 5 levels
-// measured 3-5 % faster than 3 and the same as never skipping (bench/RESULTS.md, render_bench).
+// is at least this many levels above the leaf. A skip ends in a point location (climb +
+// descent, ~0.2 µs), a leaf step costs ~15 ns; with rays starting at the range grid's first
+// visible cell, 5 levels measured 3-5 % faster than 3 and the same as never skipping
+// (bench/RESULTS.md, render_bench).
 constexpr int kSkipLevels = 5;
 
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
@@ -644,7 +644,6 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
   if (entry_hint) *entry_hint = m.element(r);
   int entry = -1;
   Vec3 p[4];
-  double recheck = t;
   while (true) {
     if (++res.steps > bound) {
       res.step_bound_hit = true;
@@ -654,13 +653,6 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
     // least kSkipLevels above (locating again behind it costs about as much as walking a few
     // leaves); a transparent leaf is walked without evaluating u.
     const EmptyState es = skip ? EmptyState(state(r)) : kVisible;
-    // Leaving the data: once the rest of the ray crosses no range-grid cell that could be
-    // visible, the ray ends (checked again only past the next such cell).
-    if (es != kVisible && t >= recheck) {
-      const double next_visible = m.first_visible(o, d, t, res.t_far, *skip);
-      if (next_visible >= res.t_far) break;
-      recheck = next_visible + m.grid_cell_diagonal() / std::sqrt(dot(d, d));
-    }
     if (es == kSkipAncestor) {
       const ElemId a = largest_transparent(m, *skip, m.element(r));
       load(m.hierarchy(), a, p);

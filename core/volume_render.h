@@ -18,9 +18,9 @@
 //      of tetrahedra around it toward the direction of the ray instead of bouncing back;
 //   4. empty space: a tetrahedron whose value range maps to zero opacity is walked without
 //      evaluating u; when its largest ancestor with the same property (per-element ranges of
-//      u, as for iso-surfaces) lies 5 (RenderOptions::skip_levels) or more levels above, that ancestor is
-//      crossed in one step and the ray located again behind it (a location costs several leaf steps); a ray
-//      whose remaining cells of the range grid (step 1) are all transparent ends;
+//      u, as for iso-surfaces) lies RenderOptions::skip_levels (5) or more levels above, that
+//      ancestor is crossed in one step and the ray located again behind it (a location costs
+//      several leaf steps);
 //   5. a ray that leaves the mesh before the box exit (rounding) is located again, not lost;
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
 // The rendered elements are kept in Z-order of their centroids, so that the records a tile of
@@ -158,11 +158,6 @@ class TetRenderMesh {
   /// there is none. Every element holding a point of the ray in front is transparent.
   double first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0, double t1,
                        const CompiledTransferFunction& tf) const;
-  /// Diagonal of a cell of that grid.
-  double grid_cell_diagonal() const {
-    return std::sqrt(grid_cell_[0] * grid_cell_[0] + grid_cell_[1] * grid_cell_[1] +
-                     grid_cell_[2] * grid_cell_[2]);
-  }
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
 
@@ -205,9 +200,7 @@ struct TraceResult {
 /// Traces the ray origin + t·dir (local frame, t ≥ 0) through m, calling visit(segment) per
 /// tetrahedron in ray order until it returns false or the ray leaves the box. With `skip`,
 /// elements whose range it reports transparent (skip->transparent) are crossed in one step,
-/// the walk starts at first_visible() and ends where the rest of the ray meets no cell that
-/// first_visible() would stop at (the transparent elements in front and behind are not
-/// visited).
+/// and the walk starts at first_visible() (the transparent elements in front are not visited).
 /// `entry_hint` (may be null): in, an element to start the entry search from; out, the entry
 /// element of this ray (for the next pixel).
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
