@@ -114,7 +114,7 @@ def main():
     ap.add_argument("jobs", nargs="*")
     a = ap.parse_args()
     jobs = a.jobs or [os.path.join(DATA, "ct_skull_64.nrrd") + ":bone:8000,35000",
-                      os.path.join(DATA, "mri_colin27_brain.nii.gz") + ":mri:45000,215000"]
+                      os.path.join(DATA, "mri_colin27_brain.nii.gz") + ":mri:45000,100000,215000"]
     os.makedirs(a.work, exist_ok=True)
     mlfe = os.path.join(a.build, "converters", "mlfe")
     helper = os.path.join(a.build, "bench", "render_bench")

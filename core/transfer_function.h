@@ -16,7 +16,10 @@
 // split at every control point of the transfer function it crosses, and on each piece both c
 // and τ are linear in the distance.
 #pragma once
+#include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -61,9 +64,22 @@ class CompiledTransferFunction {
 
   /// Piece of value s, 0..m for m breakpoints x: piece 0 is (−∞, x_0], piece k is
   /// (x_{k−1}, x_k], piece m is (x_{m−1}, ∞). At a step, each piece carries its own side.
-  int piece(double s) const;
+  int piece(double s) const {
+    // A linear scan: transfer functions have a handful of breakpoints, and this runs twice per
+    // segment.
+    int k = 0;
+    const int m = int(x_.size());
+    while (k < m && x_[std::size_t(k)] < s) ++k;
+    return k;
+  }
   /// Colour and τ of piece k at value s (linear inside it; constant on the outer ones).
-  void eval(int k, double s, double rgb[3], double& tau) const;
+  void eval(int k, double s, double rgb[3], double& tau) const {
+    const Piece& p = pieces_[std::size_t(k)];
+    double w = 0;
+    if (p.inner) w = std::clamp((s - p.x0) / (p.x1 - p.x0), 0.0, 1.0);
+    for (int c = 0; c < 3; ++c) rgb[c] = p.c0[c] + w * (p.c1[c] - p.c0[c]);
+    tau = p.t0 + w * (p.t1 - p.t0);
+  }
   /// Largest τ over the closed value range [lo, hi] (0 means fully transparent there).
   double max_tau(double lo, double hi) const;
   const std::vector<double>& breakpoints() const { return x_; }
@@ -82,6 +98,7 @@ class CompiledTransferFunction {
     double x0, x1;
     double c0[3], c1[3];
     double t0, t1;
+    bool inner;  // both ends finite (the outer pieces are constant)
   };
   std::vector<Piece> pieces_;
 };
@@ -105,7 +122,19 @@ class RayAccumulator {
   /// sf to sb; colours are scaled by `shade`. Pre-integrated: split at every transfer-function
   /// breakpoint between sf and sb, each piece integrated exactly. Trapezoid (the paper): one
   /// piece, τ and c·τ averaged from the ends.
-  void add(double sf, double sb, double t, double length, double shade = 1.0);
+  /// Inline: ray casting calls it once per segment.
+  void add(double sf, double sb, double t, double length, double shade = 1.0) {
+    if (!(length > 0)) return;
+    double cf[3], cb[3], tf, tb;
+    const int k0 = tf_.piece(sf), k1 = tf_.piece(sb);
+    if (rule_ == Rule::kTrapezoid || k0 == k1) {
+      tf_.eval(k0, sf, cf, tf);
+      tf_.eval(k1, sb, cb, tb);
+      add_piece(tf, tb, cf, cb, t, length, shade);
+      return;
+    }
+    add_split(sf, sb, k0, k1, t, length, shade);
+  }
   /// True once the accumulated opacity reached the stop opacity.
   bool done() const { return 1.0 - transmittance_ >= stop_; }
   double transmittance() const { return transmittance_; }
@@ -114,8 +143,14 @@ class RayAccumulator {
   double depth() const { return depth_; }
 
  private:
+  void add_split(double sf, double sb, int k0, int k1, double t, double length, double shade);
   void add_piece(double tf, double tb, const double cf[3], const double cb[3], double t, double l,
-                 double shade);
+                 double shade) {
+    if (!(l > 0) || (tf == 0 && tb == 0)) return;
+    add_opaque_piece(tf, tb, cf, cb, t, l, shade);
+  }
+  void add_opaque_piece(double tf, double tb, const double cf[3], const double cb[3], double t, double l,
+                        double shade);
   const CompiledTransferFunction& tf_;
   Rule rule_;
   double stop_, z_opacity_;

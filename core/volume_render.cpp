@@ -4,6 +4,7 @@
 // volume_render.h for the traversal steps.
 #include "core/volume_render.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -12,6 +13,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 #include "core/check.h"
 #include "core/field.h"
@@ -24,11 +26,12 @@ namespace {
 using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
-// Skip a transparent ancestor only when it is at least this many levels above the leaf: a
-// skip ends in a point location (climb + descent, ~0.4 µs on the CT skull), a leaf step costs
-// ~0.1 µs; skipping at every level was slower than walking on the skull and no faster on the
-// MRI, 3 levels the fastest of those tried (bench/RESULTS.md, render_bench).
-constexpr int kSkipLevels = 3;
+// trace_ray's default for RenderOptions::skip_levels: skip a transparent ancestor only when it
+// is at least this many levels above the leaf. A skip ends in a point location (climb +
+// descent, ~0.2 µs), a leaf step costs ~15 ns; with rays starting at the range grid's first
+// visible cell, 5 levels measured 3-5 % faster than 3 and the same as never skipping
+// (bench/RESULTS.md, render_bench).
+constexpr int kSkipLevels = 5;
 
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -98,11 +101,33 @@ struct TetPlanes {
   }
 };
 
-// The same rule on a precomputed record (float normals, widened exactly to double).
-int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in, int entry,
-                double& t_out) {
-  const auto normal = [&](int i) { return Vec3{double(R.n[i][0]), double(R.n[i][1]), double(R.n[i][2])}; };
-  return exit_face(normal, R.h, o, d, t_in, entry, t_out);
+// The same rule on a precomputed record (float normals, widened exactly to double), with the
+// same arithmetic, but all four faces computed and the nearest picked without branches (the
+// branches of exit_face's loop depend on the ray and mispredict); exit_face itself only for
+// the grazing fallback.
+inline int record_exit(const TetRenderMesh::StepRecord& R, const Vec3& o, const Vec3& d, double t_in,
+                       int entry, double& t_out) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double t[4];
+  for (int i = 0; i < 4; ++i) {
+    const double nx = R.n[0][i], ny = R.n[1][i], nz = R.n[2][i];
+    const double den = nx * d[0] + ny * d[1] + nz * d[2];
+    const double num = R.h[i] - (nx * o[0] + ny * o[1] + nz * o[2]);
+    t[i] = den > 0 && i != entry ? num / den : kInf;
+  }
+  int best = -1;
+  double best_t = kInf;
+  for (int i = 0; i < 4; ++i) {
+    const bool nearer = t[i] < best_t;  // the first of equal ones, as exit_face
+    best_t = nearer ? t[i] : best_t;
+    best = nearer ? i : best;
+  }
+  if (best < 0) {
+    const auto normal = [&](int i) { return Vec3{double(R.n[0][i]), double(R.n[1][i]), double(R.n[2][i])}; };
+    return exit_face(normal, R.h, o, d, t_in, entry, t_out);
+  }
+  t_out = std::max(t_in, best_t);
+  return best;
 }
 
 void load(const Hierarchy<3>& h, ElemId e, Vec3 (&p)[4]) {
@@ -124,11 +149,25 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
 
 // Face neighbours of a conforming element set, as Hierarchy::face_neighbors, but with each face
 // packed into one 64-bit key (three 21-bit vertex ids) and sorted in parallel: several times
-// faster on a million tetrahedra. Larger meshes use the hierarchy's own.
-std::vector<std::array<std::int32_t, 4>> face_adjacency(const Hierarchy<3>& h,
-                                                        const std::vector<ElemId>& elems) {
-  if (h.vertex_count() >= (std::size_t(1) << 21) || elems.size() >= (std::size_t(1) << 29))
-    return h.face_neighbors(elems);
+// faster on a million tetrahedra. Larger meshes use the hierarchy's own. Each neighbour comes
+// as 4 × its index + the local index of the shared face in it (StepRecord::next).
+std::vector<std::array<std::uint32_t, 4>> face_adjacency(const Hierarchy<3>& h,
+                                                         const std::vector<ElemId>& elems) {
+  constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
+  std::vector<std::array<std::uint32_t, 4>> nb(elems.size(), {kNo, kNo, kNo, kNo});
+  if (h.vertex_count() >= (std::size_t(1) << 21) || elems.size() >= (std::size_t(1) << 29)) {
+    const auto plain = h.face_neighbors(elems);
+    for (std::size_t i = 0; i < elems.size(); ++i)
+      for (int f = 0; f < 4; ++f) {
+        const std::int32_t j = plain[i][f];
+        if (j < 0) continue;
+        const auto& back = plain[std::size_t(j)];
+        const int g = int(std::find(back.begin(), back.end(), std::int32_t(i)) - back.begin());
+        MLFE_CHECK(g < 4);
+        nb[i][f] = 4 * std::uint32_t(j) + std::uint32_t(g);
+      }
+    return nb;
+  }
   struct Face {
     std::uint64_t key;
     std::uint32_t slot;  // 4 * element index + local face
@@ -144,39 +183,113 @@ std::vector<std::array<std::int32_t, 4>> face_adjacency(const Hierarchy<3>& h,
     }
   });
   tbb::parallel_sort(faces.begin(), faces.end());
-  std::vector<std::array<std::int32_t, 4>> nb(elems.size(), {-1, -1, -1, -1});
   for (std::size_t i = 0; i + 1 < faces.size(); ++i) {
     if (faces[i].key != faces[i + 1].key) continue;
     const std::uint32_t a = faces[i].slot, b = faces[i + 1].slot;
-    nb[a / 4][a % 4] = std::int32_t(b / 4);
-    nb[b / 4][b % 4] = std::int32_t(a / 4);
+    nb[a / 4][a % 4] = b;
+    nb[b / 4][b % 4] = a;
     ++i;
   }
   return nb;
+}
+
+// Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
+// neighbours, and the pixels of a tile cross neighbouring elements, so records close in space
+// should be close in memory (the hierarchy's order follows refinement, not space).
+void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
+  Vec3 lo, hi;
+  lo.fill(std::numeric_limits<double>::infinity());
+  hi.fill(-std::numeric_limits<double>::infinity());
+  for (const auto& q : h.points())
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], q[a]);
+      hi[a] = std::max(hi[a], q[a]);
+    }
+  // Spreads the low 21 bits of x to every third bit.
+  const auto spread = [](std::uint64_t x) {
+    x &= 0x1FFFFF;
+    x = (x | x << 32) & 0x1F00000000FFFFull;
+    x = (x | x << 16) & 0x1F0000FF0000FFull;
+    x = (x | x << 8) & 0x100F00F00F00F00Full;
+    x = (x | x << 4) & 0x10C30C30C30C30C3ull;
+    x = (x | x << 2) & 0x1249249249249249ull;
+    return x;
+  };
+  std::vector<std::pair<std::uint64_t, ElemId>> keyed(elems.size());
+  tbb::parallel_for(std::size_t(0), elems.size(), [&](std::size_t i) {
+    const auto& c = h.cell(elems[i]);
+    std::uint64_t key = 0;
+    for (int a = 0; a < 3; ++a) {
+      double m = 0;
+      for (VertexId v : c) m += h.point(v)[a];
+      const double f = hi[a] > lo[a] ? (0.25 * m - lo[a]) / (hi[a] - lo[a]) : 0.0;
+      key |= spread(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
+    }
+    keyed[i] = {key, elems[i]};
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  for (std::size_t i = 0; i < elems.size(); ++i) elems[i] = keyed[i].second;
 }
 
 }  // namespace
 
 // ---------------------------------------------------------------- camera
 
-void Camera::ray(double x, double y, std::array<double, 3>& origin, std::array<double, 3>& dir) const {
-  const Vec3 f = normalized(sub(target, position));
-  const Vec3 r = normalized(cross(f, up));
-  const Vec3 u = cross(r, f);
-  const double aspect = double(width) / double(height);
-  const double sx = 2.0 * (x + 0.5) / width - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / height;
-  if (perspective) {
-    const double th = std::tan(0.5 * fov_degrees * M_PI / 180.0);
-    origin = position;
-    dir = normalized({f[0] + (sx * th * aspect) * r[0] + (sy * th) * u[0],
-                      f[1] + (sx * th * aspect) * r[1] + (sy * th) * u[1],
-                      f[2] + (sx * th * aspect) * r[2] + (sy * th) * u[2]});
-  } else {
-    const double hh = 0.5 * ortho_height, hw = hh * aspect;
-    origin = {position[0] + sx * hw * r[0] + sy * hh * u[0], position[1] + sx * hw * r[1] + sy * hh * u[1],
-              position[2] + sx * hw * r[2] + sy * hh * u[2]};
-    dir = f;
+namespace {
+
+// Camera::ray with the camera's frame computed once per image instead of per pixel (the same
+// arithmetic, so the same rays).
+class CameraRays {
+ public:
+  explicit CameraRays(const Camera& c)
+      : c_(c), f_(normalized(sub(c.target, c.position))), r_(normalized(cross(f_, c.up))), u_(cross(r_, f_)) {
+    aspect_ = double(c.width) / double(c.height);
+    th_ = std::tan(0.5 * c.fov_degrees * M_PI / 180.0);
   }
+  void ray(double x, double y, Vec3& origin, Vec3& dir) const {
+    const Vec3 &f = f_, &r = r_, &u = u_;
+    const double sx = 2.0 * (x + 0.5) / c_.width - 1.0, sy = 1.0 - 2.0 * (y + 0.5) / c_.height;
+    if (c_.perspective) {
+      origin = c_.position;
+      dir = normalized({f[0] + (sx * th_ * aspect_) * r[0] + (sy * th_) * u[0],
+                        f[1] + (sx * th_ * aspect_) * r[1] + (sy * th_) * u[1],
+                        f[2] + (sx * th_ * aspect_) * r[2] + (sy * th_) * u[2]});
+    } else {
+      const double hh = 0.5 * c_.ortho_height, hw = hh * aspect_;
+      origin = {c_.position[0] + sx * hw * r[0] + sy * hh * u[0],
+                c_.position[1] + sx * hw * r[1] + sy * hh * u[1],
+                c_.position[2] + sx * hw * r[2] + sy * hh * u[2]};
+      dir = f;
+    }
+  }
+
+ private:
+  const Camera& c_;
+  Vec3 f_, r_, u_;
+  double aspect_, th_;
+};
+
+// world_to_local_point / _direction with the transform factored once per image.
+class ToLocal {
+ public:
+  explicit ToLocal(const GridTransform& t)
+      : origin_(t.origin),
+        lu_(Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(t.direction.data())) {}
+  Vec3 direction(const Vec3& d) const {
+    const Eigen::Vector3d x = lu_.solve(Eigen::Vector3d(d[0], d[1], d[2]));
+    return {x[0], x[1], x[2]};
+  }
+  Vec3 point(const Vec3& p) const { return direction(sub(p, origin_)); }
+
+ private:
+  Vec3 origin_;
+  Eigen::PartialPivLU<Eigen::Matrix3d> lu_;
+};
+
+}  // namespace
+
+void Camera::ray(double x, double y, std::array<double, 3>& origin, std::array<double, 3>& dir) const {
+  CameraRays(*this).ray(x, y, origin, dir);
 }
 
 std::array<double, 16> Camera::world_to_camera() const {
@@ -243,14 +356,11 @@ Camera orbit_camera(const std::array<double, 3>& center, double radius, double a
 }
 
 std::array<double, 3> world_to_local_point(const GridTransform& t, const std::array<double, 3>& p) {
-  return world_to_local_direction(t, sub(p, t.origin));
+  return ToLocal(t).point(p);
 }
 
 std::array<double, 3> world_to_local_direction(const GridTransform& t, const std::array<double, 3>& d) {
-  const Eigen::Matrix3d m =
-      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(t.direction.data());
-  const Eigen::Vector3d x = m.partialPivLu().solve(Eigen::Vector3d(d[0], d[1], d[2]));
-  return {x[0], x[1], x[2]};
+  return ToLocal(t).direction(d);
 }
 
 // ---------------------------------------------------------------- render mesh
@@ -268,14 +378,16 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   }
   // 2. the rendered elements and their face neighbours.
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
-  MLFE_CHECK(elems_.size() < 0x7FFFFFFFu);
-  nb_ = face_adjacency(h, elems_);
+  MLFE_CHECK(elems_.size() < (std::size_t(1) << 30));  // 4 × index + face fits 32 bits
+  morton_order(h, elems_);
+  const auto nb = face_adjacency(h, elems_);
   records_.resize(elems_.size());
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
     Vec3 p[4];
     for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
     StepRecord& R = records_[r];
+    for (int f = 0; f < 4; ++f) R.next[f] = nb[r][f];
     Vec3 g{0, 0, 0};
     for (int i = 0; i < 4; ++i) {
       // The face's vertices in id order, so both elements sharing it compute the same normal.
@@ -284,7 +396,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
       if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
       const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
-      for (int a = 0; a < 3; ++a) R.n[i][a] = float(nf[a]);
+      for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
       R.h[i] = dot(nf, p[f[0]]);
       // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
       const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
@@ -328,12 +440,86 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
         hi_box_[a] = std::max(hi_box_[a], h.point(v)[a]);
       }
   diag_ = std::sqrt(dot(sub(hi_box_, lo_box_), sub(hi_box_, lo_box_)));
+  // 5. the range grid: about one cell per 8 rendered elements (at most 64 along the longest
+  // axis), each with the union of the ranges of the elements whose (padded) bounding boxes
+  // overlap it; in the hierarchy's element order, in which its cells are stored.
+  const Vec3 ext = sub(hi_box_, lo_box_);
+  const double longest = std::max({ext[0], ext[1], ext[2]});
+  const double per_axis = std::clamp(std::cbrt(double(elems_.size()) / 8.0), 1.0, 64.0);
+  for (int a = 0; a < 3; ++a) {
+    grid_n_[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
+    grid_cell_[a] = ext[a] > 0 ? ext[a] / grid_n_[a] : 1.0;
+  }
+  const std::size_t cells = std::size_t(grid_n_[0]) * grid_n_[1] * grid_n_[2];
+  grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
+  grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
+  const double pad = 1e-6 * longest;
+  for (std::size_t i = 0; i < h.element_count(); ++i) {
+    if (render_of_[i] == kNone) continue;
+    Vec3 blo, bhi;
+    blo.fill(std::numeric_limits<double>::infinity());
+    bhi.fill(-std::numeric_limits<double>::infinity());
+    for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
+      for (int a = 0; a < 3; ++a) {
+        blo[a] = std::min(blo[a], h.point(v)[a]);
+        bhi[a] = std::max(bhi[a], h.point(v)[a]);
+      }
+    int c0[3], c1[3];
+    for (int a = 0; a < 3; ++a) {
+      c0[a] = grid_index(a, blo[a] - pad);
+      c1[a] = grid_index(a, bhi[a] + pad);
+    }
+    for (int z = c0[2]; z <= c1[2]; ++z)
+      for (int y = c0[1]; y <= c1[1]; ++y)
+        for (int x = c0[0]; x <= c1[0]; ++x) {
+          const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
+          grid_lo_[c] = std::min(grid_lo_[c], lo_[i]);
+          grid_hi_[c] = std::max(grid_hi_[c], hi_[i]);
+        }
+  }
+}
+
+int TetRenderMesh::grid_index(int a, double x) const {
+  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
+}
+
+double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0,
+                                    double t1, const CompiledTransferFunction& tf) const {
+  // 3D DDA (Amanatides & Woo 1987) from the cell of o + t0 d.
+  const Vec3 p = axpy(o, t0, d);
+  int i[3], step[3];
+  double t_next[3], t_delta[3];
+  for (int a = 0; a < 3; ++a) {
+    i[a] = grid_index(a, p[a]);
+    step[a] = d[a] > 0 ? 1 : d[a] < 0 ? -1 : 0;
+    if (step[a] == 0) {
+      t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+      continue;
+    }
+    const double face = lo_box_[a] + (i[a] + (step[a] > 0 ? 1 : 0)) * grid_cell_[a];
+    t_next[a] = t0 + (face - p[a]) / d[a];
+    t_delta[a] = grid_cell_[a] / std::abs(d[a]);
+  }
+  // Back off into the transparent cell before (by far more than locate's nudge).
+  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / std::sqrt(dot(d, d));
+  double t = t0;
+  while (true) {
+    const std::size_t c = (std::size_t(i[2]) * grid_n_[1] + i[1]) * grid_n_[0] + i[0];
+    if (!(grid_lo_[c] > grid_hi_[c]) && !tf.transparent(grid_lo_[c], grid_hi_[c]))
+      return std::max(t0, t - back);
+    const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+    t = t_next[a];
+    if (t >= t1) return t1;
+    i[a] += step[a];
+    if (i[a] < 0 || i[a] >= grid_n_[a]) return t1;
+    t_next[a] += t_delta[a];
+  }
 }
 
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
-         nb_.capacity() * sizeof(nb_[0]) + records_.capacity() * sizeof(StepRecord) +
-         render_of_.capacity() * sizeof(std::uint32_t) + (lo_.capacity() + hi_.capacity()) * sizeof(float);
+         records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
+         (lo_.capacity() + hi_.capacity()) * sizeof(float);
 }
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
@@ -384,9 +570,9 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
     const double l[4] = {1.0 - l1 - l2 - l3, l1, l2, l3};
     const int f = int(std::min_element(l, l + 4) - l);
     if (l[f] >= 0) return r;
-    const std::int32_t next = nb_[r][f];
-    if (next < 0) break;
-    r = std::uint32_t(next);
+    const std::uint32_t next = records_[r].next[f];
+    if (next == kNoNeighbor) break;
+    r = next >> 2;
   }
   return locate(p, d, elems_[start]);
 }
@@ -412,19 +598,44 @@ bool clip_to_box(const Vec3& lo, const Vec3& hi, const Vec3& o, const Vec3& d, d
   return t0 < t1;
 }
 
-template <class Visit>
+// What empty-space skipping does with a rendered element: u is evaluated (kVisible), the
+// element is walked without evaluating u (kEmptyLeaf), or its largest transparent ancestor,
+// kSkipLevels or more above it, is crossed in one step (kSkipAncestor).
+enum EmptyState : std::uint8_t { kVisible = 0, kEmptyLeaf = 1, kSkipAncestor = 2 };
+
+// The largest ancestor of e (or e) whose range is transparent for `skip`; e must be.
+ElemId largest_transparent(const TetRenderMesh& m, const CompiledTransferFunction& skip, ElemId e) {
+  const Hierarchy<3>& h = m.hierarchy();
+  ElemId a = e;
+  while (h.parent(a).valid() && skip.transparent(m.range_lo(h.parent(a)), m.range_hi(h.parent(a))))
+    a = h.parent(a);
+  return a;
+}
+
+EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& skip, ElemId e, int levels) {
+  if (!skip.transparent(m.range_lo(e), m.range_hi(e))) return kVisible;
+  const Hierarchy<3>& h = m.hierarchy();
+  return h.level(e) - h.level(largest_transparent(m, skip, e)) >= levels ? kSkipAncestor : kEmptyLeaf;
+}
+
+// Walks the ray o + t d through m (steps 1–5 of volume_render.h). state(r) gives the
+// EmptyState of element r (only called with skip set): computed per element crossed for a
+// single ray, looked up in a table made once per image when rendering.
+template <class State, class Visit>
 TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
-                  Visit&& visit, ElemId* entry_hint) {
+                  State&& state, Visit&& visit, ElemId* entry_hint) {
   TraceResult res;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
   res.hit = true;
-  const Hierarchy<3>& h = m.hierarchy();
   const double eps = 1e-9 * (res.t_far - res.t_near +
                              std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
   const std::uint64_t bound = m.size() + 64;
-  auto transparent = [&](ElemId e) { return skip->transparent(m.range_lo(e), m.range_hi(e)); };
 
   double t = res.t_near;
+  if (skip) {
+    t = m.first_visible(o, d, t, res.t_far, *skip);
+    if (t >= res.t_far) return res;
+  }
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
   // else descend the hierarchy.
   const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
@@ -438,29 +649,34 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
       res.step_bound_hit = true;
       break;
     }
-    const ElemId e = m.element(r);
     // Empty space: the largest transparent ancestor is crossed in one step when it is at
     // least kSkipLevels above (locating again behind it costs about as much as walking a few
     // leaves); a transparent leaf is walked without evaluating u.
-    const bool empty = skip && transparent(e);
-    if (empty) {
-      ElemId a = e;
-      while (h.parent(a).valid() && transparent(h.parent(a))) a = h.parent(a);
-      if (h.level(e) - h.level(a) >= kSkipLevels) {
-        load(h, a, p);
-        double t_out;
-        TetPlanes(p).exit(o, d, t, -1, t_out);
-        t_out = std::min(t_out, res.t_far);
-        if (!visit(TraceSegment{-1, t, t_out, 0, 0, {0, 0, 0}, true})) break;
-        ++res.skips;
-        t = t_out;
-        if (t >= res.t_far - eps) break;
-        r = m.locate(axpy(o, t, d), d, a);
-        entry = -1;
-        continue;
-      }
+    const EmptyState es = skip ? EmptyState(state(r)) : kVisible;
+    if (es == kSkipAncestor) {
+      const ElemId a = largest_transparent(m, *skip, m.element(r));
+      load(m.hierarchy(), a, p);
+      double t_out;
+      TetPlanes(p).exit(o, d, t, -1, t_out);
+      t_out = std::min(t_out, res.t_far);
+      if (!visit(TraceSegment{-1, t, t_out, 0, 0, {0, 0, 0}, true})) break;
+      ++res.skips;
+      t = t_out;
+      if (t >= res.t_far - eps) break;
+      r = m.locate(axpy(o, t, d), d, a);
+      entry = -1;
+      continue;
     }
+    const bool empty = es != kVisible;
     const TetRenderMesh::StepRecord& R = m.record(r);
+    // The next record is one of three: ask for them now, so their loads overlap this step's
+    // work instead of stalling the next one.
+    for (int i = 0; i < 4; ++i)
+      if (i != entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
+        const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
+        __builtin_prefetch(q);
+        __builtin_prefetch(q + 64);
+      }
     double t_out;
     const int f = record_exit(R, o, d, t, entry, t_out);
     t_out = std::min(t_out, res.t_far);
@@ -472,18 +688,17 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
     }
     if (!visit(seg)) break;
     t = t_out;
-    const std::int32_t next = m.neighbors(r)[f];
-    if (next < 0) {
+    const std::uint32_t next = R.next[f];
+    if (next == TetRenderMesh::kNoNeighbor) {
       if (t >= res.t_far - eps) break;
       // Left the mesh before the box exit (rounding at the boundary): locate again.
       ++res.relocations;
-      r = m.locate(axpy(o, t, d), d, e);
+      r = m.locate(axpy(o, t, d), d, m.element(r));
       entry = -1;
       continue;
     }
-    const auto& back = m.neighbors(std::uint32_t(next));
-    entry = int(std::find(back.begin(), back.end(), std::int32_t(r)) - back.begin());
-    r = std::uint32_t(next);
+    entry = int(next & 3u);
+    r = next >> 2;
   }
   return res;
 }
@@ -493,7 +708,9 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
                       const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
-  return trace(m, origin, dir, skip, visit, entry_hint);
+  return trace(
+      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r), kSkipLevels); },
+      visit, entry_hint);
 }
 
 // ---------------------------------------------------------------- images
@@ -554,14 +771,31 @@ double shade_factor(const Vec3& g, const Vec3& d) {
 RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, const TransferFunction& tf,
                         const Camera& camera, const RenderOptions& opt, RenderStats* stats) {
   const CompiledTransferFunction ctf(tf);
+  const CameraRays rays(camera);
+  const ToLocal to_local(transform);
+  // What skipping does with each element, for this transfer function: once per image rather
+  // than per element crossed.
+  std::vector<std::uint8_t> state;
+  if (opt.skip_empty) {
+    state.resize(m.size());
+    // In the hierarchy's element order, in which its per-element arrays are read.
+    tbb::parallel_for(
+        tbb::blocked_range<std::uint32_t>(0, std::uint32_t(m.hierarchy().element_count()), 4096),
+        [&](const auto& range) {
+          for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
+            const std::int32_t r = m.render_index(ElemId(e));
+            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e), opt.skip_levels);
+          }
+        });
+  }
   Counters n;
   RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId& hint) {
     Vec3 ow, dw;
-    camera.ray(x, y, ow, dw);
-    const Vec3 o = world_to_local_point(transform, ow), d = world_to_local_direction(transform, dw);
+    rays.ray(x, y, ow, dw);
+    const Vec3 o = to_local.point(ow), d = to_local.direction(dw);
     std::uint64_t segs = 0;
     const TraceResult r = trace(
-        m, o, d, opt.skip_empty ? &ctf : nullptr,
+        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; },
         [&](const TraceSegment& s) {
           if (s.tet >= 0) ++segs;
           if (!s.empty) {
@@ -589,10 +823,12 @@ RenderImage render_grid(const ScalarGrid& grid, const TransferFunction& tf, cons
   const Vec3 lo{0, 0, 0}, hi = grid.local_extent();
   const double step = 0.5 * f.resolution();
   Counters n;
+  const CameraRays rays(camera);
+  const ToLocal to_local(grid.transform);
   RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId&) {
     Vec3 ow, dw;
-    camera.ray(x, y, ow, dw);
-    const Vec3 o = world_to_local_point(grid.transform, ow), d = world_to_local_direction(grid.transform, dw);
+    rays.ray(x, y, ow, dw);
+    const Vec3 o = to_local.point(ow), d = to_local.direction(dw);
     double t0, t1;
     if (!clip_to_box(lo, hi, o, d, t0, t1)) return;
     std::uint64_t segs = 0;

@@ -6,23 +6,30 @@
 // of a coarser function. Also a reference ray caster on the original voxels.
 //
 // Traversal (per ray):
-//   1. clip the ray to the domain box (slab test);
-//   2. find the entry tetrahedron by descending the hierarchy from T0 (the child containing a
-//      point just behind the entry point along the ray);
+//   1. clip the ray to the domain box (slab test); when rendering with empty-space skipping,
+//      move its start to just before the first cell of a coarse grid that a visible element
+//      overlaps (3D DDA; everything in front is transparent, so the image does not change);
+//   2. find the entry tetrahedron by a short walk from the previous pixel's entry, else by
+//      descending the hierarchy from T0 (the child containing a point just behind the entry
+//      point along the ray);
 //   3. step through face neighbours of the rendered triangulation T_k; the exit face is the
 //      face plane the ray crosses first among those it leaves through (outward normal · d > 0),
 //      never the face it came in by, so a ray through a vertex or along an edge walks the ring
 //      of tetrahedra around it toward the direction of the ray instead of bouncing back;
 //   4. empty space: a tetrahedron whose value range maps to zero opacity is walked without
 //      evaluating u; when its largest ancestor with the same property (per-element ranges of
-//      u, as for iso-surfaces) lies 3 or more levels above, that ancestor is crossed in one
-//      step and the ray located again behind it (a location costs several leaf steps);
+//      u, as for iso-surfaces) lies RenderOptions::skip_levels (5) or more levels above, that
+//      ancestor is crossed in one step and the ray located again behind it (a location costs
+//      several leaf steps);
 //   5. a ray that leaves the mesh before the box exit (rounding) is located again, not lost;
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
+// The rendered elements are kept in Z-order of their centroids, so that the records a tile of
+// rays reads lie close together in memory.
 // Exit test: the parametric form of the face-crossing test (as in Bunyk et al.) with the
 // entry-face exclusion as tie-break, not Plücker coordinates (Platis & Theoharis 2003).
 #pragma once
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -65,6 +72,7 @@ struct RenderOptions {
   double z_opacity = 0.5;      ///< Z = distance where the accumulated opacity reaches this
   bool shading = false;        ///< scale colours by 0.35 + 0.65 |cos(gradient, ray)|
   bool skip_empty = true;      ///< cross transparent coarse elements in one step (mesh only)
+  int skip_levels = 5;         ///< ... when they are at least this many levels above the leaf
 };
 
 /// Premultiplied linear RGBA (4 floats per pixel, row 0 at the top) and Z (distance along the
@@ -97,7 +105,16 @@ class TetRenderMesh {
   int level() const { return level_; }
   const Hierarchy<3>& hierarchy() const { return h_; }
   ElemId element(std::uint32_t r) const { return elems_[r]; }
-  const std::array<std::int32_t, 4>& neighbors(std::uint32_t r) const { return nb_[r]; }
+  /// Face neighbours of element r (render indices; −1 on the boundary), face f opposite local
+  /// vertex f.
+  std::array<std::int32_t, 4> neighbors(std::uint32_t r) const {
+    std::array<std::int32_t, 4> nb;
+    for (int f = 0; f < 4; ++f) {
+      const std::uint32_t x = records_[r].next[f];
+      nb[f] = x == kNoNeighbor ? -1 : std::int32_t(x >> 2);
+    }
+    return nb;
+  }
   double value(VertexId v) const { return (*u_)[v.value]; }
   const std::array<double, 3>& box_lo() const { return lo_box_; }
   const std::array<double, 3>& box_hi() const { return hi_box_; }
@@ -119,17 +136,28 @@ class TetRenderMesh {
   /// 32 steps or at the mesh boundary.
   std::uint32_t walk_to(std::uint32_t start, const std::array<double, 3>& p,
                         const std::array<double, 3>& d) const;
-  /// What a ray step needs of element r, precomputed once: the outward face planes
-  /// n_f · x = h_f (face f opposite local vertex f; normals rounded to float, offsets in double
-  /// through the face's lowest-id vertex, so the two elements sharing a face hold the same
-  /// plane with opposite signs) and u(x) = b + g · x.
-  struct StepRecord {
-    float n[4][3];
+  /// What a ray step needs of element r, precomputed once, in one record so that a step reads
+  /// one place: the outward face planes n_f · x = h_f (face f opposite local vertex f; normals
+  /// rounded to float, offsets in double through the face's lowest-id vertex, so the two
+  /// elements sharing a face hold the same plane with opposite signs), u(x) = b + g · x, and
+  /// the face neighbours, each as 4 × render index + the index of the shared face in the
+  /// neighbour (kNoNeighbor on the boundary), so a step needs no search for its entry face.
+  /// Aligned to cache lines: 120 bytes then touch two lines instead of three.
+  struct alignas(64) StepRecord {
     double h[4];
-    float g[3];
     double b;
+    float n[3][4];  ///< n[a][f]: component a of face f's normal
+    float g[3];
+    std::uint32_t next[4];
   };
+  static constexpr std::uint32_t kNoNeighbor = 0xFFFFFFFFu;
   const StepRecord& record(std::uint32_t r) const { return records_[r]; }
+  /// Where the ray o + t d, t in [t0, t1], may start for transfer function tf: a little before
+  /// the first cell of a coarse grid over the box (about one cell per 8 elements) whose value
+  /// range — the union of those of the elements overlapping it — is not transparent; t1 when
+  /// there is none. Every element holding a point of the ray in front is transparent.
+  double first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0, double t1,
+                       const CompiledTransferFunction& tf) const;
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
 
@@ -139,12 +167,15 @@ class TetRenderMesh {
   std::vector<double> coarse_values_;
   const std::vector<double>* u_;
   std::vector<ElemId> elems_;
-  std::vector<std::array<std::int32_t, 4>> nb_;
   std::vector<StepRecord> records_;
   std::vector<std::uint32_t> render_of_;
   std::vector<float> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
   double diag_ = 0;
+  int grid_n_[3];
+  std::array<double, 3> grid_cell_;
+  std::vector<float> grid_lo_, grid_hi_;  // per cell of the range grid (empty: lo > hi)
+  int grid_index(int a, double x) const;
 };
 
 /// One piece of a traced ray: tetrahedron `tet` (render index; −1 for a skipped transparent
@@ -168,7 +199,8 @@ struct TraceResult {
 
 /// Traces the ray origin + t·dir (local frame, t ≥ 0) through m, calling visit(segment) per
 /// tetrahedron in ray order until it returns false or the ray leaves the box. With `skip`,
-/// elements whose range it reports transparent (skip->transparent) are crossed in one step.
+/// elements whose range it reports transparent (skip->transparent) are crossed in one step,
+/// and the walk starts at first_visible() (the transparent elements in front are not visited).
 /// `entry_hint` (may be null): in, an element to start the entry search from; out, the entry
 /// element of this ray (for the next pixel).
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,

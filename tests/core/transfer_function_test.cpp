@@ -50,6 +50,24 @@ TEST(MeanTransmittance, MatchesQuadratureOnAllBranches) {
   }
 }
 
+TEST(MeanTransmittance, SmallSlopeAcrossTheMomentBranches) {
+  // The Taylor branch takes the moments from a power series below a = 0.25 and from the
+  // upward recurrence above: both sides of the switch, at the largest slopes it serves.
+  for (double a : {0.0, 0.1, 0.249, 0.25, 0.26, 0.5, 1.0, 2.0, 3.9, 4.1, 9.0})
+    for (double k : {-0.1, -0.03, 0.0, 0.05, 0.1}) {
+      const double b = std::max(0.0, a + k);
+      const int n = 200000;
+      double sum = 0;
+      for (int i = 0; i < n; ++i) {
+        const double u = (i + 0.5) / n;
+        sum += std::exp(-(a * u + 0.5 * (b - a) * u * u));
+      }
+      // The series in k is cut after k⁴: its truncation, k⁵ / 42240, bounds the error.
+      const double tol = std::abs(b - a) <= 0.05 ? 2e-11 : 5e-10;
+      EXPECT_NEAR(mean_transmittance(a, b), sum / n, tol) << "a=" << a << " b=" << b;
+    }
+}
+
 TEST(RayAccumulator, ConstantOpacityGivesAnalyticTransmittance) {
   TransferFunction tf;
   tf.color = {{0, 1, 0.5, 0.25}};

@@ -180,6 +180,7 @@ TEST(RenderMesh, EmptySpaceSkippingKeepsTheImage) {
   tf.unit_length = 0.05;
   const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 20, 30, false, 40, 40);
   RenderOptions with, without;
+  with.skip_levels = 1;  // the blob has 4 levels: let ancestors be crossed too
   without.skip_empty = false;
   RenderStats sw, so;
   const RenderImage a = render_mesh(m, GridTransform{}, tf, cam, with, &sw);
@@ -211,10 +212,27 @@ TEST(RenderMesh, CompactAdjacency) {
   const Blob b;
   const TetRenderMesh m(b.h, b.u);
   EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 150.0);
-  // The same neighbours as the hierarchy's own face_neighbors, and shared both ways.
-  const auto expected = b.h.face_neighbors(b.h.leaves());
+  // The same neighbours as the hierarchy's own face_neighbors, and shared both ways. The
+  // renderer keeps the leaves in its own (spatial) order: compare through the elements.
+  const auto leaves = b.h.leaves();
+  const auto expected = b.h.face_neighbors(leaves);
   ASSERT_EQ(expected.size(), m.size());
-  for (std::uint32_t r = 0; r < m.size(); ++r) EXPECT_EQ(m.neighbors(r), expected[r]) << r;
+  std::vector<std::int32_t> position(b.h.element_count(), -1);
+  for (std::size_t i = 0; i < leaves.size(); ++i) position[leaves[i].value] = std::int32_t(i);
+  std::set<std::uint32_t> seen;
+  for (std::uint32_t r = 0; r < m.size(); ++r) {
+    const std::int32_t i = position[m.element(r).value];
+    ASSERT_GE(i, 0) << "element " << r << " is not a leaf";
+    EXPECT_TRUE(seen.insert(m.element(r).value).second) << "leaf rendered twice";
+    EXPECT_EQ(m.render_index(m.element(r)), std::int32_t(r));
+    for (int f = 0; f < 4; ++f) {
+      const std::int32_t n = m.neighbors(r)[f], e = expected[std::size_t(i)][f];
+      ASSERT_EQ(n < 0, e < 0) << r << " face " << f;
+      if (n >= 0) {
+        EXPECT_EQ(m.element(std::uint32_t(n)), leaves[std::size_t(e)]) << r << " face " << f;
+      }
+    }
+  }
   for (std::uint32_t r = 0; r < m.size(); ++r)
     for (std::int32_t n : m.neighbors(r))
       if (n >= 0) {
