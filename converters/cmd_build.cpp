@@ -4,9 +4,10 @@
 #include <memory>
 
 #include "converters/commands.h"
-#include "converters/pipeline.h"
+#include "converters/pipeline_options.h"
 #include "converters/volume_options.h"
 #include "core/error.h"
+#include "mlfe/version.h"
 
 namespace mlfe::cli {
 namespace {
