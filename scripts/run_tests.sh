@@ -32,6 +32,11 @@ cmake --build "$ROOT/build/consumer" -j "$JOBS"
 "$ROOT/build/consumer/mlfe_consumer" "$ROOT/samples/ct_skull_64.nrrd" "$ROOT/build/consumer/ct_skull.glb"
 node "$ROOT/tools/validate_gltf.js" "$ROOT/build/consumer/ct_skull.glb" >/dev/null
 echo "consumer: ct_skull.glb accepted by the glTF validator"
+# The installed Python module loads (its RPATH finds the installed libmlfe_formats).
+PYSITE="$(sed -n 's/^MLFE_PYTHON_INSTALL_DIR:STRING=//p' "$ROOT/build/CMakeCache.txt")"
+if [ -n "$PYSITE" ]; then
+  PYTHONPATH="$PREFIX/$PYSITE" /usr/bin/python3 -c "import mlfe; print('installed python module: mlfe', mlfe.__version__)"
+fi
 
 echo "== bounded fuzzing"
 bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"
