@@ -8,7 +8,9 @@ macro(mlfe_require_package name apt)
   endif()
 endmacro()
 
-# mlfe_require_file(<var> <header-or-lib> <apt-package> find_xxx args...)
+# mlfe_require_header(<var> <header> <apt-package> [find_path args...]) and
+# mlfe_require_library(<var> <library> <apt-package> [find_library args...]): find_path /
+# find_library that fail the configure step with the Debian package to install.
 macro(mlfe_require_header var header apt)
   find_path(${var} ${header} ${ARGN})
   if(NOT ${var})

@@ -7,11 +7,12 @@
 #include <memory>
 
 #include "converters/commands.h"
-#include "converters/pipeline.h"
+#include "converters/pipeline_options.h"
 #include "converters/volume_options.h"
 #include "core/error.h"
 #include "formats/hierarchy_levels.h"
 #include "formats/hierarchy_resample.h"
+#include "mlfe/version.h"
 
 namespace mlfe::cli {
 namespace {
@@ -93,7 +94,7 @@ void run_build(const BuildState& s) {
   const ScalarGrid grid = read_volume(s.input, s.read);
   if (s.max_error > 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
   const Built b = build_from_grid(grid, s.params, {});
-  const FileFigures fig = b.dim == 2 ? write_file(s, b, *b.a2, grid) : write_file(s, b, *b.a3, grid);
+  const FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), grid) : write_file(s, b, b.get<3>(), grid);
   const double bytes = static_cast<double>(std::filesystem::file_size(s.output));
   if (!s.report.empty()) {
     nlohmann::json r = build_report(s.input, &grid, b);

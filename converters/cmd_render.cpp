@@ -15,6 +15,7 @@
 #include "formats/exr_writer.h"
 #include "formats/file_names.h"
 #include "formats/transfer_function_io.h"
+#include "mlfe/version.h"
 
 namespace mlfe::cli {
 
@@ -85,7 +86,7 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
                                         const ScalarGrid* grid, const std::string& source, bool quiet) {
   check_output_path(out, {".exr"});
   if (!p.png.empty()) check_output_path(p.png, {".png"});
-  if (b.dim != 3) throw Error(source + ": rendering needs a 3D volume or hierarchy");
+  if (b.dim() != 3) throw Error(source + ": rendering needs a 3D volume or hierarchy");
   if (p.reference && !grid)
     throw Error(source + ": --reference needs the volume itself as input, not a hierarchy");
   int w = 0, h = 0;
@@ -97,7 +98,7 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   }
   const auto bg = parse3(p.background, "--background");
   const GridTransform& tr = b.transform;
-  const auto& hier = b.a3->hierarchy;
+  const auto& hier = b.get<3>().hierarchy;
 
   // Transfer function: presets over the data's range, opacities per voxel unless told.
   double voxel = std::min({tr.spacing[0], tr.spacing[1], tr.spacing[2]});
@@ -138,7 +139,7 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
 
   std::unique_ptr<TetRenderMesh> mesh;
   if (!p.reference) {
-    mesh = std::make_unique<TetRenderMesh>(hier, b.a3->values, p.level);
+    mesh = std::make_unique<TetRenderMesh>(hier, b.get<3>().values, p.level);
     if (!quiet)
       std::fprintf(
           stderr, "mlfe render: %zu tetrahedra on level %d, renderer adds %.1f MB (%.0f bytes/tetrahedron)\n",
@@ -234,7 +235,6 @@ void run_render(const RenderState& s) {
     if (!s.render.reference)
       b = build_from_grid(*grid, s.build, {});
     else {
-      b.dim = 3;
       b.transform = grid->transform;
       const auto r = grid->value_range();
       b.value_min = r[0];
@@ -243,7 +243,7 @@ void run_render(const RenderState& s) {
       Approximation<3> a;
       a.hierarchy = Hierarchy<3>::box({0, 0, 0}, grid->local_extent());
       a.values.assign(a.hierarchy.vertex_count(), 0.0);
-      b.a3 = std::move(a);
+      b.approximation = std::move(a);
     }
   }
   for (const auto& f : render_outputs(s.output, s.render, b, grid ? &*grid : nullptr, s.input, s.build.quiet))

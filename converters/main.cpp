@@ -11,6 +11,7 @@
 
 #include "converters/commands.h"
 #include "core/error.h"
+#include "mlfe/version.h"
 
 namespace mlfe::cli {
 int& thread_option() {

@@ -6,13 +6,10 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <optional>
-#include <sstream>
 
 #include "core/error.h"
 #include "core/field.h"
@@ -23,8 +20,9 @@
 #include "formats/file_names.h"
 #include "formats/gltf_writer.h"
 #include "formats/openmesh_io.h"
+#include "mlfe/version.h"
 
-namespace mlfe::cli {
+namespace mlfe {
 
 namespace fs = std::filesystem;
 
@@ -42,148 +40,64 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
     throw Error(fmt::format("{}: cannot create file: folder {} does not exist", path, parent.string()));
 }
 
-void add_build_options(CLI::App* cmd, BuildParams& p) {
-  cmd->add_option("--rms", p.rms,
-                  "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data "
-                  "units [default: 0.5% without --iso; with --iso, refinement follows the surfaces]");
-  cmd->add_option(
-         "--threshold", p.threshold,
-         "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--max-vertices", p.max_vertices, "vertex budget (never exceeded)");
-  cmd->add_option("--max-level", p.max_level, "deepest refinement level")
-      ->check(CLI::Range(0, 40))
-      ->capture_default_str();
-  cmd->add_option("--start-level", p.start_level,
-                  "uniform levels before adapting (-1: until edges <= 16 voxels)")
-      ->check(CLI::Range(-1, 12));
-  cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
-      ->check(CLI::IsMember({"l2", "h1"}))
-      ->capture_default_str();
-  cmd->add_option("--preconditioner", p.preconditioner, "CG preconditioner")
-      ->check(CLI::IsMember({"bpx", "jacobi", "none"}))
-      ->capture_default_str();
-  cmd->add_option("--surface-tolerance", p.surface_tolerance,
-                  "with iso-values: refine until surfaces are within this many voxels")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_flag(
-      "--check-u", p.check_against_u,
-      "surface-driven builds: after the first solve, refine where u's surfaces miss the data's and solve "
-      "again (more vertices; u then follows small parts too)");
-  cmd->add_option(
-         "--max-memory", p.max_memory,
-         "memory budget of the build: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; "
-         "refinement stops there with a message")
-      ->capture_default_str();
-  cmd->add_flag("--quiet", p.quiet, "no progress on stderr");
-}
-
-void add_asset_options(CLI::App* cmd, AssetParams& p) {
-  cmd->add_option("--iso", p.iso, "iso-values, comma separated (3D volumes)");
-  cmd->add_option("--tolerance", p.tolerance,
-                  "position tolerance in mm for Draco/quantization (default: voxel/10)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_flag("--no-draco", p.no_draco, "glTF with plain float buffers");
-  cmd->add_flag("--quantize", p.quantize, "glTF with KHR_mesh_quantization (with --no-draco)");
-  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)")
-      ->check(CLI::Range(0, 8));
-  cmd->add_option("--decimate", p.decimate,
-                  "reduce every surface to this many triangles (OpenMesh quadric decimater)");
-  cmd->add_option(
-         "--simplify", p.simplify,
-         "simplify every surface while it stays within this many voxels of the extracted one (0: the raw "
-         "extraction)")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd->add_option(
-         "--simplifier", p.simplifier,
-         "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
-         "result, topology kept; ~10 microseconds per triangle), fast (meshoptimizer: collapses while its "
-         "error estimate stays within the tolerance; seconds for millions of triangles) or auto (bounded "
-         "for surfaces of up to 200000 extracted triangles, fast above)")
-      ->check(CLI::IsMember({"auto", "fast", "bounded"}))
-      ->capture_default_str();
-  cmd->add_option("--placement", p.placement,
-                  "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
-                  "(quadric minimum near the surface: fewer triangles at the same tolerance) or auto "
-                  "(optimal, input with --normals gradient)")
-      ->check(CLI::IsMember({"auto", "input", "optimal"}))
-      ->capture_default_str();
-  cmd->add_option(
-         "--snap", p.snap,
-         "move surface vertices onto the volume's own iso-surface, at most this many voxels "
-         "along the approximation's gradient (0: keep the approximation's surface; needs the volume)")
-      ->check(CLI::Range(0.0, 8.0))
-      ->capture_default_str();
-  cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
-  cmd->add_option("--normals", p.normals,
-                  "vertex normals: gradient (the approximation's gradients, the paper's; kept through "
-                  "--simplify), surface (area-weighted from the written triangles; smaller Draco files) "
-                  "or auto (gradient, surface after --simplify/--decimate)")
-      ->check(CLI::IsMember({"auto", "gradient", "surface"}))
-      ->capture_default_str();
-  cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
-  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
-      ->check(CLI::Range(-1, 40));
-}
-
-std::vector<double> parse_values(const std::string& text, const std::string& what) {
-  std::vector<double> out;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      const double v = std::stod(item, &used);
-      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
-      out.push_back(v);
-    } catch (const std::exception&) {
-      throw Error(fmt::format("{}: not a number: '{}'", what, item));
-    }
-  }
-  return out;
-}
-
 double peak_rss_mb() {
   rusage ru{};
   getrusage(RUSAGE_SELF, &ru);
   return ru.ru_maxrss / 1024.0;
 }
 
-std::size_t parse_memory_budget(const std::string& text) {
-  std::string t = text;
-  double scale = 1;
-  bool percent = false;
-  if (!t.empty()) {
-    const char c = static_cast<char>(std::toupper(static_cast<unsigned char>(t.back())));
-    if (c == '%') percent = true;
-    if (c == 'K') scale = 1024.0;
-    if (c == 'M') scale = 1024.0 * 1024.0;
-    if (c == 'G') scale = 1024.0 * 1024.0 * 1024.0;
-    if (percent || scale > 1) t.pop_back();
-  }
-  std::vector<double> v;
-  try {
-    v = parse_values(t, "--max-memory");
-  } catch (const Error&) {
-    v.clear();
-  }
-  if (v.size() != 1 || v[0] < 0 || (percent && v[0] > 100))
-    throw Error("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
-                text + "'");
-  if (!percent) return static_cast<std::size_t>(v[0] * scale);
+std::size_t MemoryBudget::bytes() const {
+  if (!(amount >= 0) || (percent_of_ram && amount > 100) || unit_power < 0 || unit_power > 3)
+    throw Error(fmt::format("memory budget: expected a percentage of RAM (0..100) or bytes; got {}", text()));
+  if (!percent_of_ram) return static_cast<std::size_t>(amount * std::pow(1024.0, unit_power));
   const double ram = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
-  return static_cast<std::size_t>(ram * v[0] / 100.0);
+  return static_cast<std::size_t>(ram * amount / 100.0);
 }
 
-Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values) {
+std::string MemoryBudget::text() const {
+  static const char* const kUnits[] = {"", "K", "M", "G"};
+  return fmt::format("{}{}", amount,
+                     percent_of_ram                       ? "%"
+                     : unit_power >= 0 && unit_power <= 3 ? kUnits[unit_power]
+                                                          : "?");
+}
+
+namespace {
+
+// Values the approximation needs in range; the command line checks the same bounds.
+void check_build_options(const BuildOptions& p) {
+  if (p.rms && !(p.rms->value > 0 && std::isfinite(p.rms->value)))
+    throw Error("--rms: expected one positive value, e.g. 0.5% or 2.0");
+  if (!(p.threshold >= 0)) throw Error(fmt::format("threshold: expected a value >= 0, got {}", p.threshold));
+  if (p.max_level < 0 || p.max_level > 40)
+    throw Error(fmt::format("max_level: expected 0..40, got {}", p.max_level));
+  if (p.start_level < -1 || p.start_level > 12)
+    throw Error(fmt::format("start_level: expected -1..12, got {}", p.start_level));
+  if (!(p.surface_tolerance > 0))
+    throw Error(fmt::format("surface_tolerance: expected a positive value, got {}", p.surface_tolerance));
+}
+
+}  // namespace
+
+Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<double>& iso_values) {
+  if (grid.dim != 2 && grid.dim != 3)
+    throw Error(fmt::format("{}: expected a 2D or 3D grid, got dim {}", grid.source, grid.dim));
   for (int a = 0; a < grid.dim; ++a)
     if (grid.dims[a] < 2)
       throw Error(fmt::format("{}: needs at least 2 samples along every axis (dims {}x{}x{})", grid.source,
                               grid.dims[0], grid.dims[1], grid.dims[2]));
+  if (grid.values.size() != static_cast<std::size_t>(grid.voxel_count()) ||
+      (grid.dim == 2 && grid.dims[2] != 1))
+    throw Error(fmt::format("{}: {} values do not fill dims {}x{}x{}", grid.source, grid.values.size(),
+                            grid.dims[0], grid.dims[1], grid.dims[2]));
+  for (int a = 0; a < grid.dim; ++a)
+    if (!(grid.transform.spacing[a] > 0) || !std::isfinite(grid.transform.spacing[a]))
+      throw Error(fmt::format("{}: spacing must be positive (axis {}: {})", grid.source, a,
+                              grid.transform.spacing[a]));
+  for (double v : iso_values)
+    if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
+  check_build_options(p);
   Built b;
-  b.dim = grid.dim;
   b.transform = grid.transform;
   b.space = grid.space;
   const auto range = grid.value_range();
@@ -193,29 +107,23 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
 
   ApproximationOptions o;
   // With surfaces to extract and no global target, refine for the surfaces alone.
-  o.surface_driven = !iso_values.empty() && p.rms.empty() && p.threshold <= 0 && p.max_vertices == 0;
+  o.surface_driven = !iso_values.empty() && !p.rms && p.threshold <= 0 && p.max_vertices == 0;
   if (p.threshold > 0) {
     o.threshold = p.threshold;
   } else if (!o.surface_driven) {
-    std::string r = p.rms.empty() ? "0.5%" : p.rms;
-    const bool percent = !r.empty() && r.back() == '%';
-    if (percent) r.pop_back();
-    const auto v = parse_values(r, "--rms");
-    if (v.size() != 1 || v[0] <= 0) throw Error("--rms: expected one positive value, e.g. 0.5% or 2.0");
-    o.target_rms = percent ? v[0] / 100.0 * span : v[0];
+    const RmsTarget r = p.rms.value_or(RmsTarget{});
+    o.target_rms = r.percent_of_range ? r.value / 100.0 * span : r.value;
   }
   o.max_vertices = p.max_vertices;
   o.max_level = p.max_level;
   o.start_level = p.start_level;
-  o.h1 = p.norm == "h1";
-  o.preconditioner = p.preconditioner == "bpx"      ? Preconditioner::kBpx
-                     : p.preconditioner == "jacobi" ? Preconditioner::kJacobi
-                                                    : Preconditioner::kNone;
+  o.h1 = p.norm == Norm::kH1;
+  o.preconditioner = p.preconditioner;
   o.iso_values = iso_values;
   o.surface_tolerance = p.surface_tolerance;
   o.check_surfaces_against_u = p.check_against_u;
   o.solve = p.solve_u || p.check_against_u;
-  const std::size_t budget = parse_memory_budget(p.max_memory);
+  const std::size_t budget = p.max_memory.bytes();
   if (budget > 0) {
     // What the build may use: the budget less the volume (and its min/max pyramid), with a
     // tenth kept for extraction and writing.
@@ -224,43 +132,26 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
     if (room < 8.0 * 1024 * 1024)
       throw Error(
           fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
-                      grid.source, grid_bytes / 1048576.0, p.max_memory, double(budget) / 1048576.0));
+                      grid.source, grid_bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);
   }
-  if (!p.quiet) {
-    std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices", "elements",
-                 "rms", "rms%", "psnr", "cg", "seconds");
-    o.surface_progress = [](const SurfacePassStats& s) {
-      std::fprintf(stderr,
-                   "surface pass: %zu vertices, %zu elements, %zu near a surface, %zu refined, %.2f s\n",
-                   s.vertices, s.elements, s.candidates, s.marked, s.seconds);
-    };
-    o.progress = [](const IterationStats& s) {
-      std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level,
-                   s.vertices, s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
-    };
-  }
+  o.progress = p.progress;
+  o.surface_progress = p.surface_progress;
+  b.memory_budget_bytes = o.max_memory_bytes;
   const auto t0 = std::chrono::steady_clock::now();
   GridField f(grid);
   b.surface_driven = o.surface_driven;
   if (grid.dim == 2)
-    b.a2 = approximate<2>(f, o);
+    b.approximation = approximate<2>(f, o);
   else
-    b.a3 = approximate<3>(f, o);
+    b.approximation = approximate<3>(f, o);
   b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  if ((grid.dim == 2 ? b.a2->memory_limited : b.a3->memory_limited))
-    std::fprintf(
-        stderr,
-        "mlfe: warning: %s: refinement stopped at the memory budget (--max-memory %s, %.0f MiB for the "
-        "build); the approximation is coarser than asked\n",
-        grid.source.c_str(), p.max_memory.c_str(), double(o.max_memory_bytes) / 1048576.0);
   return b;
 }
 
 Built built_from_file(const std::string& path) {
   HierarchyFile hf = read_hierarchy(path);
   Built b;
-  b.dim = hf.dim;
   b.transform = hf.transform;
   b.space = hf.space;
   b.value_min = hf.value_min;
@@ -271,12 +162,12 @@ Built built_from_file(const std::string& path) {
     Approximation<2> a;
     a.hierarchy = std::get<Hierarchy<2>>(std::move(hf.hierarchy));
     a.values = std::move(hf.values);
-    b.a2 = std::move(a);
+    b.approximation = std::move(a);
   } else {
     Approximation<3> a;
     a.hierarchy = std::get<Hierarchy<3>>(std::move(hf.hierarchy));
     a.values = std::move(hf.values);
-    b.a3 = std::move(a);
+    b.approximation = std::move(a);
   }
   return b;
 }
@@ -288,10 +179,7 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
   info.value_min = b.value_min;
   info.value_max = b.value_max;
   info.metadata = provenance;
-  if (b.dim == 2)
-    write_hierarchy(path, b.a2->hierarchy, b.a2->values, info);
-  else
-    write_hierarchy(path, b.a3->hierarchy, b.a3->values, info);
+  b.visit([&](const auto& a) { write_hierarchy(path, a.hierarchy, a.values, info); });
 }
 
 void write_json(const std::string& path, const nlohmann::json& j) {
@@ -340,7 +228,7 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
                     {"refine_seconds", s.refine_seconds},
                     {"seconds", s.seconds}});
   r["per_iteration"] = rows;
-  const auto& passes = b.dim == 2 ? b.a2->surface_passes : b.a3->surface_passes;
+  const auto& passes = b.surface_passes();
   nlohmann::json sp = nlohmann::json::array();
   for (const auto& s : passes)
     sp.push_back({{"vertices", s.vertices},
@@ -349,7 +237,7 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
                   {"marked", s.marked},
                   {"seconds", s.seconds}});
   r["surface_passes"] = sp;
-  r["memory_limited"] = b.dim == 2 ? b.a2->memory_limited : b.a3->memory_limited;
+  r["memory_limited"] = b.memory_limited();
   return r;
 }
 
@@ -376,42 +264,55 @@ double smallest_spacing(const GridTransform& t, int dim) {
 
 }  // namespace
 
-nlohmann::json write_assets(const std::string& out, const Built& b, const AssetParams& p,
-                            const nlohmann::json& provenance, const ScalarGrid* grid) {
-  const auto t0 = std::chrono::steady_clock::now();
-  check_output_path(out, kAssetExtensions);
-  const std::string ext = lower_extension(out);
-  const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim) / 10.0;
+const char* to_string(Simplifier s) {
+  return s == Simplifier::kFast ? "fast" : s == Simplifier::kBounded ? "bounded" : "auto";
+}
+const char* to_string(VertexPlacement p) {
+  return p == VertexPlacement::kInput ? "input" : p == VertexPlacement::kOptimal ? "optimal" : "auto";
+}
+const char* to_string(Normals n) {
+  return n == Normals::kGradient ? "gradient" : n == Normals::kSurface ? "surface" : "auto";
+}
 
-  std::vector<GltfSurface> surfaces;
-  std::vector<double> isos;
-  bool field_used = false;
-  if (b.dim == 3) {
+Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) {
+  if (p.lod < 0 || p.lod > 8) throw Error(fmt::format("lod: expected 0..8, got {}", p.lod));
+  if (!(p.simplify >= 0)) throw Error(fmt::format("simplify: expected a value >= 0, got {}", p.simplify));
+  if (!(p.snap >= 0 && p.snap <= 8)) throw Error(fmt::format("snap: expected 0..8 voxels, got {}", p.snap));
+  if (p.level < -1) throw Error(fmt::format("level: expected -1 (finest) or a level, got {}", p.level));
+  const auto t0 = std::chrono::steady_clock::now();
+  Surfaces out;
+  std::vector<GltfSurface>& surfaces = out.surfaces;
+  std::vector<double>& isos = out.iso_values;
+  const int dim = b.dim();
+  if (dim == 3) {
     if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
-    isos = parse_values(p.iso, "--iso");
+    for (double v : p.iso)
+      if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
+    isos = p.iso;
     std::sort(isos.begin(), isos.end());
+    const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
     // some of them away. With the volume at hand the asset takes the interpolant.
     // A build keeps them; a hierarchy read from a file (iso --volume) samples them again.
     std::vector<double> nodal_data;
     if (grid && grid->dim == 3 && b.surface_driven) {
-      nodal_data = b.a3->data_values;
-      sample_at_vertices(b.a3->hierarchy, GridField(*grid), nodal_data);
+      nodal_data = a3.data_values;
+      sample_at_vertices(a3.hierarchy, GridField(*grid), nodal_data);
     }
-    IsoExtractor x(b.a3->hierarchy, nodal_data.empty() ? b.a3->values : nodal_data);
-    const int finest = b.a3->hierarchy.max_level();
+    IsoExtractor x(a3.hierarchy, nodal_data.empty() ? a3.values : nodal_data);
+    const int finest = a3.hierarchy.max_level();
     const int level = p.level < 0 ? finest : std::min(p.level, finest);
     std::optional<GridField> field;
     if (grid && grid->dim == 3 && p.snap > 0) field.emplace(*grid);
-    field_used = field.has_value();
+    out.snapped = field.has_value();
     auto options = [&](int at) {
       IsoOptions o;
       o.normals_toward_higher = p.normals_toward_higher;
       o.level = at;
       if (field) {
         o.snap_to = &*field;
-        o.snap_distance = p.snap * smallest_spacing(b.transform, b.dim);
+        o.snap_distance = p.snap * smallest_spacing(b.transform, dim);
       }
       return o;
     };
@@ -432,22 +333,23 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
       surfaces.push_back(std::move(s));
     }
   } else {
+    const Approximation<2>& a2 = b.get<2>();
     GltfSurface s;
     s.name = "height field";
-    s.mesh = height_field_surface(b.a2->hierarchy, b.a2->values, b.transform, p.z_scale, p.level);
+    s.mesh = height_field_surface(a2.hierarchy, a2.values, b.transform, p.z_scale, p.level);
     s.color = {0.70f, 0.72f, 0.60f, 1.0f};
     surfaces.push_back(std::move(s));
   }
-  const double extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // Gradient normals hold at extracted vertices only, so they keep the vertices in place.
-  const std::string placement = p.placement != "auto"     ? p.placement
-                                : p.normals == "gradient" ? "input"
-                                                          : "optimal";
+  out.placement = p.placement != VertexPlacement::kAuto ? p.placement
+                  : p.normals == Normals::kGradient     ? VertexPlacement::kInput
+                                                        : VertexPlacement::kOptimal;
+  out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (p.simplify > 0) {
-    const double voxel = smallest_spacing(b.transform, b.dim);
+    const double voxel = smallest_spacing(b.transform, dim);
     SimplifyOptions so;
     so.tolerance = p.simplify * voxel;
-    so.placement = placement == "optimal" ? Placement::kOptimal : Placement::kInputVertex;
+    so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     // auto: the verified simplifier while it takes about a second or two (~10 µs per
     // triangle), meshoptimizer beyond; decided per surface from its size alone, so the bytes do
@@ -456,26 +358,39 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      const bool bounded =
-          p.simplifier == "bounded" || (p.simplifier == "auto" && m.triangles.size() <= kBoundedUpTo);
+      const bool bounded = p.simplifier == Simplifier::kBounded ||
+                           (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
       m = bounded ? simplify_within(m, so) : simplify_fast(m, so.tolerance);
     });
   }
   if (p.decimate > 0)
     for (auto& s : surfaces)
       if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
-  // --decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
-  const std::string normals = p.decimate > 0 || (p.normals == "auto" && p.simplify > 0) ? "surface"
-                              : p.normals == "auto"                                     ? "gradient"
-                                                                                        : p.normals;
-  if (normals == "surface")
+  // decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
+  out.normals = p.decimate > 0 || (p.normals == Normals::kAuto && p.simplify > 0) ? Normals::kSurface
+                : p.normals == Normals::kAuto                                     ? Normals::kGradient
+                                                                                  : p.normals;
+  if (out.normals == Normals::kSurface)
     for (auto& s : surfaces) {
       compute_area_weighted_normals(s.mesh);
       for (auto& lod : s.lods) compute_area_weighted_normals(lod);
     }
+  out.simplify_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - out.extract_seconds;
+  return out;
+}
 
-  const double simplify_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - extract_seconds;
+nlohmann::json write_assets(const std::string& out, const Built& b, const AssetOptions& p,
+                            const nlohmann::json& provenance, const ScalarGrid* grid) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check_output_path(out, kAssetExtensions);
+  const std::string ext = lower_extension(out);
+  if (!(p.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", p.tolerance));
+  const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim()) / 10.0;
+
+  const Surfaces extracted = extract(b, p, grid);
+  const std::vector<GltfSurface>& surfaces = extracted.surfaces;
+
   nlohmann::json summary;
   nlohmann::json per = nlohmann::json::array();
   std::size_t total = 0;
@@ -487,18 +402,19 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   }
   if (ext == ".glb" || ext == ".gltf") {
     GltfOptions o;
-    o.draco = !p.no_draco;
+    o.draco = p.draco;
     o.quantize = p.quantize;
     o.tolerance_mm = tol;
     o.space = b.space;
     o.extras = provenance;
     o.extras["tolerance_mm"] = tol;
-    o.extras["iso_values"] = isos;
-    o.extras["snapped_to_data_voxels"] = field_used ? p.snap : 0.0;
+    o.extras["iso_values"] = extracted.iso_values;
+    o.extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
-    if (p.simplify > 0) o.extras["simplifier"] = p.simplifier;
-    if (p.simplify > 0 && p.simplifier != "fast") o.extras["placement"] = placement;
-    o.extras["normals"] = normals;
+    if (p.simplify > 0) o.extras["simplifier"] = to_string(p.simplifier);
+    if (p.simplify > 0 && p.simplifier != Simplifier::kFast)
+      o.extras["placement"] = to_string(extracted.placement);
+    o.extras["normals"] = to_string(extracted.normals);
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.
@@ -517,10 +433,74 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetP
   summary["bytes"] = std::filesystem::file_size(out);
   summary["tolerance_mm"] = tol;
   summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  summary["stage_seconds"] = {{"extract", extract_seconds},
-                              {"simplify", simplify_seconds},
-                              {"write", summary["seconds"].get<double>() - extract_seconds - simplify_seconds}};
+  summary["stage_seconds"] = {
+      {"extract", extracted.extract_seconds},
+      {"simplify", extracted.simplify_seconds},
+      {"write", summary["seconds"].get<double>() - extracted.extract_seconds - extracted.simplify_seconds}};
   return summary;
 }
 
-}  // namespace mlfe::cli
+namespace {
+
+std::string rms_text(const RmsTarget& r) {
+  return r.percent_of_range ? fmt::format("{}%", r.value) : fmt::format("{}", r.value);
+}
+
+}  // namespace
+
+ConvertResult convert(const ScalarGrid& grid, const std::string& out, const ConvertOptions& c) {
+  check_output_path(out, kAssetExtensions);
+  if (!c.hierarchy.empty()) check_output_path(c.hierarchy, {".mlfeh"});
+  if (!c.report.empty()) check_output_path(c.report, {});
+  // u is solved for only when an output holds it (the hierarchy) or the caller keeps it.
+  BuildOptions p = c.build;
+  p.solve_u = !c.hierarchy.empty() || c.keep_u;
+  std::vector<double> isos;
+  if (grid.dim == 3) {
+    if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
+    isos = c.asset.iso;
+  }
+  ConvertResult result;
+  Built& b = result.built;
+  b = build(grid, p, isos);
+  nlohmann::json prov = {{"input", fs::path(grid.source).filename().string()},
+                         {"tool", std::string("mlfe ") + MLFE_VERSION}};
+  if (!b.iterations().empty()) {
+    const auto& last = b.iterations().back();
+    prov["rms_error"] = last.rms_error;
+    prov["rms_error_percent"] = last.rms_percent;
+    prov["psnr_db"] = last.psnr_db;
+  }
+  prov["vertices"] = b.vertices();
+  // The effective target: the default RMS applies only without iso-values (surface-driven
+  // refinement otherwise) or alongside another global target.
+  const bool surface_driven = !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty();
+  prov["options"] = {{"rms", p.rms            ? rms_text(*p.rms)
+                             : surface_driven ? "none (surface-driven)"
+                                              : "0.5%"},
+                     {"threshold", p.threshold},
+                     {"max_vertices", p.max_vertices},
+                     {"norm", p.norm == Norm::kH1 ? "h1" : "l2"},
+                     {"surface_tolerance", p.surface_tolerance}};
+  prov["refinement"] = b.surface_driven ? "surface-driven" : "global";
+  if (c.provenance.is_object()) prov.merge_patch(c.provenance);
+  if (!c.hierarchy.empty()) write_built(c.hierarchy, b, prov);
+  result.asset = write_assets(out, b, c.asset, prov, &grid);
+  if (!c.report.empty()) {
+    nlohmann::json r = build_report(grid.source, &grid, b);
+    r["asset"] = result.asset;
+    r["peak_rss_mb"] = peak_rss_mb();
+    write_json(c.report, r);
+  }
+  return result;
+}
+
+ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
+                      const VolumeReadOptions& read) {
+  check_output_path(out, kAssetExtensions);
+  if (!options.hierarchy.empty()) check_output_path(options.hierarchy, {".mlfeh"});
+  if (!options.report.empty()) check_output_path(options.report, {});
+  return convert(read_volume(input, read), out, options);
+}
+
+}  // namespace mlfe

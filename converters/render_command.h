@@ -4,7 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
-#include "converters/pipeline.h"
+#include "converters/pipeline_options.h"
 
 namespace mlfe::cli {
 

@@ -16,6 +16,7 @@
 
 #include "core/bpx.h"
 #include "core/check.h"
+#include "core/error.h"
 #include "core/fe_assembly.h"
 #include "core/hierarchical_basis.h"
 #include "core/marking.h"
@@ -212,7 +213,8 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
 
 template <int D>
 Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
-  MLFE_CHECK(f.dim() == D);
+  if (f.dim() != D)
+    throw Error("approximate<" + std::to_string(D) + ">: the field is " + std::to_string(f.dim()) + "D");
   const auto t0 = Clock::now();
   Approximation<D> out;
   typename Hierarchy<D>::Point lo, hi;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/check.h"
+#include "core/error.h"
 
 namespace mlfe {
 
@@ -108,13 +109,17 @@ inline std::array<double, 3> interpolate_gradient(const Lattice& l, const std::a
 }  // namespace
 
 GridField::GridField(const ScalarGrid& grid) : grid_(grid), dim_(grid.dim), n_(grid.dims) {
-  MLFE_CHECK(dim_ == 2 || dim_ == 3);
-  MLFE_CHECK(grid.values.size() == static_cast<std::size_t>(grid.voxel_count()));
+  if (dim_ != 2 && dim_ != 3)
+    throw Error(grid.source + ": a grid is 2D or 3D, not " + std::to_string(dim_) + "D");
+  if (grid.values.size() != static_cast<std::size_t>(grid.voxel_count()))
+    throw Error(grid.source + ": " + std::to_string(grid.values.size()) + " values for " +
+                std::to_string(grid.voxel_count()) + " voxels");
   resolution_ = 1e300;
   double voxel_volume = 1;
   for (int a = 0; a < 3; ++a) {
     if (a < dim_) {
-      MLFE_CHECK(n_[a] >= 2 && grid.transform.spacing[a] > 0);
+      if (n_[a] < 2 || !(grid.transform.spacing[a] > 0))
+        throw Error(grid.source + ": needs at least 2 samples and a positive spacing along every axis");
       inv_spacing_[a] = 1.0 / grid.transform.spacing[a];
       resolution_ = std::min(resolution_, grid.transform.spacing[a]);
       voxel_volume *= grid.transform.spacing[a];

@@ -51,7 +51,8 @@ class Field {
 
 /// Trilinear (3D) / bilinear (2D) interpolation of a ScalarGrid's samples, which sit at the
 /// voxel positions i * spacing. Holds a reference: the grid must outlive the field.
-/// Requires at least 2 samples along every axis of the grid's dimension (CHECK).
+/// Throws mlfe::Error unless the grid is 2D or 3D, its values fill its dims, and every axis of
+/// its dimension has at least 2 samples and a positive spacing.
 class GridField final : public Field {
  public:
   explicit GridField(const ScalarGrid& grid);

@@ -2,12 +2,15 @@
 #include "core/hierarchical_basis.h"
 
 #include "core/check.h"
+#include "core/error.h"
 
 namespace mlfe {
 
 template <int D>
 std::vector<double> hierarchical_decompose(const Hierarchy<D>& h, const std::vector<double>& nodal) {
-  MLFE_CHECK(nodal.size() == h.vertex_count());
+  if (nodal.size() != h.vertex_count())
+    throw Error("hierarchical_decompose: " + std::to_string(nodal.size()) + " values for " +
+                std::to_string(h.vertex_count()) + " vertices");
   std::vector<double> s(nodal.size());
   for (std::size_t v = 0; v < nodal.size(); ++v) {
     const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
@@ -19,7 +22,9 @@ std::vector<double> hierarchical_decompose(const Hierarchy<D>& h, const std::vec
 template <int D>
 std::vector<double> hierarchical_reconstruct(const Hierarchy<D>& h, const std::vector<double>& surplus,
                                              int max_level) {
-  MLFE_CHECK(surplus.size() == h.vertex_count());
+  if (surplus.size() != h.vertex_count())
+    throw Error("hierarchical_reconstruct: " + std::to_string(surplus.size()) + " values for " +
+                std::to_string(h.vertex_count()) + " vertices");
   std::vector<double> u(surplus.size());
   // Parents always have smaller ids than their midpoint, so one pass in id order suffices.
   for (std::size_t v = 0; v < u.size(); ++v) {

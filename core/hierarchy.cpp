@@ -72,7 +72,8 @@ int green_type(int dim, unsigned mask) {
 
 template <int D>
 Hierarchy<D> Hierarchy<D>::box(const Point& lo, const Point& hi) {
-  for (int a = 0; a < D; ++a) MLFE_CHECK(lo[a] < hi[a]);
+  for (int a = 0; a < D; ++a)
+    if (!(lo[a] < hi[a])) throw Error("box: the lower corner must lie below the upper one on every axis");
   std::vector<Point> pts;
   for (int c = 0; c < (1 << D); ++c) {
     Point p;
@@ -103,9 +104,12 @@ Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Ce
   h.vx_.parents.resize(h.vx_.points.size(), {VertexId::invalid(), VertexId::invalid()});
   h.vx_.level.resize(h.vx_.points.size(), 0);
   for (const Cell& c : cells) {
-    for (VertexId v : c) MLFE_CHECK(v.valid() && v.value < h.vx_.points.size());
+    for (VertexId v : c)
+      if (!v.valid() || v.value >= h.vx_.points.size())
+        throw Error("coarse mesh: a cell refers to a vertex beyond the " + std::to_string(h.vx_.points.size()) +
+                    " points");
+    if (h.cell_measure(c) == 0.0) throw Error("coarse mesh: a cell is degenerate (zero measure)");
     h.add_element(c, ElemId::invalid(), 0, ElemKind::kCoarse);
-    MLFE_CHECK_MSG(h.cell_measure(c) != 0.0, "degenerate coarse element");
   }
   h.coarse_count_ = cells.size();
   return h;
@@ -508,7 +512,8 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   std::vector<ElemId> to_red;
   to_red.reserve(marked.size());
   for (ElemId e : marked) {
-    MLFE_CHECK_MSG(e.valid() && e.value < el_.cells.size() && is_leaf(e), "refine() needs leaf ids");
+    if (!e.valid() || e.value >= el_.cells.size() || !is_leaf(e))
+      throw Error("refine: element " + std::to_string(e.value) + " is not a leaf of this hierarchy");
     to_red.push_back(kind(e) == ElemKind::kGreen ? parent(e) : e);
   }
   std::sort(to_red.begin(), to_red.end());

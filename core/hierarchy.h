@@ -78,11 +78,12 @@ class Hierarchy {
 
   /// T0 of the axis-aligned box [lo, hi]: 2 triangles (2D) or the 6 Kuhn/Freudenthal
   /// tetrahedra around the main diagonal lo→hi (3D), so that neighbouring boxes would match.
-  /// Requires lo < hi componentwise (checked).
+  /// Throws mlfe::Error unless lo < hi componentwise.
   static Hierarchy box(const Point& lo, const Point& hi);
 
   /// Builds T0 from given points and cells (each cell's vertex order is kept; Bey's
-  /// similarity bound assumes the order the cells come in). Indices are checked.
+  /// similarity bound assumes the order the cells come in). Throws mlfe::Error for indices out
+  /// of range or degenerate cells.
   static Hierarchy from_coarse(std::vector<Point> points, std::vector<Cell> cells);
 
   /// Every array of a hierarchy, as stored (for serialization). Vertex arrays are indexed by
@@ -114,7 +115,8 @@ class Hierarchy {
   // ---- refinement ----
   /// Red-refines the given leaf elements (a green leaf red-refines its parent instead), then
   /// runs the green closure so the leaf triangulation is conforming again. The result does not
-  /// depend on the order of `marked` or on the thread count. Non-leaf ids are a bug (CHECK).
+  /// depend on the order of `marked` or on the thread count. Throws mlfe::Error for ids that
+  /// are not leaves (before changing anything).
   /// ElemIds are renumbered (compacted); VertexIds are stable and new vertices are appended.
   /// Returns, for every element id before the call, its id after the call (invalid for the
   /// green children that were removed), so callers can carry per-element data across.

@@ -11,6 +11,7 @@
 
 #include "core/check.h"
 #include "core/edge_map.h"
+#include "core/error.h"
 #include "core/hierarchical_basis.h"
 #include "core/p1_element.h"
 
@@ -153,7 +154,9 @@ std::size_t walk_level(const Hierarchy<3>& h, int level, Keep&& keep, Emit&& emi
 
 IsoExtractor::IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values)
     : h_(h), values_(values) {
-  MLFE_CHECK(values.size() == h.vertex_count());
+  if (values.size() != h.vertex_count())
+    throw Error("iso-surface: " + std::to_string(values.size()) + " values for " +
+                std::to_string(h.vertex_count()) + " vertices");
   const std::size_t n = h.element_count();
   lo_.assign(n, 0.f);
   hi_.assign(n, 0.f);
@@ -410,7 +413,9 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
 
 TriangleMesh height_field_surface(const Hierarchy<2>& h, const std::vector<double>& values,
                                   const GridTransform& transform, double z_scale, int level) {
-  MLFE_CHECK(values.size() == h.vertex_count());
+  if (values.size() != h.vertex_count())
+    throw Error("height field: " + std::to_string(values.size()) + " values for " +
+                std::to_string(h.vertex_count()) + " vertices");
   const int lv = level < 0 ? h.max_level() : level;
   std::vector<double> coarse;
   if (lv < h.max_level()) coarse = hierarchical_reconstruct(h, hierarchical_decompose(h, values), lv);

@@ -39,7 +39,7 @@ struct IsoOptions {
 
 class IsoExtractor {
  public:
-  /// values: u at every vertex of h (size checked). Both must outlive the extractor.
+  /// values: u at every vertex of h (mlfe::Error otherwise). Both must outlive the extractor.
   IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values);
 
   /// The iso-surface u = iso on T_level (values on coarser levels come from the hierarchical

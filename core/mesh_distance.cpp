@@ -12,6 +12,7 @@
 #include <random>
 
 #include "core/check.h"
+#include "core/error.h"
 
 namespace mlfe {
 namespace {
@@ -329,8 +330,9 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
 
 OneSidedDistance one_sided_distance(const TriangleMesh& from, const std::vector<SurfaceSample>& samples,
                                     const TriangleMesh& to, const TriangleBvh& to_bvh) {
-  MLFE_CHECK(!from.triangles.empty() && !to.triangles.empty());
-  MLFE_CHECK(from.normals.size() == from.positions.size() && to.normals.size() == to.positions.size());
+  if (from.triangles.empty() || to.triangles.empty()) throw Error("mesh distance: a mesh has no triangles");
+  if (from.normals.size() != from.positions.size() || to.normals.size() != to.positions.size())
+    throw Error("mesh distance: the meshes need one normal per vertex");
   struct Slot {
     double distance;
     double angle_deg;  ///< < 0 when either normal is undefined
@@ -388,7 +390,8 @@ double MeshDistance::mean() const { return std::max(expected_to_actual.mean, act
 
 MeshDistance mesh_distance(const TriangleMesh& expected, const TriangleMesh& actual,
                            const SurfaceSamplingOptions& options) {
-  MLFE_CHECK(!expected.triangles.empty() && !actual.triangles.empty());
+  if (expected.triangles.empty() || actual.triangles.empty())
+    throw Error("mesh distance: a mesh has no triangles");
   // Normals: the meshes' own when both have them (what an asset stores is what is compared),
   // otherwise area-weighted ones for both so that they are computed the same way.
   TriangleMesh e = expected, a = actual;

@@ -131,7 +131,8 @@ void TransferFunction::validate(const std::string& source) const {
 std::vector<std::string> transfer_function_presets() { return {"grey", "bone", "mri", "hot"}; }
 
 TransferFunction transfer_function_preset(const std::string& name, double lo, double hi, double unit_length) {
-  MLFE_CHECK(lo < hi && unit_length > 0);
+  if (!(lo < hi) || !(unit_length > 0))
+    throw Error("transfer function '" + name + "': needs a value range lo < hi and a positive unit length");
   const double r = hi - lo;
   auto at = [&](double f) { return lo + f * r; };
   TransferFunction tf;

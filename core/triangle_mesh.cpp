@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/check.h"
+#include "core/error.h"
 
 namespace mlfe {
 
@@ -15,7 +16,9 @@ void compute_area_weighted_normals(TriangleMesh& mesh) {
   // Cross products are twice the area times the unit normal: summing them weights by area.
   std::vector<Vec3> sum(mesh.positions.size(), Vec3::Zero());
   for (const auto& t : mesh.triangles) {
-    MLFE_CHECK(t[0] < sum.size() && t[1] < sum.size() && t[2] < sum.size());
+    if (t[0] >= sum.size() || t[1] >= sum.size() || t[2] >= sum.size())
+      throw Error("normals: a triangle refers to a vertex beyond the " + std::to_string(sum.size()) +
+                  " positions");
     const auto &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
     const Vec3 u(double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]);
     const Vec3 v(double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]);

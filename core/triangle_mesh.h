@@ -18,7 +18,8 @@ struct TriangleMesh {
 };
 
 /// Area-weighted vertex normals from the geometry (unit length; (0, 0, 1) for a vertex whose
-/// triangles have no area). Replaces `mesh.normals`. Triangle indices must be in range (CHECK).
+/// triangles have no area). Replaces `mesh.normals`. Throws mlfe::Error for
+/// triangle indices out of range.
 void compute_area_weighted_normals(TriangleMesh& mesh);
 
 }  // namespace mlfe

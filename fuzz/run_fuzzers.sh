@@ -61,7 +61,7 @@ for t in "${TARGETS[@]}"; do
   corpus="$BUILD/corpus/$t"
   artifacts="$BUILD/artifacts/$t/"
   mkdir -p "$corpus" "$artifacts"
-  for dir in "$ROOT/tests/data" "$ROOT/tests/golden" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$SHARED"; do
+  for dir in "$ROOT/samples" "$ROOT/tests/data" "$ROOT/tests/golden" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$SHARED"; do
     [ -d "$dir" ] || continue
     for pat in $(seed_patterns "$t"); do
       for f in "$dir"/$pat; do

@@ -12,6 +12,7 @@ PKGS=(
   libcli11-dev nlohmann-json3-dev libfmt-dev
   libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
   googletest libgtest-dev libbenchmark-dev
+  python3 python3-dev pybind11-dev python3-pybind11 python3-numpy
   clang libclang-rt-14-dev
 )
 # Node.js/npm only when the machine has none (a non-Debian node may already be there).

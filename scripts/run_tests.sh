@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # README command (b): install what is missing, build, and run every test:
-#   1. Release build, all GoogleTest suites through ctest (unit, format round trips, CLI,
-#      golden files, Khronos glTF validator verdicts);
+#   1. Release build, all GoogleTest suites and the Python module's tests through ctest (unit,
+#      format round trips, CLI, golden files, Khronos glTF validator verdicts);
 #   2. the core tests again under AddressSanitizer + UBSan (Debug);
-#   3. a consumer project that does find_package(mlfe) and links mlfe::core;
+#   3. a consumer project that does find_package(mlfe), links mlfe::core and mlfe::pipeline and
+#      converts the CT sample to a .glb the Khronos validator accepts;
 #   4. bounded libFuzzer runs of every parser (MLFE_FUZZ_SECONDS each, default 30).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -28,7 +29,14 @@ rm -rf "$PREFIX" "$ROOT/build/consumer"
 cmake --install "$ROOT/build" --prefix "$PREFIX" >/dev/null
 cmake -S "$ROOT/tests/consumer" -B "$ROOT/build/consumer" -DCMAKE_PREFIX_PATH="$PREFIX" >/dev/null
 cmake --build "$ROOT/build/consumer" -j "$JOBS"
-"$ROOT/build/consumer/mlfe_consumer"
+"$ROOT/build/consumer/mlfe_consumer" "$ROOT/samples/ct_skull_64.nrrd" "$ROOT/build/consumer/ct_skull.glb"
+node "$ROOT/tools/validate_gltf.js" "$ROOT/build/consumer/ct_skull.glb" >/dev/null
+echo "consumer: ct_skull.glb accepted by the glTF validator"
+# The installed Python module loads (its RPATH finds the installed libmlfe_formats).
+PYSITE="$(sed -n 's/^MLFE_PYTHON_INSTALL_DIR:STRING=//p' "$ROOT/build/CMakeCache.txt")"
+if [ -n "$PYSITE" ]; then
+  PYTHONPATH="$PREFIX/$PYSITE" /usr/bin/python3 -c "import mlfe; print('installed python module: mlfe', mlfe.__version__)"
+fi
 
 echo "== bounded fuzzing"
 bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/triangle_mesh.h"
+#include "tests/test_paths.h"
 
 namespace mlfe::test {
 
@@ -100,23 +101,6 @@ inline std::string read_bytes(const std::string& path) {
 }
 
 inline bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
-
-/// A fresh scratch folder per test binary run, removed when the binary exits.
-inline std::string scratch_dir() {
-  struct Dir {
-    std::filesystem::path path;
-    Dir()
-        : path(std::filesystem::path(::testing::TempDir()) / ("mlfe_writers_" + std::to_string(::getpid()))) {
-      std::filesystem::create_directories(path);
-    }
-    ~Dir() {
-      std::error_code ec;
-      std::filesystem::remove_all(path, ec);
-    }
-  };
-  static const Dir dir;
-  return dir.path.string();
-}
 
 /// Corner-wise oriented match of every triangle of `b` against some triangle of `a` within
 /// `tol` per coordinate; returns the number of unmatched triangles (brute force on vertex

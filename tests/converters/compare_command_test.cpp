@@ -12,13 +12,14 @@
 
 #include "formats/openmesh_io.h"
 #include "tests/test_meshes.h"
+#include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
 
 namespace mlfe {
 namespace {
 
-const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.nrrd";
+const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 const std::string kGolden = std::string(MLFE_SOURCE_DIR) + "/tests/golden";
 
 struct CliRun {

@@ -21,6 +21,7 @@
 #include "formats/openmesh_io.h"
 #include "formats/volume_reader.h"
 #include "tests/test_meshes.h"
+#include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -28,7 +29,7 @@ using nlohmann::json;
 namespace mlfe {
 namespace {
 
-const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.nrrd";
+const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 const std::string kGolden = std::string(MLFE_SOURCE_DIR) + "/tests/golden";
 
 struct RunResult {
@@ -36,14 +37,7 @@ struct RunResult {
   std::string err;
 };
 
-std::string scratch() {
-  static const std::string dir = [] {
-    std::string d = (fs::temp_directory_path() / ("mlfe_cli_test_" + std::to_string(::getpid()))).string();
-    fs::create_directories(d);
-    return d;
-  }();
-  return dir;
-}
+std::string scratch() { return test::scratch_dir("cli"); }
 
 RunResult run(const std::string& args) {
   const std::string errfile = scratch() + "/stderr.txt";
@@ -457,7 +451,7 @@ TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
 }
 
 TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
-  const std::string dem = std::string(MLFE_SOURCE_DIR) + "/tests/data/dem_jacksboro.nrrd";
+  const std::string dem = test::sample_path("dem_jacksboro.nrrd");
   const std::string glb = scratch() + "/dem.glb", rep = scratch() + "/dem.json";
   ASSERT_EQ(
       run("convert " + dem + " --rms 1% --z-scale 0.00001 --quiet -o " + glb + " --report " + rep).status, 0);

@@ -12,17 +12,14 @@
 
 #include "core/error.h"
 #include "formats/hierarchy_io.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
 
 namespace fs = std::filesystem;
 
-fs::path temp_dir() {
-  const fs::path dir = fs::temp_directory_path() / ("mlfe_refine_command_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir;
-}
+fs::path temp_dir() { return mlfe::test::scratch_dir("refine_command"); }
 
 std::string read_all(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

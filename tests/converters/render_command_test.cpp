@@ -8,22 +8,17 @@
 #include <sstream>
 #include <string>
 
+#include "tests/test_paths.h"
+
 namespace fs = std::filesystem;
 
 namespace mlfe {
 namespace {
 
-const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.nrrd";
+const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 const std::string kSmall = std::string(MLFE_SOURCE_DIR) + "/tests/data/small_skull.mlfeh";
 
-std::string scratch() {
-  static const std::string dir = [] {
-    std::string d = (fs::temp_directory_path() / ("mlfe_render_test_" + std::to_string(::getpid()))).string();
-    fs::create_directories(d);
-    return d;
-  }();
-  return dir;
-}
+std::string scratch() { return test::scratch_dir("render"); }
 
 struct RunResult {
   int status;

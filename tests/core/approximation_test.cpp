@@ -11,6 +11,7 @@
 #include "core/fe_assembly.h"
 #include "core/field.h"
 #include "core/hierarchical_basis.h"
+#include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
 namespace {
@@ -168,26 +169,7 @@ TEST(Approximation, UniformRefinementConvergesWithRateTwo) {
 // u at x if leaf e contains x, else NaN.
 double eval_u_in(const Hierarchy<3>& h, ElemId e, const std::vector<double>& u, const std::array<double, 3>& x) {
   const auto& c = h.cell(e);
-  const auto& a = h.point(c[0]);
-  double m[3][3], r[3];
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) m[i][j] = h.point(c[j + 1])[i] - a[i];
-    r[i] = x[i] - a[i];
-  }
-  auto det3 = [](double q[3][3]) {
-    return q[0][0] * (q[1][1] * q[2][2] - q[1][2] * q[2][1]) - q[0][1] * (q[1][0] * q[2][2] - q[1][2] * q[2][0]) +
-           q[0][2] * (q[1][0] * q[2][1] - q[1][1] * q[2][0]);
-  };
-  const double det = det3(m);
-  double lam[4], s = 0;
-  for (int j = 0; j < 3; ++j) {
-    double q[3][3];
-    for (int i = 0; i < 3; ++i)
-      for (int k = 0; k < 3; ++k) q[i][k] = k == j ? r[i] : m[i][k];
-    lam[j + 1] = det3(q) / det;
-    s += lam[j + 1];
-  }
-  lam[0] = 1 - s;
+  const auto lam = test::barycentric(h, e, x);
   if (std::min({lam[0], lam[1], lam[2], lam[3]}) < -1e-12) return std::nan("");
   double v = 0;
   for (int i = 0; i < 4; ++i) v += lam[i] * u[c[i].value];

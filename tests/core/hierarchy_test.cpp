@@ -34,42 +34,7 @@ double box_measure() {
 
 template <int D>
 bool contains_point(const Hierarchy<D>& h, ElemId e, const P<D>& x) {
-  const auto& c = h.cell(e);
-  double bary[D + 1];
-  if constexpr (D == 2) {
-    const auto& a = h.point(c[0]);
-    const auto& b = h.point(c[1]);
-    const auto& d = h.point(c[2]);
-    const double det = (b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0]);
-    const double l1 = ((x[0] - a[0]) * (d[1] - a[1]) - (x[1] - a[1]) * (d[0] - a[0])) / det;
-    const double l2 = ((b[0] - a[0]) * (x[1] - a[1]) - (b[1] - a[1]) * (x[0] - a[0])) / det;
-    bary[1] = l1;
-    bary[2] = l2;
-    bary[0] = 1 - l1 - l2;
-  } else {
-    const auto& a = h.point(c[0]);
-    double m[3][3], r[3];
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) m[i][j] = h.point(c[j + 1])[i] - a[i];
-      r[i] = x[i] - a[i];
-    }
-    auto det3 = [](double q[3][3]) {
-      return q[0][0] * (q[1][1] * q[2][2] - q[1][2] * q[2][1]) -
-             q[0][1] * (q[1][0] * q[2][2] - q[1][2] * q[2][0]) +
-             q[0][2] * (q[1][0] * q[2][1] - q[1][1] * q[2][0]);
-    };
-    const double det = det3(m);
-    double s = 0;
-    for (int j = 0; j < 3; ++j) {
-      double q[3][3];
-      for (int i = 0; i < 3; ++i)
-        for (int k = 0; k < 3; ++k) q[i][k] = k == j ? r[i] : m[i][k];
-      bary[j + 1] = det3(q) / det;
-      s += bary[j + 1];
-    }
-    bary[0] = 1 - s;
-  }
-  for (double b : bary)
+  for (double b : test::barycentric(h, e, x))
     if (b < -1e-12) return false;
   return true;
 }
@@ -345,14 +310,7 @@ TYPED_TEST(HierarchyTest, GreenElementsAreNeverParentsUnderRandomMarking) {
     auto h = unit_box<D>();
     std::mt19937 rng(seed);
     for (int it = 0; it < (D == 2 ? 10 : 6); ++it) {
-      auto leaves = h.leaves();
-      std::vector<ElemId> marked;
-      std::uniform_int_distribution<std::size_t> pick(0, leaves.size() - 1);
-      for (int k = 0; k < 5; ++k) marked.push_back(leaves[pick(rng)]);
-      // Marking green leaves on purpose exercises the parent-red rule.
-      for (ElemId e : leaves)
-        if (h.kind(e) == ElemKind::kGreen && rng() % 7 == 0) marked.push_back(e);
-      h.refine(marked);
+      h.refine(test::random_marking(h, rng, 5, 7));
       expect_green_never_parent(h);
     }
     expect_conforming(h, lo, hi);
@@ -445,13 +403,9 @@ TYPED_TEST(HierarchyTest, RefinementOverTheVertexLimitIsRolledBack) {
     std::mt19937 rng(seed);
     int rolled_back = 0;
     for (int it = 0; it < (D == 2 ? 8 : 5); ++it) {
-      auto leaves = h.leaves();
-      std::vector<ElemId> marked;
-      std::uniform_int_distribution<std::size_t> pick(0, leaves.size() - 1);
-      for (int k = 0; k < 6; ++k) marked.push_back(leaves[pick(rng)]);
-      // Green leaves: their parents lose green children (red, or a new green closure).
-      for (ElemId e : leaves)
-        if (h.kind(e) == ElemKind::kGreen && rng() % 5 == 0) marked.push_back(e);
+      // Green leaves among the marks: their parents lose green children (red, or a new
+      // green closure).
+      const std::vector<ElemId> marked = test::random_marking(h, rng, 6, 5);
       auto full = h;
       const auto full_remap = full.refine(marked);
       const std::size_t before = h.vertex_count();

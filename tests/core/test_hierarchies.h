@@ -1,7 +1,11 @@
-// Hierarchies shared by the core and format tests.
+// Hierarchies and hierarchy helpers shared by the core and format tests: refined examples,
+// random marking, barycentric coordinates, equality of every stored array.
 #pragma once
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cstddef>
+#include <random>
 #include <vector>
 
 #include "core/hierarchy.h"
@@ -26,6 +30,59 @@ Hierarchy<D> refine_toward_origin(Hierarchy<D> h, int rounds) {
     h.refine(marked);
   }
   return h;
+}
+
+/// Random marks: `picks` leaves drawn uniformly (repeats allowed), then every green leaf with
+/// probability 1/green_one_in (marking green leaves exercises the parent-red rule).
+template <int D>
+std::vector<ElemId> random_marking(const Hierarchy<D>& h, std::mt19937& rng, int picks,
+                                   unsigned green_one_in) {
+  const auto leaves = h.leaves();
+  std::vector<ElemId> marked;
+  std::uniform_int_distribution<std::size_t> pick(0, leaves.size() - 1);
+  for (int k = 0; k < picks; ++k) marked.push_back(leaves[pick(rng)]);
+  for (ElemId e : leaves)
+    if (h.kind(e) == ElemKind::kGreen && rng() % green_one_in == 0) marked.push_back(e);
+  return marked;
+}
+
+/// Barycentric coordinates of `x` in element `e` (Cramer's rule; x inside iff all >= 0).
+template <int D>
+std::array<double, D + 1> barycentric(const Hierarchy<D>& h, ElemId e,
+                                      const typename Hierarchy<D>::Point& x) {
+  const auto& c = h.cell(e);
+  const auto& a = h.point(c[0]);
+  std::array<double, D + 1> bary{};
+  if constexpr (D == 2) {
+    const auto& b = h.point(c[1]);
+    const auto& d = h.point(c[2]);
+    const double det = (b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0]);
+    bary[1] = ((x[0] - a[0]) * (d[1] - a[1]) - (x[1] - a[1]) * (d[0] - a[0])) / det;
+    bary[2] = ((b[0] - a[0]) * (x[1] - a[1]) - (b[1] - a[1]) * (x[0] - a[0])) / det;
+    bary[0] = 1 - bary[1] - bary[2];
+  } else {
+    double m[3][3], r[3];
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) m[i][j] = h.point(c[j + 1])[i] - a[i];
+      r[i] = x[i] - a[i];
+    }
+    auto det3 = [](double q[3][3]) {
+      return q[0][0] * (q[1][1] * q[2][2] - q[1][2] * q[2][1]) -
+             q[0][1] * (q[1][0] * q[2][2] - q[1][2] * q[2][0]) +
+             q[0][2] * (q[1][0] * q[2][1] - q[1][1] * q[2][0]);
+    };
+    const double det = det3(m);
+    double s = 0;
+    for (int j = 0; j < 3; ++j) {
+      double q[3][3];
+      for (int i = 0; i < 3; ++i)
+        for (int k = 0; k < 3; ++k) q[i][k] = k == j ? r[i] : m[i][k];
+      bary[j + 1] = det3(q) / det;
+      s += bary[j + 1];
+    }
+    bary[0] = 1 - s;
+  }
+  return bary;
 }
 
 /// Every stored array of the two hierarchies is equal.

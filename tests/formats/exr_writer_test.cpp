@@ -18,15 +18,14 @@
 
 #include "core/error.h"
 #include "formats/transfer_function_io.h"
+#include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
 
 namespace mlfe {
 namespace {
 
-std::string temp(const std::string& name) {
-  return (fs::temp_directory_path() / ("mlfe_exr_test_" + std::to_string(::getpid()) + "_" + name)).string();
-}
+std::string temp(const std::string& name) { return test::scratch_dir("exr_writer") + "/" + name; }
 
 std::string command_output(const std::string& cmd) {
   std::string out;

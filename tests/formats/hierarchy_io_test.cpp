@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "tests/core/test_hierarchies.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
@@ -49,11 +50,7 @@ HierarchyFileInfo sample_info() {
   return info;
 }
 
-fs::path temp_file(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("mlfe_hierarchy_io_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir / name;
-}
+fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir("hierarchy_io")) / name; }
 
 Bytes read_bytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

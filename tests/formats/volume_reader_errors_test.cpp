@@ -20,6 +20,7 @@
 
 #include "core/error.h"
 #include "formats/volume_reader.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
@@ -92,7 +93,7 @@ TEST(VolumeReaderErrors, WrongMagicForTheExtension) {
 
 TEST(VolumeReaderErrors, NrrdTruncatedDataIsRefusedBeforeTeemAllocates) {
   const std::string dir = temp_dir();
-  std::string full = slurp(kData + "ct_skull_64.nrrd");
+  std::string full = slurp(test::sample_path("ct_skull_64.nrrd"));
   spit(dir + "cut.nrrd", full.substr(0, full.size() - 1000));
   expect_error(dir + "cut.nrrd", {"truncated", "1048576 bytes"});
 }
@@ -116,7 +117,8 @@ TEST(VolumeReaderErrors, NrrdAbsurdDimsAreRefusedWithoutAllocating) {
 TEST(VolumeReaderErrors, MemoryLimitNamesBytesNeededAndAvailable) {
   VolumeReadOptions o;
   o.max_bytes = 1000;
-  expect_error(kData + "ct_skull_64.nrrd", {"needs 2097152 bytes", "only 1000 bytes of memory are available"}, o);
+  expect_error(test::sample_path("ct_skull_64.nrrd"),
+               {"needs 2097152 bytes", "only 1000 bytes of memory are available"}, o);
   expect_error(kData + "ct_skull_64.raw", {"needs 1048576 bytes", "only 1000 bytes"}, o);
 }
 

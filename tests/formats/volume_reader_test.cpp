@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "formats/volume_reader.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
@@ -120,7 +121,7 @@ TEST(NrrdReader, RoundTripThroughTeemKeepsVoxelsAndObliqueTransform) {
 }
 
 TEST(NrrdReader, CtSkullMatchesRawSidecarVoxelForVoxel) {
-  ScalarGrid n = read_volume(kData + "ct_skull_64.nrrd");
+  ScalarGrid n = read_volume(test::sample_path("ct_skull_64.nrrd"));
   ScalarGrid r = read_volume(kData + "ct_skull_64.raw");
   EXPECT_EQ(n.format, "nrrd");
   EXPECT_EQ(r.format, "raw");
@@ -141,7 +142,7 @@ TEST(NrrdReader, CtSkullMatchesRawSidecarVoxelForVoxel) {
 }
 
 TEST(NrrdReader, JacksboroDemIsA2dInt16HeightField) {
-  ScalarGrid g = read_volume(kData + "dem_jacksboro.nrrd");
+  ScalarGrid g = read_volume(test::sample_path("dem_jacksboro.nrrd"));
   EXPECT_EQ(g.dim, 2);
   EXPECT_EQ(g.dims, (std::array<std::int64_t, 3>{403, 344, 1}));
   EXPECT_EQ(g.source_type, ScalarType::I16);

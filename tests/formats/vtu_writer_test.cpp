@@ -14,17 +14,14 @@
 #include <string>
 
 #include "core/error.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
 
 namespace fs = std::filesystem;
 
-fs::path temp_file(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("mlfe_vtu_writer_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir / name;
-}
+fs::path temp_file(const std::string& name) { return fs::path(mlfe::test::scratch_dir("vtu_writer")) / name; }
 
 std::string read_all(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

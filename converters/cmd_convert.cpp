@@ -1,0 +1,74 @@
+// mlfe convert: volume in, iso-surface asset (glTF/Draco, PLY/OBJ/STL/OFF) out, in one command;
+// the work is mlfe::convert (converters/pipeline.h).
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+#include "converters/commands.h"
+#include "converters/convert_command.h"
+#include "converters/render_command.h"
+#include "converters/volume_options.h"
+#include "core/error.h"
+
+namespace mlfe::cli {
+
+void add_convert_options(CLI::App* cmd, ConvertState& s) {
+  cmd->add_option("-o,--output", s.output, "output: .glb .gltf .drc .ply .obj .stl .off")->required();
+  cmd->add_option("--report", s.report, "JSON report (build statistics and the asset summary)");
+  add_asset_options(cmd, s.asset);
+  add_build_options(cmd, s.params);
+  add_volume_read_options(cmd, s.read);
+}
+
+void print_written(const ConvertState& s, const nlohmann::json& summary, const char* command) {
+  if (!s.params.quiet)
+    std::fprintf(stderr, "mlfe %s: %zu triangles, %zu bytes -> %s\n", command,
+                 summary["triangles"].get<std::size_t>(), summary["bytes"].get<std::size_t>(),
+                 s.output.c_str());
+  std::printf("%s\n", s.output.c_str());
+  if (!s.hierarchy.empty()) std::printf("%s\n", s.hierarchy.c_str());
+  if (!s.report.empty()) std::printf("%s\n", s.report.c_str());
+}
+
+void run_convert(const ConvertState& s, const char* command) {
+  ConvertOptions c;
+  c.hierarchy = s.hierarchy;
+  c.report = s.report;
+  check_output_path(s.output, kAssetExtensions);
+  if (!c.hierarchy.empty()) check_output_path(c.hierarchy, {".mlfeh"});
+  if (!c.report.empty()) check_output_path(c.report, {});
+  if (!s.render.empty()) check_output_path(s.render, {".exr"});
+  c.asset = asset_options(s.asset);
+  c.build = build_options(s.params);
+  c.keep_u = !s.render.empty();  // the image is of u
+  // The provenance keeps --rms as it was spelled.
+  if (!s.params.rms.empty()) c.provenance["options"]["rms"] = s.params.rms;
+  const ScalarGrid grid = read_volume(s.input, s.read);
+  const ConvertResult r = convert(grid, s.output, c);
+  warn_if_memory_limited(r.built, grid.source, s.params.max_memory);
+  print_written(s, r.asset, command);
+  // convert --render: the image of the hierarchy just built, with mlfe render's defaults.
+  if (!s.render.empty())
+    for (const auto& f : render_outputs(s.render, RenderParams{}, r.built, &grid, s.input, s.params.quiet))
+      std::printf("%s\n", f.c_str());
+}
+
+namespace {
+
+void add_convert_command(CLI::App& app) {
+  auto state = std::make_shared<ConvertState>();
+  CLI::App* cmd = app.add_subcommand(
+      "convert", "Volume in, iso-surface asset out: adaptive build + marching tetrahedra + glTF/Draco");
+  cmd->add_option("input", state->input, "volume or height field")->required();
+  cmd->add_option("--hierarchy", state->hierarchy, "also keep the hierarchy it built (.mlfeh)");
+  cmd->add_option("--render", state->render,
+                  "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
+  add_convert_options(cmd, *state);
+  cmd->callback([state] { run_convert(*state, "convert"); });
+}
+
+}  // namespace
+
+MLFE_REGISTER_COMMAND(50, add_convert_command);
+
+}  // namespace mlfe::cli

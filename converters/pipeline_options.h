@@ -1,0 +1,77 @@
+// The command line's spelling of the pipeline's options (converters/pipeline.h): CLI11 options
+// that fill text parameters, parsed into the library's typed options, and the progress the
+// commands print on stderr.
+#pragma once
+#include <CLI/CLI.hpp>
+#include <string>
+#include <vector>
+
+#include "converters/pipeline.h"
+
+namespace mlfe::cli {
+
+struct BuildParams {
+  /// Target RMS error: "0.5%" of the value range, or absolute. Empty: the default, which is
+  /// 0.5% without iso-values and none with them (surface-driven refinement; see mlfe::build).
+  std::string rms;
+  double threshold = 0;  ///< the paper's per-element threshold (data units), 0: off
+  std::size_t max_vertices = 0;
+  int max_level = 20;
+  int start_level = -1;
+  std::string norm = "l2";             ///< "l2" or "h1"
+  std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
+  double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
+  bool check_against_u = false;        ///< surface-driven: refine where u misses the data's surfaces
+  /// Memory budget of the build: "50%" of the machine's RAM (default), or bytes with an
+  /// optional K/M/G suffix; "0": none. Refinement stops at it with a message.
+  std::string max_memory = "50%";
+  bool quiet = false;
+};
+
+/// Adds --rms, --threshold, --max-vertices, --max-level, --start-level, --norm,
+/// --preconditioner, --surface-tolerance, --check-u, --max-memory and --quiet.
+void add_build_options(CLI::App* cmd, BuildParams& p);
+
+/// The typed options of `p`, with the progress table on stderr unless p.quiet; throws
+/// mlfe::Error on bad text (--rms, --max-memory).
+BuildOptions build_options(const BuildParams& p);
+
+/// The memory budget of a --max-memory text ("50%", "6G", "512M", "0"); throws mlfe::Error on
+/// bad text.
+MemoryBudget parse_memory_budget(const std::string& text);
+
+/// mlfe::build with the command line's progress and its warning when refinement stopped at
+/// the memory budget.
+Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values);
+
+/// The warning on stderr when `b` stopped refining at its memory budget.
+void warn_if_memory_limited(const Built& b, const std::string& source, const std::string& max_memory);
+
+/// Parses "80,150" into numbers; throws mlfe::Error on bad input.
+std::vector<double> parse_values(const std::string& text, const std::string& what);
+
+struct AssetParams {
+  std::string iso;  ///< comma-separated iso-values (3D)
+  double tolerance = 0;
+  bool no_draco = false;
+  bool quantize = false;
+  int lod = 0;
+  std::size_t decimate = 0;
+  double simplify = 0.3;
+  std::string simplifier = "auto";  ///< "auto", "fast", "bounded"
+  double snap = 1.0;
+  bool normals_toward_higher = false;
+  std::string normals = "auto";    ///< "auto", "gradient", "surface"
+  std::string placement = "auto";  ///< "auto", "input", "optimal"
+  double z_scale = 1.0;
+  int level = -1;
+};
+
+/// Adds --iso, --tolerance, --no-draco, --quantize, --lod, --decimate, --simplify,
+/// --simplifier, --placement, --snap, --normals-toward-higher, --normals, --z-scale, --level.
+void add_asset_options(CLI::App* cmd, AssetParams& p);
+
+/// The typed options of `p`; throws mlfe::Error on bad --iso text.
+AssetOptions asset_options(const AssetParams& p);
+
+}  // namespace mlfe::cli

@@ -1,0 +1,421 @@
+// The Python module `mlfe`: the pipeline library (converters/pipeline.h) for scripts and
+// notebooks. Volumes are NumPy arrays indexed [i, j, k] (x, y, z; 2D height fields [i, j]);
+// spacing, origin and direction follow the same axes. Arrays handed out (volumes read, surfaces
+// extracted, hierarchy values) are views of the C++ buffers, kept alive by their owner; a volume
+// passed in is copied once into the grid the library samples. The GIL is released while the
+// library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "converters/pipeline.h"
+#include "core/error.h"
+#include "mlfe/version.h"
+
+namespace py = pybind11;
+
+namespace mlfe::python {
+namespace {
+
+// A NumPy array viewing `data` (owned by `owner`, moved into a capsule).
+template <class T, class Owner>
+py::array_t<T> view(std::shared_ptr<Owner> owner, const T* data, std::vector<py::ssize_t> shape,
+                    std::vector<py::ssize_t> strides) {
+  auto* keep = new std::shared_ptr<Owner>(std::move(owner));
+  py::capsule base(keep, [](void* p) { delete static_cast<std::shared_ptr<Owner>*>(p); });
+  return py::array_t<T>(std::move(shape), std::move(strides), data, base);
+}
+
+std::array<double, 3> triple(const py::handle& h, const char* what, double fill) {
+  std::array<double, 3> out{fill, fill, fill};
+  const auto v = h.cast<std::vector<double>>();
+  if (v.size() < 2 || v.size() > 3) throw Error(std::string(what) + ": expected 2 or 3 numbers");
+  for (std::size_t a = 0; a < v.size(); ++a) out[a] = v[a];
+  return out;
+}
+
+py::object to_python(const nlohmann::json& j) { return py::module_::import("json").attr("loads")(j.dump()); }
+
+// The keyword options of build/convert/extract, consumed as they are read so that unknown
+// names can be reported.
+class Options {
+ public:
+  explicit Options(const py::kwargs& kw) {
+    for (auto item : kw)
+      left_[item.first.cast<std::string>()] = py::reinterpret_borrow<py::object>(item.second);
+  }
+  template <class T>
+  void get(const char* name, T& out) {
+    auto it = left_.find(name);
+    if (it == left_.end() || it->second.is_none()) return;
+    try {
+      out = it->second.cast<T>();
+    } catch (const py::cast_error&) {
+      throw Error(std::string(name) + ": wrong type (" + std::string(py::str(it->second.get_type())) + ")");
+    }
+    left_.erase(it);
+  }
+  bool has(const char* name) const { return left_.count(name) && !left_.at(name).is_none(); }
+  py::object take(const char* name) {
+    py::object o = left_.at(name);
+    left_.erase(name);
+    return o;
+  }
+  void finish() const {
+    if (!left_.empty()) throw Error("unknown option '" + left_.begin()->first + "'");
+  }
+
+ private:
+  std::map<std::string, py::object> left_;
+};
+
+template <class E>
+E choice(const std::string& text, const char* what, std::initializer_list<std::pair<const char*, E>> values) {
+  std::string names;
+  for (const auto& v : values) {
+    if (text == v.first) return v.second;
+    names += (names.empty() ? "" : ", ") + std::string(v.first);
+  }
+  throw Error(std::string(what) + ": '" + text + "' is not one of " + names);
+}
+
+BuildOptions build_options(Options& kw) {
+  BuildOptions o;
+  if (kw.has("rms")) {
+    py::object r = kw.take("rms");
+    if (py::isinstance<py::str>(r)) {
+      std::string t = r.cast<std::string>();
+      RmsTarget target;
+      target.percent_of_range = !t.empty() && t.back() == '%';
+      if (target.percent_of_range) t.pop_back();
+      std::size_t used = 0;
+      try {
+        target.value = std::stod(t, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used == 0 || used != t.size())
+        throw Error("rms: expected e.g. '0.5%' or a number, got '" + t + "'");
+      o.rms = target;
+    } else {
+      o.rms = RmsTarget{r.cast<double>(), false};
+    }
+  }
+  kw.get("threshold", o.threshold);
+  kw.get("max_vertices", o.max_vertices);
+  kw.get("max_level", o.max_level);
+  kw.get("start_level", o.start_level);
+  std::string norm = "l2", pre = "bpx";
+  kw.get("norm", norm);
+  o.norm = choice<Norm>(norm, "norm", {{"l2", Norm::kL2}, {"h1", Norm::kH1}});
+  kw.get("preconditioner", pre);
+  o.preconditioner = choice<Preconditioner>(
+      pre, "preconditioner",
+      {{"bpx", Preconditioner::kBpx}, {"jacobi", Preconditioner::kJacobi}, {"none", Preconditioner::kNone}});
+  kw.get("surface_tolerance", o.surface_tolerance);
+  kw.get("check_u", o.check_against_u);
+  if (kw.has("max_memory")) {
+    py::object m = kw.take("max_memory");
+    if (py::isinstance<py::str>(m)) {
+      const std::string t = m.cast<std::string>();
+      if (t.empty() || t.back() != '%') throw Error("max_memory: a percentage text ('50%') or bytes (int)");
+      o.max_memory.amount = std::stod(t.substr(0, t.size() - 1));
+    } else {
+      o.max_memory.percent_of_ram = false;
+      o.max_memory.amount = m.cast<double>();
+    }
+  }
+  return o;
+}
+
+AssetOptions asset_options(Options& kw) {
+  AssetOptions o;
+  kw.get("tolerance", o.tolerance);
+  kw.get("draco", o.draco);
+  kw.get("quantize", o.quantize);
+  kw.get("lod", o.lod);
+  kw.get("decimate", o.decimate);
+  kw.get("simplify", o.simplify);
+  std::string simplifier = "auto", normals = "auto", placement = "auto";
+  kw.get("simplifier", simplifier);
+  o.simplifier = choice<Simplifier>(
+      simplifier, "simplifier",
+      {{"auto", Simplifier::kAuto}, {"fast", Simplifier::kFast}, {"bounded", Simplifier::kBounded}});
+  kw.get("snap", o.snap);
+  kw.get("normals_toward_higher", o.normals_toward_higher);
+  kw.get("normals", normals);
+  o.normals = choice<Normals>(
+      normals, "normals",
+      {{"auto", Normals::kAuto}, {"gradient", Normals::kGradient}, {"surface", Normals::kSurface}});
+  kw.get("placement", placement);
+  o.placement = choice<VertexPlacement>(placement, "placement",
+                                        {{"auto", VertexPlacement::kAuto},
+                                         {"input", VertexPlacement::kInput},
+                                         {"optimal", VertexPlacement::kOptimal}});
+  kw.get("z_scale", o.z_scale);
+  kw.get("level", o.level);
+  return o;
+}
+
+// A grid from an array indexed [i, j(, k)]: one copy into the library's x-fastest layout.
+std::shared_ptr<ScalarGrid> grid_from_array(const py::array& in, const py::object& spacing,
+                                            const py::object& origin, const py::object& direction,
+                                            const std::string& space) {
+  auto values = py::array_t<float, py::array::f_style | py::array::forcecast>::ensure(in);
+  if (!values) throw Error("volume: expected a numeric array");
+  if (values.ndim() != 2 && values.ndim() != 3)
+    throw Error("volume: expected a 2D or 3D array, got " + std::to_string(values.ndim()) + " dimensions");
+  auto g = std::make_shared<ScalarGrid>();
+  g->dim = int(values.ndim());
+  g->dims = {values.shape(0), values.shape(1), g->dim == 3 ? values.shape(2) : 1};
+  g->source = "array";
+  g->format = "numpy";
+  g->values.resize(std::size_t(g->voxel_count()));
+  if (!g->values.empty()) std::memcpy(g->values.data(), values.data(), g->values.size() * sizeof(float));
+  for (float v : g->values)
+    if (!std::isfinite(v)) throw Error("volume: NaN or infinite values (replace them first)");
+  if (!spacing.is_none()) g->transform.spacing = triple(spacing, "spacing", 1.0);
+  if (!origin.is_none()) g->transform.origin = triple(origin, "origin", 0.0);
+  if (!direction.is_none()) {
+    const auto d = direction.cast<std::vector<std::vector<double>>>();
+    if (d.size() != 3 || d[0].size() != 3 || d[1].size() != 3 || d[2].size() != 3)
+      throw Error("direction: expected a 3x3 matrix (rows)");
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) g->transform.direction[r * 3 + c] = d[r][c];
+  }
+  g->space = space;
+  return g;
+}
+
+std::shared_ptr<ScalarGrid> grid_from(const py::object& volume, const py::object& spacing,
+                                      const py::object& origin, const py::object& direction,
+                                      const std::string& space) {
+  if (py::isinstance<py::str>(volume) || py::hasattr(volume, "__fspath__")) {
+    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
+      throw Error("spacing, origin and direction are for arrays; a file brings its own");
+    const std::string path = py::str(py::module_::import("os").attr("fspath")(volume));
+    py::gil_scoped_release release;
+    return std::make_shared<ScalarGrid>(read_volume(path));
+  }
+  return grid_from_array(py::array::ensure(volume), spacing, origin, direction, space);
+}
+
+py::tuple read_volume_py(const py::object& path) {
+  const std::string p = py::str(py::module_::import("os").attr("fspath")(path));
+  std::shared_ptr<ScalarGrid> g;
+  {
+    py::gil_scoped_release release;
+    g = std::make_shared<ScalarGrid>(read_volume(p));
+  }
+  const auto s = py::ssize_t(sizeof(float));
+  std::vector<py::ssize_t> shape{g->dims[0], g->dims[1]}, strides{s, s * g->dims[0]};
+  if (g->dim == 3) {
+    shape.push_back(g->dims[2]);
+    strides.push_back(s * g->dims[0] * g->dims[1]);
+  }
+  py::array_t<float> values = view<float>(g, g->values.data(), shape, strides);
+  const auto& t = g->transform;
+  py::dict info;
+  info["direction"] = py::make_tuple(py::make_tuple(t.direction[0], t.direction[1], t.direction[2]),
+                                     py::make_tuple(t.direction[3], t.direction[4], t.direction[5]),
+                                     py::make_tuple(t.direction[6], t.direction[7], t.direction[8]));
+  info["space"] = g->space;
+  info["format"] = g->format;
+  info["source_type"] = scalar_type_name(g->source_type);
+  info["notes"] = g->notes;
+  const int n = g->dim;
+  py::tuple spacing(n), origin(n);
+  for (int a = 0; a < n; ++a) {
+    spacing[a] = t.spacing[a];
+    origin[a] = t.origin[a];
+  }
+  return py::make_tuple(values, spacing, origin, info);
+}
+
+// A built hierarchy with the grid it came from (for extraction from the data's interpolant and
+// snapping, as `mlfe convert` does).
+struct PyBuilt {
+  std::shared_ptr<const Built> built;
+  std::shared_ptr<const ScalarGrid> grid;
+};
+
+py::tuple mesh_arrays(TriangleMesh&& m) {
+  auto owner = std::make_shared<TriangleMesh>(std::move(m));
+  const auto f3 = py::ssize_t(3 * sizeof(float)), u3 = py::ssize_t(3 * sizeof(std::uint32_t));
+  const auto nv = py::ssize_t(owner->positions.size()), nn = py::ssize_t(owner->normals.size()),
+             nt = py::ssize_t(owner->triangles.size());
+  auto vertices = view<float>(owner, owner->positions.empty() ? nullptr : owner->positions[0].data(), {nv, 3},
+                              {f3, py::ssize_t(sizeof(float))});
+  auto normals = view<float>(owner, owner->normals.empty() ? nullptr : owner->normals[0].data(), {nn, 3},
+                             {f3, py::ssize_t(sizeof(float))});
+  auto indices = view<std::uint32_t>(owner, owner->triangles.empty() ? nullptr : owner->triangles[0].data(),
+                                     {nt, 3}, {u3, py::ssize_t(sizeof(std::uint32_t))});
+  return py::make_tuple(vertices, normals, indices);
+}
+
+PyBuilt build_py(const py::object& volume, const py::object& iso, const py::object& spacing,
+                 const py::object& origin, const py::object& direction, const std::string& space,
+                 const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  const BuildOptions options = build_options(kw);
+  kw.finish();
+  const std::vector<double> isos = iso.is_none() ? std::vector<double>{} : iso.cast<std::vector<double>>();
+  PyBuilt out;
+  auto grid = grid_from(volume, spacing, origin, direction, space);
+  py::gil_scoped_release release;
+  out.built = std::make_shared<const Built>(build(*grid, options, isos));
+  out.grid = std::move(grid);
+  return out;
+}
+
+py::object convert_py(const py::object& volume, const py::object& out, const py::object& iso,
+                      const py::object& spacing, const py::object& origin, const py::object& direction,
+                      const std::string& space, const py::object& hierarchy, const py::object& report,
+                      const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  ConvertOptions c;
+  c.build = build_options(kw);
+  c.asset = asset_options(kw);
+  kw.finish();
+  if (!iso.is_none()) c.asset.iso = iso.cast<std::vector<double>>();
+  auto fspath = py::module_::import("os").attr("fspath");
+  if (!hierarchy.is_none()) c.hierarchy = py::str(fspath(hierarchy));
+  if (!report.is_none()) c.report = py::str(fspath(report));
+  const std::string out_path = py::str(fspath(out));
+  c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
+  // Checked before reading or copying the volume.
+  check_output_path(out_path, kAssetExtensions);
+  auto grid = grid_from(volume, spacing, origin, direction, space);
+  ConvertResult r;
+  {
+    py::gil_scoped_release release;
+    r = convert(*grid, out_path, c);
+  }
+  return to_python(r.asset);
+}
+
+}  // namespace
+}  // namespace mlfe::python
+
+PYBIND11_MODULE(mlfe, m) {
+  using namespace mlfe;
+  using namespace mlfe::python;
+  m.doc() =
+      "mlfe: adaptive multilevel finite-element approximation of volume data (hierarchies, "
+      "iso-surfaces, glTF/Draco assets). Arrays are indexed [i, j, k] (x fastest in memory).";
+  m.attr("__version__") = MLFE_VERSION;
+  py::register_exception<Error>(m, "Error", PyExc_ValueError);
+
+  m.def("read_volume", &read_volume_py, py::arg("path"),
+        "Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png).\n"
+        "Returns (values, spacing, origin, info): values a float32 array indexed [i, j, k] (a view,\n"
+        "no copy), spacing and origin per axis, info a dict (direction rows, space, format,\n"
+        "source_type, notes).");
+
+  py::class_<PyBuilt>(m, "Hierarchy",
+                      "An adaptive approximation built by mlfe.build(): the hierarchy, u at its "
+                      "vertices and the build's statistics.")
+      .def_property_readonly("dim", [](const PyBuilt& b) { return b.built->dim(); })
+      .def_property_readonly("levels", [](const PyBuilt& b) { return b.built->levels(); })
+      .def_property_readonly("vertices", [](const PyBuilt& b) { return b.built->vertices(); })
+      .def_property_readonly("elements", [](const PyBuilt& b) { return b.built->leaves(); })
+      .def_property_readonly("stop_reason", [](const PyBuilt& b) { return b.built->stop_reason(); })
+      .def_property_readonly("surface_driven", [](const PyBuilt& b) { return b.built->surface_driven; })
+      .def_property_readonly("memory_limited", [](const PyBuilt& b) { return b.built->memory_limited(); })
+      .def_property_readonly("seconds", [](const PyBuilt& b) { return b.built->seconds; })
+      .def_property_readonly(
+          "errors",
+          [](const PyBuilt& b) {
+            py::dict d;
+            if (b.built->iterations().empty()) return d;  // u not solved (no output held it)
+            const auto& last = b.built->iterations().back();
+            d["rms"] = last.rms_error;
+            d["rms_percent"] = last.rms_percent;
+            d["l2"] = last.l2_error;
+            d["psnr_db"] = last.psnr_db;
+            return d;
+          },
+          "the final error of u against the data: rms, rms_percent (of the value range), l2, psnr_db")
+      .def_property_readonly(
+          "report",
+          [](const PyBuilt& b) { return to_python(build_report(b.grid->source, b.grid.get(), *b.built)); },
+          "the JSON report of `mlfe build --report` as a dict (per-iteration rows included)")
+      .def_property_readonly(
+          "values",
+          [](const PyBuilt& b) {
+            const auto& v = b.built->values();
+            auto a = view<double>(b.built, v.data(), {py::ssize_t(v.size())}, {py::ssize_t(sizeof(double))});
+            py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+            return a;
+          },
+          "u at every vertex (a read-only view)")
+      .def(
+          "extract",
+          [](const PyBuilt& b, double iso, const py::kwargs& kwargs) {
+            Options kw(kwargs);
+            AssetOptions o = asset_options(kw);
+            kw.finish();
+            o.iso = {iso};
+            Surfaces s;
+            {
+              py::gil_scoped_release release;
+              s = extract(*b.built, o, b.grid.get());
+            }
+            return mesh_arrays(std::move(s.surfaces.at(0).mesh));
+          },
+          py::arg("iso"),
+          "The iso-surface at `iso` as (vertices float32 (n, 3), normals float32 (n, 3), indices uint32\n"
+          "(m, 3)), physical millimetres; asset options (simplify, snap, normals, ...) as in convert.")
+      .def(
+          "write",
+          [](const PyBuilt& b, const py::object& out, const py::kwargs& kwargs) {
+            Options kw(kwargs);
+            py::object iso = kw.has("iso") ? kw.take("iso") : py::none();
+            AssetOptions o = asset_options(kw);
+            kw.finish();
+            if (!iso.is_none()) o.iso = iso.cast<std::vector<double>>();
+            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
+            const nlohmann::json prov = {{"input", b.grid->source},
+                                         {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
+            nlohmann::json summary;
+            {
+              py::gil_scoped_release release;
+              summary = write_assets(path, *b.built, o, prov, b.grid.get());
+            }
+            return to_python(summary);
+          },
+          py::arg("out"), "Writes the iso-surfaces (iso=[...]) as an asset, by extension, as convert does.")
+      .def(
+          "save",
+          [](const PyBuilt& b, const py::object& out) {
+            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
+            check_output_path(path, {".mlfeh"});
+            py::gil_scoped_release release;
+            write_built(path, *b.built, {{"input", b.grid->source}});
+          },
+          py::arg("out"), "Writes the hierarchy file (.mlfeh).");
+
+  m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
+        py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
+        py::arg("space") = "",
+        "Builds the adaptive approximation of `volume` (a path or an array indexed [i, j, k]).\n"
+        "Options as `mlfe build`: rms ('0.5%' or a number in data units), threshold, max_vertices,\n"
+        "max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,\n"
+        "max_memory ('50%' or bytes). With iso values and no global target, refinement follows\n"
+        "the surfaces.");
+  m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
+        py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
+        py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
+        "Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as `mlfe convert`. Returns the\n"
+        "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
+        "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap,\n"
+        "normals_toward_higher, normals, placement, z_scale, level.");
+}

@@ -1,0 +1,158 @@
+"""Tests of the Python module: NumPy and file volumes to validated glTF, extraction counts
+against the command line's result, and bad input raising mlfe.Error instead of crashing.
+Run by ctest with /usr/bin/python3 (tests/CMakeLists.txt): PYTHONPATH holds the built module,
+MLFE_BINARY the command line and MLFE_SOURCE_DIR the repository."""
+import os
+import re
+import subprocess
+import tempfile
+import unittest
+
+import numpy as np
+
+import mlfe
+
+SOURCE = os.environ["MLFE_SOURCE_DIR"]
+BINARY = os.environ["MLFE_BINARY"]
+SKULL = os.path.join(SOURCE, "samples", "ct_skull_64.nrrd")
+
+
+def validate(path):
+    """The Khronos glTF validator's verdict (tools/validate_gltf.js): (accepted, report)."""
+    r = subprocess.run(["node", os.path.join(SOURCE, "tools", "validate_gltf.js"), path],
+                       capture_output=True, text=True)
+    return r.returncode == 0, r.stdout + r.stderr
+
+
+def ply_counts(path):
+    """(vertices, faces) from a PLY header."""
+    with open(path, "rb") as f:
+        header = f.read(4096).split(b"end_header")[0].decode("ascii")
+    v = int(re.search(r"element vertex (\d+)", header).group(1))
+    t = int(re.search(r"element face (\d+)", header).group(1))
+    return v, t
+
+
+def sphere(n=24, radius=8.0):
+    """A distance-from-centre volume indexed [i, j, k], with its own shape along each axis."""
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n + 2), np.arange(n + 4), indexing="ij")
+    c = [(n - 1) / 2, (n + 1) / 2, (n + 3) / 2]
+    return np.sqrt((i - c[0]) ** 2 + (j - c[1]) ** 2 + (k - c[2]) ** 2).astype(np.float32), radius
+
+
+class PythonModuleTest(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory(prefix="mlfe_python_test_")
+        self.dir = self.tmp.name
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def test_array_to_glb(self):
+        volume, radius = sphere()
+        out = os.path.join(self.dir, "sphere.glb")
+        summary = mlfe.convert(volume, out, iso=[radius], spacing=(0.5, 0.5, 0.5), origin=(10, 0, 0))
+        self.assertGreater(summary["triangles"], 100)
+        self.assertEqual(summary["bytes"], os.path.getsize(out))
+        ok, report = validate(out)
+        self.assertTrue(ok, report)
+        # Placement follows spacing and origin: the sphere's vertices lie radius * 0.5 mm from
+        # the centre (within the simplification and snapping tolerances).
+        b = mlfe.build(volume, iso=[radius], spacing=(0.5, 0.5, 0.5), origin=(10, 0, 0))
+        vertices, normals, indices = b.extract(radius, simplify=0)
+        centre = np.array([10 + 0.5 * (volume.shape[0] - 1) / 2, 0.5 * (volume.shape[1] - 1) / 2,
+                           0.5 * (volume.shape[2] - 1) / 2])
+        distance = np.linalg.norm(vertices - centre, axis=1)
+        self.assertLess(np.abs(distance - 0.5 * radius).max(), 0.5 * 0.5)
+
+    def test_path_to_glb_with_hierarchy_and_report(self):
+        out = os.path.join(self.dir, "skull.glb")
+        h = os.path.join(self.dir, "skull.mlfeh")
+        rep = os.path.join(self.dir, "skull.json")
+        summary = mlfe.convert(SKULL, out, iso=[1.5, 3.0], hierarchy=h, report=rep)
+        self.assertEqual(len(summary["surfaces"]), 2)
+        ok, report = validate(out)
+        self.assertTrue(ok, report)
+        self.assertTrue(os.path.getsize(h) > 0 and os.path.getsize(rep) > 0)
+
+    def test_same_bytes_as_the_command_line(self):
+        """The module and `mlfe convert` run the same pipeline: same PLY bytes."""
+        args = dict(iso=[2.5], max_vertices=3000, simplify=0)
+        py_out = os.path.join(self.dir, "py.ply")
+        cli_out = os.path.join(self.dir, "cli.ply")
+        mlfe.convert(SKULL, py_out, **args)
+        subprocess.run([BINARY, "convert", SKULL, "--iso", "2.5", "--max-vertices", "3000", "--simplify", "0",
+                        "--quiet", "-o", cli_out], check=True, capture_output=True)
+        with open(py_out, "rb") as a, open(cli_out, "rb") as b:
+            self.assertEqual(a.read(), b.read())
+
+    def test_extract_counts_match_the_cpp_result(self):
+        for build_args, asset_args, cli in [
+            (dict(max_vertices=3000), dict(simplify=0), ["--max-vertices", "3000", "--simplify", "0"]),
+            ({}, {}, []),  # the defaults: surface-driven build, simplified and snapped
+            (dict(rms="1%"), dict(snap=0, simplify=0.5, simplifier="bounded"),
+             ["--rms", "1%", "--snap", "0", "--simplify", "0.5", "--simplifier", "bounded"]),
+        ]:
+            with self.subTest(cli=cli):
+                b = mlfe.build(SKULL, iso=[2.5], **build_args)
+                vertices, normals, indices = b.extract(2.5, **asset_args)
+                ply = os.path.join(self.dir, "cli.ply")
+                subprocess.run([BINARY, "convert", SKULL, "--iso", "2.5", "--quiet", "-o", ply] + cli, check=True,
+                               capture_output=True)
+                self.assertEqual((len(vertices), len(indices)), ply_counts(ply))
+                self.assertEqual(vertices.dtype, np.float32)
+                self.assertEqual(indices.dtype, np.uint32)
+                self.assertEqual(normals.shape, vertices.shape)
+                self.assertLess(int(indices.max()), len(vertices))
+                self.assertFalse(vertices.flags.owndata)  # a view of the C++ mesh
+
+    def test_build_reports_levels_counts_and_errors(self):
+        b = mlfe.build(SKULL, rms="2%")
+        self.assertEqual(b.dim, 3)
+        self.assertGreater(b.levels, 1)
+        self.assertEqual(b.values.shape, (b.vertices,))
+        self.assertLessEqual(b.errors["rms_percent"], 2.0)
+        self.assertEqual(b.report["vertices"], b.vertices)
+        self.assertEqual(b.report["elements"], b.elements)
+        self.assertFalse(b.surface_driven)
+
+    def test_read_volume_is_a_view_indexed_ijk(self):
+        values, spacing, origin, info = mlfe.read_volume(SKULL)
+        self.assertEqual(values.dtype, np.float32)
+        self.assertEqual(values.ndim, 3)
+        self.assertFalse(values.flags.owndata)
+        self.assertEqual(len(spacing), 3)
+        self.assertEqual(info["format"], "nrrd")
+        # The array goes back in with its frame: the same asset as from the file.
+        a = os.path.join(self.dir, "from_array.ply")
+        f = os.path.join(self.dir, "from_file.ply")
+        mlfe.convert(values, a, iso=[2.5], spacing=spacing, origin=origin, direction=info["direction"],
+                     space=info["space"])
+        mlfe.convert(SKULL, f, iso=[2.5])
+        self.assertEqual(ply_counts(a), ply_counts(f))
+
+    def test_bad_input_raises_with_the_message(self):
+        out = os.path.join(self.dir, "bad.glb")
+        cases = [
+            (lambda: mlfe.convert(np.zeros((1, 5, 5), np.float32), out, iso=[0.5]), "at least 2 samples"),
+            (lambda: mlfe.convert(os.path.join(self.dir, "missing.nrrd"), out, iso=[1]), "missing.nrrd"),
+            (lambda: mlfe.convert(SKULL, out), "--iso is required"),
+            (lambda: mlfe.convert(SKULL, out, iso=[1], norm="h2"), "norm"),
+            (lambda: mlfe.convert(SKULL, out, iso=[1], simplfy=0.2), "unknown option 'simplfy'"),
+            (lambda: mlfe.convert(SKULL, os.path.join(self.dir, "x.xyz"), iso=[1]), "unknown output type"),
+            (lambda: mlfe.convert(np.full((4, 4, 4), np.nan, np.float32), out, iso=[1]), "NaN"),
+            (lambda: mlfe.build(SKULL, max_level=99), "max_level"),
+            (lambda: mlfe.build(np.zeros((3, 3, 3, 3), np.float32)), "2D or 3D"),
+            (lambda: mlfe.build(np.zeros((4, 4, 4), np.float32), spacing=(1, 0, 1)), "spacing"),
+        ]
+        for call, message in cases:
+            with self.subTest(message=message):
+                with self.assertRaises(mlfe.Error) as caught:
+                    call()
+                self.assertIn(message, str(caught.exception))
+                self.assertIsInstance(caught.exception, ValueError)
+                self.assertFalse(os.path.exists(out))
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,45 @@
+// Where the tests find their inputs and put their outputs, in one place: the bundled samples
+// (samples/, also the main job's inputs), the small test inputs (tests/data), the golden files
+// (tests/golden), and a scratch folder per test binary, removed at exit.
+#pragma once
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+namespace mlfe::test {
+
+/// A file of the bundled samples (samples/ct_skull_64.nrrd, samples/dem_jacksboro.nrrd).
+inline std::string sample_path(const std::string& name) {
+  return std::string(MLFE_SOURCE_DIR) + "/samples/" + name;
+}
+/// A file of tests/data.
+inline std::string test_data_path(const std::string& name) {
+  return std::string(MLFE_SOURCE_DIR) + "/tests/data/" + name;
+}
+/// A file of tests/golden.
+inline std::string golden_path(const std::string& name) {
+  return std::string(MLFE_SOURCE_DIR) + "/tests/golden/" + name;
+}
+
+/// A fresh scratch folder per test binary run, removed when the binary exits; with `sub`, a
+/// folder of that name inside it (created on first use).
+inline std::string scratch_dir(const std::string& sub = "") {
+  struct Dir {
+    std::filesystem::path path;
+    Dir() : path(std::filesystem::temp_directory_path() / ("mlfe_test_" + std::to_string(::getpid()))) {
+      std::filesystem::create_directories(path);
+    }
+    ~Dir() {
+      std::error_code ec;
+      std::filesystem::remove_all(path, ec);
+    }
+  };
+  static const Dir dir;
+  if (sub.empty()) return dir.path.string();
+  const std::filesystem::path p = dir.path / sub;
+  std::filesystem::create_directories(p);
+  return p.string();
+}
+
+}  // namespace mlfe::test
