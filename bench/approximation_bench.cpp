@@ -35,12 +35,12 @@
 #include <string>
 #include <vector>
 
-#include "core/approximation.h"
-#include "core/field.h"
-#include "core/hierarchy.h"
-#include "core/p1_element.h"
-#include "core/scalar_grid.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
 
 using namespace mlfe;
 

@@ -21,8 +21,8 @@
 #include <random>
 #include <string>
 
-#include "formats/compare.h"
-#include "formats/openmesh_io.h"
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/openmesh_io.h>
 
 namespace {
 

@@ -35,13 +35,13 @@
 #include <string>
 #include <vector>
 
-#include "core/approximation.h"
-#include "core/field.h"
-#include "core/iso_surface.h"
-#include "core/surface_simplification.h"
-#include "formats/hierarchy_io.h"
-#include "formats/openmesh_io.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/surface_simplification.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 
 using namespace mlfe;
 using Clock = std::chrono::steady_clock;

@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
-#include "formats/draco_io.h"
-#include "formats/gltf_writer.h"
-#include "formats/openmesh_io.h"
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/openmesh_io.h>
 
 int main(int argc, char** argv) {
   if (argc < 3) {

@@ -13,7 +13,7 @@
 #include <cstring>
 #include <string>
 
-#include "formats/volume_reader.h"
+#include <mlfe/formats/volume_reader.h>
 
 namespace {
 double peak_rss_mb() {

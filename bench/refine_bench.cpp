@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "core/hierarchy.h"
+#include <mlfe/core/hierarchy.h>
 
 namespace {
 

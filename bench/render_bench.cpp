@@ -20,10 +20,10 @@
 #include <string>
 #include <vector>
 
-#include "core/volume_render.h"
-#include "formats/hierarchy_io.h"
-#include "formats/volume_reader.h"
-#include "formats/vtu_writer.h"
+#include <mlfe/core/volume_render.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/vtu_writer.h>
 
 using namespace mlfe;
 

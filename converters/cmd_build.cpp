@@ -9,10 +9,10 @@
 #include "converters/commands.h"
 #include "converters/pipeline_options.h"
 #include "converters/volume_options.h"
-#include "core/error.h"
-#include "formats/hierarchy_levels.h"
-#include "formats/hierarchy_resample.h"
-#include "mlfe/version.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/hierarchy_levels.h>
+#include <mlfe/formats/hierarchy_resample.h>
+#include <mlfe/version.h>
 
 namespace mlfe::cli {
 namespace {

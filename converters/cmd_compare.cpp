@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "converters/commands.h"
-#include "core/error.h"
-#include "formats/compare.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/compare.h>
 
 namespace mlfe::cli {
 namespace {

@@ -8,7 +8,7 @@
 #include "converters/convert_command.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe::cli {
 

@@ -14,9 +14,9 @@
 
 #include "converters/commands.h"
 #include "converters/volume_options.h"
-#include "formats/hierarchy_io.h"
-#include "formats/vdb_reader.h"
-#include "formats/volume_reader.h"
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/vdb_reader.h>
+#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe::cli {
 namespace {

@@ -11,8 +11,8 @@
 
 #include "converters/commands.h"
 #include "converters/convert_command.h"
-#include "core/error.h"
-#include "mlfe/version.h"
+#include <mlfe/core/error.h>
+#include <mlfe/version.h>
 
 namespace mlfe::cli {
 namespace {

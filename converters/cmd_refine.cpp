@@ -15,11 +15,11 @@
 #include <vector>
 
 #include "converters/commands.h"
-#include "core/error.h"
-#include "core/hierarchy.h"
-#include "core/mesh_quality.h"
-#include "formats/hierarchy_io.h"
-#include "formats/vtu_writer.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/mesh_quality.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/vtu_writer.h>
 
 namespace mlfe::cli {
 namespace {

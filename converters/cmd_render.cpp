@@ -10,12 +10,12 @@
 #include "converters/commands.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
-#include "core/error.h"
-#include "core/volume_render.h"
-#include "formats/exr_writer.h"
-#include "formats/file_names.h"
-#include "formats/transfer_function_io.h"
-#include "mlfe/version.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/volume_render.h>
+#include <mlfe/formats/exr_writer.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/transfer_function_io.h>
+#include <mlfe/version.h>
 
 namespace mlfe::cli {
 

@@ -10,8 +10,8 @@
 #include <new>
 
 #include "converters/commands.h"
-#include "core/error.h"
-#include "mlfe/version.h"
+#include <mlfe/core/error.h>
+#include <mlfe/version.h>
 
 namespace mlfe::cli {
 int& thread_option() {

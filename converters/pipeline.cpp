@@ -1,4 +1,4 @@
-#include "converters/pipeline.h"
+#include <mlfe/pipeline.h>
 
 #include <fmt/format.h>
 #include <sys/resource.h>
@@ -11,16 +11,16 @@
 #include <filesystem>
 #include <optional>
 
-#include "core/error.h"
-#include "core/field.h"
-#include "core/iso_surface.h"
-#include "core/surface_simplification.h"
-#include "formats/atomic_file.h"
-#include "formats/draco_io.h"
-#include "formats/file_names.h"
-#include "formats/gltf_writer.h"
-#include "formats/openmesh_io.h"
-#include "mlfe/version.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/surface_simplification.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/version.h>
 
 namespace mlfe {
 

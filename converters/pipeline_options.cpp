@@ -8,7 +8,7 @@
 #include <memory>
 #include <sstream>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe::cli {
 

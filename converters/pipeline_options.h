@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "converters/pipeline.h"
+#include <mlfe/pipeline.h>
 
 namespace mlfe::cli {
 

@@ -3,7 +3,7 @@
 #pragma once
 #include <CLI/CLI.hpp>
 
-#include "formats/volume_reader.h"
+#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe::cli {
 

@@ -1,6 +1,6 @@
 // Adaptive multilevel FE approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see
 // approximation.h. Solvers: CG with the BPX preconditioner (Bramble, Pasciak & Xu 1990).
-#include "core/approximation.h"
+#include <mlfe/core/approximation.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -14,14 +14,14 @@
 #include <memory>
 #include <numeric>
 
-#include "core/bpx.h"
-#include "core/check.h"
-#include "core/error.h"
-#include "core/fe_assembly.h"
-#include "core/hierarchical_basis.h"
-#include "core/marking.h"
-#include "core/p1_element.h"
-#include "core/surface_estimator.h"
+#include <mlfe/core/bpx.h>
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/fe_assembly.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/marking.h>
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/surface_estimator.h>
 
 namespace mlfe {
 

@@ -1,12 +1,12 @@
-#include "core/element_integrals.h"
+#include <mlfe/core/element_integrals.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <vector>
 
-#include "core/check.h"
-#include "core/p1_element.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

@@ -15,8 +15,8 @@
 #include <string>
 #include <vector>
 
-#include "core/error.h"
-#include "core/surface_simplification.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/surface_simplification.h>
 
 namespace mlfe {
 namespace {

@@ -1,5 +1,5 @@
 // Assembly and error estimation for the L2 / H1 best approximation (Grosso, Lürig & Ertl 1997).
-#include "core/fe_assembly.h"
+#include <mlfe/core/fe_assembly.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -11,8 +11,8 @@
 #include <limits>
 #include <utility>
 
-#include "core/check.h"
-#include "core/p1_element.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

@@ -1,10 +1,10 @@
-#include "core/field.h"
+#include <mlfe/core/field.h>
 
 #include <algorithm>
 #include <cmath>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

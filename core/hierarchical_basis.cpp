@@ -1,8 +1,8 @@
 // Hierarchical basis (Yserentant 1986); see hierarchical_basis.h.
-#include "core/hierarchical_basis.h"
+#include <mlfe/core/hierarchical_basis.h>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,7 +1,7 @@
 // Red-green refinement of simplex hierarchies: Bank, Sherman & Weiser (1983) in 2D and
 // Bey, "Tetrahedral grid refinement", Computing 55 (1995) in 3D, with the green closure of
 // Grosso, Lürig & Ertl (IEEE Vis 1997). See hierarchy.h for the local numbering.
-#include "core/hierarchy.h"
+#include <mlfe/core/hierarchy.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -10,8 +10,8 @@
 #include <cmath>
 #include <string>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,5 +1,5 @@
 // Marching tetrahedra on the multilevel hierarchy (Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 5).
-#include "core/iso_surface.h"
+#include <mlfe/core/iso_surface.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -9,11 +9,11 @@
 #include <cmath>
 #include <unordered_map>
 
-#include "core/check.h"
-#include "core/edge_map.h"
-#include "core/error.h"
-#include "core/hierarchical_basis.h"
-#include "core/p1_element.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/edge_map.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

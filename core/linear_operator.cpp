@@ -1,4 +1,4 @@
-#include "core/linear_operator.h"
+#include <mlfe/core/linear_operator.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -7,7 +7,7 @@
 
 #include <cmath>
 
-#include "core/check.h"
+#include <mlfe/core/check.h>
 
 namespace mlfe {
 

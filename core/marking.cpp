@@ -1,5 +1,5 @@
 // Marking for the adaptive approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see marking.h.
-#include "core/marking.h"
+#include <mlfe/core/marking.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -7,8 +7,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/p1_element.h"
-#include "core/surface_estimator.h"
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/surface_estimator.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "core/mesh_distance.h"
+#include <mlfe/core/mesh_distance.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -11,8 +11,8 @@
 #include <optional>
 #include <random>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

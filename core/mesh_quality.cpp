@@ -1,4 +1,4 @@
-#include "core/mesh_quality.h"
+#include <mlfe/core/mesh_quality.h>
 
 #include <algorithm>
 #include <cmath>

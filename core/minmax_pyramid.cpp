@@ -1,4 +1,4 @@
-#include "core/minmax_pyramid.h"
+#include <mlfe/core/minmax_pyramid.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/check.h"
+#include <mlfe/core/check.h>
 
 namespace mlfe {
 

@@ -1,9 +1,9 @@
-#include "core/scalar_grid.h"
+#include <mlfe/core/scalar_grid.h>
 
 #include <algorithm>
 #include <limits>
 
-#include "core/check.h"
+#include <mlfe/core/check.h>
 
 namespace mlfe {
 

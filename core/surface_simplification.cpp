@@ -39,7 +39,7 @@
 //        \   /                 \   |
 //          b                     b
 // (v0's other neighbours keep their faces, now fanned around v1.)
-#include "core/surface_simplification.h"
+#include <mlfe/core/surface_simplification.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -56,8 +56,8 @@
 #include <string>
 #include <vector>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

@@ -1,14 +1,14 @@
 // Exact emission–absorption integration over linear segments: Röttger, Kraus & Ertl (IEEE Vis
 // 2000) pre-integration in the partial form of Moreland & Angel (IEEE VolVis 2004), with the
 // mean transmittance ψ in closed form instead of a table (see transfer_function.h).
-#include "core/transfer_function.h"
+#include <mlfe/core/transfer_function.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,12 +1,12 @@
 // Area-weighted vertex normals of an indexed triangle mesh.
-#include "core/triangle_mesh.h"
+#include <mlfe/core/triangle_mesh.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <vector>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

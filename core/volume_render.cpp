@@ -2,7 +2,7 @@
 // 1997, Sec. 6) with exact pre-integrated segments (Röttger, Kraus & Ertl 2000; Moreland &
 // Angel 2004) and empty-space skipping through the hierarchy's per-element ranges. See
 // volume_render.h for the traversal steps.
-#include "core/volume_render.h"
+#include <mlfe/core/volume_render.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -15,9 +15,9 @@
 #include <limits>
 #include <memory>
 
-#include "core/check.h"
-#include "core/field.h"
-#include "core/hierarchical_basis.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
 
 namespace mlfe {
 

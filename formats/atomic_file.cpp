@@ -1,4 +1,4 @@
-#include "formats/atomic_file.h"
+#include <mlfe/formats/atomic_file.h>
 
 #include <unistd.h>
 
@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,4 +1,4 @@
-#include "formats/compare.h"
+#include <mlfe/formats/compare.h>
 
 #include <fmt/format.h>
 
@@ -9,15 +9,15 @@
 #include <fstream>
 #include <map>
 
-#include "core/error.h"
-#include "core/mesh_distance.h"
-#include "formats/atomic_file.h"
-#include "formats/draco_io.h"
-#include "formats/gltf_reader.h"
-#include "formats/hierarchy_io.h"
-#include "formats/image_reader.h"
-#include "formats/openmesh_io.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/mesh_distance.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_reader.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe {
 namespace {

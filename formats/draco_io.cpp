@@ -1,4 +1,4 @@
-#include "formats/draco_io.h"
+#include <mlfe/formats/draco_io.h>
 
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
@@ -15,8 +15,8 @@
 #include <new>
 #include <unordered_map>
 
-#include "core/error.h"
-#include "formats/atomic_file.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "formats/exr_writer.h"
+#include <mlfe/formats/exr_writer.h>
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
@@ -12,9 +12,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "core/check.h"
-#include "core/error.h"
-#include "formats/atomic_file.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 

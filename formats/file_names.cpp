@@ -1,4 +1,4 @@
-#include "formats/file_names.h"
+#include <mlfe/formats/file_names.h>
 
 #include <algorithm>
 #include <cctype>

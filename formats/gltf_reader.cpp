@@ -1,4 +1,4 @@
-#include "formats/gltf_reader.h"
+#include <mlfe/formats/gltf_reader.h>
 
 // Not through tinygltf's loader: in this process its symbols resolve to the copy bundled in
 // libdraco.so (a different version than the libtinygltf-dev headers), and that loader crashed
@@ -14,8 +14,8 @@
 #include <fstream>
 #include <sstream>
 
-#include "core/error.h"
-#include "formats/draco_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "formats/gltf_writer.h"
+#include <mlfe/formats/gltf_writer.h>
 
 // Debian's libtinygltf-dev ships tinygltf as a compiled shared library (libtinygltf.so, linked
 // through TinyGLTF::TinyGLTF), so this file only includes the declarations. Defining
@@ -16,10 +16,10 @@
 #include <limits>
 #include <optional>
 
-#include "core/error.h"
-#include "formats/atomic_file.h"
-#include "formats/file_names.h"
-#include "formats/draco_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/draco_io.h>
 
 namespace mlfe {
 namespace {

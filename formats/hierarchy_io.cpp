@@ -1,5 +1,5 @@
 // .mlfeh reader and writer; the format is specified in hierarchy_io.h.
-#include "formats/hierarchy_io.h"
+#include <mlfe/formats/hierarchy_io.h>
 
 #include <zlib.h>
 #include <zstd.h>
@@ -10,9 +10,9 @@
 #include <fstream>
 #include <limits>
 
-#include "core/error.h"
-#include "formats/atomic_file.h"
-#include "formats/hierarchy_levels.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/hierarchy_levels.h>
 
 namespace mlfe {
 

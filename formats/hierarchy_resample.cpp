@@ -1,5 +1,5 @@
 // Leaf mesh → voxel grid by barycentric interpolation (see hierarchy_resample.h).
-#include "formats/hierarchy_resample.h"
+#include <mlfe/formats/hierarchy_resample.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -9,8 +9,8 @@
 #include <limits>
 #include <string>
 
-#include "core/check.h"
-#include "core/error.h"
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

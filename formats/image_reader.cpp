@@ -1,4 +1,4 @@
-#include "formats/image_reader.h"
+#include <mlfe/formats/image_reader.h>
 
 #include <ImfBoxAttribute.h>
 #include <ImfChannelList.h>
@@ -24,7 +24,7 @@
 #include <sstream>
 #include <vector>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "formats/metaimage_reader.h"
+#include <mlfe/formats/metaimage_reader.h>
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -12,7 +12,7 @@
 #include <sstream>
 #include <vector>
 
-#include "formats/raw_reader.h"
+#include <mlfe/formats/raw_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {

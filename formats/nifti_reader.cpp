@@ -1,4 +1,4 @@
-#include "formats/nifti_reader.h"
+#include <mlfe/formats/nifti_reader.h>
 
 #include <fmt/format.h>
 #include <nifti2_io.h>

@@ -1,4 +1,4 @@
-#include "formats/nrrd_reader.h"
+#include <mlfe/formats/nrrd_reader.h>
 
 #include <fmt/format.h>
 #include <teem/nrrd.h>

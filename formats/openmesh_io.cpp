@@ -3,7 +3,7 @@
 // GCC matches the pragma by source location, so it must precede the OpenMesh/libstdc++ headers.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 
-#include "formats/openmesh_io.h"
+#include <mlfe/formats/openmesh_io.h>
 
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
@@ -14,9 +14,9 @@
 #include <fstream>
 #include <mutex>
 
-#include "core/error.h"
-#include "formats/atomic_file.h"
-#include "formats/file_names.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/file_names.h>
 
 namespace mlfe {
 namespace {

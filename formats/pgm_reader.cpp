@@ -1,11 +1,11 @@
-#include "formats/pgm_reader.h"
+#include <mlfe/formats/pgm_reader.h>
 
 #include <fmt/format.h>
 
 #include <cctype>
 #include <fstream>
 
-#include "formats/raw_reader.h"
+#include <mlfe/formats/raw_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {

@@ -1,4 +1,4 @@
-#include "formats/png_reader.h"
+#include <mlfe/formats/png_reader.h>
 
 #include <fmt/format.h>
 #include <png.h>

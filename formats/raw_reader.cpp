@@ -1,4 +1,4 @@
-#include "formats/raw_reader.h"
+#include <mlfe/formats/raw_reader.h>
 
 #include <fmt/format.h>
 

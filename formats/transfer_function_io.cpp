@@ -1,10 +1,10 @@
-#include "formats/transfer_function_io.h"
+#include <mlfe/formats/transfer_function_io.h>
 
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,5 +1,5 @@
 // The only translation unit that includes OpenVDB headers (they compile slowly).
-#include "formats/vdb_reader.h"
+#include <mlfe/formats/vdb_reader.h>
 
 #include <fmt/format.h>
 #include <openvdb/io/File.h>

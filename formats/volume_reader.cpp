@@ -1,4 +1,4 @@
-#include "formats/volume_reader.h"
+#include <mlfe/formats/volume_reader.h>
 
 #include <fmt/format.h>
 #include <sys/stat.h>
@@ -12,13 +12,13 @@
 #include <limits>
 #include <new>
 
-#include "formats/metaimage_reader.h"
-#include "formats/nifti_reader.h"
-#include "formats/nrrd_reader.h"
-#include "formats/pgm_reader.h"
-#include "formats/png_reader.h"
-#include "formats/raw_reader.h"
-#include "formats/vdb_reader.h"
+#include <mlfe/formats/metaimage_reader.h>
+#include <mlfe/formats/nifti_reader.h>
+#include <mlfe/formats/nrrd_reader.h>
+#include <mlfe/formats/pgm_reader.h>
+#include <mlfe/formats/png_reader.h>
+#include <mlfe/formats/raw_reader.h>
+#include <mlfe/formats/vdb_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {

@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "core/error.h"
-#include "core/scalar_grid.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe::volume_detail {
 

@@ -1,12 +1,12 @@
-#include "formats/vtu_writer.h"
+#include <mlfe/formats/vtu_writer.h>
 
 #include <cstdint>
 #include <cstring>
 #include <ostream>
 #include <sstream>
 
-#include "core/error.h"
-#include "formats/atomic_file.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 

@@ -9,11 +9,11 @@
 #include <fstream>
 #include <string>
 
-#include "core/error.h"
-#include "formats/draco_io.h"
-#include "formats/gltf_reader.h"
-#include "formats/hierarchy_io.h"
-#include "formats/image_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_reader.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/image_reader.h>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string kind = MLFE_FUZZ_KIND;

@@ -10,8 +10,8 @@
 #include <fstream>
 #include <string>
 
-#include "core/error.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/volume_reader.h>
 
 namespace {
 

@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "converters/pipeline.h"
-#include "core/error.h"
-#include "mlfe/version.h"
+#include <mlfe/pipeline.h>
+#include <mlfe/core/error.h>
+#include <mlfe/version.h>
 
 namespace py = pybind11;
 

@@ -16,7 +16,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/triangle_mesh.h"
+#include <mlfe/core/triangle_mesh.h>
 #include "tests/test_paths.h"
 
 namespace mlfe::test {

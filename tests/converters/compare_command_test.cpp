@@ -10,7 +10,7 @@
 #include <sstream>
 #include <string>
 
-#include "formats/openmesh_io.h"
+#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 

@@ -15,11 +15,11 @@
 #include <sstream>
 #include <string>
 
-#include "core/field.h"
-#include "formats/draco_io.h"
-#include "formats/gltf_writer.h"
-#include "formats/openmesh_io.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/field.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 #include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 

@@ -11,7 +11,7 @@
 #include <sstream>
 #include <string>
 
-#include "formats/hierarchy_io.h"
+#include <mlfe/formats/hierarchy_io.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

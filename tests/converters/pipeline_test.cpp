@@ -1,7 +1,7 @@
 // The pipeline library (converters/pipeline.h) without the command line: its defaults give the
 // command line's bytes, extract() and write_assets() agree, the 2D/3D holder, and bad input
 // throws mlfe::Error before any output is written.
-#include "converters/pipeline.h"
+#include <mlfe/pipeline.h>
 
 #include <gtest/gtest.h>
 
@@ -11,7 +11,7 @@
 #include <sstream>
 #include <string>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

@@ -10,8 +10,8 @@
 #include <regex>
 #include <string>
 
-#include "core/error.h"
-#include "formats/hierarchy_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/hierarchy_io.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {

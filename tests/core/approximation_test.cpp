@@ -1,4 +1,4 @@
-#include "core/approximation.h"
+#include <mlfe/core/approximation.h>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -7,10 +7,10 @@
 #include <functional>
 #include <random>
 
-#include "core/bpx.h"
-#include "core/fe_assembly.h"
-#include "core/field.h"
-#include "core/hierarchical_basis.h"
+#include <mlfe/core/bpx.h>
+#include <mlfe/core/fe_assembly.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {

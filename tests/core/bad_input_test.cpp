@@ -5,15 +5,15 @@
 #include <string>
 #include <vector>
 
-#include "core/approximation.h"
-#include "core/error.h"
-#include "core/field.h"
-#include "core/hierarchical_basis.h"
-#include "core/hierarchy.h"
-#include "core/iso_surface.h"
-#include "core/mesh_distance.h"
-#include "core/transfer_function.h"
-#include "core/triangle_mesh.h"
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/mesh_distance.h>
+#include <mlfe/core/transfer_function.h>
+#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "core/element_integrals.h"
+#include <mlfe/core/element_integrals.h>
 
 #include <gtest/gtest.h>
 
@@ -8,7 +8,7 @@
 #include <cstring>
 #include <random>
 
-#include "core/p1_element.h"
+#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 namespace {

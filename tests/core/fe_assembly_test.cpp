@@ -1,10 +1,10 @@
-#include "core/fe_assembly.h"
+#include <mlfe/core/fe_assembly.h>
 
 #include <gtest/gtest.h>
 
 #include <random>
 
-#include "core/p1_element.h"
+#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 namespace {

@@ -4,8 +4,8 @@
 #include <functional>
 #include <string>
 
-#include "core/error.h"
-#include "core/hierarchy.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {

@@ -1,4 +1,4 @@
-#include "core/hierarchy.h"
+#include <mlfe/core/hierarchy.h>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -9,7 +9,7 @@
 #include <random>
 #include <set>
 
-#include "core/mesh_quality.h"
+#include <mlfe/core/mesh_quality.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {

@@ -1,4 +1,4 @@
-#include "core/iso_surface.h"
+#include <mlfe/core/iso_surface.h>
 
 #include <gtest/gtest.h>
 
@@ -6,8 +6,8 @@
 #include <map>
 #include <set>
 
-#include "core/approximation.h"
-#include "core/field.h"
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
 
 namespace mlfe {
 namespace {

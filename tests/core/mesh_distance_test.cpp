@@ -1,6 +1,6 @@
 // core/mesh_distance: closest points against brute force, exact distances for planted
 // displacements, sampling determinism across thread counts, signed volume and handedness.
-#include "core/mesh_distance.h"
+#include <mlfe/core/mesh_distance.h>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

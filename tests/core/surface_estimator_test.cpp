@@ -1,5 +1,5 @@
 // The min/max pyramid, the surface-gap estimator and surface-driven refinement.
-#include "core/surface_estimator.h"
+#include <mlfe/core/surface_estimator.h>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -8,9 +8,9 @@
 #include <functional>
 #include <random>
 
-#include "core/approximation.h"
-#include "core/field.h"
-#include "core/minmax_pyramid.h"
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/minmax_pyramid.h>
 
 namespace mlfe {
 namespace {

@@ -1,4 +1,4 @@
-#include "core/surface_simplification.h"
+#include <mlfe/core/surface_simplification.h>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -12,7 +12,7 @@
 #include <set>
 #include <utility>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -8,7 +8,7 @@
 #include <random>
 #include <vector>
 
-#include "core/hierarchy.h"
+#include <mlfe/core/hierarchy.h>
 
 namespace mlfe::test {
 

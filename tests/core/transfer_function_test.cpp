@@ -1,13 +1,13 @@
 // Exact segment integration: the closed-form mean transmittance and the pre-integrated
 // accumulator against fine numerical integration, constant opacity against the analytic
 // transmittance, narrow spikes, early termination.
-#include "core/transfer_function.h"
+#include <mlfe/core/transfer_function.h>
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

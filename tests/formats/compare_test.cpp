@@ -1,7 +1,7 @@
 // formats/compare (mlfe compare's library): each kind detects a planted difference just over
 // its tolerance and accepts one just under; Draco copies, reordered copies and glTF encodings
 // compare equal; mirrored and millimetre meshes are reported with a reason that says so.
-#include "formats/compare.h"
+#include <mlfe/formats/compare.h>
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
@@ -19,12 +19,12 @@
 #include <numeric>
 #include <random>
 
-#include "core/error.h"
-#include "core/hierarchy.h"
-#include "formats/draco_io.h"
-#include "formats/gltf_writer.h"
-#include "formats/hierarchy_io.h"
-#include "formats/openmesh_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

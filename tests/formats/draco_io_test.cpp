@@ -1,4 +1,4 @@
-#include "formats/draco_io.h"
+#include <mlfe/formats/draco_io.h>
 
 #include <gtest/gtest.h>
 
@@ -6,8 +6,8 @@
 #include <cstdlib>
 #include <random>
 
-#include "core/error.h"
-#include "formats/openmesh_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

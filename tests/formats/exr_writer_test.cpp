@@ -1,6 +1,6 @@
 // EXR output as other tools see it (exrheader from the openexr package, and OpenEXR's reader),
 // the PNG preview, and ParaView transfer-function files.
-#include "formats/exr_writer.h"
+#include <mlfe/formats/exr_writer.h>
 
 #include <ImfArray.h>
 #include <ImfFrameBuffer.h>
@@ -16,8 +16,8 @@
 #include <limits>
 #include <sstream>
 
-#include "core/error.h"
-#include "formats/transfer_function_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/transfer_function_io.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

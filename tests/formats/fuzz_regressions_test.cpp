@@ -4,9 +4,9 @@
 
 #include <filesystem>
 
-#include "core/error.h"
-#include "formats/draco_io.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe {
 namespace {

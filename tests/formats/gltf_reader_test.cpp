@@ -1,6 +1,6 @@
 // formats/gltf_reader: geometry back from mlfe's own .glb/.gltf (Draco, plain, quantized), node
 // transforms applied (a mirroring one flips the winding), and bad files end in mlfe::Error.
-#include "formats/gltf_reader.h"
+#include <mlfe/formats/gltf_reader.h>
 
 #include <gtest/gtest.h>
 
@@ -8,8 +8,8 @@
 #include <fstream>
 #include <random>
 
-#include "core/error.h"
-#include "formats/gltf_writer.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/gltf_writer.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

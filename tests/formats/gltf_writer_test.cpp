@@ -1,4 +1,4 @@
-#include "formats/gltf_writer.h"
+#include <mlfe/formats/gltf_writer.h>
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -9,8 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/error.h"
-#include "formats/draco_io.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -1,4 +1,4 @@
-#include "formats/hierarchy_io.h"
+#include <mlfe/formats/hierarchy_io.h>
 
 #include <gtest/gtest.h>
 #include <zlib.h>
@@ -11,7 +11,7 @@
 #include <random>
 #include <string>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/core/test_hierarchies.h"
 #include "tests/test_paths.h"
 

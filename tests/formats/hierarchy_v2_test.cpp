@@ -13,10 +13,10 @@
 #include <random>
 #include <string>
 
-#include "core/error.h"
-#include "core/hierarchical_basis.h"
-#include "formats/hierarchy_io.h"
-#include "formats/hierarchy_levels.h"
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/hierarchy_levels.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {

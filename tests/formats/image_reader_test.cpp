@@ -1,6 +1,6 @@
 // formats/image_reader: EXR channels and attributes (data window not at the origin), PNG
 // channel layout and scaling, and truncated files end in mlfe::Error.
-#include "formats/image_reader.h"
+#include <mlfe/formats/image_reader.h>
 
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
@@ -14,7 +14,7 @@
 #include <cstring>
 #include <fstream>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

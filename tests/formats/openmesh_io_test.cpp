@@ -1,4 +1,4 @@
-#include "formats/openmesh_io.h"
+#include <mlfe/formats/openmesh_io.h>
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <array>
 #include <cmath>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "core/error.h"
-#include "formats/volume_reader.h"
+#include <mlfe/core/error.h>
+#include <mlfe/formats/volume_reader.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {

@@ -1,4 +1,4 @@
-#include "formats/vtu_writer.h"
+#include <mlfe/formats/vtu_writer.h>
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -13,7 +13,7 @@
 #include <regex>
 #include <string>
 
-#include "core/error.h"
+#include <mlfe/core/error.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {

@@ -1,0 +1,48 @@
+// Assembly of the L2 (or H1) best-approximation system M U = F on the leaf triangulation,
+// and the element error estimate E_T = ∫_T (f - u)² (+ s² ∫_T |∇f - ∇u|² in H1).
+// Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 3: mesh reduction as L2 approximation.
+//
+// Degrees of freedom are the hierarchy's vertices (every vertex is a vertex of some leaf).
+// The bilinear form is (u, v) + gradient_weight (∇u, ∇v); gradient_weight = 0 is plain L2.
+// All functions are TBB-parallel and bitwise deterministic: per-element results go to fixed
+// slots and are summed in element order.
+#pragma once
+#include <vector>
+
+#include <mlfe/core/element_integrals.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/linear_operator.h>
+
+namespace mlfe {
+
+/// Resolving integrals of f for each element of `elems` (see element_integrals.h).
+template <int D>
+std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
+                                                           const std::vector<ElemId>& elems,
+                                                           const Field& f, double max_sub_edge,
+                                                           bool gradients);
+
+/// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()).
+template <int D>
+SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
+                             double gradient_weight);
+
+/// How `integrals` lines up with `leaves`: integrals[i] belongs to leaves[i] (kLeafOrder), or
+/// integrals is a per-element cache and integrals[leaves[i].value] belongs to leaves[i]
+/// (kElementId; saves gathering a copy of a cache that already exists). Sizes are CHECKed.
+enum class IntegralIndex { kLeafOrder, kElementId };
+
+/// Load vector F_j = (f, φ_j) + gradient_weight (∇f, ∇φ_j).
+template <int D>
+Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
+                     const std::vector<ElementIntegrals<D>>& integrals, double gradient_weight,
+                     IntegralIndex index = IntegralIndex::kLeafOrder);
+
+/// E_T for each leaf, from the cached integrals and nodal values U (never negative).
+template <int D>
+std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
+                                   const std::vector<ElementIntegrals<D>>& integrals,
+                                   const Vector& u, double gradient_weight,
+                                   IntegralIndex index = IntegralIndex::kLeafOrder);
+
+}  // namespace mlfe

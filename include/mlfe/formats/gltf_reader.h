@@ -1,0 +1,41 @@
+// Reading glTF 2.0 assets (.glb, .gltf) back into triangle meshes for comparison: the JSON is
+// parsed with nlohmann::json, buffers come from the GLB BIN chunk, data: URIs or files next to
+// the asset, Draco decodes KHR_draco_mesh_compression primitives, and node transforms are
+// applied so positions are in the scene's frame (metres, +Y up for mlfe's assets).
+#pragma once
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include <mlfe/core/triangle_mesh.h>
+
+namespace mlfe {
+
+/// One triangle primitive of one node, in world coordinates.
+struct GltfPrimitive {
+  std::string label;  ///< "node <i> '<node name>' mesh '<mesh name>' primitive <p>"
+  int node = -1, mesh = -1, primitive = -1;
+  TriangleMesh mesh_data;  ///< positions and normals transformed by the node's world matrix
+};
+
+struct GltfAsset {
+  /// Every triangle primitive of every node that has a mesh, in node order then primitive
+  /// order (nodes outside the scene, such as MSFT_lod levels, included).
+  std::vector<GltfPrimitive> primitives;
+  /// The glTF JSON without what only encodes the data: buffers, bufferViews, accessors,
+  /// images' and primitives' data references, node transforms (their effect is in the geometry)
+  /// and the compression extensions KHR_draco_mesh_compression, KHR_mesh_quantization and
+  /// EXT_meshopt_compression (in extensionsUsed/Required too). What remains is the scene graph,
+  /// names, materials, other extensions and extras.
+  nlohmann::json structure;
+};
+
+/// Reads a .glb or .gltf file (by magic bytes: "glTF" is binary, anything else JSON).
+/// Triangle primitives (mode 4) with float or (normalized) integer positions
+/// (KHR_mesh_quantization) and optional normals are read; other modes are skipped (they stay
+/// visible in `structure`). Throws mlfe::Error ("<path>: <problem>") for unreadable files, bad
+/// JSON, buffers or accessors outside their data, indices out of range, sparse accessors,
+/// buffer URIs that leave the asset's folder and Draco payloads that do not decode.
+GltfAsset read_gltf(const std::string& path);
+
+}  // namespace mlfe

@@ -1,0 +1,57 @@
+// glTF 2.0 export of iso-surfaces (.glb, or .gltf with the buffer embedded as base64).
+//
+// Frame: input positions are physical millimetres in the volume's anatomical space; glTF is
+// metres, +Y up, +Z front, right-handed, and the asset's right side points to -X. Superior
+// maps to +Y and anterior to +Z, so a viewer shows the patient upright, facing the camera.
+// The matrix used is recorded in asset.extras.mlfe.physical_to_gltf.
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <mlfe/core/triangle_mesh.h>
+
+namespace mlfe {
+
+struct GltfSurface {
+  std::string name;   ///< mesh name; empty gives "iso <iso_value>"
+  double iso_value = 0.0;
+  TriangleMesh mesh;  ///< physical millimetres in GltfOptions::space; normals optional
+  std::array<float, 4> color{0.8f, 0.8f, 0.8f, 1.0f};  ///< linear RGBA in [0,1]; alpha < 1 => BLEND
+  std::vector<TriangleMesh> lods;  ///< coarser levels, finest first; written as extra nodes
+};
+
+struct GltfOptions {
+  bool draco = true;      ///< KHR_draco_mesh_compression (required extension)
+  bool quantize = false;  ///< KHR_mesh_quantization for uncompressed output (ignored with draco)
+  double tolerance_mm = 0.01;  ///< max position error per coordinate from Draco/quantization, mm
+  std::string space;      ///< "RAS", "LPS" or "" (unknown, treated as RAS) of the input positions
+  nlohmann::json extras = nlohmann::json::object();  ///< provenance, copied into asset.extras
+  std::string generator = "mlfe";                     ///< asset.generator
+};
+
+/// Writes one scene with one node, mesh and material per surface, to `path` (.glb binary or
+/// .gltf JSON with an embedded data-URI buffer, chosen by the extension, case-insensitive).
+/// Positions are converted with physical_to_gltf_matrix(options.space); normals are rotated,
+/// renormalized and computed from the triangles when a surface has none. Surfaces without
+/// triangles become nodes without a mesh; triangles with two equal corners are dropped.
+/// Node names are "iso <iso_value>" (node extras: iso_value, lod, triangles). LOD k (from 1)
+/// is a node "iso <v> lod <k>" referenced by MSFT_lod (optional extension) from the surface
+/// node and kept out of the scene, so viewers without LOD support show only the full surface.
+/// Draco: every primitive is compressed on one scene-wide quantization grid (crack-free between
+/// surfaces), verified by decoding; accessors describe the decoded data. quantize: positions
+/// and normals as normalized SHORT under a root node "mlfe dequantize" whose uniform scale and
+/// translation restore metres; throws if 16 bits cannot meet tolerance_mm.
+/// The file appears atomically; same inputs give byte-identical files.
+/// Throws mlfe::Error ("<path>: <problem>") for an unknown extension or space, non-finite
+/// or out-of-range mesh data, tolerance_mm <= 0 with compression, encoder failures and I/O errors.
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces, const GltfOptions& options);
+
+/// Row-major 3x3 matrix M with gltf_metres = M * physical_mm for input space "RAS" (also "")
+/// or "LPS": RAS -> 0.001*(-x, z, y), LPS -> 0.001*(x, z, -y). 1000*M is a proper rotation
+/// (det +1), so triangle winding and normals stay valid. Throws mlfe::Error for other spaces.
+std::array<double, 9> physical_to_gltf_matrix(const std::string& space);
+
+}  // namespace mlfe

@@ -1,0 +1,81 @@
+// A red-green hierarchy described level by level, as the .mlfeh v2 file stores it (after
+// R. Grosso, C. Lürig, T. Ertl, IEEE Vis 1997, Sec. 6: the coarse mesh, the deterministic
+// refinement rules and the ids of the simplices to be regularly subdivided rebuild every
+// level), and the hierarchical-basis value coding on top of it (H. Yserentant, Numer. Math. 49,
+// 1986), quantized SZ-style against the already decoded coarser values (S. Di, F. Cappello,
+// "Fast error-bounded lossy HPC data compression with SZ", IPDPS 2016) so the bound is exact.
+//
+// Canonical rebuild. Start from T0 (the coarse points and cells, in the original order). For
+// k = 1, 2, …: the candidates of step k are the elements of level k−1 that are not green, in
+// ElemId order of the hierarchy rebuilt so far; one mark per candidate says "red-refined".
+// Step k passes to Hierarchy::refine() every marked candidate that is a leaf, and for a
+// marked candidate that already has green children (closure of step k−1) its first green
+// child (refine() then red-refines the candidate instead); the green closure runs inside
+// refine(). A hierarchy's marks are the set of its red-refined elements, so the rebuild yields
+// the same elements, vertices and levels in a canonical numbering (the ids differ from the
+// original's in general, the mesh does not).
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
+
+namespace mlfe {
+
+/// The candidates of step `level` (≥ 1): elements of level − 1 that are not green, in id order.
+template <int D>
+std::vector<ElemId> refinement_candidates(const Hierarchy<D>& h, int level);
+
+/// One rebuild step: refines per `marks` (one byte, 0 or 1, per candidate of
+/// refinement_candidates(h, level), sizes CHECKed).
+template <int D>
+void apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
+                            const std::vector<std::uint8_t>& marks);
+
+/// Thrown by encode_levels for a hierarchy the canonical rebuild does not reproduce. Known
+/// cause: Hierarchy::green_pattern breaks ties between equally long edges by global vertex id,
+/// so a green element whose refinement history differs from the rebuild's (ids in another
+/// relative order) can get the other diagonal. Hierarchies of approximate() rebuild in the
+/// cases measured; writers fall back to format version 1 on this error.
+struct LevelRebuildError : Error {
+  using Error::Error;
+};
+
+template <int D>
+struct LevelEncoding {
+  std::vector<typename Hierarchy<D>::Point> coarse_points;
+  std::vector<typename Hierarchy<D>::Cell> coarse_cells;  ///< ids into coarse_points
+  /// marks[k − 1]: the marks of step k, k = 1 .. levels.
+  std::vector<std::vector<std::uint8_t>> marks;
+  Hierarchy<D> rebuilt;               ///< the canonical rebuild (up to the requested level)
+  std::vector<VertexId> to_original;  ///< rebuilt vertex id → vertex id in the input hierarchy
+  /// Rebuilt vertex count after step k (k = 0 .. levels); vertices of step k are the ids
+  /// [vertex_end[k − 1], vertex_end[k]).
+  std::vector<std::size_t> vertex_end;
+};
+
+/// The level-by-level description of h, rebuilt canonically up to `max_level` (−1: all
+/// levels). With max_level < h.max_level(), `rebuilt` is T_max_level of h (its elements of
+/// level ≤ max_level). The full rebuild equals h up to numbering (verified: vertex, element
+/// and leaf counts and every leaf); when it does not, throws LevelRebuildError (no file name
+/// in the message).
+template <int D>
+LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level = -1);
+
+/// Hierarchical-basis quantization: visiting vertices in id order (parents first), the
+/// prediction is 0 for vertices of T0 and the mean of the two decoded parent values otherwise;
+/// the stored integer is q = round((u − prediction) / (2E)) and the decoded value
+/// prediction + q·2E (q ± 1 when rounding of the product would leave the bound). Returns the
+/// decoded values, every one within `max_error` (> 0) of u; `codes` (if given) receives q.
+/// The decoded value of a vertex depends only on its own value and its parents' decoded values,
+/// so it is the same whatever the vertex numbering. Throws mlfe::Error when |q| would reach 2^52
+/// (a bound too small for the values).
+template <int D>
+std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vector<double>& u,
+                                          double max_error, std::vector<std::int64_t>* codes = nullptr);
+
+extern template struct LevelEncoding<2>;
+extern template struct LevelEncoding<3>;
+
+}  // namespace mlfe

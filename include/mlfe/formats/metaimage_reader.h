@@ -1,0 +1,20 @@
+// MetaImage (.mha with the data in the same file, .mhd with a separate data file).
+#pragma once
+#include <string>
+
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+namespace mlfe {
+
+/// Reads a 2D or 3D scalar MetaImage: ElementType MET_UCHAR, MET_CHAR, MET_USHORT, MET_SHORT,
+/// MET_UINT, MET_INT, MET_FLOAT, MET_DOUBLE; ElementDataFile LOCAL or one file name relative
+/// to the header; ElementByteOrderMSB / BinaryDataByteOrderMSB; CompressedData (zlib);
+/// HeaderSize (-1: data at the end of the data file); ElementSpacing (or ElementSize),
+/// Offset/Origin/Position and TransformMatrix/Rotation/Orientation (listed axis by axis, as
+/// ITK writes it). MetaImage coordinates are ITK's, so ScalarGrid::space is "LPS".
+/// Throws mlfe::Error for a bad header, unsupported types or channels, size mismatches,
+/// truncated data and corrupt compressed data.
+ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts);
+
+}  // namespace mlfe

@@ -1,0 +1,19 @@
+// NIfTI-1 and NIfTI-2 (.nii, .nii.gz, .hdr+.img, also Analyze 7.5 pairs) via libnifti2.
+#pragma once
+#include <string>
+
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+namespace mlfe {
+
+/// Reads a NIfTI image of type uint8..float64 (either byte order; gzip through znz).
+/// scl_slope/scl_inter are applied when slope is non-zero and not the identity. The transform
+/// is the sform when sform_code > 0, else the qform when qform_code > 0 (space "RAS"), else
+/// pixdim spacing with origin 0 (space ""). Images with more than 3 dimensions yield their
+/// first 3D volume (noted). The header is checked (dims, type, data size against the file
+/// size and the memory limit) before any voxel memory is allocated; libnifti's messages are
+/// silenced and its failures become mlfe::Error.
+ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts);
+
+}  // namespace mlfe

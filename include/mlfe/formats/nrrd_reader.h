@@ -1,0 +1,18 @@
+// NRRD volumes and height fields (.nrrd with attached data, .nhdr with detached data) via Teem.
+#pragma once
+#include <string>
+
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+namespace mlfe {
+
+/// Reads a 2D or 3D scalar NRRD (raw, gzip, bzip2, ascii, hex encodings as Teem supports them).
+/// The transform comes from "space directions"/"space origin" when present (space
+/// right-anterior-superior / left-posterior-superior set ScalarGrid::space; left-anterior-
+/// superior is converted to RAS), otherwise from "spacings" and "axis mins". The header is read
+/// first without data, so dims, type and sizes are checked against the file size and the memory
+/// limit before Teem allocates. Teem's messages (biff) become the mlfe::Error text.
+ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts);
+
+}  // namespace mlfe

@@ -1,0 +1,16 @@
+// Grey PNG height fields (8 or 16 bit) via libpng.
+#pragma once
+#include <string>
+
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+namespace mlfe {
+
+/// Reads a PNG as a 2D grid (nz = 1, unit spacing, row j of the image is index j).
+/// 16-bit images give uint16 values, 8-bit images uint8; colour images are converted to
+/// grey by libpng (noted). Throws mlfe::Error for bad or truncated PNG data and images
+/// larger than the memory limit.
+ScalarGrid read_png(const std::string& path, const VolumeReadOptions& opts);
+
+}  // namespace mlfe

@@ -1,0 +1,25 @@
+// Headerless raw volumes described by a JSON sidecar (FILE.json) or by command-line flags.
+#pragma once
+#include <cstddef>
+#include <istream>
+#include <string>
+
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+namespace mlfe {
+
+/// Reads raw voxels at `path`. The sidecar "<path>.json" (or the path with its extension
+/// replaced by .json) holds {"dims":[nx,ny(,nz)], "dtype":"float32", "endian":"little",
+/// "spacing":[..], "origin":[..], "offset":0, "direction":[9 numbers, row-major],
+/// "space":"RAS"|"LPS"}; dims and dtype are required unless given in opts (raw_*), which
+/// override the sidecar. The file size must equal offset + voxel bytes exactly.
+/// Throws mlfe::Error naming the data file or the sidecar and the problem.
+ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts);
+
+/// Reads n values of type t from `in` in chunks (so no second full-size buffer is needed),
+/// swapping bytes when `swap`, into dst. Throws "<path>: truncated ..." when the stream ends early.
+void read_raw_values(const std::string& path, std::istream& in, ScalarType t, bool swap, float* dst,
+                     std::size_t n);
+
+}  // namespace mlfe

@@ -1,0 +1,29 @@
+// mlfe: multilevel finite elements for volume data (Grosso, Lürig & Ertl, IEEE Vis 1997).
+// The umbrella header: the pipeline (volume → adaptive hierarchy → assets), its core (the
+// red-green hierarchy, the adaptive L2 approximation, iso-surfaces, simplification, ray casting)
+// and the formats. Bad input anywhere throws mlfe::Error (mlfe/core/error.h).
+#pragma once
+
+#include <mlfe/version.h>
+
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/mesh_distance.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/surface_simplification.h>
+#include <mlfe/core/transfer_function.h>
+#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/volume_render.h>
+
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/exr_writer.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/volume_reader.h>
+
+#include <mlfe/pipeline.h>
