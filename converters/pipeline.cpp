@@ -22,6 +22,7 @@
 #include "formats/draco_io.h"
 #include "formats/file_names.h"
 #include "formats/gltf_writer.h"
+#include "formats/hierarchy_levels.h"
 #include "formats/openmesh_io.h"
 
 namespace mlfe::cli {
@@ -288,10 +289,17 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
   info.value_min = b.value_min;
   info.value_max = b.value_max;
   info.metadata = provenance;
-  if (b.dim == 2)
-    write_hierarchy(path, b.a2->hierarchy, b.a2->values, info);
-  else
-    write_hierarchy(path, b.a3->hierarchy, b.a3->values, info);
+  // v2 with exact values, so `iso` on the file extracts the surfaces convert extracted.
+  const HierarchyWriteOptions v2{true, 19, 2, 0.0};
+  const auto write = [&](const auto& a) {
+    try {
+      write_hierarchy(path, a.hierarchy, a.values, info, v2);
+    } catch (const LevelRebuildError& e) {
+      std::fprintf(stderr, "mlfe: warning: %s; writing format version 1\n", e.what());
+      write_hierarchy(path, a.hierarchy, a.values, info);
+    }
+  };
+  if (b.dim == 2) write(*b.a2); else write(*b.a3);
 }
 
 void write_json(const std::string& path, const nlohmann::json& j) {

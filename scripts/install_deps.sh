@@ -13,6 +13,7 @@ PKGS=(
   libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
   googletest libgtest-dev libbenchmark-dev
   clang libclang-rt-14-dev
+  python3-vtk9  # tests/converters/export_command_test.cpp reads .vtu with VTK's XML reader
 )
 # Node.js/npm only when the machine has none (a non-Debian node may already be there).
 if ! command -v npm >/dev/null 2>&1; then PKGS+=(nodejs npm); fi
