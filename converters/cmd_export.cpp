@@ -30,10 +30,12 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
   const std::vector<double>* values = f.values.empty() ? nullptr : &f.values;
   if (ext == ".vtu" || ext == ".msh") {
     const std::vector<ElemId> leaves = h.leaves();
-    if (ext == ".vtu") write_vtu(s.output, h, leaves, values, &f.transform);
-    else write_msh(s.output, h, leaves, values, &f.transform);
-    std::fprintf(stderr, "mlfe export: %zu elements, %zu vertices, level %d\n", leaves.size(), h.vertex_count(),
-                 h.max_level());
+    if (ext == ".vtu")
+      write_vtu(s.output, h, leaves, values, &f.transform);
+    else
+      write_msh(s.output, h, leaves, values, &f.transform);
+    std::fprintf(stderr, "mlfe export: %zu elements, %zu vertices, level %d\n", leaves.size(),
+                 h.vertex_count(), h.max_level());
     return;
   }
   if (!values) throw Error(s.input + ": the file stores no values, so there is no grid to export");
@@ -58,26 +60,32 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
 void run_export(const ExportState& s) {
   const std::string ext = lower_extension(s.output);
   if (ext != ".vtu" && ext != ".msh" && !is_volume_output(s.output))
-    throw Error(s.output + ": unknown output type '" + ext + "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
+    throw Error(s.output + ": unknown output type '" + ext +
+                "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_output_path(s.output, {});
   const HierarchyFile f = read_hierarchy(s.input, s.level);
   if (s.level > f.file_levels)
     throw Error(s.input + ": --level " + std::to_string(s.level) + " but the file has " +
                 std::to_string(f.file_levels) + " levels");
-  if (f.dim == 2) export_hierarchy(s, f, std::get<Hierarchy<2>>(f.hierarchy));
-  else export_hierarchy(s, f, std::get<Hierarchy<3>>(f.hierarchy));
+  if (f.dim == 2)
+    export_hierarchy(s, f, std::get<Hierarchy<2>>(f.hierarchy));
+  else
+    export_hierarchy(s, f, std::get<Hierarchy<3>>(f.hierarchy));
   std::printf("%s\n", s.output.c_str());
 }
 
 void add_export_command(CLI::App& app) {
   auto state = std::make_shared<ExportState>();
   CLI::App* cmd = app.add_subcommand(
-      "export", "A hierarchy file's approximation on its voxel grid (.nii.gz .nrrd .raw .vdb) or its leaf mesh "
-                "with values and levels (.vtu .msh), in the file's physical frame");
+      "export",
+      "A hierarchy file's approximation on its voxel grid (.nii.gz .nrrd .raw .vdb) or its leaf mesh "
+      "with values and levels (.vtu .msh), in the file's physical frame");
   cmd->add_option("input", state->input, "hierarchy file (.mlfeh)")->required();
-  cmd->add_option("-o,--output", state->output, "output (.nii.gz, .nii, .nrrd, .raw + .raw.json, .vdb, .vtu, .msh)")
+  cmd->add_option("-o,--output", state->output,
+                  "output (.nii.gz, .nii, .nrrd, .raw + .raw.json, .vdb, .vtu, .msh)")
       ->required();
-  cmd->add_option("--level", state->level, "use levels 0..K only (default: all)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--level", state->level, "use levels 0..K only (default: all)")
+      ->check(CLI::NonNegativeNumber);
   cmd->callback([state] { run_export(*state); });
 }
 

@@ -299,7 +299,10 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
       write_hierarchy(path, a.hierarchy, a.values, info);
     }
   };
-  if (b.dim == 2) write(*b.a2); else write(*b.a3);
+  if (b.dim == 2)
+    write(*b.a2);
+  else
+    write(*b.a3);
 }
 
 void write_json(const std::string& path, const nlohmann::json& j) {

@@ -76,7 +76,8 @@ void write_msh(const std::string& path, const Hierarchy<D>& h, const std::vector
         for (int r = 0; r < 3; ++r) d[k][r] = xyz[t[k + 1] - 1][r] - a[r];
       double orient;
       if (D == 3) {
-        orient = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) - d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+        orient = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                 d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
                  d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
       } else {
         orient = 1;  // a triangle in 3D space has no sign; keep the hierarchy's order

@@ -39,7 +39,8 @@ VolumeFormat format_of(const std::string& path) {
 
 // Physical step of index axis a: spacing[a] times column a of the direction matrix.
 std::array<double, 3> axis_step(const GridTransform& t, int a) {
-  return {t.direction[0 + a] * t.spacing[a], t.direction[3 + a] * t.spacing[a], t.direction[6 + a] * t.spacing[a]};
+  return {t.direction[0 + a] * t.spacing[a], t.direction[3 + a] * t.spacing[a],
+          t.direction[6 + a] * t.spacing[a]};
 }
 
 void write_nifti(const std::string& path, const ScalarGrid& g) {
@@ -66,8 +67,8 @@ void write_nifti(const std::string& path, const ScalarGrid& g) {
     nim->sto_xyz = m;
     nim->qform_code = NIFTI_XFORM_SCANNER_ANAT;
     double dx, dy, dz;
-    nifti_dmat44_to_quatern(m, &nim->quatern_b, &nim->quatern_c, &nim->quatern_d, &nim->qoffset_x, &nim->qoffset_y,
-                            &nim->qoffset_z, &dx, &dy, &dz, &nim->qfac);
+    nifti_dmat44_to_quatern(m, &nim->quatern_b, &nim->quatern_c, &nim->quatern_d, &nim->qoffset_x,
+                            &nim->qoffset_y, &nim->qoffset_z, &dx, &dy, &dz, &nim->qfac);
     nim->qto_xyz = m;
     nim->xyz_units = NIFTI_UNITS_MM;
     nim->nifti_type = NIFTI_FTYPE_NIFTI1_1;
@@ -81,12 +82,16 @@ void write_nifti(const std::string& path, const ScalarGrid& g) {
 
 void write_nrrd(const std::string& path, const ScalarGrid& g) {
   std::unique_ptr<Nrrd, Nrrd* (*)(Nrrd*)> n(nrrdNew(), nrrdNix);
-  if (nrrdWrap_va(n.get(), const_cast<float*>(g.values.data()), nrrdTypeFloat, 3, static_cast<size_t>(g.dims[0]),
-                  static_cast<size_t>(g.dims[1]), static_cast<size_t>(g.dims[2])) != 0)
+  if (nrrdWrap_va(n.get(), const_cast<float*>(g.values.data()), nrrdTypeFloat, 3,
+                  static_cast<size_t>(g.dims[0]), static_cast<size_t>(g.dims[1]),
+                  static_cast<size_t>(g.dims[2])) != 0)
     fail(path, "cannot describe the grid to Teem");
-  if (g.space == "RAS") nrrdSpaceSet(n.get(), nrrdSpaceRightAnteriorSuperior);
-  else if (g.space == "LPS") nrrdSpaceSet(n.get(), nrrdSpaceLeftPosteriorSuperior);
-  else nrrdSpaceDimensionSet(n.get(), 3);
+  if (g.space == "RAS")
+    nrrdSpaceSet(n.get(), nrrdSpaceRightAnteriorSuperior);
+  else if (g.space == "LPS")
+    nrrdSpaceSet(n.get(), nrrdSpaceLeftPosteriorSuperior);
+  else
+    nrrdSpaceDimensionSet(n.get(), 3);
   double dirs[3][NRRD_SPACE_DIM_MAX] = {};
   for (int a = 0; a < 3; ++a) {
     const auto s = axis_step(g.transform, a);
@@ -94,7 +99,8 @@ void write_nrrd(const std::string& path, const ScalarGrid& g) {
   }
   nrrdAxisInfoSet_va(n.get(), nrrdAxisInfoSpaceDirection, dirs[0], dirs[1], dirs[2]);
   const double* o = g.transform.origin.data();
-  if (nrrdSpaceOriginSet(n.get(), const_cast<double*>(o)) != 0) fail(path, "cannot set the NRRD space origin");
+  if (nrrdSpaceOriginSet(n.get(), const_cast<double*>(o)) != 0)
+    fail(path, "cannot set the NRRD space origin");
   write_path_atomically(path, [&](const std::string& tmp) {
     std::unique_ptr<NrrdIoState, NrrdIoState* (*)(NrrdIoState*)> nio(nrrdIoStateNew(), nrrdIoStateNix);
     nio->encoding = nrrdEncodingGzip->available() ? nrrdEncodingGzip : nrrdEncodingRaw;
@@ -116,7 +122,8 @@ void write_raw(const std::string& path, const ScalarGrid& g) {
   const bool little = first == 1;
   write_file_atomically(path, [&](std::ostream& os) {
     if (little) {
-      os.write(reinterpret_cast<const char*>(g.values.data()), static_cast<std::streamsize>(g.values.size() * 4));
+      os.write(reinterpret_cast<const char*>(g.values.data()),
+               static_cast<std::streamsize>(g.values.size() * 4));
     } else {
       for (float v : g.values) {
         char b[4];
@@ -178,13 +185,19 @@ bool is_volume_output(const std::string& path) { return format_of(path) != Volum
 
 void write_volume(const std::string& path, const ScalarGrid& g) {
   if (g.voxel_count() <= 0 || g.values.size() != static_cast<std::size_t>(g.voxel_count()))
-    fail(path, fmt::format("{} values for a {} x {} x {} grid", g.values.size(), g.dims[0], g.dims[1], g.dims[2]));
+    fail(path,
+         fmt::format("{} values for a {} x {} x {} grid", g.values.size(), g.dims[0], g.dims[1], g.dims[2]));
   switch (format_of(path)) {
-    case VolumeFormat::Nifti: return write_nifti(path, g);
-    case VolumeFormat::Nrrd: return write_nrrd(path, g);
-    case VolumeFormat::Raw: return write_raw(path, g);
-    case VolumeFormat::Vdb: return write_vdb(path, g);
-    case VolumeFormat::Unknown: break;
+    case VolumeFormat::Nifti:
+      return write_nifti(path, g);
+    case VolumeFormat::Nrrd:
+      return write_nrrd(path, g);
+    case VolumeFormat::Raw:
+      return write_raw(path, g);
+    case VolumeFormat::Vdb:
+      return write_vdb(path, g);
+    case VolumeFormat::Unknown:
+      break;
   }
   fail(path, "unknown volume type (.nii, .nii.gz, .nrrd, .raw, .vdb)");
 }

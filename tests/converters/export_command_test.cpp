@@ -62,7 +62,8 @@ void expect_same_frame(const ScalarGrid& a, const ScalarGrid& b, const std::stri
   const double n0 = a.dims[0] - 1, n1 = a.dims[1] - 1, n2 = a.dims[2] - 1;
   for (const auto& c : {std::array<double, 3>{0, 0, 0}, {n0, 0, 0}, {0, n1, 0}, {0, 0, n2}, {n0, n1, n2}}) {
     const auto p = ras(a, c[0], c[1], c[2]), q = ras(b, c[0], c[1], c[2]);
-    for (int r = 0; r < 3; ++r) EXPECT_NEAR(p[r], q[r], 1e-4 * (1 + std::fabs(p[r]))) << what << " axis " << r;
+    for (int r = 0; r < 3; ++r)
+      EXPECT_NEAR(p[r], q[r], 1e-4 * (1 + std::fabs(p[r]))) << what << " axis " << r;
   }
 }
 
@@ -96,7 +97,8 @@ TEST(ExportCommand, VolumesReadBackWithTheSameValuesAndFrame) {
 }
 
 TEST(ExportCommand, LevelKIsTheCoarserApproximation) {
-  const std::string h = scratch() + "/lvl.mlfeh", full = scratch() + "/lvl_full.raw", one = scratch() + "/lvl_1.raw";
+  const std::string h = scratch() + "/lvl.mlfeh", full = scratch() + "/lvl_full.raw",
+                    one = scratch() + "/lvl_1.raw";
   ASSERT_EQ(run("build " + kSkull + " -o " + h + " --max-vertices 3000").status, 0);
   ASSERT_EQ(run("export " + h + " -o " + full).status, 0);
   ASSERT_EQ(run("export " + h + " --level 1 -o " + one).status, 0);
@@ -143,7 +145,8 @@ TEST(ExportCommand, VtuReadsInVtk) {
   const auto e = src.local_extent();
   double det = 0;
   const auto& d = src.transform.direction;
-  det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) + d[2] * (d[3] * d[7] - d[4] * d[6]);
+  det = d[0] * (d[4] * d[8] - d[5] * d[7]) - d[1] * (d[3] * d[8] - d[5] * d[6]) +
+        d[2] * (d[3] * d[7] - d[4] * d[6]);
   EXPECT_NEAR(vol, std::fabs(det) * e[0] * e[1] * e[2], 1e-6 * vol);
 }
 
@@ -191,7 +194,8 @@ TEST(ExportCommand, MshIsAValidGmsh41Mesh) {
     for (int k = 0; k < 3; ++k)
       for (int r = 0; r < 3; ++r) d[k][r] = xyz[v[k + 1] - 1][r] - xyz[v[0] - 1][r];
     const double det = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
-                       d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) + d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
+                       d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                       d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
     ASSERT_GT(det, 0) << "element " << i + 1 << " is not positively oriented";
     volume += det / 6;
   }
