@@ -101,7 +101,7 @@ def main():
     cases = [
         ("CT", "ct_skull_64.nrrd", [[], ["--max-error", "0.05"], ["--rms", "0.25%"], ["--rms", "0.1%"]],
          [0.1, 0.25, 0.5, 1, 2]),
-        ("MRI", "mri_colin27_brain.nii.gz", [[], ["--max-error", "0.05"], ["--rms", "0.5%", "--max-error", "0.5"]],
+        ("MRI", "mri_colin27_brain.nii.gz", [[], ["--rms", "1%"], ["--rms", "2%"]],
          [4, 8, 16, 32, 64]),
     ]
     results = {"load_average": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),

@@ -67,8 +67,20 @@ void expect_same_frame(const ScalarGrid& a, const ScalarGrid& b, const std::stri
   }
 }
 
+// The CT voxels as raw float32 in an oblique LPS frame (NIfTI output must convert it to RAS).
+std::string oblique_lps_skull() {
+  const std::string raw = scratch() + "/oblique.raw";
+  fs::copy_file(std::string(MLFE_SOURCE_DIR) + "/tests/data/ct_skull_64.raw", raw,
+                fs::copy_options::overwrite_existing);
+  const double c = std::cos(0.5), s = std::sin(0.5);
+  std::ofstream(raw + ".json") << "{\"dims\":[64,64,64],\"dtype\":\"float32\",\"spacing\":[1.5,2,2.5],"
+                               << "\"origin\":[10,-20,5],\"space\":\"LPS\",\"direction\":[" << c << "," << -s
+                               << ",0," << s << "," << c << ",0,0,0,1]}";
+  return raw;
+}
+
 TEST(ExportCommand, VolumesReadBackWithTheSameValuesAndFrame) {
-  for (const std::string& input : {kSkull, kMri}) {
+  for (const std::string& input : {kSkull, kMri, oblique_lps_skull()}) {
     const std::string h = scratch() + "/vol.mlfeh";
     ASSERT_EQ(run("build " + input + " -o " + h + " --max-vertices 3000").status, 0) << input;
     const HierarchyFile f = read_hierarchy(h);
@@ -174,7 +186,11 @@ TEST(ExportCommand, MshIsAValidGmsh41Mesh) {
   ASSERT_EQ(nn, hh.vertex_count());
   EXPECT_EQ(nb, nn);
   std::vector<std::array<double, 3>> xyz(nn);
-  for (std::size_t i = 0, t; i < nn; ++i) in >> t, ASSERT_EQ(t, i + 1);
+  for (std::size_t i = 0; i < nn; ++i) {
+    std::size_t t = 0;
+    in >> t;
+    ASSERT_EQ(t, i + 1);
+  }
   for (auto& p : xyz) in >> p[0] >> p[1] >> p[2];
   in >> tok;
   ASSERT_EQ(tok, "$EndNodes");
