@@ -19,6 +19,7 @@
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/hierarchy_levels.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/version.h>
 
@@ -179,7 +180,18 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
   info.value_min = b.value_min;
   info.value_max = b.value_max;
   info.metadata = provenance;
-  b.visit([&](const auto& a) { write_hierarchy(path, a.hierarchy, a.values, info); });
+  // v2 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
+  // writer verifies that the file rebuilds this hierarchy; if it ever did not, v1 (exact) is
+  // written instead of a different hierarchy.
+  const HierarchyWriteOptions v2{true, 19, 2, 0.0};
+  b.visit([&](const auto& a) {
+    try {
+      write_hierarchy(path, a.hierarchy, a.values, info, v2);
+    } catch (const LevelRebuildError& e) {
+      std::fprintf(stderr, "mlfe: warning: %s; writing format version 1\n", e.what());
+      write_hierarchy(path, a.hierarchy, a.values, info);
+    }
+  });
 }
 
 void write_json(const std::string& path, const nlohmann::json& j) {

@@ -29,6 +29,9 @@ constexpr std::uint64_t kMaxSpace = 64;
 constexpr std::uint64_t kMaxMetadata = 16u << 20;
 // Caps the allocation a small compressed file can demand.
 constexpr std::uint64_t kMaxRatio = 1024, kRatioSlack = 4096;
+// v2 sections: zstd's own limit (a 4-byte RLE block per 128 KiB block), since a level whose
+// marks are all set and whose surpluses all round to 0 compresses far beyond 1024:1.
+constexpr std::uint64_t kMaxSectionRatio = 32768;
 
 using Bytes = std::vector<std::uint8_t>;
 
@@ -489,7 +492,7 @@ class SectionReader {
     if (codec != kCodecRaw && codec != kCodecZstd) throw Error(path_ + ": " + name + " section has unknown codec");
     if (stored > size_ - pos_) throw Error(path_ + ": truncated " + name + " section");
     if (codec == kCodecRaw && raw != stored) throw Error(path_ + ": " + name + " section sizes disagree");
-    if (codec == kCodecZstd && raw > kMaxRatio * stored + kRatioSlack)
+    if (codec == kCodecZstd && raw > kMaxSectionRatio * stored + kRatioSlack)
       throw Error(path_ + ": implausible compression ratio in the " + name + " section");
     Bytes payload(static_cast<std::size_t>(stored));
     read(payload.data(), payload.size());

@@ -266,6 +266,9 @@ ScalarGrid read_vdb(const std::string& path, const VolumeReadOptions& opts) {
     } else {
       fail(path, fmt::format("grid '{}' has unsupported value type {}", name, type));
     }
+    // mlfe's own writer (formats/volume_writer.h) records the frame's anatomical space.
+    if (const auto sp = base->getMetadata<openvdb::StringMetadata>("space"))
+      if (sp->value() == "RAS" || sp->value() == "LPS") out.space = sp->value();
     std::string cls = openvdb::GridBase::gridClassToString(base->getGridClass());
     add_note(out, fmt::format("grid '{}' ({} values, class {}); domain is the active-voxel bounding box", name, type, cls));
     if (metas->size() > 1) add_note(out, "other grids: " + all);

@@ -6,11 +6,13 @@
 #   libopenvdb-tools   vdb_tool / vdb_print / vdb_render (OpenVDB comparison)
 #   xvfb               X server for VTK's volume mappers, which need a render window (bench/render_bench.py)
 #   libzfp-dev         optional: ZFP compressed-array comparison (skipped if unavailable)
+#   python3-zfpy       ZFP fixed-accuracy rate-distortion beside the hierarchy file (bench/hierarchy_file_bench.py)
+#   zstd               zstd -19 of the raw input (bench/hierarchy_file_bench.py)
 # Idempotent: checks every package with dpkg-query and runs apt-get update/install only when
 # something is missing. Build dependencies of mlfe itself: scripts/install_deps.sh.
 set -euo pipefail
 
-REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools xvfb)
+REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools xvfb python3-zfpy zstd)
 OPTIONAL=(libzfp-dev)
 
 is_installed() {

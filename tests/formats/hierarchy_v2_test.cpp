@@ -284,6 +284,22 @@ TEST(HierarchyFileV2, WithoutValues) {
   EXPECT_EQ(std::get<Hierarchy<2>>(f.hierarchy).element_count(), h.element_count());
 }
 
+// A uniformly refined box with constant values: every mark set, every surplus 0, so the
+// finest level compresses far beyond 1024:1 and must still read.
+TEST(HierarchyFileV2, HighlyCompressibleLevelsRead) {
+  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
+  for (int k = 0; k < 6; ++k) h.refine(h.leaves());
+  const std::vector<double> u(h.vertex_count(), 7.0);
+  const fs::path p = temp_file("constant_v2.mlfeh");
+  write_hierarchy<3>(p.string(), h, u, info_v2(), v2(0.5));
+  const HierarchyFile f = read_hierarchy(p.string());
+  ASSERT_EQ(f.values.size(), u.size());
+  for (double v : f.values) EXPECT_NEAR(v, 7.0, 0.5);
+  ASSERT_FALSE(f.sections.empty());
+  const HierarchySection& last = f.sections.back();
+  EXPECT_GT(last.raw_bytes, 1024 * last.file_bytes) << "the case no longer tests a ratio above 1024";
+}
+
 TEST(HierarchyFileV2, RejectsABoundTooSmallForTheValues) {
   const Hierarchy<2> h = random_hierarchy<2>(4, 2);
   std::vector<double> u(h.vertex_count(), 1e20);

@@ -1,0 +1,33 @@
+// Gmsh MSH 4.1 ASCII output of a set of hierarchy elements with per-vertex values and
+// per-element levels, for Gmsh and the finite-element tools that read its format.
+//
+// Layout: $MeshFormat "4.1 0 8"; $Entities with one entity of dimension D (tag 1, the bounding
+// box of the written points); $Nodes as one block, tags 1..n for the used vertices in
+// increasing VertexId order, physical coordinates; $Elements as one block of type 4
+// (4-node tetrahedron) or 2 (3-node triangle), tags 1..m in the given order, vertices
+// ordered so a tetrahedron has positive volume (Gmsh's reference orientation);
+// $NodeData "u" (when values are given) and $ElementData "level".
+#pragma once
+#include <string>
+#include <vector>
+
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/ids.h>
+#include <mlfe/core/scalar_grid.h>
+
+namespace mlfe {
+
+/// Writes the elements `elems` of `h` to `path` atomically. `point_values` (may be null) holds
+/// one value per vertex of h; `transform` (may be null) maps local coordinates to physical ones.
+/// The bytes depend only on the arguments. Throws mlfe::Error ("<path>: ...") for an element id
+/// out of range, a wrong number of values or a file that cannot be written.
+template <int D>
+void write_msh(const std::string& path, const Hierarchy<D>& h, const std::vector<ElemId>& elems,
+               const std::vector<double>* point_values, const GridTransform* transform);
+
+extern template void write_msh<2>(const std::string&, const Hierarchy<2>&, const std::vector<ElemId>&,
+                                  const std::vector<double>*, const GridTransform*);
+extern template void write_msh<3>(const std::string&, const Hierarchy<3>&, const std::vector<ElemId>&,
+                                  const std::vector<double>*, const GridTransform*);
+
+}  // namespace mlfe
