@@ -1,17 +1,15 @@
 // Red-green refinement of simplex hierarchies: Bank, Sherman & Weiser (1983) in 2D and
 // Bey, "Tetrahedral grid refinement", Computing 55 (1995) in 3D, with the green closure of
 // Grosso, Lürig & Ertl (IEEE Vis 1997). See hierarchy.h for the local numbering.
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <string>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 
@@ -106,8 +104,8 @@ Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Ce
   for (const Cell& c : cells) {
     for (VertexId v : c)
       if (!v.valid() || v.value >= h.vx_.points.size())
-        throw Error("coarse mesh: a cell refers to a vertex beyond the " + std::to_string(h.vx_.points.size()) +
-                    " points");
+        throw Error("coarse mesh: a cell refers to a vertex beyond the " +
+                    std::to_string(h.vx_.points.size()) + " points");
     if (h.cell_measure(c) == 0.0) throw Error("coarse mesh: a cell is degenerate (zero measure)");
     h.add_element(c, ElemId::invalid(), 0, ElemKind::kCoarse);
   }
@@ -617,10 +615,6 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   std::vector<ElemId> to_regreen;
   // With a vertex limit: the child links of older elements as they were before this call
   // changed them, for the rollback (elements and vertices created here are truncated away).
-  struct UndoLink {
-    ElemId e, first_child;
-    std::uint8_t num_children;
-  };
   std::vector<UndoLink> undo_links;
   while (!to_red.empty() || !to_regreen.empty()) {
     const std::size_t round_first_elem = el_.cells.size();
@@ -764,19 +758,33 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   // Only red refinement adds vertices, so the count is final here.
   if (vertices_reached) *vertices_reached = vx_.points.size();
   if (vertex_limit > 0 && vx_.points.size() > vertex_limit) {
-    // Newest first, so an element changed twice ends with its state before the call.
-    for (auto u = undo_links.rbegin(); u != undo_links.rend(); ++u) {
-      el_.first_child[u->e] = u->first_child;
-      el_.num_children[u->e] = u->num_children;
-    }
-    for (std::size_t v = vx_.points.size(); v-- > old_vertex_count;)
-      edge_mid_.erase(vx_.parents[vertex_id(v)][0], vx_.parents[vertex_id(v)][1]);
-    vx_.for_each([&](auto& a) { a.resize(old_vertex_count); });
-    el_.for_each([&](auto& a) { a.resize(old_count); });
+    roll_back(undo_links, old_count, old_vertex_count);
     return {};
   }
 
-  // Green closure: every remaining leaf with hanging midpoints has an admissible pattern.
+  // Close: green children for every leaf left with hanging midpoints.
+  green_closure(touched, dead);
+  dead.resize(el_.cells.size(), 0);
+  return compact(dead, old_count);
+}
+
+template <int D>
+void Hierarchy<D>::roll_back(const std::vector<UndoLink>& undo_links, std::size_t old_count,
+                             std::size_t old_vertex_count) {
+  // Newest first, so an element changed twice ends with its state before the call.
+  for (auto u = undo_links.rbegin(); u != undo_links.rend(); ++u) {
+    el_.first_child[u->e] = u->first_child;
+    el_.num_children[u->e] = u->num_children;
+  }
+  for (std::size_t v = vx_.points.size(); v-- > old_vertex_count;)
+    edge_mid_.erase(vx_.parents[vertex_id(v)][0], vx_.parents[vertex_id(v)][1]);
+  vx_.for_each([&](auto& a) { a.resize(old_vertex_count); });
+  el_.for_each([&](auto& a) { a.resize(old_count); });
+}
+
+template <int D>
+void Hierarchy<D>::green_closure(const std::vector<std::uint8_t>& touched, std::vector<std::uint8_t>& dead) {
+  // Every remaining leaf with hanging midpoints has an admissible pattern.
   // Candidates: leaves with ≥ 2 flagged corners, in id order (deterministic child numbering).
   // One parallel pass over the element arrays (streamed; the flags fit in cache) costs less
   // than walking the incidence lists of every flagged vertex, which misses at every step.
@@ -837,8 +845,6 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                         }
                       });
   }
-  dead.resize(el_.cells.size(), 0);
-  return compact(dead, old_count);
 }
 
 template <int D>

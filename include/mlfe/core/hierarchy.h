@@ -32,13 +32,13 @@
 // 2D triangle: edges e0 = (0,1), e1 = (0,2), e2 = (1,2); red children
 //   [x0,x01,x02] [x01,x1,x12] [x02,x12,x2] [x01,x12,x02].
 #pragma once
+#include <mlfe/core/edge_map.h>
+#include <mlfe/core/ids.h>
+
 #include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/edge_map.h>
-#include <mlfe/core/ids.h>
 
 namespace mlfe {
 
@@ -210,6 +210,16 @@ class Hierarchy {
   unsigned hanging_mask(ElemId e, const std::vector<std::uint8_t>* flagged = nullptr) const;
   bool hanging_on_parent_edges(ElemId e, unsigned mask) const;
   std::vector<ElemId> compact(const std::vector<std::uint8_t>& dead, std::size_t old_count);
+  // refine()'s steps after its red rounds: undo an attempt over the vertex limit (the child
+  // links of older elements as they were, then truncation), or close the mesh with green
+  // children for every leaf whose corners were `touched` and that has hanging midpoints.
+  struct UndoLink {
+    ElemId e, first_child;
+    std::uint8_t num_children;
+  };
+  void roll_back(const std::vector<UndoLink>& undo_links, std::size_t old_count,
+                 std::size_t old_vertex_count);
+  void green_closure(const std::vector<std::uint8_t>& touched, std::vector<std::uint8_t>& dead);
 
   // The parallel arrays, declared once: whatever applies to all of them (sizing, reserving,
   // truncating, moving an entry, memory) goes through for_each.
