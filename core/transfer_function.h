@@ -12,8 +12,8 @@
 //
 // ψ is available two ways: in closed form (erfcx for increasing τ, Dawson's integral for
 // decreasing τ, a Taylor series in the slope when τ is nearly constant), exact to ~1e-12; and,
-// as Moreland & Angel do, from a 2D table over the front and back optical depths (mapped to
-// γ = d / (1 + d) ∈ [0, 1), bilinear), which is several times cheaper per segment and within
+// as Moreland & Angel do, from a 2D table over the front and back optical depths d (mapped to
+// γ = 1 − 1/√(1 + d) ∈ [0, 1), bilinear), which is several times cheaper per segment and within
 // the bound stated at mean_transmittance_table of the exact value. ζ (so the opacity) is exact
 // either way. A segment is split at every control point of the transfer function it crosses,
 // and on each piece both c and τ are linear in the distance.
@@ -57,7 +57,7 @@ std::vector<std::string> transfer_function_presets();
 double mean_transmittance(double a, double b);
 
 /// ψ(a, b) from a table built once per process (first call; thread-safe), bilinear in
-/// γ = d / (1 + d) of both depths: |error| ≤ kMeanTransmittanceTableError for all a, b ≥ 0.
+/// γ = 1 − 1/√(1 + d) of both depths d: |error| ≤ kMeanTransmittanceTableError for all a, b ≥ 0.
 /// An image's colours then differ from the exact integration by at most that much per piece
 /// integrated (weighted by the transmittance in front); its opacity does not change.
 double mean_transmittance_table(double a, double b);
