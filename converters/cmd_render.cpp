@@ -40,8 +40,11 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
   cmd->add_option("--size", p.size, "image size WxH")->capture_default_str();
   cmd->add_option("--level", p.level, "render the approximation on this hierarchy level (-1: finest)");
   cmd->add_flag("--reference", p.reference, "ray-cast the original voxels instead (volume input)");
-  cmd->add_option("--integration", p.integration, "segment integration")
-      ->check(CLI::IsMember({"preintegrated", "trapezoid"}))
+  cmd->add_option(
+         "--integration", p.integration,
+         "segment integration: pre-integrated with the tabulated mean transmittance, with the exact one, "
+         "or the trapezoid rule")
+      ->check(CLI::IsMember({"preintegrated", "exact", "trapezoid"}))
       ->capture_default_str();
   cmd->add_flag("--shading", p.shading, "shade with the per-tetrahedron gradient (headlight)");
   cmd->add_flag("--no-skip", p.no_skip, "no empty-space skipping");
@@ -130,8 +133,9 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   }
 
   RenderOptions opt;
-  opt.rule =
-      p.integration == "trapezoid" ? RayAccumulator::Rule::kTrapezoid : RayAccumulator::Rule::kPreIntegrated;
+  opt.rule = p.integration == "trapezoid" ? RayAccumulator::Rule::kTrapezoid
+             : p.integration == "exact"   ? RayAccumulator::Rule::kExact
+                                          : RayAccumulator::Rule::kPreIntegrated;
   opt.stop_opacity = p.stop_opacity;
   opt.z_opacity = p.z_opacity;
   opt.shading = p.shading;

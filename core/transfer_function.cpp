@@ -1,6 +1,6 @@
-// Exact emission–absorption integration over linear segments: Röttger, Kraus & Ertl (IEEE Vis
-// 2000) pre-integration in the partial form of Moreland & Angel (IEEE VolVis 2004), with the
-// mean transmittance ψ in closed form instead of a table (see transfer_function.h).
+// Emission–absorption integration over linear segments: Röttger, Kraus & Ertl (IEEE Vis 2000)
+// pre-integration in the partial form of Moreland & Angel (IEEE VolVis 2004), with the mean
+// transmittance ψ in closed form or from Moreland & Angel's 2D table (see transfer_function.h).
 #include <mlfe/core/transfer_function.h>
 
 #include <algorithm>
@@ -186,6 +186,51 @@ double mean_transmittance(double a, double b) {
   return std::sqrt(2.0 / kp) * (dawson(y1) - zeta * dawson(y0));
 }
 
+namespace {
+
+// The ψ table: kPsiN × kPsiN floats (256 KB: stays in L2) over γ = 1 − 1/√(1 + d) of the front
+// and back depths, γ = 1 (d = ∞) holding ψ = 0. Moreland & Angel's γ = d / (1 + d) leaves
+// ψ(0, b) ≈ √(π / 2b) with a square-root cusp at γ = 1 (errors ~1e-2 at b ~ 1000); in this γ it
+// is linear there, and ψ(a, a) ≈ 1 / a is quadratic. Worst error measured over 2·10⁶ random
+// pairs with depths 1e-4..1e3, on both axes and the diagonal: 2.5e-5 (6.4e-6 at 512²); with
+// depths up to 1e8 (pairs of 0, 1e-9, 0.5, 3, 1e4, 1e8): 6.3e-5. The bound stated is 1e-4.
+constexpr int kPsiN = 256;
+
+struct PsiTable {
+  std::vector<float> v;
+  PsiTable() : v(std::size_t(kPsiN) * kPsiN) {
+    auto depth = [](int i) {
+      const double r = 1.0 - double(i) / (kPsiN - 1);
+      return 1.0 / (r * r) - 1.0;
+    };
+    for (int i = 0; i < kPsiN; ++i)
+      for (int j = 0; j < kPsiN; ++j)
+        v[std::size_t(i) * kPsiN + std::size_t(j)] =
+            i == kPsiN - 1 || j == kPsiN - 1 ? 0.0f : float(mean_transmittance(depth(i), depth(j)));
+  }
+};
+
+const float* psi_table() {
+  static const PsiTable table;
+  return table.v.data();
+}
+
+double psi_lookup(const float* t, double a, double b) {
+  const double x = (1.0 - 1.0 / std::sqrt(1.0 + a)) * (kPsiN - 1);
+  const double y = (1.0 - 1.0 / std::sqrt(1.0 + b)) * (kPsiN - 1);
+  const int i = std::min(int(x), kPsiN - 2), j = std::min(int(y), kPsiN - 2);
+  const double fx = x - i, fy = y - j;
+  const float* p = t + std::size_t(i) * kPsiN + std::size_t(j);
+  return (1.0 - fx) * ((1.0 - fy) * p[0] + fy * p[1]) + fx * ((1.0 - fy) * p[kPsiN] + fy * p[kPsiN + 1]);
+}
+
+}  // namespace
+
+double mean_transmittance_table(double a, double b) {
+  MLFE_CHECK(a >= 0 && b >= 0);
+  return psi_lookup(psi_table(), a, b);
+}
+
 CompiledTransferFunction::CompiledTransferFunction(const TransferFunction& tf) {
   tf.validate(tf.name.empty() ? "transfer function" : tf.name);
   for (const auto& p : tf.color) x_.push_back(p[0]);
@@ -233,6 +278,10 @@ double CompiledTransferFunction::max_tau(double lo, double hi) const {
   return best;
 }
 
+const float* RayAccumulator::psi_table_if(Rule rule) {
+  return rule == Rule::kPreIntegrated ? psi_table() : nullptr;
+}
+
 void RayAccumulator::reset() {
   transmittance_ = 1.0;
   rgb_[0] = rgb_[1] = rgb_[2] = 0;
@@ -270,8 +319,8 @@ void RayAccumulator::add_opaque_piece(double tf, double tb, const double cf[3], 
     depth_ = t + std::clamp(x, 0.0, l);
   }
   double w_f, w_b;
-  if (rule_ == Rule::kPreIntegrated) {
-    const double psi = mean_transmittance(a, b);
+  if (rule_ != Rule::kTrapezoid) {
+    const double psi = rule_ == Rule::kPreIntegrated ? psi_lookup(psi_, a, b) : mean_transmittance(a, b);
     w_f = 1.0 - psi;
     w_b = psi - zeta;
   } else {

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 
 #include <mlfe/core/check.h>
 #include <mlfe/core/field.h>
@@ -618,89 +619,119 @@ EmptyState empty_state(const TetRenderMesh& m, const CompiledTransferFunction& s
   return h.level(e) - h.level(largest_transparent(m, skip, e)) >= levels ? kSkipAncestor : kEmptyLeaf;
 }
 
-// Walks the ray o + t d through m (steps 1–5 of volume_render.h). state(r) gives the
-// EmptyState of element r (only called with skip set): computed per element crossed for a
-// single ray, looked up in a table made once per image when rendering.
-template <class State, class Visit>
-TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
-                  State&& state, Visit&& visit, ElemId* entry_hint) {
+// One ray's walk through m (steps 1–5 of volume_render.h), resumable one element at a time so
+// that a thread can advance several rays in turn: each step is a dependent chain (record load →
+// exit test → next record), and independent rays fill its latency.
+struct RayWalk {
+  Vec3 o, d;
+  double t = 0, eps = 0;
+  std::uint64_t bound = 0;
+  std::uint32_t r = 0;
+  int entry = -1;
+  bool active = false;
   TraceResult res;
-  if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, res.t_near, res.t_far)) return res;
-  res.hit = true;
-  const double eps = 1e-9 * (res.t_far - res.t_near +
-                             std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
-  const std::uint64_t bound = m.size() + 64;
+};
 
-  double t = res.t_near;
+// Steps 1–2: clips the ray and finds its entry element; false when nothing is to be walked.
+inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
+                       const CompiledTransferFunction* skip, ElemId* entry_hint, RayWalk& w) {
+  w.o = o, w.d = d;
+  w.res = TraceResult{};
+  w.active = false;
+  w.entry = -1;
+  if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, w.res.t_near, w.res.t_far)) return false;
+  w.res.hit = true;
+  w.eps = 1e-9 * (w.res.t_far - w.res.t_near +
+                  std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
+  w.bound = m.size() + 64;
+  w.t = w.res.t_near;
   if (skip) {
-    t = m.first_visible(o, d, t, res.t_far, *skip);
-    if (t >= res.t_far) return res;
+    w.t = m.first_visible(o, d, w.t, w.res.t_far, *skip);
+    if (w.t >= w.res.t_far) return false;
   }
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
   // else descend the hierarchy.
   const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
-  std::uint32_t r =
-      start >= 0 ? m.walk_to(std::uint32_t(start), axpy(o, t, d), d) : m.locate(axpy(o, t, d), d);
-  if (entry_hint) *entry_hint = m.element(r);
-  int entry = -1;
-  Vec3 p[4];
-  while (true) {
-    if (++res.steps > bound) {
-      res.step_bound_hit = true;
-      break;
-    }
-    // Empty space: the largest transparent ancestor is crossed in one step when it is at
-    // least kSkipLevels above (locating again behind it costs about as much as walking a few
-    // leaves); a transparent leaf is walked without evaluating u.
-    const EmptyState es = skip ? EmptyState(state(r)) : kVisible;
-    if (es == kSkipAncestor) {
-      const ElemId a = largest_transparent(m, *skip, m.element(r));
-      load(m.hierarchy(), a, p);
-      double t_out;
-      TetPlanes(p).exit(o, d, t, -1, t_out);
-      t_out = std::min(t_out, res.t_far);
-      if (!visit(TraceSegment{-1, t, t_out, 0, 0, {0, 0, 0}, true})) break;
-      ++res.skips;
-      t = t_out;
-      if (t >= res.t_far - eps) break;
-      r = m.locate(axpy(o, t, d), d, a);
-      entry = -1;
-      continue;
-    }
-    const bool empty = es != kVisible;
-    const TetRenderMesh::StepRecord& R = m.record(r);
-    // The next record is one of three: ask for them now, so their loads overlap this step's
-    // work instead of stalling the next one.
-    for (int i = 0; i < 4; ++i)
-      if (i != entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
-        const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
-        __builtin_prefetch(q);
-        __builtin_prefetch(q + 64);
-      }
-    double t_out;
-    const int f = record_exit(R, o, d, t, entry, t_out);
-    t_out = std::min(t_out, res.t_far);
-    TraceSegment seg{std::int32_t(r), t, t_out, 0, 0, {0, 0, 0}, empty};
-    if (!empty) {
-      seg.gradient = {double(R.g[0]), double(R.g[1]), double(R.g[2])};
-      seg.s0 = R.b + dot(seg.gradient, axpy(o, t, d));
-      seg.s1 = R.b + dot(seg.gradient, axpy(o, t_out, d));
-    }
-    if (!visit(seg)) break;
-    t = t_out;
-    const std::uint32_t next = R.next[f];
-    if (next == TetRenderMesh::kNoNeighbor) {
-      if (t >= res.t_far - eps) break;
-      // Left the mesh before the box exit (rounding at the boundary): locate again.
-      ++res.relocations;
-      r = m.locate(axpy(o, t, d), d, m.element(r));
-      entry = -1;
-      continue;
-    }
-    entry = int(next & 3u);
-    r = next >> 2;
+  w.r = start >= 0 ? m.walk_to(std::uint32_t(start), axpy(o, w.t, d), d) : m.locate(axpy(o, w.t, d), d);
+  if (entry_hint) *entry_hint = m.element(w.r);
+  w.active = true;
+  return true;
+}
+
+// Steps 3–5 for one element (or one skipped ancestor); false when the ray is finished. state(r)
+// gives the EmptyState of element r (only called with skip set): computed per element crossed
+// for a single ray, looked up in a table made once per image when rendering.
+template <class State, class Visit>
+inline bool walk_step(const TetRenderMesh& m, const CompiledTransferFunction* skip, State&& state,
+                      Visit&& visit, RayWalk& w) {
+  TraceResult& res = w.res;
+  const Vec3 &o = w.o, &d = w.d;
+  if (++res.steps > w.bound) {
+    res.step_bound_hit = true;
+    return false;
   }
-  return res;
+  // Empty space: the largest transparent ancestor is crossed in one step when it is at least
+  // kSkipLevels above (locating again behind it costs about as much as walking a few leaves);
+  // a transparent leaf is walked without evaluating u.
+  const EmptyState es = skip ? EmptyState(state(w.r)) : kVisible;
+  if (es == kSkipAncestor) {
+    const ElemId a = largest_transparent(m, *skip, m.element(w.r));
+    Vec3 p[4];
+    load(m.hierarchy(), a, p);
+    double t_out;
+    TetPlanes(p).exit(o, d, w.t, -1, t_out);
+    t_out = std::min(t_out, res.t_far);
+    if (!visit(TraceSegment{-1, w.t, t_out, 0, 0, {0, 0, 0}, true})) return false;
+    ++res.skips;
+    w.t = t_out;
+    if (w.t >= res.t_far - w.eps) return false;
+    w.r = m.locate(axpy(o, w.t, d), d, a);
+    w.entry = -1;
+    return true;
+  }
+  const bool empty = es != kVisible;
+  const TetRenderMesh::StepRecord& R = m.record(w.r);
+  // The next record is one of three: ask for them now, so their loads overlap this step's work
+  // instead of stalling the next one.
+  for (int i = 0; i < 4; ++i)
+    if (i != w.entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
+      const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
+      __builtin_prefetch(q);
+      __builtin_prefetch(q + 64);
+    }
+  double t_out;
+  const int f = record_exit(R, o, d, w.t, w.entry, t_out);
+  t_out = std::min(t_out, res.t_far);
+  TraceSegment seg{std::int32_t(w.r), w.t, t_out, 0, 0, {0, 0, 0}, empty};
+  if (!empty) {
+    seg.gradient = {double(R.g[0]), double(R.g[1]), double(R.g[2])};
+    seg.s0 = R.b + dot(seg.gradient, axpy(o, w.t, d));
+    seg.s1 = R.b + dot(seg.gradient, axpy(o, t_out, d));
+  }
+  if (!visit(seg)) return false;
+  w.t = t_out;
+  const std::uint32_t next = R.next[f];
+  if (next == TetRenderMesh::kNoNeighbor) {
+    if (w.t >= res.t_far - w.eps) return false;
+    // Left the mesh before the box exit (rounding at the boundary): locate again.
+    ++res.relocations;
+    w.r = m.locate(axpy(o, w.t, d), d, m.element(w.r));
+    w.entry = -1;
+    return true;
+  }
+  w.entry = int(next & 3u);
+  w.r = next >> 2;
+  return true;
+}
+
+template <class State, class Visit>
+TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const CompiledTransferFunction* skip,
+                  State&& state, Visit&& visit, ElemId* entry_hint) {
+  RayWalk w;
+  if (begin_walk(m, o, d, skip, entry_hint, w))
+    while (walk_step(m, skip, state, visit, w)) {
+    }
+  return w.res;
 }
 
 }  // namespace
@@ -729,19 +760,32 @@ struct Counters {
   }
 };
 
-// Runs pixel(x, y, acc, hint) over fixed 16x16 tiles in parallel. A pixel depends only on its
-// tile (the entry hint is reset per tile), so the image does not depend on how tiles are
-// distributed over threads.
-template <class Pixel>
-RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf, const RenderOptions& opt,
-                         Pixel&& pixel) {
+constexpr int kTile = 16;
+
+RenderImage blank_image(const Camera& cam) {
   MLFE_CHECK(cam.width > 0 && cam.height > 0);
   RenderImage img;
   img.width = cam.width;
   img.height = cam.height;
   img.rgba.assign(std::size_t(cam.width) * cam.height * 4, 0.0f);
   img.z.assign(std::size_t(cam.width) * cam.height, std::numeric_limits<float>::infinity());
-  constexpr int kTile = 16;
+  return img;
+}
+
+void store(RenderImage& img, int x, int y, const RayAccumulator& acc) {
+  const std::size_t i = std::size_t(y) * img.width + x;
+  for (int c = 0; c < 3; ++c) img.rgba[4 * i + c] = float(acc.rgb()[c]);
+  img.rgba[4 * i + 3] = float(1.0 - acc.transmittance());
+  img.z[i] = float(acc.depth());
+}
+
+// Runs pixel(x, y, acc, hint) over fixed 16x16 tiles in parallel. A pixel depends only on its
+// tile (the entry hint is reset per tile), so the image does not depend on how tiles are
+// distributed over threads.
+template <class Pixel>
+RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf, const RenderOptions& opt,
+                         Pixel&& pixel) {
+  RenderImage img = blank_image(cam);
   const int tx = (cam.width + kTile - 1) / kTile, ty = (cam.height + kTile - 1) / kTile;
   tbb::parallel_for(0, tx * ty, [&](int tile) {
     RayAccumulator acc(ctf, opt.rule, opt.stop_opacity, opt.z_opacity);
@@ -751,10 +795,7 @@ RenderImage render_tiles(const Camera& cam, const CompiledTransferFunction& ctf,
       for (int x = x0; x < std::min(x0 + kTile, cam.width); ++x) {
         acc.reset();
         pixel(x, y, acc, hint);
-        const std::size_t i = std::size_t(y) * cam.width + x;
-        for (int c = 0; c < 3; ++c) img.rgba[4 * i + c] = float(acc.rgb()[c]);
-        img.rgba[4 * i + 3] = float(1.0 - acc.transmittance());
-        img.z[i] = float(acc.depth());
+        store(img, x, y, acc);
       }
   });
   return img;
@@ -788,28 +829,66 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
           }
         });
   }
+  // Tiles in parallel; in a tile, kLanes consecutive pixels at a time, their rays advanced one
+  // element each in turn (a step's latency chain is filled by the other rays). Each ray meets
+  // its segments in the same order with its own accumulator, and the entry hints pass from
+  // pixel to pixel in the same order as one ray at a time, so the image is the same.
+  constexpr int kLanes = 2;
+  const CompiledTransferFunction* skip = opt.skip_empty ? &ctf : nullptr;
   Counters n;
-  RenderImage img = render_tiles(camera, ctf, opt, [&](int x, int y, RayAccumulator& acc, ElemId& hint) {
-    Vec3 ow, dw;
-    rays.ray(x, y, ow, dw);
-    const Vec3 o = to_local.point(ow), d = to_local.direction(dw);
-    std::uint64_t segs = 0;
-    const TraceResult r = trace(
-        m, o, d, opt.skip_empty ? &ctf : nullptr, [&](std::uint32_t e) { return state[e]; },
-        [&](const TraceSegment& s) {
-          if (s.tet >= 0) ++segs;
-          if (!s.empty) {
-            acc.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
-          }
-          return !acc.done();
-        },
-        &hint);
-    if (!r.hit) return;
-    n.rays.fetch_add(1, std::memory_order_relaxed);
-    n.segments.fetch_add(segs, std::memory_order_relaxed);
-    if (r.skips) n.skips.fetch_add(r.skips, std::memory_order_relaxed);
-    if (r.relocations) n.relocations.fetch_add(r.relocations, std::memory_order_relaxed);
-    if (r.step_bound_hit) n.bound.fetch_add(1, std::memory_order_relaxed);
+  RenderImage img = blank_image(camera);
+  const int tx = (camera.width + kTile - 1) / kTile, ty = (camera.height + kTile - 1) / kTile;
+  tbb::parallel_for(0, tx * ty, [&](int tile) {
+    std::optional<RayAccumulator> accs[kLanes];
+    for (auto& a : accs) a.emplace(ctf, opt.rule, opt.stop_opacity, opt.z_opacity);
+    auto acc = [&](int l) -> RayAccumulator& { return *accs[l]; };
+    RayWalk walk[kLanes];
+    std::uint64_t segs[kLanes];
+    int px[kLanes], py[kLanes];
+    ElemId hint = ElemId::invalid();
+    const int x0 = (tile % tx) * kTile, y0 = (tile / tx) * kTile;
+    const int w = std::min(x0 + kTile, camera.width) - x0, h = std::min(y0 + kTile, camera.height) - y0;
+    auto state_of = [&](std::uint32_t e) { return state[e]; };
+    for (int first = 0; first < w * h; first += kLanes) {
+      const int lanes = std::min(kLanes, w * h - first);
+      for (int l = 0; l < lanes; ++l) {
+        px[l] = x0 + (first + l) % w, py[l] = y0 + (first + l) / w;
+        acc(l).reset();
+        segs[l] = 0;
+        Vec3 ow, dw;
+        rays.ray(px[l], py[l], ow, dw);
+        begin_walk(m, to_local.point(ow), to_local.direction(dw), skip, &hint, walk[l]);
+      }
+      for (bool any = true; any;) {
+        any = false;
+        for (int l = 0; l < lanes; ++l) {
+          if (!walk[l].active) continue;
+          RayAccumulator& a = acc(l);
+          const Vec3& d = walk[l].d;
+          std::uint64_t& sg = segs[l];
+          walk[l].active = walk_step(
+              m, skip, state_of,
+              [&](const TraceSegment& s) {
+                if (s.tet >= 0) ++sg;
+                if (!s.empty)
+                  a.add(s.s0, s.s1, s.t0, s.t1 - s.t0, opt.shading ? shade_factor(s.gradient, d) : 1.0);
+                return !a.done();
+              },
+              walk[l]);
+          any |= walk[l].active;
+        }
+      }
+      for (int l = 0; l < lanes; ++l) {
+        store(img, px[l], py[l], acc(l));
+        const TraceResult& r = walk[l].res;
+        if (!r.hit) continue;
+        n.rays.fetch_add(1, std::memory_order_relaxed);
+        n.segments.fetch_add(segs[l], std::memory_order_relaxed);
+        if (r.skips) n.skips.fetch_add(r.skips, std::memory_order_relaxed);
+        if (r.relocations) n.relocations.fetch_add(r.relocations, std::memory_order_relaxed);
+        if (r.step_bound_hit) n.bound.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
   });
   n.to(stats);
   return img;

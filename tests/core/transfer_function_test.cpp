@@ -1,11 +1,13 @@
-// Exact segment integration: the closed-form mean transmittance and the pre-integrated
-// accumulator against fine numerical integration, constant opacity against the analytic
-// transmittance, narrow spikes, early termination.
+// Segment integration: the mean transmittance (closed form and table) and the pre-integrated
+// accumulator (both) against fine numerical integration, the table against the closed form,
+// constant opacity against the analytic transmittance, narrow spikes, early termination.
 #include <mlfe/core/transfer_function.h>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <mlfe/core/error.h>
 
@@ -94,13 +96,65 @@ TEST(RayAccumulator, PreIntegrationMatchesFineNumericalIntegration) {
   const CompiledTransferFunction ctf(tf);
   const double segments[][3] = {{0, 100, 4},  {100, 0, 4}, {20, 35, 0.7},
                                 {85, 45, 10}, {55, 55, 2}, {5, 95, 0.1}};
-  for (const auto& s : segments) {
-    RayAccumulator acc(ctf, RayAccumulator::Rule::kPreIntegrated, 1.0, 0.5);
-    acc.add(s[0], s[1], 0, s[2]);
-    const Numeric num = integrate_numerically(ctf, s[0], s[1], s[2], 100000);
-    EXPECT_NEAR(1 - acc.transmittance(), num.alpha, 1e-4) << s[0] << "->" << s[1];
-    for (int c = 0; c < 3; ++c) EXPECT_NEAR(acc.rgb()[c], num.rgb[c], 1e-4) << s[0] << "->" << s[1];
+  for (auto rule : {RayAccumulator::Rule::kPreIntegrated, RayAccumulator::Rule::kExact})
+    for (const auto& s : segments) {
+      RayAccumulator acc(ctf, rule, 1.0, 0.5);
+      acc.add(s[0], s[1], 0, s[2]);
+      const Numeric num = integrate_numerically(ctf, s[0], s[1], s[2], 100000);
+      EXPECT_NEAR(1 - acc.transmittance(), num.alpha, 1e-4) << s[0] << "->" << s[1];
+      for (int c = 0; c < 3; ++c) EXPECT_NEAR(acc.rgb()[c], num.rgb[c], 1e-4) << s[0] << "->" << s[1];
+    }
+}
+
+TEST(MeanTransmittance, TableWithinItsBoundOfTheClosedForm) {
+  // Random depth pairs over seven decades, plus both axes and the diagonal (where ψ has its
+  // steepest parts), plus zero and very large depths.
+  std::uint32_t state = 12345;
+  auto uniform = [&] {
+    state = state * 1664525u + 1013904223u;
+    return double(state >> 8) / 16777216.0;
+  };
+  double worst = 0;
+  for (int k = 0; k < 200000; ++k) {
+    double a = std::pow(10.0, -4 + 7 * uniform()), b = std::pow(10.0, -4 + 7 * uniform());
+    if (k % 5 == 1) b = 0;
+    if (k % 5 == 2) a = 0;
+    if (k % 5 == 3) b = a;
+    worst = std::max(worst, std::abs(mean_transmittance_table(a, b) - mean_transmittance(a, b)));
   }
+  for (double d : {0.0, 1e-9, 0.5, 3.0, 1e4, 1e8})
+    for (double e : {0.0, 1e-9, 0.5, 3.0, 1e4, 1e8})
+      worst = std::max(worst, std::abs(mean_transmittance_table(d, e) - mean_transmittance(d, e)));
+  EXPECT_LE(worst, kMeanTransmittanceTableError);
+  EXPECT_GT(worst, 0.0);  // it is a table, not the closed form again
+}
+
+TEST(RayAccumulator, TabulatedAgainstExactWithinTheTableBound) {
+  // A ray of many short and long pieces through every kind of piece of the transfer function:
+  // opacity identical (ζ is exact either way), colours within the table's bound times the
+  // colour change per piece, summed over the pieces.
+  TransferFunction tf;
+  tf.color = {{0, 0, 0, 1}, {40, 1, 0, 0}, {60, 0.2, 1, 0.3}, {100, 1, 1, 1}};
+  tf.opacity = {{10, 0}, {30, 0.4}, {50, 0.05}, {80, 0.9}, {90, 0.2}};
+  const CompiledTransferFunction ctf(tf);
+  RayAccumulator table(ctf, RayAccumulator::Rule::kPreIntegrated, 1.0, 0.5);
+  RayAccumulator exact(ctf, RayAccumulator::Rule::kExact, 1.0, 0.5);
+  double s = 50, t = 0, bound = 0;
+  for (int i = 0; i < 400; ++i) {
+    const double next = 50 + 49 * std::sin(0.37 * i), length = 0.01 + 0.3 * (1 + std::cos(1.3 * i));
+    table.add(s, next, t, length);
+    exact.add(s, next, t, length);
+    bound += kMeanTransmittanceTableError * 4;  // ≤ 4 pieces per segment, |c_b − c_f| ≤ 1
+    s = next, t += length;
+  }
+  EXPECT_EQ(table.transmittance(), exact.transmittance());
+  double diff = 0;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(table.rgb()[c], exact.rgb()[c], bound);
+    diff = std::max(diff, std::abs(table.rgb()[c] - exact.rgb()[c]));
+  }
+  EXPECT_GT(diff, 0.0);
+  EXPECT_LT(diff, 1e-4);
 }
 
 TEST(RayAccumulator, NarrowOpacitySpikeIsFound) {
