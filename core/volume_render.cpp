@@ -17,6 +17,7 @@
 #include <optional>
 
 #include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
 #include <mlfe/core/hierarchical_basis.h>
 
@@ -330,7 +331,9 @@ std::array<double, 16> Camera::world_to_ndc() const {
 
 Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg,
                     double elevation_deg, bool perspective, int width, int height) {
-  MLFE_CHECK(radius > 0 && width > 0 && height > 0);
+  if (!(radius > 0) || width <= 0 || height <= 0)
+    throw Error("camera: needs a positive distance and image size (got radius " + std::to_string(radius) + ", " +
+                std::to_string(width) + "x" + std::to_string(height) + ")");
   Camera c;
   c.perspective = perspective;
   c.width = width;
@@ -367,7 +370,9 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 // ---------------------------------------------------------------- render mesh
 
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level) : h_(h) {
-  MLFE_CHECK(values.size() == h.vertex_count());
+  if (values.size() != h.vertex_count())
+    throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
+                std::to_string(h.vertex_count()) + " vertices");
   const int finest = h.max_level();
   level_ = level < 0 || level >= finest ? finest : level;
   // 1. u on T_k: the hierarchical basis without the surpluses of finer vertices.
@@ -379,7 +384,9 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   }
   // 2. the rendered elements and their face neighbours.
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
-  MLFE_CHECK(elems_.size() < (std::size_t(1) << 30));  // 4 × index + face fits 32 bits
+  // Neighbour records pack 4 × index + face into 32 bits.
+  if (elems_.size() >= (std::size_t(1) << 30))
+    throw Error("render: " + std::to_string(elems_.size()) + " tetrahedra exceed the renderer's limit of 2^30");
   morton_order(h, elems_);
   const auto nb = face_adjacency(h, elems_);
   records_.resize(elems_.size());
@@ -763,7 +770,9 @@ struct Counters {
 constexpr int kTile = 16;
 
 RenderImage blank_image(const Camera& cam) {
-  MLFE_CHECK(cam.width > 0 && cam.height > 0);
+  if (cam.width <= 0 || cam.height <= 0)
+    throw Error("render: image size must be positive (got " + std::to_string(cam.width) + "x" +
+                std::to_string(cam.height) + ")");
   RenderImage img;
   img.width = cam.width;
   img.height = cam.height;
@@ -896,7 +905,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
 
 RenderImage render_grid(const ScalarGrid& grid, const TransferFunction& tf, const Camera& camera,
                         const RenderOptions& opt, RenderStats* stats) {
-  MLFE_CHECK(grid.dim == 3);
+  if (grid.dim != 3) throw Error(grid.source + ": the reference renderer needs a 3D volume");
   const GridField f(grid);
   const CompiledTransferFunction ctf(tf);
   const Vec3 lo{0, 0, 0}, hi = grid.local_extent();

@@ -38,8 +38,8 @@ std::uint8_t srgb8(double linear) {
 
 void write_exr(const std::string& path, const RenderImage& img, const ExrAttributes& attributes) {
   const int w = img.width, h = img.height;
-  MLFE_CHECK(w > 0 && h > 0 && img.rgba.size() == std::size_t(w) * h * 4 &&
-             img.z.size() == std::size_t(w) * h);
+  if (w <= 0 || h <= 0 || img.rgba.size() != std::size_t(w) * h * 4 || img.z.size() != std::size_t(w) * h)
+    throw Error(path + ": the image's size and its RGBA/Z arrays do not match");
   std::vector<half> channels[4];
   for (auto& c : channels) c.resize(std::size_t(w) * h);
   for (std::size_t i = 0; i < std::size_t(w) * h; ++i)
@@ -75,7 +75,8 @@ void write_exr(const std::string& path, const RenderImage& img, const ExrAttribu
 void write_png_preview(const std::string& path, const RenderImage& img,
                        const std::array<double, 3>& background) {
   const int w = img.width, h = img.height;
-  MLFE_CHECK(w > 0 && h > 0 && img.rgba.size() == std::size_t(w) * h * 4);
+  if (w <= 0 || h <= 0 || img.rgba.size() != std::size_t(w) * h * 4)
+    throw Error(path + ": the image's size and its RGBA array do not match");
   std::vector<std::uint8_t> rgb(std::size_t(w) * h * 3);
   for (std::size_t i = 0; i < std::size_t(w) * h; ++i) {
     const double a = img.rgba[4 * i + 3];

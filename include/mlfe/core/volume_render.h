@@ -212,7 +212,8 @@ TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origi
 RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, const TransferFunction& tf,
                         const Camera& camera, const RenderOptions& options, RenderStats* stats = nullptr);
 
-/// Reference: the trilinear interpolant of the voxels (3D grid, ≥ 2 samples per axis, CHECKed),
+/// Reference: the trilinear interpolant of the voxels (3D grid, ≥ 2 samples per axis; throws
+/// mlfe::Error otherwise),
 /// sampled every half of the smallest spacing, each step integrated like a mesh segment
 /// (linear between samples); no empty-space skipping (a full-grid ray caster).
 RenderImage render_grid(const ScalarGrid& grid, const TransferFunction& tf, const Camera& camera,
