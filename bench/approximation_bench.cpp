@@ -20,6 +20,12 @@
 // value range. Uniform downsampling keeps every s-th voxel (s = 2, 3, 4; the last sample of each
 // axis is always kept) and reconstructs the full grid trilinearly; its PSNR uses the same
 // discrete voxel RMS.
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
 #include <sys/resource.h>
 #include <tbb/global_control.h>
 
@@ -34,13 +40,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/p1_element.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
 
 using namespace mlfe;
 
@@ -256,7 +255,8 @@ RunResult run_3d(const ScalarGrid& g, const std::string& label, ApproximationOpt
   return r;
 }
 
-void bench_volume(const std::string& path, const std::vector<double>& budgets, const std::vector<double>& rms_pct) {
+void bench_volume(const std::string& path, const std::vector<double>& budgets,
+                  const std::vector<double>& rms_pct) {
   const auto t_read = Clock::now();
   ScalarGrid g = read_volume(path);
   const double read_s = since(t_read);
@@ -264,9 +264,11 @@ void bench_volume(const std::string& path, const std::vector<double>& budgets, c
   const double span = double(range[1]) - double(range[0]);
   const std::size_t N = std::size_t(g.voxel_count());
   std::printf("\n=== %s ===\n", path.c_str());
-  std::printf("dims %lldx%lldx%lld = %zu voxels, spacing %.4g x %.4g x %.4g, value range [%g, %g], read %.2f s, RSS %.0f MiB\n",
-              (long long)g.dims[0], (long long)g.dims[1], (long long)g.dims[2], N, g.transform.spacing[0],
-              g.transform.spacing[1], g.transform.spacing[2], range[0], range[1], read_s, current_rss_mb());
+  std::printf(
+      "dims %lldx%lldx%lld = %zu voxels, spacing %.4g x %.4g x %.4g, value range [%g, %g], read %.2f s, RSS "
+      "%.0f MiB\n",
+      (long long)g.dims[0], (long long)g.dims[1], (long long)g.dims[2], N, g.transform.spacing[0],
+      g.transform.spacing[1], g.transform.spacing[2], range[0], range[1], read_s, current_rss_mb());
 
   // Uniform downsampling.
   std::printf("\nUniform downsampling + trilinear reconstruction (PSNR over the value range, voxel RMS)\n");
@@ -314,23 +316,29 @@ void bench_volume(const std::string& path, const std::vector<double>& budgets, c
   }
 
   std::printf("\nAdaptive L2 approximation: vertices vs error (PSNR over the value range)\n");
-  std::printf("| run | vertices | vertices/voxels | leaf tets | iterations | RMS (L2) | PSNR L2 dB | RMS voxels | PSNR voxels dB | stop |\n");
+  std::printf(
+      "| run | vertices | vertices/voxels | leaf tets | iterations | RMS (L2) | PSNR L2 dB | RMS voxels | "
+      "PSNR voxels dB | stop |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& r : runs)
-    std::printf("| %s | %zu | 1/%.1f | %zu | %d | %.5g | %.2f | %.5g | %.2f | %s |\n", r.label.c_str(), r.vertices,
-                double(N) / double(r.vertices), r.elements, r.iterations, r.rms_cont, r.psnr_cont, r.rms_vox,
-                r.psnr_vox, r.stop.c_str());
+    std::printf("| %s | %zu | 1/%.1f | %zu | %d | %.5g | %.2f | %.5g | %.2f | %s |\n", r.label.c_str(),
+                r.vertices, double(N) / double(r.vertices), r.elements, r.iterations, r.rms_cont, r.psnr_cont,
+                r.rms_vox, r.psnr_vox, r.stop.c_str());
 
   std::printf("\nTiming (seconds; per-iteration = total / iterations), peak RSS, CG\n");
-  std::printf("| run | build s | CPU s | Mvoxel/s | iter | assembly/it | solve/it | estimate/it | refine/it | "
-              "assembly | solve | estimate | refine | peak RSS MiB | direct solves | CG solves | CG it mean | CG it max |\n");
+  std::printf(
+      "| run | build s | CPU s | Mvoxel/s | iter | assembly/it | solve/it | estimate/it | refine/it | "
+      "assembly | solve | estimate | refine | peak RSS MiB | direct solves | CG solves | CG it mean | CG it "
+      "max |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& r : runs) {
     const double it = std::max(1, r.iterations);
-    std::printf("| %s | %.2f | %.2f | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f | %.0f | %d | %d | %.1f | %d |\n",
-                r.label.c_str(), r.seconds, r.cpu, double(N) / r.seconds / 1e6, r.iterations, r.assembly / it, r.solve / it,
-                r.estimate / it, r.refine / it, r.assembly, r.solve, r.estimate, r.refine, r.peak_mb, r.direct_solves,
-                r.cg_solves, r.cg_mean, r.cg_max);
+    std::printf(
+        "| %s | %.2f | %.2f | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f | %.0f | %d "
+        "| %d | %.1f | %d |\n",
+        r.label.c_str(), r.seconds, r.cpu, double(N) / r.seconds / 1e6, r.iterations, r.assembly / it,
+        r.solve / it, r.estimate / it, r.refine / it, r.assembly, r.solve, r.estimate, r.refine, r.peak_mb,
+        r.direct_solves, r.cg_solves, r.cg_mean, r.cg_max);
   }
 
   // Per-iteration detail of the headline run.
@@ -339,31 +347,36 @@ void bench_volume(const std::string& path, const std::vector<double>& budgets, c
     if (r.label.find("2x samples/4") != std::string::npos) head = &r;
   if (head) {
     std::printf("\nPer iteration, %s\n", head->label.c_str());
-    std::printf("| it | level | vertices | leaf tets | marked | RMS | PSNR dB | CG it | assembly s | solve s | estimate s | refine s |\n");
+    std::printf(
+        "| it | level | vertices | leaf tets | marked | RMS | PSNR dB | CG it | assembly s | solve s | "
+        "estimate s | refine s |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const auto& s : head->its)
-      std::printf("| %d | %d | %zu | %zu | %zu | %.5g | %.2f | %d | %.3f | %.3f | %.3f | %.3f |\n", s.iteration, s.level,
-                  s.vertices, s.elements, s.marked, s.rms_error, s.psnr_db, s.cg_iterations, s.assembly_seconds,
-                  s.solve_seconds, s.estimate_seconds, s.refine_seconds);
+      std::printf("| %d | %d | %zu | %zu | %zu | %.5g | %.2f | %d | %.3f | %.3f | %.3f | %.3f |\n",
+                  s.iteration, s.level, s.vertices, s.elements, s.marked, s.rms_error, s.psnr_db,
+                  s.cg_iterations, s.assembly_seconds, s.solve_seconds, s.estimate_seconds, s.refine_seconds);
 
     std::printf("\nTargets (%s):\n", path.c_str());
     const bool t1 = head->psnr_vox >= psnr2 && head->vertices * 4 <= v2;
-    std::printf("- PSNR of 2x downsampling (%.2f dB, %zu samples) with <= 1/4 of its samples (%zu): %s — %zu vertices, "
-                "voxel PSNR %.2f dB (%+.2f dB)\n",
-                psnr2, v2, v2 / 4, t1 ? "MET" : "NOT MET", head->vertices, head->psnr_vox, head->psnr_vox - psnr2);
+    std::printf(
+        "- PSNR of 2x downsampling (%.2f dB, %zu samples) with <= 1/4 of its samples (%zu): %s — %zu "
+        "vertices, "
+        "voxel PSNR %.2f dB (%+.2f dB)\n",
+        psnr2, v2, v2 / 4, t1 ? "MET" : "NOT MET", head->vertices, head->psnr_vox, head->psnr_vox - psnr2);
     // Smallest vertex count among runs that reach psnr2.
     const RunResult* best = nullptr;
     for (const auto& r : runs)
       if (r.psnr_vox >= psnr2 && (!best || r.vertices < best->vertices)) best = &r;
     if (best)
-      std::printf("  smallest run reaching it: %s, %zu vertices = 1/%.1f of the 2x samples\n", best->label.c_str(),
-                  best->vertices, double(v2) / double(best->vertices));
+      std::printf("  smallest run reaching it: %s, %zu vertices = 1/%.1f of the 2x samples\n",
+                  best->label.c_str(), best->vertices, double(v2) / double(best->vertices));
     else
       std::printf("  no run reached %.2f dB\n", psnr2);
     const double mvs = double(N) / head->seconds / 1e6;
-    std::printf("- >= 3 Mvoxel/s at that budget: %s — %.2f Mvoxel/s (%.2f s wall, %.2f s CPU for %zu voxels; "
-                "%.2f Mvoxel/s even with 2 full cores = CPU s / 2)\n",
-                mvs >= 3 ? "MET" : "NOT MET", mvs, head->seconds, head->cpu, N, double(N) / (head->cpu / 2) / 1e6);
+    std::printf(
+        "- >= 3 Mvoxel/s at that budget: %s — %.2f Mvoxel/s (%.2f s wall, %.2f s CPU for %zu voxels; "
+        "%.2f Mvoxel/s even with 2 full cores = CPU s / 2)\n",
+        mvs >= 3 ? "MET" : "NOT MET", mvs, head->seconds, head->cpu, N, double(N) / (head->cpu / 2) / 1e6);
     double peak = 0;
     int cg_max = 0;
     double cg_mean_max = 0;
@@ -372,8 +385,9 @@ void bench_volume(const std::string& path, const std::vector<double>& budgets, c
       cg_max = std::max(cg_max, r.cg_max);
       cg_mean_max = std::max(cg_mean_max, r.cg_mean);
     }
-    std::printf("- peak memory <= 1.5 GB (1536 MiB): %s — max peak RSS over all runs %.0f MiB (headline %.0f MiB)\n",
-                peak <= 1536 ? "MET" : "NOT MET", peak, head->peak_mb);
+    std::printf(
+        "- peak memory <= 1.5 GB (1536 MiB): %s — max peak RSS over all runs %.0f MiB (headline %.0f MiB)\n",
+        peak <= 1536 ? "MET" : "NOT MET", peak, head->peak_mb);
     std::printf("- BPX-PCG <= 30 iterations per solve: %s — max %d, largest per-run mean %.1f\n",
                 cg_max <= 30 ? "MET" : "NOT MET", cg_max, cg_mean_max);
   }
@@ -390,18 +404,21 @@ void bench_dem(const std::string& path, double threshold, int start_level) {
   ApproximationOptions o;
   o.threshold = threshold;
   o.start_level = start_level;
-  std::printf("start level %d%s\n", start_level, start_level == 0 ? " (T0 = 2 triangles, as in the paper)" : "");
+  std::printf("start level %d%s\n", start_level,
+              start_level == 0 ? " (T0 = 2 triangles, as in the paper)" : "");
   const auto t0 = Clock::now();
   GridField f(g);
   Approximation<2> a = approximate<2>(f, o);
   const double total = since(t0);
-  std::printf("| it | level | vertices | triangles | solve s | CG it | RMS m | growth |\n|---|---|---|---|---|---|---|---|\n");
+  std::printf(
+      "| it | level | vertices | triangles | solve s | CG it | RMS m | growth "
+      "|\n|---|---|---|---|---|---|---|---|\n");
   std::size_t prev = 0;
   for (const auto& s : a.iterations) {
     char growth[32] = "-";
     if (prev) std::snprintf(growth, sizeof growth, "%.2f", double(s.vertices) / double(prev));
-    std::printf("| %d | %d | %zu | %zu | %.4f | %d | %.4g | %s |\n", s.iteration, s.level, s.vertices, s.elements,
-                s.solve_seconds, s.cg_iterations, s.rms_error, growth);
+    std::printf("| %d | %d | %zu | %zu | %.4f | %d | %.4g | %s |\n", s.iteration, s.level, s.vertices,
+                s.elements, s.solve_seconds, s.cg_iterations, s.rms_error, growth);
     prev = s.vertices;
   }
   std::printf("total %.2f s, %zu iterations, stop: %s\n", total, a.iterations.size(), a.stop_reason.c_str());
@@ -427,17 +444,26 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    if (a == "--dem") dem = next();
-    else if (a == "--threshold") threshold = std::atof(next().c_str());
-    else if (a == "--dem-start-level") dem_start_level = std::atoi(next().c_str());
-    else if (a == "--budgets") budgets = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
-    else if (a == "--rms") rms = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
-    else if (a == "--threads") threads = std::atoi(next().c_str());
+    if (a == "--dem")
+      dem = next();
+    else if (a == "--threshold")
+      threshold = std::atof(next().c_str());
+    else if (a == "--dem-start-level")
+      dem_start_level = std::atoi(next().c_str());
+    else if (a == "--budgets")
+      budgets = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
+    else if (a == "--rms")
+      rms = next() == "none" ? std::vector<double>{} : parse_list(argv[i]);
+    else if (a == "--threads")
+      threads = std::atoi(next().c_str());
     else if (a == "-h" || a == "--help") {
-      std::printf("usage: approximation_bench [--dem PATH|none] [--threshold T] [--dem-start-level L] [--budgets f,..] [--rms p,..|none] "
-                  "[--threads N] [VOLUME...]\n");
+      std::printf(
+          "usage: approximation_bench [--dem PATH|none] [--threshold T] [--dem-start-level L] [--budgets "
+          "f,..] [--rms p,..|none] "
+          "[--threads N] [VOLUME...]\n");
       return 0;
-    } else volumes.push_back(a);
+    } else
+      volumes.push_back(a);
   }
   if (volumes.empty())
     volumes = {std::string(MLFE_SHARED_DATA_DIR) + "/ct_skull_64.nrrd",
@@ -448,7 +474,8 @@ int main(int argc, char** argv) {
   try {
     for (const auto& v : volumes) {
       ScalarGrid probe = read_volume(v);
-      if (probe.dim == 2) bench_dem(v, threshold, dem_start_level);
+      if (probe.dim == 2)
+        bench_dem(v, threshold, dem_start_level);
       else {
         probe = ScalarGrid{};
         bench_volume(v, budgets, rms);

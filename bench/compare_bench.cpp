@@ -7,6 +7,8 @@
 // Times, per run: the library call on meshes in memory (compare_meshes), the library call on
 // files (compare_files: reading two binary PLYs included) and, with --mlfe, the command end to
 // end (process start, reading, comparing). Prints one JSON line per measurement.
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <sys/resource.h>
 #include <tbb/global_control.h>
 
@@ -20,9 +22,6 @@
 #include <numeric>
 #include <random>
 #include <string>
-
-#include <mlfe/formats/compare.h>
-#include <mlfe/formats/openmesh_io.h>
 
 namespace {
 

@@ -20,6 +20,13 @@
 // Every mode prints one JSON line on stdout with counts and seconds. --threads N (default 2)
 // may precede the mode.
 #include <meshoptimizer.h>
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/surface_simplification.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -34,14 +41,6 @@
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/surface_simplification.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/openmesh_io.h>
-#include <mlfe/formats/volume_reader.h>
 
 using namespace mlfe;
 using Clock = std::chrono::steady_clock;

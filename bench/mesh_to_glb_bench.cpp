@@ -8,23 +8,23 @@
 //     --drc P      also write the positions alone as Draco (.drc, same tolerance): "bytes without
 //                  normals" in the JSON
 // Prints one JSON line: triangles, vertices, bytes, seconds (all), write_seconds (the .glb alone).
-#include <nlohmann/json.hpp>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/openmesh_io.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/gltf_writer.h>
-#include <mlfe/formats/openmesh_io.h>
-
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: mesh_to_glb_bench IN.ply OUT.glb [--scale sx,sy,sz] [--tolerance MM] [--no-draco]\n");
+    std::fprintf(
+        stderr, "usage: mesh_to_glb_bench IN.ply OUT.glb [--scale sx,sy,sz] [--tolerance MM] [--no-draco]\n");
     return 1;
   }
   std::array<double, 3> scale{1, 1, 1};
@@ -73,9 +73,10 @@ int main(int argc, char** argv) {
     mlfe::write_gltf(argv[2], surfaces, o);
     const double write_sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - tw).count();
     const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    nlohmann::json j = {{"triangles", tris}, {"vertices", verts}, {"bytes", std::filesystem::file_size(argv[2])},
-                        {"tolerance_mm", tol}, {"draco", draco}, {"seconds", sec},
-                        {"write_seconds", write_sec}};
+    nlohmann::json j = {
+        {"triangles", tris},         {"vertices", verts}, {"bytes", std::filesystem::file_size(argv[2])},
+        {"tolerance_mm", tol},       {"draco", draco},    {"seconds", sec},
+        {"write_seconds", write_sec}};
     if (!drc.empty()) j["drc_positions_bytes"] = drc_bytes;
     std::printf("%s\n", j.dump().c_str());
   } catch (const std::exception& e) {

@@ -3,6 +3,7 @@
 //   read_bench vdb-native FILE       OpenVDB's own read of every grid (what vdb_print -l does)
 //   read_bench mlfe FILE             mlfe::read_volume of the same file (dense float grid)
 // Each mode prints seconds and the process's peak RSS, so run each in its own process.
+#include <mlfe/formats/volume_reader.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <sys/resource.h>
@@ -12,8 +13,6 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
-
-#include <mlfe/formats/volume_reader.h>
 
 namespace {
 double peak_rss_mb() {
@@ -66,7 +65,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("| %s | %s | %.0f | %.3f | %.0f | %.2f |\n", mode.c_str(), path.c_str(), voxels, s, peak_rss_mb(),
-              peak_rss_mb() * 1048576.0 / (voxels * 4.0));
+  std::printf("| %s | %s | %.0f | %.3f | %.0f | %.2f |\n", mode.c_str(), path.c_str(), voxels, s,
+              peak_rss_mb(), peak_rss_mb() * 1048576.0 / (voxels * 4.0));
   return 0;
 }

@@ -9,6 +9,7 @@
 //   leaves, child tetrahedra created, seconds in refine(), children / s / core,
 //   Hierarchy::memory_bytes() / leaf, peak RSS / leaf.
 // Targets: ≥ 5 M child tetrahedra / s / core; ≤ 120 bytes / leaf (hierarchy + links + edge map).
+#include <mlfe/core/hierarchy.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <tbb/global_control.h>
@@ -19,8 +20,6 @@
 #include <cstring>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
 
 namespace {
 
@@ -99,8 +98,9 @@ bool run_forked(const std::string& name, int threads, bool quick, Result& out) {
 
 int main(int argc, char** argv) {
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
-  std::printf("| scenario | threads | leaves | child tets created | refine s | child tets/s/core | "
-              "memory_bytes/leaf | peak RSS/leaf |\n");
+  std::printf(
+      "| scenario | threads | leaves | child tets created | refine s | child tets/s/core | "
+      "memory_bytes/leaf | peak RSS/leaf |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const char* name : {"uniform", "plane"}) {
     for (int threads : {1, 2}) {
@@ -109,8 +109,8 @@ int main(int argc, char** argv) {
         std::printf("| %s | %d | failed | | | | | |\n", name, threads);
         continue;
       }
-      std::printf("| %s | %d | %.0f | %.0f | %.2f | %.2f M | %.1f | %.1f |\n", name, threads, r.leaves, r.created,
-                  r.seconds, r.created / r.seconds / threads / 1e6, r.memory_bytes / r.leaves,
+      std::printf("| %s | %d | %.0f | %.0f | %.2f | %.2f M | %.1f | %.1f |\n", name, threads, r.leaves,
+                  r.created, r.seconds, r.created / r.seconds / threads / 1e6, r.memory_bytes / r.leaves,
                   r.peak_rss / r.leaves);
       std::fflush(stdout);
     }

@@ -9,6 +9,7 @@
 //   Defaults (200 seeds per dimension up to 2*10^5 leaves) take about a minute; the >= 10 M leaf run
 //   of bench/refine_stress_results.md uses --uniform 6 (3D) / 10 (2D) --max-leaves 10000000.
 //   refine_stress --case DIM SEED   (one case in-process: for a debugger)
+#include <mlfe/core/hierarchy.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -21,8 +22,6 @@
 #include <random>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
 
 namespace {
 

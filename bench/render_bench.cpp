@@ -12,6 +12,10 @@
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
+#include <mlfe/core/volume_render.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/vtu_writer.h>
 
 #include <cmath>
 #include <cstdio>
@@ -19,11 +23,6 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/volume_render.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/volume_reader.h>
-#include <mlfe/formats/vtu_writer.h>
 
 using namespace mlfe;
 

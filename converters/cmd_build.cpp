@@ -1,5 +1,9 @@
 // mlfe build: volume → adaptive hierarchy (.mlfeh) + JSON report.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/hierarchy_levels.h>
+#include <mlfe/formats/hierarchy_resample.h>
+#include <mlfe/version.h>
 
 #include <chrono>
 #include <cmath>
@@ -9,10 +13,6 @@
 #include "converters/commands.h"
 #include "converters/pipeline_options.h"
 #include "converters/volume_options.h"
-#include <mlfe/core/error.h>
-#include <mlfe/formats/hierarchy_levels.h>
-#include <mlfe/formats/hierarchy_resample.h>
-#include <mlfe/version.h>
 
 namespace mlfe::cli {
 namespace {
@@ -43,7 +43,8 @@ struct FileFigures {
 // Writes the v2 file: values quantized to the bound, the error figures measured on the voxel
 // grid from exactly the values a reader decodes.
 template <int D>
-FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a, const ScalarGrid& grid) {
+FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a,
+                       const ScalarGrid& grid) {
   FileFigures fig;
   const auto t0 = std::chrono::steady_clock::now();
   const double range = b.value_max - b.value_min;
@@ -54,8 +55,7 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
   } catch (const Error& e) {
     throw Error(s.output + ": " + e.what());
   }
-  const std::vector<float> approx =
-      resample_to_grid(a.hierarchy, decoded, grid.dims, grid.transform.spacing);
+  const std::vector<float> approx = resample_to_grid(a.hierarchy, decoded, grid.dims, grid.transform.spacing);
   fig.errors = grid_errors(approx, grid.values, range, s.input);
   HierarchyFileInfo info;
   info.transform = b.transform;
@@ -80,8 +80,8 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
   } catch (const LevelRebuildError& e) {
     std::fprintf(stderr, "mlfe: warning: %s; writing format version 1 (exact, larger)\n", e.what());
     write_hierarchy(s.output, a.hierarchy, a.values, info);
-    fig.errors = grid_errors(resample_to_grid(a.hierarchy, a.values, grid.dims, grid.transform.spacing), grid.values,
-                             range, s.input);
+    fig.errors = grid_errors(resample_to_grid(a.hierarchy, a.values, grid.dims, grid.transform.spacing),
+                             grid.values, range, s.input);
     fig.bound = 0;
   }
   fig.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -94,7 +94,8 @@ void run_build(const BuildState& s) {
   const ScalarGrid grid = read_volume(s.input, s.read);
   if (s.max_error > 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
   const Built b = build_from_grid(grid, s.params, {});
-  const FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), grid) : write_file(s, b, b.get<3>(), grid);
+  const FileFigures fig =
+      b.dim() == 2 ? write_file(s, b, b.get<2>(), grid) : write_file(s, b, b.get<3>(), grid);
   const double bytes = static_cast<double>(std::filesystem::file_size(s.output));
   if (!s.report.empty()) {
     nlohmann::json r = build_report(s.input, &grid, b);
@@ -108,14 +109,16 @@ void run_build(const BuildState& s) {
     write_json(s.report, r);
   }
   const auto& last = b.iterations().back();
-  std::fprintf(stderr, "mlfe build: %zu vertices, %zu elements, %d levels, RMS %.4g (%.3f%%), PSNR %.2f dB (%s)\n",
+  std::fprintf(stderr,
+               "mlfe build: %zu vertices, %zu elements, %d levels, RMS %.4g (%.3f%%), PSNR %.2f dB (%s)\n",
                b.vertices(), b.leaves(), b.levels(), last.rms_error, last.rms_percent, last.psnr_db,
                b.stop_reason().c_str());
-  std::fprintf(stderr,
-               "mlfe build: file %.0f bytes (%.3f bits/voxel), values within %.4g; on the voxels RMS %.4g, max %.4g, "
-               "PSNR %.2f dB\n",
-               bytes, 8 * bytes / static_cast<double>(grid.voxel_count()), fig.bound, fig.errors.rms,
-               fig.errors.max, fig.errors.psnr);
+  std::fprintf(
+      stderr,
+      "mlfe build: file %.0f bytes (%.3f bits/voxel), values within %.4g; on the voxels RMS %.4g, max %.4g, "
+      "PSNR %.2f dB\n",
+      bytes, 8 * bytes / static_cast<double>(grid.voxel_count()), fig.bound, fig.errors.rms, fig.errors.max,
+      fig.errors.psnr);
   std::printf("%s\n", s.output.c_str());
 }
 
@@ -127,11 +130,13 @@ void add_build_command(CLI::App& app) {
       ->required();
   cmd->add_option("-o,--output", state->output, "hierarchy file (.mlfeh)")->required();
   cmd->add_option("--report", state->report, "JSON report of the build");
-  cmd->add_option("--max-error", state->max_error,
-                  "every stored vertex value within this of the approximation's (data units; default: half the "
-                  "achieved RMS error)")
+  cmd->add_option(
+         "--max-error", state->max_error,
+         "every stored vertex value within this of the approximation's (data units; default: half the "
+         "achieved RMS error)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--psnr", state->psnr, "value quantization error alone at this PSNR (dB over the value range)")
+  cmd->add_option("--psnr", state->psnr,
+                  "value quantization error alone at this PSNR (dB over the value range)")
       ->check(CLI::PositiveNumber);
   add_build_options(cmd, state->params);
   add_volume_read_options(cmd, state->read);

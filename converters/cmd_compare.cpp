@@ -3,6 +3,8 @@
 // difference on stdout), 2 unreadable input or a usage error (main() maps compare's usage errors
 // to 2 so that 1 always means "different").
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/compare.h>
 
 #include <memory>
 #include <optional>
@@ -10,8 +12,6 @@
 #include <vector>
 
 #include "converters/commands.h"
-#include <mlfe/core/error.h>
-#include <mlfe/formats/compare.h>
 
 namespace mlfe::cli {
 namespace {

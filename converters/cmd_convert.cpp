@@ -1,5 +1,7 @@
 // mlfe convert: volume in, iso-surface asset (glTF/Draco, PLY/OBJ/STL/OFF) out, in one command;
 // the work is mlfe::convert (converters/pipeline.h).
+#include <mlfe/core/error.h>
+
 #include <cstdio>
 #include <memory>
 #include <optional>
@@ -8,7 +10,6 @@
 #include "converters/convert_command.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
-#include <mlfe/core/error.h>
 
 namespace mlfe::cli {
 

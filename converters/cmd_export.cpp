@@ -1,13 +1,6 @@
 // mlfe export: a hierarchy file's approximation as a voxel grid (NIfTI, NRRD, raw + JSON,
 // OpenVDB) on the grid it was built from, or its leaf mesh (VTK .vtu, Gmsh .msh) with the
 // values and element levels, in the file's physical frame.
-#include <chrono>
-#include <cmath>
-#include <cstdio>
-#include <string>
-
-#include "converters/commands.h"
-#include <mlfe/pipeline.h>
 #include <mlfe/core/error.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/hierarchy_io.h>
@@ -15,6 +8,14 @@
 #include <mlfe/formats/msh_writer.h>
 #include <mlfe/formats/volume_writer.h>
 #include <mlfe/formats/vtu_writer.h>
+#include <mlfe/pipeline.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "converters/commands.h"
 
 namespace mlfe::cli {
 namespace {

@@ -2,21 +2,21 @@
 // anything; for a hierarchy file (.mlfeh), its levels, counts, error figures and bytes per
 // section.
 #include <fmt/format.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/vdb_reader.h>
+#include <mlfe/formats/volume_reader.h>
 
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <variant>
 #include <cstdio>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <variant>
 
 #include "converters/commands.h"
 #include "converters/volume_options.h"
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/vdb_reader.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe::cli {
 namespace {
@@ -71,7 +71,8 @@ void run_hierarchy_info(const InfoArgs& a) {
     j["space"] = f.space;
     j["metadata"] = f.metadata;
     for (std::size_t k = 0; k < counts.size(); ++k)
-      j["per_level"].push_back({{"level", k}, {"vertices", counts[k][0]}, {"elements", counts[k][1]}, {"leaves", counts[k][2]}});
+      j["per_level"].push_back(
+          {{"level", k}, {"vertices", counts[k][0]}, {"elements", counts[k][1]}, {"leaves", counts[k][2]}});
     for (const auto& s : f.sections)
       j["sections"].push_back({{"name", s.name}, {"file_bytes", s.file_bytes}, {"raw_bytes", s.raw_bytes}});
     j["read_seconds"] = seconds;
@@ -81,21 +82,25 @@ void run_hierarchy_info(const InfoArgs& a) {
   std::uint64_t total = 0;
   for (const auto& s : f.sections) total += s.file_bytes;
   fmt::print("file:      {}\n", a.file);
-  fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", f.version, f.dim, total, seconds);
+  fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", f.version, f.dim,
+             total, seconds);
   fmt::print("mesh:      {} vertices, {} elements, {} leaves, {} levels\n", nv, ne, nl, f.file_levels + 1);
-  fmt::print("values:    {}\n", f.values.empty()       ? std::string("none")
-                                  : f.value_bound > 0 ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
-                                                      : std::string("exact (f64)"));
+  fmt::print("values:    {}\n", f.values.empty() ? std::string("none")
+                                : f.value_bound > 0
+                                    ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
+                                    : std::string("exact (f64)"));
   fmt::print("range:     {} .. {}\n", f.value_min, f.value_max);
   if (!f.norm.empty()) fmt::print("norm:      {}\n", f.norm);
   if (!std::isnan(f.rms_error))
-    fmt::print("error:     RMS {:.6g}, max {:.6g}, PSNR {:.2f} dB (stored approximation against its source)\n",
-               f.rms_error, f.max_error, f.psnr_db);
+    fmt::print(
+        "error:     RMS {:.6g}, max {:.6g}, PSNR {:.2f} dB (stored approximation against its source)\n",
+        f.rms_error, f.max_error, f.psnr_db);
   const auto& t = f.transform;
   fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
   fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
   const auto& d = t.direction;
-  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7], d[8]);
+  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7],
+             d[8]);
   fmt::print("space:     {}\n", f.space.empty() ? "(not given)" : f.space);
   if (!f.metadata.empty()) fmt::print("metadata:  {}\n", f.metadata.dump());
   fmt::print("{:>7} {:>12} {:>12} {:>12}\n", "level", "vertices", "elements", "leaves");
@@ -136,15 +141,18 @@ void run_info(const InfoArgs& a) {
   }
   fmt::print("file:      {}\n", a.file);
   fmt::print("format:    {}\n", g.format);
-  fmt::print("dims:      {} x {} x {} ({}D, {} voxels)\n", g.dims[0], g.dims[1], g.dims[2], g.dim, g.voxel_count());
+  fmt::print("dims:      {} x {} x {} ({}D, {} voxels)\n", g.dims[0], g.dims[1], g.dims[2], g.dim,
+             g.voxel_count());
   fmt::print("type:      {} (stored as float32)\n", scalar_type_name(g.source_type));
   fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
   fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
   const auto& d = t.direction;
-  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7], d[8]);
+  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7],
+             d[8]);
   fmt::print("space:     {}\n", g.space.empty() ? "(not given)" : g.space);
   fmt::print("range:     {} .. {}\n", range[0], range[1]);
-  fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", memory, memory / 1048576.0, seconds);
+  fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", memory, memory / 1048576.0,
+             seconds);
   for (const auto& name : grids) fmt::print("grid:      {}\n", name);
   if (!g.notes.empty()) {
     std::string notes = g.notes;
@@ -160,8 +168,12 @@ void run_info(const InfoArgs& a) {
 
 void add_info_command(CLI::App& app) {
   auto args = std::make_shared<InfoArgs>();
-  CLI::App* cmd = app.add_subcommand("info", "print the format, grid, transform and value range of a volume file, or the levels, errors and sections of a hierarchy file");
-  cmd->add_option("FILE", args->file, "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png) or hierarchy (.mlfeh)")
+  CLI::App* cmd = app.add_subcommand("info",
+                                     "print the format, grid, transform and value range of a volume file, or "
+                                     "the levels, errors and sections of a hierarchy file");
+  cmd->add_option(
+         "FILE", args->file,
+         "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png) or hierarchy (.mlfeh)")
       ->required()
       ->check(CLI::ExistingFile);
   add_volume_read_options(cmd, args->read);

@@ -1,6 +1,8 @@
 // mlfe iso: iso-surface assets (glTF/Draco, PLY/OBJ/STL/OFF) from a hierarchy, or from a volume
 // as mlfe convert does.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/version.h>
 
 #include <algorithm>
 #include <array>
@@ -11,8 +13,6 @@
 
 #include "converters/commands.h"
 #include "converters/convert_command.h"
-#include <mlfe/core/error.h>
-#include <mlfe/version.h>
 
 namespace mlfe::cli {
 namespace {

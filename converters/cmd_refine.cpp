@@ -2,6 +2,11 @@
 // sphere's surface, without any volume data. For looking at (and benchmarking) the refinement
 // itself: mesh quality, level transitions, green closure.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/mesh_quality.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/vtu_writer.h>
 
 #include <algorithm>
 #include <array>
@@ -15,11 +20,6 @@
 #include <vector>
 
 #include "converters/commands.h"
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/mesh_quality.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/vtu_writer.h>
 
 namespace mlfe::cli {
 namespace {
@@ -50,9 +50,11 @@ std::vector<double> parse_list(const std::string& option, const std::string& tex
       throw Error(fmt::format("{}: '{}' is not a finite number", option, item));
     out.push_back(v);
   }
-  if (!text.empty() && text.back() == ',') throw Error(fmt::format("{}: trailing comma in '{}'", option, text));
+  if (!text.empty() && text.back() == ',')
+    throw Error(fmt::format("{}: trailing comma in '{}'", option, text));
   if (out.size() != n)
-    throw Error(fmt::format("{}: expected {} comma-separated numbers, got {} ('{}')", option, n, out.size(), text));
+    throw Error(
+        fmt::format("{}: expected {} comma-separated numbers, got {} ('{}')", option, n, out.size(), text));
   return out;
 }
 
@@ -206,8 +208,8 @@ void run(const RefineArgs& a, const Goal& goal, const std::vector<double>& box, 
       throw;
     }
   }
-  fmt::print(stderr, "refine: {}D, {} levels, {} vertices, {} leaf elements, min {} {:.2f} deg\n", D, h.max_level(),
-             h.vertex_count(), leaves.size(), D == 2 ? "angle" : "dihedral", min_angle);
+  fmt::print(stderr, "refine: {}D, {} levels, {} vertices, {} leaf elements, min {} {:.2f} deg\n", D,
+             h.max_level(), h.vertex_count(), leaves.size(), D == 2 ? "angle" : "dihedral", min_angle);
 }
 
 void run_refine(const RefineArgs& a) {
@@ -255,7 +257,8 @@ void run_refine(const RefineArgs& a) {
 void add_refine_command(CLI::App& app) {
   auto args = std::make_shared<RefineArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "refine", "red-green refine a box toward a point, plane or sphere surface and write the leaf mesh (.vtu)");
+      "refine",
+      "red-green refine a box toward a point, plane or sphere surface and write the leaf mesh (.vtu)");
   cmd->add_option("--dim", args->dim, "2 (triangles) or 3 (tetrahedra)")->required();
   cmd->add_option("--box", args->box, "x0,y0[,z0],x1,y1[,z1]: lower and upper corner")->required();
   cmd->add_option("--toward", args->toward, "point | plane | sphere")->required();

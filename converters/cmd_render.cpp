@@ -1,6 +1,12 @@
 // mlfe render: ray-cast EXR images of a hierarchy (.mlfeh) or a volume (built first with the
 // same defaults as mlfe build), face to face through the adaptive tetrahedral mesh.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/volume_render.h>
+#include <mlfe/formats/exr_writer.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/transfer_function_io.h>
+#include <mlfe/version.h>
 
 #include <chrono>
 #include <cmath>
@@ -10,12 +16,6 @@
 #include "converters/commands.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
-#include <mlfe/core/error.h>
-#include <mlfe/core/volume_render.h>
-#include <mlfe/formats/exr_writer.h>
-#include <mlfe/formats/file_names.h>
-#include <mlfe/formats/transfer_function_io.h>
-#include <mlfe/version.h>
 
 namespace mlfe::cli {
 

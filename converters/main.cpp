@@ -1,6 +1,8 @@
 // mlfe: multilevel finite elements for volume data (Grosso, Lürig & Ertl, IEEE Vis 1997).
 // Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file).
 // `compare` follows diff(1) instead: 0 equal, 1 different, 2 bad input or usage error.
+#include <mlfe/core/error.h>
+#include <mlfe/version.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -10,8 +12,6 @@
 #include <new>
 
 #include "converters/commands.h"
-#include <mlfe/core/error.h>
-#include <mlfe/version.h>
 
 namespace mlfe::cli {
 int& thread_option() {

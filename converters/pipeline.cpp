@@ -1,16 +1,4 @@
-#include <mlfe/pipeline.h>
-
 #include <fmt/format.h>
-#include <sys/resource.h>
-#include <tbb/parallel_for.h>
-#include <unistd.h>
-
-#include <algorithm>
-#include <chrono>
-#include <cmath>
-#include <filesystem>
-#include <optional>
-
 #include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
 #include <mlfe/core/iso_surface.h>
@@ -21,7 +9,17 @@
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
 #include <mlfe/formats/openmesh_io.h>
+#include <mlfe/pipeline.h>
 #include <mlfe/version.h>
+#include <sys/resource.h>
+#include <tbb/parallel_for.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <optional>
 
 namespace mlfe {
 

@@ -1,14 +1,13 @@
 #include "converters/pipeline_options.h"
 
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
 
 #include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <memory>
 #include <sstream>
-
-#include <mlfe/core/error.h>
 
 namespace mlfe::cli {
 

@@ -2,11 +2,11 @@
 // that fill text parameters, parsed into the library's typed options, and the progress the
 // commands print on stderr.
 #pragma once
+#include <mlfe/pipeline.h>
+
 #include <CLI/CLI.hpp>
 #include <string>
 #include <vector>
-
-#include <mlfe/pipeline.h>
 
 namespace mlfe::cli {
 

@@ -1,9 +1,9 @@
 // Shared command-line options for reading volumes, so every subcommand that takes an input
 // volume spells them the same way.
 #pragma once
-#include <CLI/CLI.hpp>
-
 #include <mlfe/formats/volume_reader.h>
+
+#include <CLI/CLI.hpp>
 
 namespace mlfe::cli {
 

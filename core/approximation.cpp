@@ -1,7 +1,14 @@
 // Adaptive multilevel FE approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see
 // approximation.h. Solvers: CG with the BPX preconditioner (Bramble, Pasciak & Xu 1990).
 #include <mlfe/core/approximation.h>
-
+#include <mlfe/core/bpx.h>
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/fe_assembly.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/marking.h>
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/surface_estimator.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -13,15 +20,6 @@
 #include <cstdlib>
 #include <memory>
 #include <numeric>
-
-#include <mlfe/core/bpx.h>
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/hierarchical_basis.h>
-#include <mlfe/core/marking.h>
-#include <mlfe/core/p1_element.h>
-#include <mlfe/core/surface_estimator.h>
 
 namespace mlfe {
 

@@ -1,13 +1,11 @@
 // BPX preconditioner (Bramble, Pasciak & Xu 1990); see bpx.h.
 #include <mlfe/core/bpx.h>
-
+#include <mlfe/core/check.h>
+#include <mlfe/core/p1_element.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

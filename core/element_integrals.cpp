@@ -1,12 +1,11 @@
+#include <mlfe/core/check.h>
 #include <mlfe/core/element_integrals.h>
+#include <mlfe/core/p1_element.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <vector>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

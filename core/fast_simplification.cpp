@@ -8,15 +8,14 @@
 // seams do not stay at full resolution. The slab count depends on the triangle count alone,
 // never on the thread count, so the output is the same with any number of threads.
 #include <meshoptimizer.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/surface_simplification.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/error.h>
-#include <mlfe/core/surface_simplification.h>
 
 namespace mlfe {
 namespace {

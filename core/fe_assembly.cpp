@@ -1,6 +1,7 @@
 // Assembly and error estimation for the L2 / H1 best approximation (Grosso, Lürig & Ertl 1997).
+#include <mlfe/core/check.h>
 #include <mlfe/core/fe_assembly.h>
-
+#include <mlfe/core/p1_element.h>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -10,9 +11,6 @@
 #include <cstdint>
 #include <limits>
 #include <utility>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

@@ -1,10 +1,9 @@
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
 
 #include <algorithm>
 #include <cmath>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 

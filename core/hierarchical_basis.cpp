@@ -1,8 +1,7 @@
 // Hierarchical basis (Yserentant 1986); see hierarchical_basis.h.
-#include <mlfe/core/hierarchical_basis.h>
-
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
+#include <mlfe/core/hierarchical_basis.h>
 
 namespace mlfe {
 
@@ -53,8 +52,10 @@ void prolongate_to_new_vertices(const Hierarchy<D>& h, std::vector<double>& valu
 
 template std::vector<double> hierarchical_decompose<2>(const Hierarchy<2>&, const std::vector<double>&);
 template std::vector<double> hierarchical_decompose<3>(const Hierarchy<3>&, const std::vector<double>&);
-template std::vector<double> hierarchical_reconstruct<2>(const Hierarchy<2>&, const std::vector<double>&, int);
-template std::vector<double> hierarchical_reconstruct<3>(const Hierarchy<3>&, const std::vector<double>&, int);
+template std::vector<double> hierarchical_reconstruct<2>(const Hierarchy<2>&, const std::vector<double>&,
+                                                         int);
+template std::vector<double> hierarchical_reconstruct<3>(const Hierarchy<3>&, const std::vector<double>&,
+                                                         int);
 template void prolongate_to_new_vertices<2>(const Hierarchy<2>&, std::vector<double>&);
 template void prolongate_to_new_vertices<3>(const Hierarchy<3>&, std::vector<double>&);
 

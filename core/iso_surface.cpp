@@ -1,6 +1,10 @@
 // Marching tetrahedra on the multilevel hierarchy (Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 5).
+#include <mlfe/core/check.h>
+#include <mlfe/core/edge_map.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchical_basis.h>
 #include <mlfe/core/iso_surface.h>
-
+#include <mlfe/core/p1_element.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -8,12 +12,6 @@
 #include <array>
 #include <cmath>
 #include <unordered_map>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/edge_map.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchical_basis.h>
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

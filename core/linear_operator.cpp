@@ -1,13 +1,11 @@
+#include <mlfe/core/check.h>
 #include <mlfe/core/linear_operator.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/partitioner.h>
 
 #include <cmath>
-
-#include <mlfe/core/check.h>
 
 namespace mlfe {
 
@@ -39,9 +37,7 @@ JacobiPreconditioner::JacobiPreconditioner(const SparseMatrix& a) : inv_diag_(a.
   }
 }
 
-void JacobiPreconditioner::apply(const Vector& x, Vector& y) const {
-  y = inv_diag_.cwiseProduct(x);
-}
+void JacobiPreconditioner::apply(const Vector& x, Vector& y) const { y = inv_diag_.cwiseProduct(x); }
 
 double deterministic_dot(const Vector& x, const Vector& y) {
   MLFE_CHECK(x.size() == y.size());
@@ -54,8 +50,8 @@ double deterministic_dot(const Vector& x, const Vector& y) {
       [](double a, double b) { return a + b; }, tbb::simple_partitioner());
 }
 
-CgResult conjugate_gradient(const LinearOperator& a, const LinearOperator& m, const Vector& b,
-                            Vector& x, double rtol, int max_iterations) {
+CgResult conjugate_gradient(const LinearOperator& a, const LinearOperator& m, const Vector& b, Vector& x,
+                            double rtol, int max_iterations) {
   CgResult res;
   const Eigen::Index n = b.size();
   MLFE_CHECK(a.size() == n && m.size() == n);

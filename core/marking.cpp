@@ -1,14 +1,12 @@
 // Marking for the adaptive approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see marking.h.
 #include <mlfe/core/marking.h>
-
+#include <mlfe/core/p1_element.h>
+#include <mlfe/core/surface_estimator.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
-
-#include <mlfe/core/p1_element.h>
-#include <mlfe/core/surface_estimator.h>
 
 namespace mlfe {
 namespace {

@@ -1,5 +1,6 @@
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/mesh_distance.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
@@ -10,9 +11,6 @@
 #include <numeric>
 #include <optional>
 #include <random>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

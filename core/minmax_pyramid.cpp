@@ -1,12 +1,10 @@
+#include <mlfe/core/check.h>
 #include <mlfe/core/minmax_pyramid.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
-
-#include <mlfe/core/check.h>
 
 namespace mlfe {
 

@@ -1,22 +1,29 @@
+#include <mlfe/core/check.h>
 #include <mlfe/core/scalar_grid.h>
 
 #include <algorithm>
 #include <limits>
 
-#include <mlfe/core/check.h>
-
 namespace mlfe {
 
 const char* scalar_type_name(ScalarType t) {
   switch (t) {
-    case ScalarType::U8: return "uint8";
-    case ScalarType::I8: return "int8";
-    case ScalarType::U16: return "uint16";
-    case ScalarType::I16: return "int16";
-    case ScalarType::U32: return "uint32";
-    case ScalarType::I32: return "int32";
-    case ScalarType::F32: return "float32";
-    case ScalarType::F64: return "float64";
+    case ScalarType::U8:
+      return "uint8";
+    case ScalarType::I8:
+      return "int8";
+    case ScalarType::U16:
+      return "uint16";
+    case ScalarType::I16:
+      return "int16";
+    case ScalarType::U32:
+      return "uint32";
+    case ScalarType::I32:
+      return "int32";
+    case ScalarType::F32:
+      return "float32";
+    case ScalarType::F64:
+      return "float64";
   }
   return "unknown";
 }
@@ -24,13 +31,17 @@ const char* scalar_type_name(ScalarType t) {
 int scalar_type_size(ScalarType t) {
   switch (t) {
     case ScalarType::U8:
-    case ScalarType::I8: return 1;
+    case ScalarType::I8:
+      return 1;
     case ScalarType::U16:
-    case ScalarType::I16: return 2;
+    case ScalarType::I16:
+      return 2;
     case ScalarType::U32:
     case ScalarType::I32:
-    case ScalarType::F32: return 4;
-    case ScalarType::F64: return 8;
+    case ScalarType::F32:
+      return 4;
+    case ScalarType::F64:
+      return 8;
   }
   return 0;
 }

@@ -1,12 +1,11 @@
 // Surface gap of a linear element against the data; see surface_estimator.h.
+#include <mlfe/core/check.h>
+#include <mlfe/core/p1_element.h>
 #include <mlfe/core/surface_estimator.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 

@@ -39,8 +39,9 @@
 //        \   /                 \   |
 //          b                     b
 // (v0's other neighbours keep their faces, now fanned around v1.)
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/surface_simplification.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
@@ -55,9 +56,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

@@ -1,14 +1,13 @@
 // Emission–absorption integration over linear segments: Röttger, Kraus & Ertl (IEEE Vis 2000)
 // pre-integration in the partial form of Moreland & Angel (IEEE VolVis 2004), with the mean
 // transmittance ψ in closed form or from Moreland & Angel's 2D table (see transfer_function.h).
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/transfer_function.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 

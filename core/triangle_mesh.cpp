@@ -1,12 +1,11 @@
 // Area-weighted vertex normals of an indexed triangle mesh.
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/triangle_mesh.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <vector>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 

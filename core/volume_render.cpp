@@ -2,8 +2,11 @@
 // 1997, Sec. 6) with exact pre-integrated segments (Röttger, Kraus & Ertl 2000; Moreland &
 // Angel 2004) and empty-space skipping through the hierarchy's per-element ranges. See
 // volume_render.h for the traversal steps.
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
 #include <mlfe/core/volume_render.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
@@ -15,11 +18,6 @@
 #include <limits>
 #include <memory>
 #include <optional>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchical_basis.h>
 
 namespace mlfe {
 
@@ -332,8 +330,8 @@ std::array<double, 16> Camera::world_to_ndc() const {
 Camera orbit_camera(const std::array<double, 3>& center, double radius, double azimuth_deg,
                     double elevation_deg, bool perspective, int width, int height) {
   if (!(radius > 0) || width <= 0 || height <= 0)
-    throw Error("camera: needs a positive distance and image size (got radius " + std::to_string(radius) + ", " +
-                std::to_string(width) + "x" + std::to_string(height) + ")");
+    throw Error("camera: needs a positive distance and image size (got radius " + std::to_string(radius) +
+                ", " + std::to_string(width) + "x" + std::to_string(height) + ")");
   Camera c;
   c.perspective = perspective;
   c.width = width;
@@ -386,7 +384,8 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
   // Neighbour records pack 4 × index + face into 32 bits.
   if (elems_.size() >= (std::size_t(1) << 30))
-    throw Error("render: " + std::to_string(elems_.size()) + " tetrahedra exceed the renderer's limit of 2^30");
+    throw Error("render: " + std::to_string(elems_.size()) +
+                " tetrahedra exceed the renderer's limit of 2^30");
   morton_order(h, elems_);
   const auto nb = face_adjacency(h, elems_);
   records_.resize(elems_.size());

@@ -1,12 +1,10 @@
+#include <mlfe/core/error.h>
 #include <mlfe/formats/atomic_file.h>
-
 #include <unistd.h>
 
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 
@@ -16,8 +14,7 @@ std::string temporary_path_for(const std::string& path) {
   return (p.parent_path() / name).string();
 }
 
-void write_path_atomically(const std::string& path,
-                           const std::function<bool(const std::string&)>& write) {
+void write_path_atomically(const std::string& path, const std::function<bool(const std::string&)>& write) {
   const std::string tmp = temporary_path_for(path);
   bool ok = false;
   try {
@@ -38,8 +35,7 @@ void write_path_atomically(const std::string& path,
   }
 }
 
-void write_file_atomically(const std::string& path,
-                           const std::function<void(std::ostream&)>& write) {
+void write_file_atomically(const std::string& path, const std::function<void(std::ostream&)>& write) {
   write_path_atomically(path, [&](const std::string& tmp) {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path + ": cannot create file");

@@ -1,6 +1,14 @@
-#include <mlfe/formats/compare.h>
-
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/mesh_distance.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_reader.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 
 #include <algorithm>
 #include <cctype>
@@ -8,16 +16,6 @@
 #include <cstring>
 #include <fstream>
 #include <map>
-
-#include <mlfe/core/error.h>
-#include <mlfe/core/mesh_distance.h>
-#include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/gltf_reader.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/image_reader.h>
-#include <mlfe/formats/openmesh_io.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe {
 namespace {

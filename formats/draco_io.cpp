@@ -1,9 +1,10 @@
-#include <mlfe/formats/draco_io.h>
-
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
 #include <draco/compression/expert_encode.h>
 #include <draco/mesh/mesh.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/draco_io.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,9 +15,6 @@
 #include <memory>
 #include <new>
 #include <unordered_map>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 namespace {
@@ -208,17 +206,21 @@ DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions
   draco::Mesh dm;
   dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
   draco::GeometryAttribute pos_att;
-  pos_att.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+  pos_att.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3,
+               0);
   const int pos_id = dm.AddAttribute(pos_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
   for (std::size_t i = 0; i < n; ++i)
-    dm.attribute(pos_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)), input.positions[i].data());
+    dm.attribute(pos_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)),
+                                            input.positions[i].data());
   int nrm_id = -1;
   if (!input.normals.empty()) {
     draco::GeometryAttribute nrm_att;
-    nrm_att.Init(draco::GeometryAttribute::NORMAL, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+    nrm_att.Init(draco::GeometryAttribute::NORMAL, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3,
+                 0);
     nrm_id = dm.AddAttribute(nrm_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
     for (std::size_t i = 0; i < n; ++i)
-      dm.attribute(nrm_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)), input.normals[i].data());
+      dm.attribute(nrm_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)),
+                                              input.normals[i].data());
   }
   for (const auto& t : input.triangles)
     dm.AddFace({draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
@@ -280,8 +282,14 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
     // Only numeric types: Draco's converter reads DT_BOOL bytes as C++ bool, which is undefined
     // for bytes other than 0/1 (found by fuzzing).
     switch (att->data_type()) {
-      case draco::DT_INT8: case draco::DT_UINT8: case draco::DT_INT16: case draco::DT_UINT16:
-      case draco::DT_INT32: case draco::DT_UINT32: case draco::DT_FLOAT32: case draco::DT_FLOAT64:
+      case draco::DT_INT8:
+      case draco::DT_UINT8:
+      case draco::DT_INT16:
+      case draco::DT_UINT16:
+      case draco::DT_INT32:
+      case draco::DT_UINT32:
+      case draco::DT_FLOAT32:
+      case draco::DT_FLOAT64:
         break;
       default:
         throw Error(what + ": corrupt Draco data (" + name + " attribute has a non-numeric type)");
@@ -322,7 +330,8 @@ void write_draco_file(const std::string& path, const TriangleMesh& mesh, const D
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
-  write_file_atomically(path, [&](std::ostream& out) { out.write(bytes.data(), std::streamsize(bytes.size())); });
+  write_file_atomically(path,
+                        [&](std::ostream& out) { out.write(bytes.data(), std::streamsize(bytes.size())); });
 }
 
 TriangleMesh read_draco_file(const std::string& path) {

@@ -1,5 +1,3 @@
-#include <mlfe/formats/exr_writer.h>
-
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
@@ -7,14 +5,14 @@
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
 #include <half.h>
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/exr_writer.h>
 #include <png.h>
 
 #include <algorithm>
 #include <cmath>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 

@@ -5,6 +5,8 @@
 // on damaged .glb files (GltfReader.TruncatedAndCorruptedFilesThrowError). The JSON is parsed
 // with nlohmann::json and every index and byte range is checked here instead.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -13,9 +15,6 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/draco_io.h>
 
 namespace mlfe {
 namespace {

@@ -4,9 +4,12 @@
 // through TinyGLTF::TinyGLTF), so this file only includes the declarations. Defining
 // TINYGLTF_IMPLEMENTATION here as well would put a second, differently configured copy of every
 // tinygltf symbol into the process (an ODR violation resolved by symbol interposition).
-#include <tiny_gltf.h>
-
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <tiny_gltf.h>
 
 #include <algorithm>
 #include <cctype>
@@ -15,11 +18,6 @@
 #include <cstring>
 #include <limits>
 #include <optional>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/file_names.h>
-#include <mlfe/formats/draco_io.h>
 
 namespace mlfe {
 namespace {
@@ -70,8 +68,8 @@ struct Level {
 Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std::string& path) {
   const std::size_t n = in.positions.size();
   if (!in.normals.empty() && in.normals.size() != n)
-    throw Error(path + ": mesh has " + std::to_string(in.normals.size()) + " normals for " + std::to_string(n) +
-                " positions");
+    throw Error(path + ": mesh has " + std::to_string(in.normals.size()) + " normals for " +
+                std::to_string(n) + " positions");
   if (n > std::numeric_limits<std::uint32_t>::max()) throw Error(path + ": mesh too large");
   Level level;
   TriangleMesh& out = level.mesh;
@@ -102,7 +100,8 @@ Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std:
     std::array<double, 3> v{0.0, 0.0, 0.0};
     if (!in.normals.empty()) {
       const auto& q = in.normals[i];
-      for (int r = 0; r < 3; ++r) v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
+      for (int r = 0; r < 3; ++r)
+        v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
     }
     const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     if (len > 1e-12 && std::isfinite(len)) {
@@ -136,8 +135,8 @@ int add_buffer_view(tinygltf::Model& model, const void* data, std::size_t size, 
   return int(model.bufferViews.size() - 1);
 }
 
-int add_accessor(tinygltf::Model& model, int view, int component, int type, std::size_t count, bool normalized,
-                 std::vector<double> min = {}, std::vector<double> max = {}) {
+int add_accessor(tinygltf::Model& model, int view, int component, int type, std::size_t count,
+                 bool normalized, std::vector<double> min = {}, std::vector<double> max = {}) {
   tinygltf::Accessor a;
   a.bufferView = view;
   a.byteOffset = 0;
@@ -163,7 +162,8 @@ void bounds(const std::vector<Vec3>& ps, std::vector<double>& lo, std::vector<do
 
 int index_component_for(std::size_t vertex_count) {
   // 65535 is the primitive-restart value for 16-bit indices, so it must not occur as an index.
-  return vertex_count <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+  return vertex_count <= 65535 ? TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT
+                               : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
 }
 
 int add_indices(tinygltf::Model& model, const TriangleMesh& mesh, bool with_view) {
@@ -219,8 +219,8 @@ struct Writer {
       bounds(dec.positions, lo, hi);
       prim.attributes["POSITION"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
                                                  dec.positions.size(), false, lo, hi);
-      prim.attributes["NORMAL"] =
-          add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, dec.positions.size(), false);
+      prim.attributes["NORMAL"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
+                                               dec.positions.size(), false);
       prim.indices = add_indices(model, dec, false);
       tinygltf::Value::Object attributes;
       attributes["POSITION"] = tinygltf::Value(enc.position_unique_id);
@@ -238,20 +238,23 @@ struct Writer {
       for (std::size_t i = 0; i < mesh.positions.size(); ++i)
         for (int k = 0; k < 3; ++k) {
           const double center = double(box.min[k]) + half;
-          const double q = std::clamp(std::round((double(mesh.positions[i][k]) - center) / half * 32767.0), -32767.0,
-                                      32767.0);
+          const double q = std::clamp(std::round((double(mesh.positions[i][k]) - center) / half * 32767.0),
+                                      -32767.0, 32767.0);
           pos[4 * i + k] = std::int16_t(q);
           lo[k] = std::min(lo[k], q);
           hi[k] = std::max(hi[k], q);
-          nrm[4 * i + k] = std::int16_t(std::round(std::clamp(double(mesh.normals[i][k]), -1.0, 1.0) * 32767.0));
+          nrm[4 * i + k] =
+              std::int16_t(std::round(std::clamp(double(mesh.normals[i][k]), -1.0, 1.0) * 32767.0));
         }
       // Vertex attribute strides must be multiples of 4: pad each SHORT VEC3 to 8 bytes.
-      const int pos_view = add_buffer_view(model, pos.data(), pos.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
-      const int nrm_view = add_buffer_view(model, nrm.data(), nrm.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
-      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_TYPE_VEC3,
-                                                 mesh.positions.size(), true, lo, hi);
-      prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_SHORT, TINYGLTF_TYPE_VEC3,
-                                               mesh.positions.size(), true);
+      const int pos_view =
+          add_buffer_view(model, pos.data(), pos.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
+      const int nrm_view =
+          add_buffer_view(model, nrm.data(), nrm.size() * 2, TINYGLTF_TARGET_ARRAY_BUFFER, 8);
+      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_SHORT,
+                                                 TINYGLTF_TYPE_VEC3, mesh.positions.size(), true, lo, hi);
+      prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_SHORT,
+                                               TINYGLTF_TYPE_VEC3, mesh.positions.size(), true);
       prim.indices = add_indices(model, mesh, true);
     } else {
       std::vector<double> lo, hi;
@@ -260,10 +263,10 @@ struct Writer {
                                            TINYGLTF_TARGET_ARRAY_BUFFER);
       const int nrm_view =
           add_buffer_view(model, mesh.normals.data(), mesh.normals.size() * 12, TINYGLTF_TARGET_ARRAY_BUFFER);
-      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
-                                                 mesh.positions.size(), false, lo, hi);
-      prim.attributes["NORMAL"] =
-          add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, mesh.normals.size(), false);
+      prim.attributes["POSITION"] = add_accessor(model, pos_view, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                                 TINYGLTF_TYPE_VEC3, mesh.positions.size(), false, lo, hi);
+      prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                               TINYGLTF_TYPE_VEC3, mesh.normals.size(), false);
       prim.indices = add_indices(model, mesh, true);
     }
     tinygltf::Mesh m;
@@ -288,7 +291,8 @@ std::array<double, 9> physical_to_gltf_matrix(const std::string& space) {
   throw Error("glTF export: unknown anatomical space '" + space + "' (expected RAS, LPS or empty)");
 }
 
-void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces, const GltfOptions& options) {
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                const GltfOptions& options) {
   const std::string ext = lower_extension(path);
   if (ext != ".glb" && ext != ".gltf") throw Error(path + ": glTF output needs a .glb or .gltf extension");
   const bool binary = ext == ".glb";
@@ -298,8 +302,9 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
-  const Encoding encoding =
-      options.draco ? Encoding::kDraco : options.quantize ? Encoding::kQuantized : Encoding::kFloat;
+  const Encoding encoding = options.draco      ? Encoding::kDraco
+                            : options.quantize ? Encoding::kQuantized
+                                               : Encoding::kFloat;
   if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
     throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
 
@@ -357,7 +362,9 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
         {"physical_to_gltf", std::vector<double>(m.begin(), m.end())},
         {"input_space", options.space},
         {"assumed_space", options.space.empty() ? "RAS" : options.space},
-        {"encoding", encoding == Encoding::kDraco ? "draco" : encoding == Encoding::kQuantized ? "quantized" : "float"},
+        {"encoding", encoding == Encoding::kDraco       ? "draco"
+                     : encoding == Encoding::kQuantized ? "quantized"
+                                                        : "float"},
         {"tolerance_mm", options.tolerance_mm},
     };
     model.asset.extras = to_value(extras);
@@ -372,7 +379,8 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
     tinygltf::Node root;
     root.name = "mlfe dequantize";
     const double half = 0.5 * double(w.box.range);
-    root.translation = {double(w.box.min[0]) + half, double(w.box.min[1]) + half, double(w.box.min[2]) + half};
+    root.translation = {double(w.box.min[0]) + half, double(w.box.min[1]) + half,
+                        double(w.box.min[2]) + half};
     root.scale = {half, half, half};
     model.nodes.push_back(root);
     parent = 0;
@@ -387,7 +395,8 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
       if (!(x >= 0.0f && x <= 1.0f)) throw Error(path + ": surface color components must be in [0, 1]");
     // Via the shortest decimal form, so 0.9f is written as 0.9 rather than 0.8999999761581421.
     auto shortest = [](float x) { return std::stod(fmt::format("{}", x)); };
-    mat.pbrMetallicRoughness.baseColorFactor = {shortest(c[0]), shortest(c[1]), shortest(c[2]), shortest(c[3])};
+    mat.pbrMetallicRoughness.baseColorFactor = {shortest(c[0]), shortest(c[1]), shortest(c[2]),
+                                                shortest(c[3])};
     mat.pbrMetallicRoughness.metallicFactor = 0.0;  // tissue is a dielectric
     mat.pbrMetallicRoughness.roughnessFactor = 0.6;
     if (c[3] < 1.0f) {
@@ -405,7 +414,8 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
       tinygltf::Value::Object extras;
       extras["iso_value"] = tinygltf::Value(surfaces[s].iso_value);
       extras["lod"] = tinygltf::Value(level.lod);
-      extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
+      extras["triangles"] =
+          tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
       node.extras = tinygltf::Value(std::move(extras));
       if (!level.mesh.triangles.empty()) node.mesh = w.add_mesh(level, material);
       model.nodes.push_back(node);
@@ -431,8 +441,10 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
       scene.nodes.push_back(main_node);
   }
   // Only declared when a mesh uses them: a required extension that nothing uses is an error.
-  if (!model.meshes.empty() && encoding == Encoding::kDraco) add_extension(model, "KHR_draco_mesh_compression", true);
-  if (!model.meshes.empty() && encoding == Encoding::kQuantized) add_extension(model, "KHR_mesh_quantization", true);
+  if (!model.meshes.empty() && encoding == Encoding::kDraco)
+    add_extension(model, "KHR_draco_mesh_compression", true);
+  if (!model.meshes.empty() && encoding == Encoding::kQuantized)
+    add_extension(model, "KHR_mesh_quantization", true);
   if (any_lod) add_extension(model, "MSFT_lod", false);
   model.scenes.push_back(scene);
   model.defaultScene = 0;

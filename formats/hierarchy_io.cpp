@@ -1,6 +1,8 @@
 // .mlfeh reader and writer; the format is specified in hierarchy_io.h.
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/hierarchy_io.h>
-
+#include <mlfe/formats/hierarchy_levels.h>
 #include <zlib.h>
 #include <zstd.h>
 
@@ -9,10 +11,6 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/hierarchy_levels.h>
 
 namespace mlfe {
 
@@ -139,7 +137,6 @@ Hierarchy<D> read_arrays(const std::string& path, Cursor& c, std::size_t nv, std
   return Hierarchy<D>::from_arrays(std::move(a), path + ": invalid hierarchy");
 }
 
-
 // ---- version 2 (docs/mlfeh-v2.md) ----
 
 constexpr std::uint32_t tag_of(const char (&s)[5]) {
@@ -166,8 +163,8 @@ void put_varint(Bytes& out, std::int64_t q) {
 // Appends one section (header + payload) to `file`.
 // The HEAD section's CRC starts from the preamble's (crc_seed), so the version and dimension
 // are covered too.
-void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const Bytes& raw, bool compress, int level,
-                 std::uint32_t crc_seed = 0) {
+void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const Bytes& raw, bool compress,
+                 int level, std::uint32_t crc_seed = 0) {
   Bytes packed;
   if (compress) {
     packed.resize(ZSTD_compressBound(raw.size()));
@@ -181,7 +178,8 @@ void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const 
   put(file, compress ? kCodecZstd : kCodecRaw);
   put(file, static_cast<std::uint64_t>(payload.size()));
   put(file, static_cast<std::uint64_t>(raw.size()));
-  const std::uint32_t crc = crc32_of(payload.data(), payload.size(), crc32_of(file.data() + at, 24, crc_seed));
+  const std::uint32_t crc =
+      crc32_of(payload.data(), payload.size(), crc32_of(file.data() + at, 24, crc_seed));
   put(file, crc);
   put_bytes(file, payload.data(), payload.size());
 }
@@ -192,8 +190,9 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw Error(path + ": max error must be finite and >= 0");
   if (h.max_level() > kMaxLevels) throw Error(path + ": more than 60 levels");
-  const std::uint32_t coding =
-      values.empty() ? kCodingNone : options.max_error > 0 ? kCodingQuantized : kCodingExact;
+  const std::uint32_t coding = values.empty()          ? kCodingNone
+                               : options.max_error > 0 ? kCodingQuantized
+                                                       : kCodingExact;
   const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
   if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
 
@@ -280,16 +279,17 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
 template <int D>
 void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
                      const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
-  static_assert(sizeof(typename Hierarchy<D>::Point) == 8 * D && sizeof(typename Hierarchy<D>::Cell) == 4 * (D + 1) &&
-                    sizeof(ElemId) == 4 && sizeof(ElemKind) == 1,
+  static_assert(sizeof(typename Hierarchy<D>::Point) == 8 * D &&
+                    sizeof(typename Hierarchy<D>::Cell) == 4 * (D + 1) && sizeof(ElemId) == 4 &&
+                    sizeof(ElemKind) == 1,
                 "arrays are copied as raw bytes");
   check_info(path, info);
   if (options.version != 1 && options.version != 2)
     throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
   if (options.version == 2) {
     if (!values.empty() && values.size() != h.vertex_count())
-      throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(h.vertex_count()) +
-                  " vertices");
+      throw Error(path + ": " + std::to_string(values.size()) + " values for " +
+                  std::to_string(h.vertex_count()) + " vertices");
     for (double v : values)
       if (!std::isfinite(v)) throw Error(path + ": values must be finite");
     write_v2(path, h, values, info, options);
@@ -297,7 +297,8 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
   }
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
   if (!values.empty() && values.size() != nv)
-    throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(nv) + " vertices");
+    throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(nv) +
+                " vertices");
   for (double v : values)
     if (std::isnan(v)) throw Error(path + ": values contain NaN");
   const bool has_values = !values.empty();
@@ -318,7 +319,8 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
   Bytes packed;
   if (options.compress) {
     packed.resize(ZSTD_compressBound(raw.size()));
-    const std::size_t n = ZSTD_compress(packed.data(), packed.size(), raw.data(), raw.size(), options.zstd_level);
+    const std::size_t n =
+        ZSTD_compress(packed.data(), packed.size(), raw.data(), raw.size(), options.zstd_level);
     if (ZSTD_isError(n)) throw Error(path + ": zstd compression failed (" + ZSTD_getErrorName(n) + ")");
     packed.resize(n);
     Bytes().swap(raw);
@@ -339,7 +341,8 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
   for (double x : info.transform.direction) put(head, x);
   put(head, info.value_min);
   put(head, info.value_max);
-  put(head, static_cast<std::uint32_t>((options.compress ? kFlagZstd : 0u) | (has_values ? kFlagValues : 0u)));
+  put(head,
+      static_cast<std::uint32_t>((options.compress ? kFlagZstd : 0u) | (has_values ? kFlagValues : 0u)));
   put(head, static_cast<std::uint32_t>(info.space.size()));
   put(head, static_cast<std::uint64_t>(meta.size()));
   put(head, static_cast<std::uint64_t>(section.size()));
@@ -356,7 +359,8 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
   });
 }
 
-void write_hierarchy(const std::string& path, const HierarchyFile& file, const HierarchyWriteOptions& options) {
+void write_hierarchy(const std::string& path, const HierarchyFile& file,
+                     const HierarchyWriteOptions& options) {
   if (file.dim == 2 && std::holds_alternative<Hierarchy<2>>(file.hierarchy))
     write_hierarchy<2>(path, std::get<Hierarchy<2>>(file.hierarchy), file.values, file, options);
   else if (file.dim == 3 && std::holds_alternative<Hierarchy<3>>(file.hierarchy))
@@ -385,8 +389,8 @@ HierarchyFile read_v1(const std::string& path) {
   h.get<std::uint64_t>("magic");
   const auto version = h.get<std::uint32_t>("header");
   if (version != kVersion)
-    throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) + " (this mlfe reads " +
-                std::to_string(kVersion) + ")");
+    throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) +
+                " (this mlfe reads " + std::to_string(kVersion) + ")");
   if (head_n < kHeaderSize) throw Error(path + ": truncated header");
 
   HierarchyFile f;
@@ -405,7 +409,8 @@ HierarchyFile read_v1(const std::string& path) {
   const auto rs = h.get<std::uint64_t>("header");
 
   if (dim != 2 && dim != 3) throw Error(path + ": dimension " + std::to_string(dim) + " is not 2 or 3");
-  if (nv >= VertexId::kInvalidValue) throw Error(path + ": vertex count " + std::to_string(nv) + " too large");
+  if (nv >= VertexId::kInvalidValue)
+    throw Error(path + ": vertex count " + std::to_string(nv) + " too large");
   if (ne == 0 || ne >= ElemId::kInvalidValue)
     throw Error(path + ": element count " + std::to_string(ne) + " out of range");
   if (flags & ~(kFlagZstd | kFlagValues)) throw Error(path + ": unknown flags " + std::to_string(flags));
@@ -416,14 +421,16 @@ HierarchyFile read_v1(const std::string& path) {
   if (rs != expect_raw)
     throw Error(path + ": array section size " + std::to_string(rs) + " does not match the counts (" +
                 std::to_string(expect_raw) + ")");
-  if (!zstd && ss != rs) throw Error(path + ": stored size differs from the array size of an uncompressed file");
+  if (!zstd && ss != rs)
+    throw Error(path + ": stored size differs from the array size of an uncompressed file");
   // ls, lm are bounded above; ss is compared against the real file size before it is used, and
   // written so that the sum cannot overflow.
   const std::uint64_t fixed = kHeaderSize + ls + lm + 4;
   if (file_size < fixed || ss != file_size - fixed)
-    throw Error(path + ": file size " + std::to_string(file_size) + " does not match the header (expected " +
-                (ss <= std::numeric_limits<std::uint64_t>::max() - fixed ? std::to_string(fixed + ss) : "overflow") +
-                "; truncated?)");
+    throw Error(
+        path + ": file size " + std::to_string(file_size) + " does not match the header (expected " +
+        (ss <= std::numeric_limits<std::uint64_t>::max() - fixed ? std::to_string(fixed + ss) : "overflow") +
+        "; truncated?)");
   if (zstd && rs > kMaxRatio * ss + kRatioSlack) throw Error(path + ": implausible compression ratio");
 
   // Sizes are consistent with the file: reading the rest allocates at most the file size.
@@ -478,8 +485,10 @@ class SectionReader {
       : path_(path), in_(in), size_(file_size), pos_(kPreambleSize) {}
 
   // crc_seed: the CRC of the preamble for HEAD, else 0.
-  Bytes next(std::uint32_t tag, const std::string& name, HierarchyFile& f, int level, std::uint32_t crc_seed = 0) {
-    if (size_ - pos_ < kSectionHeaderSize) throw Error(path_ + ": truncated file (" + name + " section missing)");
+  Bytes next(std::uint32_t tag, const std::string& name, HierarchyFile& f, int level,
+             std::uint32_t crc_seed = 0) {
+    if (size_ - pos_ < kSectionHeaderSize)
+      throw Error(path_ + ": truncated file (" + name + " section missing)");
     std::uint8_t head[kSectionHeaderSize];
     read(head, kSectionHeaderSize);
     Cursor c(path_, head, kSectionHeaderSize);
@@ -489,7 +498,8 @@ class SectionReader {
     const auto raw = c.get<std::uint64_t>("section header");
     const auto stored_crc = c.get<std::uint32_t>("section header");
     if (got_tag != tag) throw Error(path_ + ": expected the " + name + " section, found another tag");
-    if (codec != kCodecRaw && codec != kCodecZstd) throw Error(path_ + ": " + name + " section has unknown codec");
+    if (codec != kCodecRaw && codec != kCodecZstd)
+      throw Error(path_ + ": " + name + " section has unknown codec");
     if (stored > size_ - pos_) throw Error(path_ + ": truncated " + name + " section");
     if (codec == kCodecRaw && raw != stored) throw Error(path_ + ": " + name + " section sizes disagree");
     if (codec == kCodecZstd && raw > kMaxSectionRatio * stored + kRatioSlack)
@@ -539,8 +549,8 @@ struct HeadV2 {
 
 // Decodes the values of vertices [from, to) of h: see docs/mlfeh-v2.md, "Values".
 template <int D>
-void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const HeadV2& head, std::size_t from,
-                std::size_t to, std::vector<double>& d, const char* what) {
+void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const HeadV2& head,
+                std::size_t from, std::size_t to, std::vector<double>& d, const char* what) {
   if (head.coding == kCodingNone) return;
   d.resize(to);
   for (std::size_t v = from; v < to; ++v) {
@@ -556,7 +566,8 @@ void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const
 }
 
 template <int D>
-void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head, int max_level, HierarchyFile& f) {
+void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head, int max_level,
+                  HierarchyFile& f) {
   // Step 1: T0 and its values.
   const Bytes mesh = r.next(kTagMesh, "T0", f, 0);
   Cursor c(path, mesh.data(), mesh.size());
@@ -589,9 +600,10 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
     if (got_k != static_cast<std::uint32_t>(k)) throw Error(path + ": " + name + " section is out of order");
     const std::vector<ElemId> cand = refinement_candidates(h, k);
     if (n != cand.size())
-      throw Error(path + ": " + name + " has " + std::to_string(n) + " marks for " + std::to_string(cand.size()) +
-                  " candidate elements");
-    if (h.vertex_count() + std::uint64_t(m) > head.nv) throw Error(path + ": " + name + " exceeds the vertex count");
+      throw Error(path + ": " + name + " has " + std::to_string(n) + " marks for " +
+                  std::to_string(cand.size()) + " candidate elements");
+    if (h.vertex_count() + std::uint64_t(m) > head.nv)
+      throw Error(path + ": " + name + " exceeds the vertex count");
     const Bytes bits = lc.get_array<std::uint8_t>((std::size_t(n) + 7) / 8, name.c_str());
     if (n % 8 && (bits.back() >> (n % 8))) throw Error(path + ": " + name + " has marks past its candidates");
     std::vector<std::uint8_t> marks(n);
@@ -651,7 +663,8 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   if (norm > 2) throw Error(path + ": unknown norm " + std::to_string(norm));
   if (ls > kMaxSpace) throw Error(path + ": space string longer than 64 bytes");
   if (lm > kMaxMetadata) throw Error(path + ": metadata longer than 16 MiB");
-  if (c.left() != std::uint64_t(ls) + lm) throw Error(path + ": header section size does not match its strings");
+  if (c.left() != std::uint64_t(ls) + lm)
+    throw Error(path + ": header section size does not match its strings");
   f.norm = norm == 1 ? "l2" : norm == 2 ? "h1" : "";
   const auto sp = c.get_array<char>(ls, "space");
   f.space.assign(sp.begin(), sp.end());
@@ -703,8 +716,10 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level) {
     file_size = static_cast<std::uint64_t>(size_signed);
     in.seekg(0);
     std::uint8_t pre[kPreambleSize] = {};
-    in.read(reinterpret_cast<char*>(pre), static_cast<std::streamsize>(std::min<std::uint64_t>(file_size, kPreambleSize)));
-    if (file_size < 8 || std::memcmp(pre, kMagic, 8) != 0) throw Error(path + ": not an mlfe hierarchy file (bad magic)");
+    in.read(reinterpret_cast<char*>(pre),
+            static_cast<std::streamsize>(std::min<std::uint64_t>(file_size, kPreambleSize)));
+    if (file_size < 8 || std::memcmp(pre, kMagic, 8) != 0)
+      throw Error(path + ": not an mlfe hierarchy file (bad magic)");
     if (file_size < 12) throw Error(path + ": truncated header");
     std::memcpy(&version, pre + 8, 4);
     if (version == kVersion2) {
@@ -713,7 +728,8 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level) {
     }
   }
   if (version != kVersion)
-    throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) + " (this mlfe reads 1 and 2)");
+    throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) +
+                " (this mlfe reads 1 and 2)");
   HierarchyFile f = read_v1(path);
   if (max_level >= 0 && max_level < f.file_levels) {
     if (f.dim == 2)

@@ -1,14 +1,13 @@
 // Level-by-level rebuild and hierarchical-basis quantization of the .mlfeh v2 file (Grosso,
 // Lürig & Ertl 1997; Yserentant 1986; Di & Cappello 2016); see hierarchy_levels.h.
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/formats/hierarchy_levels.h>
 
 #include <algorithm>
 #include <cmath>
 #include <string>
 #include <unordered_set>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

@@ -1,6 +1,7 @@
 // Leaf mesh → voxel grid by barycentric interpolation (see hierarchy_resample.h).
+#include <mlfe/core/check.h>
+#include <mlfe/core/error.h>
 #include <mlfe/formats/hierarchy_resample.h>
-
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -8,9 +9,6 @@
 #include <cmath>
 #include <limits>
 #include <string>
-
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 

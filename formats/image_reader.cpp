@@ -1,5 +1,3 @@
-#include <mlfe/formats/image_reader.h>
-
 #include <ImfBoxAttribute.h>
 #include <ImfChannelList.h>
 #include <ImfCompressionAttribute.h>
@@ -14,6 +12,8 @@
 #include <ImfStringAttribute.h>
 #include <ImfVecAttribute.h>
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/image_reader.h>
 #include <png.h>
 
 #include <algorithm>
@@ -23,8 +23,6 @@
 #include <iterator>
 #include <sstream>
 #include <vector>
-
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

@@ -1,18 +1,17 @@
-#include <mlfe/formats/metaimage_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/metaimage_reader.h>
+#include <mlfe/formats/raw_reader.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
-#include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <map>
 #include <sstream>
 #include <vector>
 
-#include <mlfe/formats/raw_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {
@@ -41,11 +40,13 @@ std::vector<double> numbers(const std::string& path, const std::string& key, con
     if (!*p) break;
     char* end = nullptr;
     double d = std::strtod(p, &end);
-    if (end == p || !std::isfinite(d)) fail(path, fmt::format("MetaImage {} has a bad number in \"{}\"", key, value));
+    if (end == p || !std::isfinite(d))
+      fail(path, fmt::format("MetaImage {} has a bad number in \"{}\"", key, value));
     v.push_back(d);
     p = end;
   }
-  if (v.size() != count) fail(path, fmt::format("MetaImage {} needs {} numbers, has {}", key, count, v.size()));
+  if (v.size() != count)
+    fail(path, fmt::format("MetaImage {} needs {} numbers, has {}", key, count, v.size()));
   return v;
 }
 
@@ -97,7 +98,8 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     auto it = h.find(key);
     return it == h.end() ? nullptr : &it->second;
   };
-  if (auto ot = get("ObjectType"); ot && *ot != "Image") fail(path, "MetaImage ObjectType is " + *ot + ", not Image");
+  if (auto ot = get("ObjectType"); ot && *ot != "Image")
+    fail(path, "MetaImage ObjectType is " + *ot + ", not Image");
   const std::string* nd = get("NDims");
   if (!nd) fail(path, "MetaImage header has no NDims");
   const int ndims = nd->size() == 1 && (*nd)[0] >= '1' && (*nd)[0] <= '9' ? (*nd)[0] - '0' : -1;
@@ -121,7 +123,8 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
   bool msb = false;
   if (auto b = get("ElementByteOrderMSB")) msb = truthy(*b);
   if (auto b = get("BinaryDataByteOrderMSB")) msb = truthy(*b);
-  if (auto b = get("BinaryData"); b && !truthy(*b)) fail(path, "ASCII MetaImage data (BinaryData = False) is not supported");
+  if (auto b = get("BinaryData"); b && !truthy(*b))
+    fail(path, "ASCII MetaImage data (BinaryData = False) is not supported");
   const bool compressed = get("CompressedData") && truthy(*get("CompressedData"));
 
   ScalarGrid grid;
@@ -173,7 +176,8 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     if (end == hs->c_str() || v < -1) fail(path, "bad MetaImage HeaderSize " + *hs);
     if (v == -1) {
       if (compressed) fail(path, "HeaderSize = -1 cannot be used with compressed data");
-      if (dsize < bytes) fail(data_file, fmt::format("truncated: needs {} bytes of data, the file has {}", bytes, dsize));
+      if (dsize < bytes)
+        fail(data_file, fmt::format("truncated: needs {} bytes of data, the file has {}", bytes, dsize));
       offset = dsize - bytes;
     } else if (data_file != path) {
       offset = static_cast<std::uint64_t>(v);
@@ -187,18 +191,20 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
   grid.source_type = *type;
   if (!compressed) {
     if (avail < bytes)
-      fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}", dims[0],
-                                  dims[1], dims[2], *et, bytes, avail));
+      fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}",
+                                  dims[0], dims[1], dims[2], *et, bytes, avail));
     check_memory(path, need, opts, "the float32 grid");
     allocate_values(grid);
     std::ifstream din(data_file, std::ios::binary);
     if (!din) fail(data_file, "cannot open");
     din.seekg(static_cast<std::streamoff>(offset));
-    read_raw_values(data_file, din, *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
+    read_raw_values(data_file, din, *type, msb == host_is_little_endian(), grid.values.data(),
+                    grid.values.size());
     return grid;
   }
   // Compressed: a zlib stream that must inflate to exactly `bytes`.
-  if (__builtin_add_overflow(need, bytes, &need) || __builtin_add_overflow(need, avail, &need)) need = UINT64_MAX;
+  if (__builtin_add_overflow(need, bytes, &need) || __builtin_add_overflow(need, avail, &need))
+    need = UINT64_MAX;
   check_memory(path, need, opts, "the compressed data, the voxels and the float32 grid");
   std::string packed(static_cast<std::size_t>(avail), '\0');
   {

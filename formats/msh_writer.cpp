@@ -1,13 +1,11 @@
-#include <mlfe/formats/msh_writer.h>
-
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/msh_writer.h>
 
 #include <algorithm>
 #include <cstdint>
 #include <ostream>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 

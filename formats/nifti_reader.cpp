@@ -1,6 +1,5 @@
-#include <mlfe/formats/nifti_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/nifti_reader.h>
 #include <nifti2_io.h>
 #include <zlib.h>
 
@@ -63,15 +62,24 @@ std::string header_bytes(const std::string& file, std::size_t n) {
 
 std::optional<ScalarType> nifti_type(int dt) {
   switch (dt) {
-    case DT_UINT8: return ScalarType::U8;
-    case DT_INT8: return ScalarType::I8;
-    case DT_UINT16: return ScalarType::U16;
-    case DT_INT16: return ScalarType::I16;
-    case DT_UINT32: return ScalarType::U32;
-    case DT_INT32: return ScalarType::I32;
-    case DT_FLOAT32: return ScalarType::F32;
-    case DT_FLOAT64: return ScalarType::F64;
-    default: return std::nullopt;
+    case DT_UINT8:
+      return ScalarType::U8;
+    case DT_INT8:
+      return ScalarType::I8;
+    case DT_UINT16:
+      return ScalarType::U16;
+    case DT_INT16:
+      return ScalarType::I16;
+    case DT_UINT32:
+      return ScalarType::U32;
+    case DT_INT32:
+      return ScalarType::I32;
+    case DT_FLOAT32:
+      return ScalarType::F32;
+    case DT_FLOAT64:
+      return ScalarType::F64;
+    default:
+      return std::nullopt;
   }
 }
 
@@ -82,14 +90,18 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   // message instead of whatever libnifti guesses.
   const std::string hfile = header_file(path);
   const std::string hb = header_bytes(hfile, 540);
-  if (hb.size() < 348) fail(hfile, fmt::format("truncated NIfTI header ({} of at least 348 bytes)", hb.size()));
+  if (hb.size() < 348)
+    fail(hfile, fmt::format("truncated NIfTI header ({} of at least 348 bytes)", hb.size()));
   std::int32_t sz = 0;
   std::memcpy(&sz, hb.data(), 4);
-  const std::int32_t sz_swapped = static_cast<std::int32_t>(__builtin_bswap32(static_cast<std::uint32_t>(sz)));
+  const std::int32_t sz_swapped =
+      static_cast<std::int32_t>(__builtin_bswap32(static_cast<std::uint32_t>(sz)));
   const bool v1 = sz == 348 || sz_swapped == 348;
   const bool v2 = sz == 540 || sz_swapped == 540;
-  if (!v1 && !v2) fail(hfile, fmt::format("not a NIfTI/Analyze header (sizeof_hdr is {}, expected 348 or 540)", sz));
-  if (v2 && hb.size() < 540) fail(hfile, fmt::format("truncated NIfTI-2 header ({} of 540 bytes)", hb.size()));
+  if (!v1 && !v2)
+    fail(hfile, fmt::format("not a NIfTI/Analyze header (sizeof_hdr is {}, expected 348 or 540)", sz));
+  if (v2 && hb.size() < 540)
+    fail(hfile, fmt::format("truncated NIfTI-2 header ({} of 540 bytes)", hb.size()));
 
   // libnifti prints "** ERROR" lines for bad datatypes and dims even at debug level 0, so
   // those fields are checked here first (NIfTI-1: dim int16[8] at 40, datatype int16 at 70;
@@ -100,7 +112,11 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
       unsigned char b[8];
       std::memcpy(b, hb.data() + at, bytes);
       if (swap) std::reverse(b, b + bytes);
-      if (bytes == 2) { std::int16_t v; std::memcpy(&v, b, 2); return v; }
+      if (bytes == 2) {
+        std::int16_t v;
+        std::memcpy(&v, b, 2);
+        return v;
+      }
       std::int64_t v;
       std::memcpy(&v, b, 8);
       return v;
@@ -122,14 +138,16 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
 
   auto type = nifti_type(nim->datatype);
   if (!type)
-    fail(path, fmt::format("unsupported NIfTI datatype {} ({})", nim->datatype, nifti_datatype_to_string(nim->datatype)));
+    fail(path, fmt::format("unsupported NIfTI datatype {} ({})", nim->datatype,
+                           nifti_datatype_to_string(nim->datatype)));
   if (nim->dim[0] < 1 || nim->dim[0] > 7) fail(path, fmt::format("invalid NIfTI dim[0] = {}", nim->dim[0]));
   std::array<std::int64_t, 3> dims{1, 1, 1};
   for (int a = 0; a < 3 && a < nim->dim[0]; ++a) dims[a] = nim->dim[a + 1];
   const std::int64_t voxels = checked_voxel_count(path, dims);
   std::int64_t volumes = 1;
   for (int a = 4; a <= nim->dim[0]; ++a) {
-    if (nim->dim[a] < 1 || nim->dim[a] > INT32_MAX) fail(path, fmt::format("invalid NIfTI dim[{}] = {}", a, nim->dim[a]));
+    if (nim->dim[a] < 1 || nim->dim[a] > INT32_MAX)
+      fail(path, fmt::format("invalid NIfTI dim[{}] = {}", a, nim->dim[a]));
     if (__builtin_mul_overflow(volumes, nim->dim[a], &volumes)) fail(path, "NIfTI dimensions overflow");
   }
   const int esize = scalar_type_size(*type);
@@ -145,10 +163,11 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
         __builtin_add_overflow(total, static_cast<std::uint64_t>(nim->iname_offset), &end))
       fail(path, "NIfTI data size overflows");
     if (end > isize)
-      fail(iname, fmt::format("truncated: {} x {} x {} {} voxels{} at offset {} need {} bytes, the file has {}",
-                              dims[0], dims[1], dims[2], scalar_type_name(*type),
-                              volumes > 1 ? fmt::format(" x {} volumes", volumes) : "", nim->iname_offset, end,
-                              isize));
+      fail(iname,
+           fmt::format("truncated: {} x {} x {} {} voxels{} at offset {} need {} bytes, the file has {}",
+                       dims[0], dims[1], dims[2], scalar_type_name(*type),
+                       volumes > 1 ? fmt::format(" x {} volumes", volumes) : "", nim->iname_offset, end,
+                       isize));
   }
   std::uint64_t need = 0;
   if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
@@ -183,8 +202,10 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   }
 
   const nifti_dmat44* m = nullptr;
-  if (nim->sform_code > 0) m = &nim->sto_xyz;
-  else if (nim->qform_code > 0) m = &nim->qto_xyz;
+  if (nim->sform_code > 0)
+    m = &nim->sto_xyz;
+  else if (nim->qform_code > 0)
+    m = &nim->qto_xyz;
   GridTransform& t = grid.transform;
   if (m) {
     std::array<std::array<double, 3>, 3> axes{};
@@ -195,9 +216,11 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
       const auto& v = axes[1];
       double len2 = axes[2][0] * axes[2][0] + axes[2][1] * axes[2][1] + axes[2][2] * axes[2][2];
       if (!(len2 > 0) || !std::isfinite(len2)) {
-        std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+        std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                                u[0] * v[1] - u[1] * v[0]};
         double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        axes[2] = len > 0 ? std::array<double, 3>{n[0] / len, n[1] / len, n[2] / len} : std::array<double, 3>{0, 0, 1};
+        axes[2] = len > 0 ? std::array<double, 3>{n[0] / len, n[1] / len, n[2] / len}
+                          : std::array<double, 3>{0, 0, 1};
       }
     }
     set_axes(path, t, axes);

@@ -1,6 +1,5 @@
-#include <mlfe/formats/nrrd_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/nrrd_reader.h>
 #include <teem/nrrd.h>
 
 #include <cmath>
@@ -52,15 +51,24 @@ struct IoDeleter {
 
 std::optional<ScalarType> teem_type(int t) {
   switch (t) {
-    case nrrdTypeChar: return ScalarType::I8;
-    case nrrdTypeUChar: return ScalarType::U8;
-    case nrrdTypeShort: return ScalarType::I16;
-    case nrrdTypeUShort: return ScalarType::U16;
-    case nrrdTypeInt: return ScalarType::I32;
-    case nrrdTypeUInt: return ScalarType::U32;
-    case nrrdTypeFloat: return ScalarType::F32;
-    case nrrdTypeDouble: return ScalarType::F64;
-    default: return std::nullopt;
+    case nrrdTypeChar:
+      return ScalarType::I8;
+    case nrrdTypeUChar:
+      return ScalarType::U8;
+    case nrrdTypeShort:
+      return ScalarType::I16;
+    case nrrdTypeUShort:
+      return ScalarType::U16;
+    case nrrdTypeInt:
+      return ScalarType::I32;
+    case nrrdTypeUInt:
+      return ScalarType::U32;
+    case nrrdTypeFloat:
+      return ScalarType::F32;
+    case nrrdTypeDouble:
+      return ScalarType::F64;
+    default:
+      return std::nullopt;
   }
 }
 
@@ -92,13 +100,13 @@ void check_header_lines(const std::string& path) {
     ++number;
     if (line.empty()) break;  // end of the header
     if (line[0] != '#' && line.find(":=") == std::string::npos && line.size() > 400)
-      fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (field lines are at most 400)", number,
-                             line.size()));
+      fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (field lines are at most 400)",
+                             number, line.size()));
     // A "key:=value" line that Teem fails to parse is quoted into the same buffer (found by
     // fuzzing: binary data after a comment line), so those are capped below its size too.
     if (line[0] != '#' && line.size() > 900)
-      fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (key/value lines are at most 900)", number,
-                             line.size()));
+      fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (key/value lines are at most 900)",
+                             number, line.size()));
     start = end + 1;
   }
 }
@@ -123,7 +131,8 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
 
   const unsigned dim = header->dim;
   if (dim != 2 && dim != 3)
-    fail(path, fmt::format("NRRD has {} axes; only 2D height fields and 3D scalar volumes are supported", dim));
+    fail(path,
+         fmt::format("NRRD has {} axes; only 2D height fields and 3D scalar volumes are supported", dim));
   auto type = teem_type(header->type);
   if (!type) fail(path, fmt::format("unsupported NRRD type {}", airEnumStr(nrrdType, header->type)));
   std::array<std::int64_t, 3> dims{1, 1, 1};
@@ -150,8 +159,9 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
       }
       avail = avail > skip ? avail - skip : 0;
       if (avail < bytes)
-        fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}",
-                                    dims[0], dims[1], dims[2], scalar_type_name(*type), bytes, avail));
+        fail(data_file,
+             fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}", dims[0],
+                         dims[1], dims[2], scalar_type_name(*type), bytes, avail));
     }
   }
   std::uint64_t need = 0;
@@ -163,7 +173,8 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
   if (nrrd->dim != dim || nrrd->type != header->type || !nrrd->data)
     fail(path, "NRRD header changed between reads");
   for (unsigned a = 0; a < dim; ++a)
-    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a]) fail(path, "NRRD header changed between reads");
+    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a])
+      fail(path, "NRRD header changed between reads");
 
   ScalarGrid grid;
   grid.dims = dims;
@@ -188,10 +199,13 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
       // A height field in 3D space: the unused third axis is the unit normal.
       const auto& u = axes[0];
       const auto& v = axes[1];
-      std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+      std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                              u[0] * v[1] - u[1] * v[0]};
       double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      if (len > 0) axes[2] = {n[0] / len, n[1] / len, n[2] / len};
-      else axes[2] = {0, 0, 1};
+      if (len > 0)
+        axes[2] = {n[0] / len, n[1] / len, n[2] / len};
+      else
+        axes[2] = {0, 0, 1};
     }
     set_axes(path, t, axes);
     for (unsigned r = 0; r < sdim; ++r) {
@@ -200,10 +214,14 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
     }
     switch (nrrd->space) {
       case nrrdSpaceRightAnteriorSuperior:
-      case nrrdSpaceRightAnteriorSuperiorTime: grid.space = "RAS"; break;
+      case nrrdSpaceRightAnteriorSuperiorTime:
+        grid.space = "RAS";
+        break;
       case nrrdSpaceLeftPosteriorSuperior:
       case nrrdSpaceLeftPosteriorSuperiorTime:
-      case nrrdSpaceScannerXYZ: grid.space = "LPS"; break;
+      case nrrdSpaceScannerXYZ:
+        grid.space = "LPS";
+        break;
       case nrrdSpaceLeftAnteriorSuperior:
       case nrrdSpaceLeftAnteriorSuperiorTime:
         for (int c = 0; c < 3; ++c) t.direction[c] = -t.direction[c];

@@ -3,6 +3,9 @@
 // GCC matches the pragma by source location, so it must precede the OpenMesh/libstdc++ headers.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/file_names.h>
 #include <mlfe/formats/openmesh_io.h>
 
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
@@ -13,10 +16,6 @@
 #include <cmath>
 #include <fstream>
 #include <mutex>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/file_names.h>
 
 namespace mlfe {
 namespace {

@@ -1,11 +1,10 @@
-#include <mlfe/formats/pgm_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/pgm_reader.h>
+#include <mlfe/formats/raw_reader.h>
 
 #include <cctype>
 #include <fstream>
 
-#include <mlfe/formats/raw_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {
@@ -27,7 +26,8 @@ ScalarGrid read_pgm(const std::string& path, const VolumeReadOptions& opts) {
       break;
     }
     if (pos >= head.size()) fail(path, fmt::format("truncated PGM header (no {})", what));
-    if (!std::isdigit(static_cast<unsigned char>(head[pos]))) fail(path, fmt::format("bad PGM header: {} is not a number", what));
+    if (!std::isdigit(static_cast<unsigned char>(head[pos])))
+      fail(path, fmt::format("bad PGM header: {} is not a number", what));
     std::int64_t v = 0;
     while (pos < head.size() && std::isdigit(static_cast<unsigned char>(head[pos]))) {
       v = v * 10 + (head[pos] - '0');
@@ -48,8 +48,8 @@ ScalarGrid read_pgm(const std::string& path, const VolumeReadOptions& opts) {
   const std::int64_t voxels = checked_voxel_count(path, dims);
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(scalar_type_size(type)));
   if (fsize - pos < bytes)
-    fail(path, fmt::format("truncated: {} x {} PGM with maxval {} needs {} bytes of data, the file has {}", w, h,
-                           maxval, bytes, fsize - pos));
+    fail(path, fmt::format("truncated: {} x {} PGM with maxval {} needs {} bytes of data, the file has {}", w,
+                           h, maxval, bytes, fsize - pos));
   check_memory(path, checked_bytes(path, voxels, 4), opts, "the float32 grid");
   ScalarGrid grid;
   grid.dim = 2;

@@ -1,6 +1,5 @@
-#include <mlfe/formats/png_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/png_reader.h>
 #include <png.h>
 
 #include <cstring>

@@ -1,6 +1,5 @@
-#include <mlfe/formats/raw_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/raw_reader.h>
 
 #include <algorithm>
 #include <cmath>
@@ -148,14 +147,16 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
   if (opts.raw_origin) grid.transform.origin = *opts.raw_origin;
   if (!have_dims || !type)
     fail(path, "headerless raw data needs a sidecar " + path + ".json or --raw-dims and --raw-type");
-  if (endian != "little" && endian != "big") fail(path, "endian must be \"little\" or \"big\", not \"" + endian + "\"");
+  if (endian != "little" && endian != "big")
+    fail(path, "endian must be \"little\" or \"big\", not \"" + endian + "\"");
   if (offset < 0) fail(path, "negative raw offset");
 
   {
     // Sidecar directions need not be unit length; fold their lengths into the spacing.
     std::array<std::array<double, 3>, 3> axes{};
     for (int a = 0; a < 3; ++a)
-      for (int r = 0; r < 3; ++r) axes[a][r] = grid.transform.direction[r * 3 + a] * grid.transform.spacing[a];
+      for (int r = 0; r < 3; ++r)
+        axes[a][r] = grid.transform.direction[r * 3 + a] * grid.transform.spacing[a];
     if (grid.transform.spacing[0] > 0 && grid.transform.spacing[1] > 0 && grid.transform.spacing[2] > 0)
       set_axes(sidecar.empty() ? path : sidecar, grid.transform, axes);
   }
@@ -164,8 +165,10 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
   std::uint64_t expected = 0;
   if (__builtin_add_overflow(bytes, static_cast<std::uint64_t>(offset), &expected) || expected != fsize)
-    fail(path, fmt::format("size mismatch: {} x {} x {} {} voxels after a {}-byte offset need {} bytes, the file has {}",
-                           dims[0], dims[1], dims[2], scalar_type_name(*type), offset, bytes + offset, fsize));
+    fail(path,
+         fmt::format(
+             "size mismatch: {} x {} x {} {} voxels after a {}-byte offset need {} bytes, the file has {}",
+             dims[0], dims[1], dims[2], scalar_type_name(*type), offset, bytes + offset, fsize));
   check_memory(path, checked_bytes(path, voxels, 4), opts, "the float32 grid");
 
   grid.dims = dims;

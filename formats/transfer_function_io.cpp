@@ -1,10 +1,9 @@
+#include <mlfe/core/error.h>
 #include <mlfe/formats/transfer_function_io.h>
 
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
-
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 

@@ -1,7 +1,6 @@
 // The only translation unit that includes OpenVDB headers (they compile slowly).
-#include <mlfe/formats/vdb_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/vdb_reader.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
 #include <tbb/blocked_range.h>
@@ -53,16 +52,18 @@ class VdbChecker {
     pos_ += 36;
     meta_map("file metadata");
     const std::int32_t grids = i32("grid count");
-    if (grids < 0 || static_cast<std::uint64_t>(grids) > b_.size()) fail(path_, fmt::format("bad OpenVDB grid count {}", grids));
+    if (grids < 0 || static_cast<std::uint64_t>(grids) > b_.size())
+      fail(path_, fmt::format("bad OpenVDB grid count {}", grids));
     for (std::int32_t g = 0; g < grids; ++g) {
       string("grid name");
       string("grid type");
       string("instance parent name");
-      const std::int64_t grid_pos = i64("grid offset"), block_pos = i64("block offset"), end_pos = i64("end offset");
+      const std::int64_t grid_pos = i64("grid offset"), block_pos = i64("block offset"),
+                         end_pos = i64("end offset");
       const auto size = static_cast<std::int64_t>(b_.size());
       if (grid_pos < 0 || grid_pos > block_pos || block_pos > end_pos || end_pos > size)
-        fail(path_, fmt::format("truncated or corrupt OpenVDB file: grid {} spans bytes {}..{} of {}", g, grid_pos,
-                                end_pos, size));
+        fail(path_, fmt::format("truncated or corrupt OpenVDB file: grid {} spans bytes {}..{} of {}", g,
+                                grid_pos, end_pos, size));
       // Each grid's data follows its descriptor; the next descriptor starts at end_pos.
       pos_ = static_cast<std::size_t>(grid_pos);
       if (version >= 222) u32("grid compression");
@@ -75,8 +76,8 @@ class VdbChecker {
  private:
   void need(std::uint64_t n, const char* what) {
     if (n > b_.size() - pos_)
-      fail(path_, fmt::format("truncated or corrupt OpenVDB file: {} at byte {} needs {} bytes, {} remain", what, pos_,
-                              n, b_.size() - pos_));
+      fail(path_, fmt::format("truncated or corrupt OpenVDB file: {} at byte {} needs {} bytes, {} remain",
+                              what, pos_, n, b_.size() - pos_));
   }
   template <typename T>
   T read(const char* what) {
@@ -133,8 +134,8 @@ void densify(const GridT& g, const openvdb::CoordBBox& bb, ScalarGrid& out, Conv
       for (std::int64_t j = 0; j < ny; ++j) {
         float* row = out.values.data() + static_cast<std::size_t>(nx * (j + ny * k));
         for (std::int64_t i = 0; i < nx; ++i)
-          row[i] = convert(acc.getValue(openvdb::Coord(bb.min().x() + int(i), bb.min().y() + int(j),
-                                                       bb.min().z() + int(k))));
+          row[i] = convert(acc.getValue(
+              openvdb::Coord(bb.min().x() + int(i), bb.min().y() + int(j), bb.min().z() + int(k))));
       }
   });
 }
@@ -150,13 +151,15 @@ void read_typed(const std::string& path, const openvdb::GridBase::Ptr& base, con
   const openvdb::Coord d = bb.dim();
   out.dims = {d.x(), d.y(), d.z()};
   const std::int64_t voxels = checked_voxel_count(path, out.dims);
-  check_memory(path, checked_bytes(path, voxels, 4), opts,
-               fmt::format("the dense {} x {} x {} float32 grid of the active bounding box", d.x(), d.y(), d.z()));
+  check_memory(
+      path, checked_bytes(path, voxels, 4), opts,
+      fmt::format("the dense {} x {} x {} float32 grid of the active bounding box", d.x(), d.y(), d.z()));
   allocate_values(out);
   densify(*grid, bb, out, convert);
 
   const openvdb::math::Transform& xf = grid->transform();
-  if (!xf.isLinear()) fail(path, fmt::format("grid '{}' has a non-linear (frustum) transform", base->getName()));
+  if (!xf.isLinear())
+    fail(path, fmt::format("grid '{}' has a non-linear (frustum) transform", base->getName()));
   const openvdb::Mat4d m = xf.baseMap()->getAffineMap()->getMat4();
   // OpenVDB maps row vectors: world = ijk * M, so row a is the step of index axis a.
   std::array<std::array<double, 3>, 3> axes{};
@@ -211,13 +214,16 @@ ScalarGrid read_vdb(const std::string& path, const VolumeReadOptions& opts) {
       for (const auto& g : *metas)
         if (!chosen_meta && is_vector_type(g->valueType())) chosen_meta = g;
     if (!chosen_meta) {
-      if (!opts.grid_name.empty()) fail(path, fmt::format("no grid named '{}' (grids: {})", opts.grid_name, all));
-      fail(path, fmt::format("no scalar grid (grids: {}){}", all, opts.vec_magnitude ? "" : "; use --vec-magnitude for vector grids"));
+      if (!opts.grid_name.empty())
+        fail(path, fmt::format("no grid named '{}' (grids: {})", opts.grid_name, all));
+      fail(path, fmt::format("no scalar grid (grids: {}){}", all,
+                             opts.vec_magnitude ? "" : "; use --vec-magnitude for vector grids"));
     }
     const std::string type = chosen_meta->valueType();
     const std::string name = chosen_meta->getName();
     if (is_vector_type(type) && !opts.vec_magnitude)
-      fail(path, fmt::format("grid '{}' is a vector grid ({}); use --vec-magnitude to read its magnitude", name, type));
+      fail(path, fmt::format("grid '{}' is a vector grid ({}); use --vec-magnitude to read its magnitude",
+                             name, type));
     if (!is_scalar_type(type) && !is_vector_type(type))
       fail(path, fmt::format("grid '{}' has unsupported value type {}", name, type));
     // Grid statistics written by OpenVDB let us refuse huge boxes before reading the tree.
@@ -227,7 +233,8 @@ ScalarGrid read_vdb(const std::string& path, const VolumeReadOptions& opts) {
         for (int a = 0; a < 3; ++a) d[a] = std::int64_t(mx->value()[a]) - mn->value()[a] + 1;
         if (d[0] >= 1 && d[1] >= 1 && d[2] >= 1)
           check_memory(path, checked_bytes(path, checked_voxel_count(path, d), 4), opts,
-                       fmt::format("the dense {} x {} x {} float32 grid of the active bounding box", d[0], d[1], d[2]));
+                       fmt::format("the dense {} x {} x {} float32 grid of the active bounding box", d[0],
+                                   d[1], d[2]));
       }
     }
     openvdb::GridBase::Ptr base = file.readGrid(name);
@@ -252,15 +259,17 @@ ScalarGrid read_vdb(const std::string& path, const VolumeReadOptions& opts) {
       out.source_type = ScalarType::U8;
       add_note(out, "bool grid converted to 0/1");
     } else if (type == "vec3s") {
-      read_typed<openvdb::Vec3SGrid>(path, base, opts, out, [](const openvdb::Vec3s& v) { return float(v.length()); });
+      read_typed<openvdb::Vec3SGrid>(path, base, opts, out,
+                                     [](const openvdb::Vec3s& v) { return float(v.length()); });
       add_note(out, "vector grid read as its magnitude");
     } else if (type == "vec3d") {
-      read_typed<openvdb::Vec3DGrid>(path, base, opts, out, [](const openvdb::Vec3d& v) { return float(v.length()); });
+      read_typed<openvdb::Vec3DGrid>(path, base, opts, out,
+                                     [](const openvdb::Vec3d& v) { return float(v.length()); });
       out.source_type = ScalarType::F64;
       add_note(out, "vector grid read as its magnitude");
     } else if (type == "vec3i") {
-      read_typed<openvdb::Vec3IGrid>(path, base, opts, out,
-                                     [](const openvdb::Vec3i& v) { return float(openvdb::Vec3d(v).length()); });
+      read_typed<openvdb::Vec3IGrid>(
+          path, base, opts, out, [](const openvdb::Vec3i& v) { return float(openvdb::Vec3d(v).length()); });
       out.source_type = ScalarType::I32;
       add_note(out, "vector grid read as its magnitude");
     } else {
@@ -270,7 +279,8 @@ ScalarGrid read_vdb(const std::string& path, const VolumeReadOptions& opts) {
     if (const auto sp = base->getMetadata<openvdb::StringMetadata>("space"))
       if (sp->value() == "RAS" || sp->value() == "LPS") out.space = sp->value();
     std::string cls = openvdb::GridBase::gridClassToString(base->getGridClass());
-    add_note(out, fmt::format("grid '{}' ({} values, class {}); domain is the active-voxel bounding box", name, type, cls));
+    add_note(out, fmt::format("grid '{}' ({} values, class {}); domain is the active-voxel bounding box",
+                              name, type, cls));
     if (metas->size() > 1) add_note(out, "other grids: " + all);
   } catch (const openvdb::Exception& e) {
     fail(path, std::string("cannot read the OpenVDB file (truncated or corrupt?): ") + e.what());

@@ -1,6 +1,12 @@
-#include <mlfe/formats/volume_reader.h>
-
 #include <fmt/format.h>
+#include <mlfe/formats/metaimage_reader.h>
+#include <mlfe/formats/nifti_reader.h>
+#include <mlfe/formats/nrrd_reader.h>
+#include <mlfe/formats/pgm_reader.h>
+#include <mlfe/formats/png_reader.h>
+#include <mlfe/formats/raw_reader.h>
+#include <mlfe/formats/vdb_reader.h>
+#include <mlfe/formats/volume_reader.h>
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -12,13 +18,6 @@
 #include <limits>
 #include <new>
 
-#include <mlfe/formats/metaimage_reader.h>
-#include <mlfe/formats/nifti_reader.h>
-#include <mlfe/formats/nrrd_reader.h>
-#include <mlfe/formats/pgm_reader.h>
-#include <mlfe/formats/png_reader.h>
-#include <mlfe/formats/raw_reader.h>
-#include <mlfe/formats/vdb_reader.h>
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {
@@ -109,7 +108,8 @@ std::int64_t checked_voxel_count(const std::string& path, const std::array<std::
   std::int64_t n = 0;
   // 2^60 voxels of 8 bytes still fit a signed 64-bit byte count.
   constexpr std::int64_t kMaxVoxels = std::int64_t(1) << 59;
-  if (__builtin_mul_overflow(dims[0], dims[1], &n) || __builtin_mul_overflow(n, dims[2], &n) || n > kMaxVoxels)
+  if (__builtin_mul_overflow(dims[0], dims[1], &n) || __builtin_mul_overflow(n, dims[2], &n) ||
+      n > kMaxVoxels)
     fail(path, fmt::format("dimensions {} x {} x {} are too large", dims[0], dims[1], dims[2]));
   return n;
 }
@@ -129,7 +129,8 @@ void check_memory(const std::string& path, std::uint64_t bytes, const VolumeRead
                   const std::string& what) {
   std::uint64_t limit = memory_limit(opts);
   if (bytes > limit)
-    fail(path, fmt::format("needs {} bytes for {} but only {} bytes of memory are available", bytes, what, limit));
+    fail(path,
+         fmt::format("needs {} bytes for {} but only {} bytes of memory are available", bytes, what, limit));
 }
 
 namespace {
@@ -152,14 +153,30 @@ void convert_typed(const unsigned char* src, bool swap, float* dst, std::size_t 
 void convert_to_float(const void* src, ScalarType t, bool swap, float* dst, std::size_t n) {
   auto s = static_cast<const unsigned char*>(src);
   switch (t) {
-    case ScalarType::U8: convert_typed<std::uint8_t>(s, false, dst, n); break;
-    case ScalarType::I8: convert_typed<std::int8_t>(s, false, dst, n); break;
-    case ScalarType::U16: convert_typed<std::uint16_t>(s, swap, dst, n); break;
-    case ScalarType::I16: convert_typed<std::int16_t>(s, swap, dst, n); break;
-    case ScalarType::U32: convert_typed<std::uint32_t>(s, swap, dst, n); break;
-    case ScalarType::I32: convert_typed<std::int32_t>(s, swap, dst, n); break;
-    case ScalarType::F32: convert_typed<float>(s, swap, dst, n); break;
-    case ScalarType::F64: convert_typed<double>(s, swap, dst, n); break;
+    case ScalarType::U8:
+      convert_typed<std::uint8_t>(s, false, dst, n);
+      break;
+    case ScalarType::I8:
+      convert_typed<std::int8_t>(s, false, dst, n);
+      break;
+    case ScalarType::U16:
+      convert_typed<std::uint16_t>(s, swap, dst, n);
+      break;
+    case ScalarType::I16:
+      convert_typed<std::int16_t>(s, swap, dst, n);
+      break;
+    case ScalarType::U32:
+      convert_typed<std::uint32_t>(s, swap, dst, n);
+      break;
+    case ScalarType::I32:
+      convert_typed<std::int32_t>(s, swap, dst, n);
+      break;
+    case ScalarType::F32:
+      convert_typed<float>(s, swap, dst, n);
+      break;
+    case ScalarType::F64:
+      convert_typed<double>(s, swap, dst, n);
+      break;
   }
 }
 
@@ -168,7 +185,8 @@ void set_axes(const std::string& path, GridTransform& t, const std::array<std::a
     const auto& v = axes[a];
     double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     if (!std::isfinite(len) || len <= 0.0)
-      fail(path, fmt::format("axis {} has a zero or non-finite physical step ({}, {}, {})", a, v[0], v[1], v[2]));
+      fail(path,
+           fmt::format("axis {} has a zero or non-finite physical step ({}, {}, {})", a, v[0], v[1], v[2]));
     t.spacing[a] = len;
     for (int r = 0; r < 3; ++r) t.direction[r * 3 + a] = v[r] / len;
   }
@@ -228,16 +246,19 @@ std::int32_t le32(const std::string& s, std::size_t at) {
 }
 
 std::string format_by_magic(const std::string& head) {
-  auto starts = [&](const char* m, std::size_t n) { return head.size() >= n && std::memcmp(head.data(), m, n) == 0; };
+  auto starts = [&](const char* m, std::size_t n) {
+    return head.size() >= n && std::memcmp(head.data(), m, n) == 0;
+  };
   if (starts("NRRD000", 7)) return "nrrd";
   if (starts("\x20\x42\x44\x56\0\0\0\0", 8)) return "vdb";  // OpenVDB magic 0x56444220 as int64 LE
   if (starts("\x89PNG\r\n\x1a\n", 8)) return "png";
-  if (head.size() >= 3 && head[0] == 'P' && head[1] == '5' && std::isspace(static_cast<unsigned char>(head[2])))
+  if (head.size() >= 3 && head[0] == 'P' && head[1] == '5' &&
+      std::isspace(static_cast<unsigned char>(head[2])))
     return "pgm";
   if (head.size() >= 348) {
     std::int32_t sz = le32(head, 0);
-    bool n1 = (sz == 348 || sz == 0x5c010000) &&
-              (std::memcmp(head.data() + 344, "n+1\0", 4) == 0 || std::memcmp(head.data() + 344, "ni1\0", 4) == 0);
+    bool n1 = (sz == 348 || sz == 0x5c010000) && (std::memcmp(head.data() + 344, "n+1\0", 4) == 0 ||
+                                                  std::memcmp(head.data() + 344, "ni1\0", 4) == 0);
     bool n2 = (sz == 540 || sz == 0x1c020000) && (std::memcmp(head.data() + 4, "n+2\0", 4) == 0 ||
                                                   std::memcmp(head.data() + 4, "ni2\0", 4) == 0);
     if (n1 || n2) return "nifti";
@@ -288,9 +309,10 @@ void check_finite_values(ScalarGrid& grid, const VolumeReadOptions& opts) {
   const std::int64_t nx = grid.dims[0], ny = grid.dims[1];
   std::int64_t fi = first % nx, fj = (first / nx) % ny, fk = first / (nx * ny);
   if (!opts.nan_as)
-    throw Error(fmt::format("{}: {} voxels are NaN or infinite (first at index {},{},{}); use --nan-as VALUE "
-                            "to replace them",
-                            grid.source, bad, fi, fj, fk));
+    throw Error(
+        fmt::format("{}: {} voxels are NaN or infinite (first at index {},{},{}); use --nan-as VALUE "
+                    "to replace them",
+                    grid.source, bad, fi, fj, fk));
   add_note(grid, fmt::format("{} NaN/Inf voxels replaced by {}", bad, *opts.nan_as));
 }
 
@@ -300,7 +322,8 @@ void check_transform(const ScalarGrid& grid) {
   for (double v : t.spacing) ok = ok && std::isfinite(v) && v > 0;
   for (double v : t.origin) ok = ok && std::isfinite(v);
   for (double v : t.direction) ok = ok && std::isfinite(v);
-  if (!ok) throw Error(grid.source + ": the index-to-physical transform has zero, negative or non-finite entries");
+  if (!ok)
+    throw Error(grid.source + ": the index-to-physical transform has zero, negative or non-finite entries");
 }
 
 }  // namespace
@@ -339,14 +362,22 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
   }
   ScalarGrid grid;
   try {
-    if (format == "raw") grid = read_raw(path, opts);
-    else if (format == "nrrd") grid = read_nrrd(path, opts);
-    else if (format == "nifti") grid = read_nifti(path, opts);
-    else if (format == "vdb") grid = read_vdb(path, opts);
-    else if (format == "metaimage") grid = read_metaimage(path, opts);
-    else if (format == "pgm") grid = read_pgm(path, opts);
-    else if (format == "png") grid = read_png(path, opts);
-    else fail(path, "unsupported format " + format);
+    if (format == "raw")
+      grid = read_raw(path, opts);
+    else if (format == "nrrd")
+      grid = read_nrrd(path, opts);
+    else if (format == "nifti")
+      grid = read_nifti(path, opts);
+    else if (format == "vdb")
+      grid = read_vdb(path, opts);
+    else if (format == "metaimage")
+      grid = read_metaimage(path, opts);
+    else if (format == "pgm")
+      grid = read_pgm(path, opts);
+    else if (format == "png")
+      grid = read_png(path, opts);
+    else
+      fail(path, "unsupported format " + format);
   } catch (const Error&) {
     throw;
   } catch (const std::bad_alloc&) {

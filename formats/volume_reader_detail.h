@@ -1,15 +1,15 @@
 // Helpers shared by the volume readers in formats/*_reader.cpp. Not part of the public API.
 #pragma once
+#include <mlfe/core/error.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/error.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe::volume_detail {
 

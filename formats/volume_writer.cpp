@@ -1,6 +1,7 @@
-#include <mlfe/formats/volume_writer.h>
-
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/volume_writer.h>
 #include <nifti2_io.h>
 #include <openvdb/openvdb.h>
 #include <teem/nrrd.h>
@@ -12,9 +13,6 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 namespace {

@@ -1,12 +1,11 @@
+#include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/vtu_writer.h>
 
 #include <cstdint>
 #include <cstring>
 #include <ostream>
 #include <sstream>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/atomic_file.h>
 
 namespace mlfe {
 
@@ -72,10 +71,14 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
 
   std::vector<Block> point_data, cell_data, pts, cells;
   if (point_values)
-    point_data.push_back(block(R"(<DataArray type="Float64" Name="u" NumberOfComponents="1" format="appended")", values));
-  cell_data.push_back(block(R"(<DataArray type="UInt8" Name="level" NumberOfComponents="1" format="appended")", levels));
-  cell_data.push_back(block(R"(<DataArray type="UInt8" Name="kind" NumberOfComponents="1" format="appended")", kinds));
-  pts.push_back(block(R"(<DataArray type="Float64" Name="Points" NumberOfComponents="3" format="appended")", points));
+    point_data.push_back(
+        block(R"(<DataArray type="Float64" Name="u" NumberOfComponents="1" format="appended")", values));
+  cell_data.push_back(
+      block(R"(<DataArray type="UInt8" Name="level" NumberOfComponents="1" format="appended")", levels));
+  cell_data.push_back(
+      block(R"(<DataArray type="UInt8" Name="kind" NumberOfComponents="1" format="appended")", kinds));
+  pts.push_back(
+      block(R"(<DataArray type="Float64" Name="Points" NumberOfComponents="3" format="appended")", points));
   cells.push_back(block(R"(<DataArray type="Int64" Name="connectivity" format="appended")", connectivity));
   cells.push_back(block(R"(<DataArray type="Int64" Name="offsets" format="appended")", offsets));
   cells.push_back(block(R"(<DataArray type="UInt8" Name="types" format="appended")", types));
@@ -93,7 +96,8 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
     xml << "      " << close << "\n";
   };
   xml << "<?xml version=\"1.0\"?>\n"
-      << "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
+      << "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
+         "header_type=\"UInt64\">\n"
       << "  <UnstructuredGrid>\n"
       << "    <Piece NumberOfPoints=\"" << n << "\" NumberOfCells=\"" << elems.size() << "\">\n";
   section(point_values ? "<PointData Scalars=\"u\">" : "<PointData>", "</PointData>", point_data);

@@ -2,18 +2,17 @@
 // the glTF reader (read_gltf, .glb) and the EXR/PNG reader (read_image, .exr), each through a
 // temporary file, and the Draco payload decoder (decode_draco). mlfe::Error is the expected
 // outcome for bad input; anything else is a finding.
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_reader.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/image_reader.h>
 #include <unistd.h>
 
 #include <cstdint>
 #include <cstdlib>
 #include <fstream>
 #include <string>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/gltf_reader.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/image_reader.h>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string kind = MLFE_FUZZ_KIND;

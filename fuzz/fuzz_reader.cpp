@@ -2,6 +2,8 @@
 // extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume. mlfe::Error is the expected
 // outcome for bad input; anything else (a crash, a sanitizer report, another exception, an
 // exit from inside a library) is a finding.
+#include <mlfe/core/error.h>
+#include <mlfe/formats/volume_reader.h>
 #include <unistd.h>
 
 #include <cstdint>
@@ -9,9 +11,6 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
-
-#include <mlfe/core/error.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace {
 

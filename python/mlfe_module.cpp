@@ -4,6 +4,9 @@
 // extracted, hierarchy values) are views of the C++ buffers, kept alive by their owner; a volume
 // passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
+#include <mlfe/core/error.h>
+#include <mlfe/pipeline.h>
+#include <mlfe/version.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -15,10 +18,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <mlfe/pipeline.h>
-#include <mlfe/core/error.h>
-#include <mlfe/version.h>
 
 namespace py = pybind11;
 

@@ -13,7 +13,7 @@ PKGS=(
   libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
   googletest libgtest-dev libbenchmark-dev
   python3 python3-dev pybind11-dev python3-pybind11 python3-numpy
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format
   python3-vtk9  # tests/converters/export_command_test.cpp reads .vtu with VTK's XML reader
 )
 # Node.js/npm only when the machine has none (a non-Debian node may already be there).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# README command (b): install what is missing, build, and run every test:
+# README command (b): install what is missing, check the formatting, build, and run every test:
 #   1. Release build, all GoogleTest suites and the Python module's tests through ctest (unit,
 #      format round trips, CLI, golden files, Khronos glTF validator verdicts);
 #   2. the core tests again under AddressSanitizer + UBSan (Debug);
@@ -10,6 +10,10 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 JOBS="${MLFE_JOBS:-$(nproc)}"
 bash "$ROOT/scripts/install_deps.sh"
+
+echo "== clang-format (.clang-format; Debian 12's clang-format 14)"
+find "$ROOT"/{core,formats,converters,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
+  xargs -0 clang-format --dry-run -Werror
 
 echo "== release build and tests"
 bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON

@@ -2,6 +2,7 @@
 // openmesh_io, draco_io, gltf_writer, the CLI tests). Header-only.
 #pragma once
 #include <gtest/gtest.h>
+#include <mlfe/core/triangle_mesh.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -16,7 +17,6 @@
 #include <utility>
 #include <vector>
 
-#include <mlfe/core/triangle_mesh.h>
 #include "tests/test_paths.h"
 
 namespace mlfe::test {

@@ -4,8 +4,6 @@
 // and the formats. Bad input anywhere throws mlfe::Error (mlfe/core/error.h).
 #pragma once
 
-#include <mlfe/version.h>
-
 #include <mlfe/core/approximation.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
@@ -18,12 +16,11 @@
 #include <mlfe/core/transfer_function.h>
 #include <mlfe/core/triangle_mesh.h>
 #include <mlfe/core/volume_render.h>
-
 #include <mlfe/formats/compare.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/exr_writer.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/volume_reader.h>
-
 #include <mlfe/pipeline.h>
+#include <mlfe/version.h>

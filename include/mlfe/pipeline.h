@@ -4,6 +4,13 @@
 // Options are typed; their defaults are the command line's. Bad input or options throw
 // mlfe::Error with a one-line message; nothing is printed (progress goes to the callbacks).
 #pragma once
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/volume_reader.h>
+
 #include <cstddef>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -11,13 +18,6 @@
 #include <string>
 #include <variant>
 #include <vector>
-
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/core/triangle_mesh.h>
-#include <mlfe/formats/gltf_writer.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe {
 

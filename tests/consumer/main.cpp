@@ -1,9 +1,9 @@
 // Uses the installed package: refines a box with mlfe::core and checks it tiles the box, then
 // converts a volume to an asset with mlfe::pipeline (the caller validates the .glb).
 // Usage: mlfe_consumer VOLUME OUT.glb
-#include <mlfe/pipeline.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
+#include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 
 #include <cmath>

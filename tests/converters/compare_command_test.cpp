@@ -1,6 +1,7 @@
 // `mlfe compare`: exit status 0 / 1 / 2, one reason per difference on stdout, the JSON report,
 // and the skull's .glb golden file checked semantically (Draco reorders, so bytes cannot be).
 #include <gtest/gtest.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <unistd.h>
 
 #include <cstdlib>
@@ -10,7 +11,6 @@
 #include <sstream>
 #include <string>
 
-#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
@@ -77,7 +77,8 @@ TEST(CompareCommand, ExitStatusZeroOneTwo) {
 TEST(GoldenCompare, SkullGlbMatchesCheckedInGlb) {
   const std::string glb = test::scratch_dir() + "/skull.glb";
   const std::string golden = kGolden + "/ct_skull_iso2.5_3000.glb";
-  const CliRun conv = mlfe_run("convert " + kSkull + " --iso 2.5 --max-vertices 3000 --simplify 0 --quiet -o " + glb);
+  const CliRun conv =
+      mlfe_run("convert " + kSkull + " --iso 2.5 --max-vertices 3000 --simplify 0 --quiet -o " + glb);
   ASSERT_EQ(conv.status, 0) << conv.err;
   if (std::getenv("MLFE_UPDATE_GOLDEN")) fs::copy_file(glb, golden, fs::copy_options::overwrite_existing);
   ASSERT_TRUE(fs::exists(golden)) << "missing golden file " << golden;

@@ -1,6 +1,11 @@
 // End-to-end tests of `mlfe convert / build / iso`: validator verdicts, physical placement,
 // determinism across thread counts, golden files, and bad input (exit 2, one line, no output).
 #include <gtest/gtest.h>
+#include <mlfe/core/field.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 
 #include <algorithm>
 #include <array>
@@ -15,11 +20,6 @@
 #include <sstream>
 #include <string>
 
-#include <mlfe/core/field.h>
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/gltf_writer.h>
-#include <mlfe/formats/openmesh_io.h>
-#include <mlfe/formats/volume_reader.h>
 #include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
@@ -594,7 +594,8 @@ TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   const std::string a = scratch() + "/nou.ply", b = scratch() + "/withu.ply", h = scratch() + "/withu.mlfeh";
   const std::string ra = scratch() + "/nou.json", rb = scratch() + "/withu.json";
   ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra).status, 0);
-  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h).status,
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h)
+                .status,
             0);
   EXPECT_EQ(read_bytes(a), read_bytes(b));
   const json ja = json::parse(read_bytes(ra)), jb = json::parse(read_bytes(rb));

@@ -1,5 +1,6 @@
 // `mlfe build` writes the compact v2 hierarchy file; `mlfe info` reports it; bad files exit 2.
 #include <gtest/gtest.h>
+#include <mlfe/formats/hierarchy_io.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -11,7 +12,6 @@
 #include <sstream>
 #include <string>
 
-#include <mlfe/formats/hierarchy_io.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

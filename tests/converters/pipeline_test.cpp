@@ -1,9 +1,9 @@
 // The pipeline library (converters/pipeline.h) without the command line: its defaults give the
 // command line's bytes, extract() and write_assets() agree, the 2D/3D holder, and bad input
 // throws mlfe::Error before any output is written.
-#include <mlfe/pipeline.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/pipeline.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -11,7 +11,6 @@
 #include <sstream>
 #include <string>
 
-#include <mlfe/core/error.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

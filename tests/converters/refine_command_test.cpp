@@ -1,5 +1,7 @@
 // mlfe refine, run as a separate process.
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/hierarchy_io.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -10,8 +12,6 @@
 #include <regex>
 #include <string>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/hierarchy_io.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -50,10 +50,12 @@ std::size_t vtu_cells(const fs::path& p) {
 
 TEST(RefineCommand, WritesALeafMeshAndAHierarchyThatAgree) {
   const fs::path vtu = temp_dir() / "point.vtu", mlfeh = temp_dir() / "point.mlfeh";
-  const RunResult r = run_mlfe("refine --dim 3 --box 0,0,0,2,1,1 --toward point --at 0.3,0.4,0.5 --levels 5 -o " +
-                         vtu.string() + " --hierarchy " + mlfeh.string());
+  const RunResult r =
+      run_mlfe("refine --dim 3 --box 0,0,0,2,1,1 --toward point --at 0.3,0.4,0.5 --levels 5 -o " +
+               vtu.string() + " --hierarchy " + mlfeh.string());
   ASSERT_EQ(r.status, 0) << r.err;
-  EXPECT_TRUE(std::regex_search(r.err, std::regex(R"(refine: 3D, 5 levels, \d+ vertices, \d+ leaf elements, min dihedral)")))
+  EXPECT_TRUE(std::regex_search(
+      r.err, std::regex(R"(refine: 3D, 5 levels, \d+ vertices, \d+ leaf elements, min dihedral)")))
       << r.err;
   const HierarchyFile f = read_hierarchy(mlfeh.string());
   ASSERT_EQ(f.dim, 3);
@@ -93,8 +95,9 @@ INSTANTIATE_TEST_SUITE_P(
 
 TEST(RefineCommand, SphereRefinementFollowsTheSurfaceNotTheInside) {
   const fs::path vtu = temp_dir() / "sphere.vtu", mlfeh = temp_dir() / "sphere.mlfeh";
-  const RunResult r = run_mlfe("refine --dim 2 --box -1,-1,1,1 --toward sphere --at 0,0 --radius 0.7 --levels 8 -o " +
-                         vtu.string() + " --hierarchy " + mlfeh.string());
+  const RunResult r =
+      run_mlfe("refine --dim 2 --box -1,-1,1,1 --toward sphere --at 0,0 --radius 0.7 --levels 8 -o " +
+               vtu.string() + " --hierarchy " + mlfeh.string());
   ASSERT_EQ(r.status, 0) << r.err;
   const auto f = read_hierarchy(mlfeh.string());
   const auto& h = std::get<Hierarchy<2>>(f.hierarchy);
@@ -118,7 +121,8 @@ TEST_P(RefineCommandBadArguments, ExitWith2AndWriteNothing) {
   const fs::path vtu = temp_dir() / "bad.vtu", mlfeh = temp_dir() / "bad.mlfeh";
   fs::remove(vtu);
   fs::remove(mlfeh);
-  const RunResult r = run_mlfe("refine " + GetParam().args + " -o " + vtu.string() + " --hierarchy " + mlfeh.string());
+  const RunResult r =
+      run_mlfe("refine " + GetParam().args + " -o " + vtu.string() + " --hierarchy " + mlfeh.string());
   EXPECT_EQ(r.status, 2) << r.err;
   EXPECT_NE(r.err.find("mlfe: " + GetParam().message), std::string::npos) << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
@@ -129,16 +133,21 @@ TEST_P(RefineCommandBadArguments, ExitWith2AndWriteNothing) {
 INSTANTIATE_TEST_SUITE_P(
     All, RefineCommandBadArguments,
     ::testing::Values(
-        BadCase{"--dim 4 --box 0,0,1,1 --toward point --at 0,0 --levels 2", "--dim: '4' is not an integer in [2, 3]"},
+        BadCase{"--dim 4 --box 0,0,1,1 --toward point --at 0,0 --levels 2",
+                "--dim: '4' is not an integer in [2, 3]"},
         BadCase{"--dim 3 --box 0,0,0,1,1 --toward point --at 0,0,0 --levels 2", "--box: expected 6"},
-        BadCase{"--dim 2 --box 0,0,1,x --toward point --at 0,0 --levels 2", "--box: 'x' is not a finite number"},
+        BadCase{"--dim 2 --box 0,0,1,x --toward point --at 0,0 --levels 2",
+                "--box: 'x' is not a finite number"},
         BadCase{"--dim 2 --box 1,0,0,1 --toward point --at 0,0 --levels 2", "--box: the lower corner"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward cube --at 0,0 --levels 2", "--toward: 'cube'"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward plane --at 0,0 --levels 2", "--normal is required"},
-        BadCase{"--dim 2 --box 0,0,1,1 --toward plane --at 0,0 --normal 0,0 --levels 2", "--normal must not be zero"},
+        BadCase{"--dim 2 --box 0,0,1,1 --toward plane --at 0,0 --normal 0,0 --levels 2",
+                "--normal must not be zero"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward sphere --at 0,0 --levels 2", "--radius is required"},
-        BadCase{"--dim 2 --box 0,0,1,1 --toward sphere --at 0,0 --radius -1 --levels 2", "--radius must be positive"},
-        BadCase{"--dim 2 --box 0,0,1,1 --toward point --at 0,0 --radius 1 --levels 2", "--radius is only used"},
+        BadCase{"--dim 2 --box 0,0,1,1 --toward sphere --at 0,0 --radius -1 --levels 2",
+                "--radius must be positive"},
+        BadCase{"--dim 2 --box 0,0,1,1 --toward point --at 0,0 --radius 1 --levels 2",
+                "--radius is only used"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward point --at 0,0,0 --levels 2", "--at: expected 2"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward point --at 0,0 --levels 99", "--levels: '99'"},
         BadCase{"--dim 2 --box 0,0,1,1 --toward point --at 0,0 --levels two", "--levels: 'two'"}));
@@ -146,8 +155,9 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(RefineCommand, UnwritableOutputExitsWith2AndLeavesNoHierarchy) {
   const fs::path mlfeh = temp_dir() / "orphan.mlfeh";
   fs::remove(mlfeh);
-  const RunResult r = run_mlfe("refine --dim 2 --box 0,0,1,1 --toward point --at 0.5,0.5 --levels 2 -o " +
-                         (temp_dir() / "no_such_dir" / "x.vtu").string() + " --hierarchy " + mlfeh.string());
+  const RunResult r =
+      run_mlfe("refine --dim 2 --box 0,0,1,1 --toward point --at 0.5,0.5 --levels 2 -o " +
+               (temp_dir() / "no_such_dir" / "x.vtu").string() + " --hierarchy " + mlfeh.string());
   EXPECT_EQ(r.status, 2) << r.err;
   EXPECT_FALSE(fs::exists(mlfeh));
 }

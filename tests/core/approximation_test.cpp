@@ -1,16 +1,15 @@
-#include <mlfe/core/approximation.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/bpx.h>
+#include <mlfe/core/fe_assembly.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchical_basis.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
 #include <functional>
 #include <random>
 
-#include <mlfe/core/bpx.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchical_basis.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
@@ -18,8 +17,7 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-ScalarGrid make_grid(int dim, int n, double spacing,
-                     const std::function<double(double, double, double)>& f) {
+ScalarGrid make_grid(int dim, int n, double spacing, const std::function<double(double, double, double)>& f) {
   ScalarGrid g;
   g.dim = dim;
   g.dims = {n, n, dim == 3 ? n : 1};
@@ -72,7 +70,8 @@ double l2_norm(const Hierarchy<D>& h, const Field& f) {  // ∫ f²
 TEST(Approximation, LinearFunctionIsReproducedExactlyOnT0) {
   for (int dim : {2, 3}) {
     // Small values keep ∫f² moderate; linear data is interpolated exactly by the grid.
-    const auto g = make_grid(dim, 9, 0.5, [](double x, double y, double z) { return 1.5 + 2 * x - 0.75 * y + 0.5 * z; });
+    const auto g =
+        make_grid(dim, 9, 0.5, [](double x, double y, double z) { return 1.5 + 2 * x - 0.75 * y + 0.5 * z; });
     GridField f(g);
     ApproximationOptions o;
     if (dim == 2) {
@@ -167,7 +166,8 @@ TEST(Approximation, UniformRefinementConvergesWithRateTwo) {
 }
 
 // u at x if leaf e contains x, else NaN.
-double eval_u_in(const Hierarchy<3>& h, ElemId e, const std::vector<double>& u, const std::array<double, 3>& x) {
+double eval_u_in(const Hierarchy<3>& h, ElemId e, const std::vector<double>& u,
+                 const std::array<double, 3>& x) {
   const auto& c = h.cell(e);
   const auto lam = test::barycentric(h, e, x);
   if (std::min({lam[0], lam[1], lam[2], lam[3]}) < -1e-12) return std::nan("");
@@ -213,7 +213,8 @@ TEST(Approximation, ReportedErrorMatchesBruteForceVoxelSum) {
         for (int i = lo[0]; i <= hi[0]; ++i) {
           const std::size_t idx = i + std::size_t(np[0]) * (j + std::size_t(np[1]) * k);
           if (seen[idx]) continue;
-          const std::array<double, 3> x{(i + 0.5) / sub * sp[0], (j + 0.5) / sub * sp[1], (k + 0.5) / sub * sp[2]};
+          const std::array<double, 3> x{(i + 0.5) / sub * sp[0], (j + 0.5) / sub * sp[1],
+                                        (k + 0.5) / sub * sp[2]};
           const double uv = eval_u_in(h, e, a.values, x);
           if (std::isnan(uv)) continue;
           seen[idx] = 1;
@@ -232,7 +233,8 @@ TEST(Approximation, SmallFeatureInsideOneCoarseElementIsFoundAndRefined) {
   // across, so a point-sampling rule would step right over it.
   const std::array<double, 3> c{21.3, 9.7, 12.2};
   const auto g = make_grid(3, 33, 1.0, [&](double x, double y, double z) {
-    const double r = std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1] * 1.25) * (y - c[1] * 1.25) + (z - c[2]) * (z - c[2]));
+    const double r =
+        std::sqrt((x - c[0]) * (x - c[0]) + (y - c[1] * 1.25) * (y - c[1] * 1.25) + (z - c[2]) * (z - c[2]));
     return r <= 2.0 ? 100.0 : 0.0;
   });
   GridField f(g);
@@ -259,7 +261,9 @@ TEST(Approximation, SmallFeatureInsideOneCoarseElementIsFoundAndRefined) {
     if (d2 <= 4.0) level_at_ball = std::max(level_at_ball, h.level(e));
     if (d2 > 225.0) max_level_far = std::max(max_level_far, h.level(e));
   }
-  std::printf("stop: %s, leaves %zu, level at ball %d, far %d, rms %g -> %g\n", a.stop_reason.c_str(), h.leaves().size(), level_at_ball, max_level_far, a.iterations.front().rms_error, a.iterations.back().rms_error);
+  std::printf("stop: %s, leaves %zu, level at ball %d, far %d, rms %g -> %g\n", a.stop_reason.c_str(),
+              h.leaves().size(), level_at_ball, max_level_far, a.iterations.front().rms_error,
+              a.iterations.back().rms_error);
   EXPECT_GE(level_at_ball, 5);
   // The L2 projection of a step rings for a few element layers, so refinement reaches a few
   // voxels beyond the ball, but no further, and stays a small fraction of uniform refinement.
@@ -278,8 +282,10 @@ int pcg_iterations(const Hierarchy<D>& h, double gw, Preconditioner p) {
   for (Eigen::Index i = 0; i < b.size(); ++i) b[i] = U(rng);
   SparseOperator a(m);
   std::unique_ptr<LinearOperator> pre;
-  if (p == Preconditioner::kBpx) pre = std::make_unique<BpxPreconditioner<D>>(h, gw);
-  else pre = std::make_unique<IdentityOperator>(m.rows());
+  if (p == Preconditioner::kBpx)
+    pre = std::make_unique<BpxPreconditioner<D>>(h, gw);
+  else
+    pre = std::make_unique<IdentityOperator>(m.rows());
   Vector x = Vector::Zero(m.rows());
   const auto r = conjugate_gradient(a, *pre, b, x, 1e-8, 20000);
   EXPECT_TRUE(r.converged);
@@ -329,7 +335,8 @@ TEST(Bpx, IterationCountsStayBoundedFromTwoToTenLevels) {
 
 TEST(Approximation, ThresholdLoopTerminatesWithMonotoneErrorAndIsThreadIndependent) {
   const auto g = make_grid(3, 33, 1.0, [](double x, double y, double z) {
-    return 100 * std::tanh((std::sqrt((x - 16) * (x - 16) + (y - 18) * (y - 18) + (z - 14) * (z - 14)) - 9) / 1.5);
+    return 100 *
+           std::tanh((std::sqrt((x - 16) * (x - 16) + (y - 18) * (y - 18) + (z - 14) * (z - 14)) - 9) / 1.5);
   });
   GridField f(g);
   auto run = [&](int threads) {
@@ -352,9 +359,8 @@ TEST(Approximation, ThresholdLoopTerminatesWithMonotoneErrorAndIsThreadIndepende
 }
 
 TEST(Approximation, VertexBudgetIsNeverExceeded) {
-  const auto g = make_grid(2, 129, 1.0, [](double x, double y, double) {
-    return std::sin(x / 7.0) * std::cos(y / 5.0) * 50;
-  });
+  const auto g = make_grid(
+      2, 129, 1.0, [](double x, double y, double) { return std::sin(x / 7.0) * std::cos(y / 5.0) * 50; });
   GridField f(g);
   ApproximationOptions o;
   o.target_rms = 1e-3;
@@ -367,7 +373,8 @@ TEST(Approximation, VertexBudgetIsNeverExceeded) {
 }
 
 TEST(HierarchicalBasis, DecompositionRoundTripsAndTruncationInterpolates) {
-  const auto g = make_grid(3, 17, 1.0, [](double x, double y, double z) { return std::sin(x / 3) + y * z / 50; });
+  const auto g =
+      make_grid(3, 17, 1.0, [](double x, double y, double z) { return std::sin(x / 3) + y * z / 50; });
   GridField f(g);
   ApproximationOptions o;
   o.start_level = 1;

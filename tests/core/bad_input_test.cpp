@@ -1,10 +1,6 @@
 // Bad input reaching the core through its public API throws mlfe::Error with a message (it used
 // to abort through MLFE_CHECK, which is kept for bugs in mlfe itself).
 #include <gtest/gtest.h>
-
-#include <string>
-#include <vector>
-
 #include <mlfe/core/approximation.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
@@ -15,6 +11,9 @@
 #include <mlfe/core/transfer_function.h>
 #include <mlfe/core/triangle_mesh.h>
 #include <mlfe/core/volume_render.h>
+
+#include <string>
+#include <vector>
 
 namespace mlfe {
 namespace {
@@ -112,17 +111,23 @@ TEST(BadInput, MeshesAndTransferFunctions) {
 // The ray caster's entry points: a camera without an image, values that do not fit the
 // hierarchy, a 2D grid for the 3D reference renderer.
 TEST(BadInput, RenderingRejectsCamerasValuesAndGrids) {
-  EXPECT_NE(error_of([] { orbit_camera({0, 0, 0}, 1.0, 0, 0, false, 0, 10); }).find("image size"),
+  EXPECT_NE(error_of([] {
+              orbit_camera({0, 0, 0}, 1.0, 0, 0, false, 0, 10);
+            }).find("image size"),
             std::string::npos);
-  EXPECT_NE(error_of([] { orbit_camera({0, 0, 0}, 0.0, 0, 0, false, 10, 10); }).find("positive distance"),
+  EXPECT_NE(error_of([] {
+              orbit_camera({0, 0, 0}, 0.0, 0, 0, false, 10, 10);
+            }).find("positive distance"),
             std::string::npos);
   const Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {1, 1, 1});
-  EXPECT_NE(error_of([&] { TetRenderMesh m(h, std::vector<double>(3, 0.0)); }).find("3 values"), std::string::npos);
+  EXPECT_NE(error_of([&] { TetRenderMesh m(h, std::vector<double>(3, 0.0)); }).find("3 values"),
+            std::string::npos);
   ScalarGrid g2 = grid({4, 4, 1});
   g2.dim = 2;
   const TransferFunction tf = transfer_function_preset("grey", 0.0, 1.0, 1.0);
   const Camera cam = orbit_camera({0, 0, 0}, 5.0, 0, 0, false, 8, 8);
-  EXPECT_NE(error_of([&] { render_grid(g2, tf, cam, RenderOptions{}); }).find("3D volume"), std::string::npos);
+  EXPECT_NE(error_of([&] { render_grid(g2, tf, cam, RenderOptions{}); }).find("3D volume"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -1,14 +1,12 @@
-#include <mlfe/core/element_integrals.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/element_integrals.h>
+#include <mlfe/core/p1_element.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <random>
-
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 namespace {

@@ -1,10 +1,8 @@
-#include <mlfe/core/fe_assembly.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/fe_assembly.h>
+#include <mlfe/core/p1_element.h>
 
 #include <random>
-
-#include <mlfe/core/p1_element.h>
 
 namespace mlfe {
 namespace {

@@ -1,11 +1,11 @@
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
 
 #include <cmath>
 #include <functional>
 #include <string>
 
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
@@ -22,9 +22,9 @@ Hierarchy<D> adapted() {
 
 template <int D>
 typename Hierarchy<D>::Arrays arrays_of(const Hierarchy<D>& h) {
-  return {h.points(),        h.vertex_parents_array(), h.vertex_level_array(),
-          h.cells(),         h.parent_array(),         h.first_child_array(),
-          h.num_children_array(), h.level_array(),     h.kind_array()};
+  return {h.points(),       h.vertex_parents_array(), h.vertex_level_array(), h.cells(),
+          h.parent_array(), h.first_child_array(),    h.num_children_array(), h.level_array(),
+          h.kind_array()};
 }
 
 TEST(HierarchyFromArrays, RebuildsAnAdaptedHierarchyExactlyIn2DAnd3D) {
@@ -82,10 +82,15 @@ TEST(HierarchyFromArrays, RejectsVertexIndicesOutOfRangeOrRepeated) {
 }
 
 TEST(HierarchyFromArrays, RejectsBadVertexParents) {
-  expect_rejected([](auto& a) { std::swap(a.vertex_parents[8][0], a.vertex_parents[8][1]); }, "invalid parents");
+  expect_rejected([](auto& a) { std::swap(a.vertex_parents[8][0], a.vertex_parents[8][1]); },
+                  "invalid parents");
   expect_rejected([](auto& a) { a.vertex_parents[8][1] = VertexId(8); }, "invalid parents");
-  expect_rejected([](auto& a) { a.vertex_parents[9] = a.vertex_parents[8]; a.points[9] = a.points[8]; },
-                  "bisected twice");
+  expect_rejected(
+      [](auto& a) {
+        a.vertex_parents[9] = a.vertex_parents[8];
+        a.points[9] = a.points[8];
+      },
+      "bisected twice");
   expect_rejected([](auto& a) { a.vertex_level[8] = 0; }, "level");
 }
 
@@ -103,10 +108,12 @@ TEST(HierarchyFromArrays, AcceptsMidpointRoundingWithinTheTolerance) {
 TEST(HierarchyFromArrays, RejectsInconsistentParentChildLinks) {
   // The true parent (processed first) notices that its child names another parent.
   expect_rejected([](auto& a) { a.parent[a.cells.size() - 1] = ElemId(0); }, "names another parent");
-  expect_rejected([](auto& a) { a.first_child[first_refined(a, ElemKind::kRed)] = ElemId(0); }, "child range");
+  expect_rejected([](auto& a) { a.first_child[first_refined(a, ElemKind::kRed)] = ElemId(0); },
+                  "child range");
   expect_rejected([](auto& a) { a.num_children[first_refined(a, ElemKind::kRed)] = 7; }, "child range");
   expect_rejected([](auto& a) { a.parent[6] = ElemId(9); }, "names another parent");
-  expect_rejected([](auto& a) { a.first_child[a.cells.size() - 1] = ElemId(0); }, "leaf but has a first child");
+  expect_rejected([](auto& a) { a.first_child[a.cells.size() - 1] = ElemId(0); },
+                  "leaf but has a first child");
 }
 
 TEST(HierarchyFromArrays, RejectsWrongLevelsAndKinds) {
@@ -124,7 +131,8 @@ TEST(HierarchyFromArrays, RejectsGreenElementsWithChildren) {
         for (std::size_t i = 0; i < a.cells.size(); ++i)
           if (a.num_children[i] > 0 && a.kind[i] == ElemKind::kRed) {
             const std::size_t p = a.parent[i].value;
-            for (std::size_t k = 0; k < a.num_children[p]; ++k) a.kind[a.first_child[p].value + k] = ElemKind::kGreen;
+            for (std::size_t k = 0; k < a.num_children[p]; ++k)
+              a.kind[a.first_child[p].value + k] = ElemKind::kGreen;
             return;
           }
         ADD_FAILURE() << "fixture lacks a refined red element";

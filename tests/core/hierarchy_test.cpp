@@ -1,6 +1,6 @@
-#include <mlfe/core/hierarchy.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/mesh_quality.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>
@@ -9,7 +9,6 @@
 #include <random>
 #include <set>
 
-#include <mlfe/core/mesh_quality.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {
@@ -60,8 +59,7 @@ void expect_conforming(const Hierarchy<D>& h, const P<D>& lo, const P<D>& hi) {
     for (int i = 0; i < SimplexTraits<D>::kEdges; ++i) {
       const VertexId a = c[SimplexTraits<D>::kEdgeVerts[i][0]];
       const VertexId b = c[SimplexTraits<D>::kEdgeVerts[i][1]];
-      ASSERT_FALSE(h.edge_midpoints().find(a, b).valid())
-          << "hanging vertex on an edge of leaf " << e.value;
+      ASSERT_FALSE(h.edge_midpoints().find(a, b).valid()) << "hanging vertex on an edge of leaf " << e.value;
     }
   }
   double box = 1;
@@ -537,10 +535,10 @@ TEST(EdgeMap, EraseKeepsEveryOtherEdgeFindable) {
 
 TEST(GreenType, ClassifiesThePapersFourGreenPatterns) {
   EXPECT_EQ(green_type(3, 0x01), 1);
-  EXPECT_EQ(green_type(3, 0x03), 2);         // e0, e1 share vertex 0
-  EXPECT_EQ(green_type(3, 0x0B), 3);         // face (0,1,2)
-  EXPECT_EQ(green_type(3, 0x21), 4);         // e0 and e5 are opposite
-  EXPECT_EQ(green_type(3, 0x07), -1);        // star at vertex 0: red
+  EXPECT_EQ(green_type(3, 0x03), 2);   // e0, e1 share vertex 0
+  EXPECT_EQ(green_type(3, 0x0B), 3);   // face (0,1,2)
+  EXPECT_EQ(green_type(3, 0x21), 4);   // e0 and e5 are opposite
+  EXPECT_EQ(green_type(3, 0x07), -1);  // star at vertex 0: red
   EXPECT_EQ(green_type(3, 0x3F), -1);
   EXPECT_EQ(green_type(2, 0x01), 1);
   EXPECT_EQ(green_type(2, 0x03), -1);

@@ -1,13 +1,11 @@
-#include <mlfe/core/iso_surface.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/iso_surface.h>
 
 #include <cmath>
 #include <map>
 #include <set>
-
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
 
 namespace mlfe {
 namespace {

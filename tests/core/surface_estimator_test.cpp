@@ -1,16 +1,14 @@
 // The min/max pyramid, the surface-gap estimator and surface-driven refinement.
-#include <mlfe/core/surface_estimator.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/approximation.h>
+#include <mlfe/core/field.h>
+#include <mlfe/core/minmax_pyramid.h>
+#include <mlfe/core/surface_estimator.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
 #include <functional>
 #include <random>
-
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/minmax_pyramid.h>
 
 namespace mlfe {
 namespace {

@@ -1,6 +1,6 @@
-#include <mlfe/core/surface_simplification.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/surface_simplification.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
@@ -12,7 +12,6 @@
 #include <set>
 #include <utility>
 
-#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

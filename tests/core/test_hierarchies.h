@@ -2,13 +2,12 @@
 // random marking, barycentric coordinates, equality of every stored array.
 #pragma once
 #include <gtest/gtest.h>
+#include <mlfe/core/hierarchy.h>
 
 #include <array>
 #include <cstddef>
 #include <random>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
 
 namespace mlfe::test {
 

@@ -1,15 +1,13 @@
 // Segment integration: the mean transmittance (closed form and table) and the pre-integrated
 // accumulator (both) against fine numerical integration, the table against the closed form,
 // constant opacity against the analytic transmittance, narrow spikes, early termination.
-#include <mlfe/core/transfer_function.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/transfer_function.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-
-#include <mlfe/core/error.h>
 
 namespace mlfe {
 namespace {

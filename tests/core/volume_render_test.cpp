@@ -1,9 +1,8 @@
 // Ray casting on the tetrahedral hierarchy: no lost rays through vertices, along edges and in
 // faces; analytic transmittance; exactness on linear fields across levels; empty-space
 // skipping; the same image with 1 and 2 threads; the renderer's memory per tetrahedron.
-#include <mlfe/core/volume_render.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/volume_render.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

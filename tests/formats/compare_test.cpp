@@ -1,14 +1,19 @@
 // formats/compare (mlfe compare's library): each kind detects a planted difference just over
 // its tolerance and accepts one just under; Draco copies, reordered copies and glTF encodings
 // compare equal; mirrored and millimetre meshes are reported with a reason that says so.
-#include <mlfe/formats/compare.h>
-
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfOutputFile.h>
 #include <ImfStringAttribute.h>
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <png.h>
 #include <tbb/global_control.h>
 
@@ -19,12 +24,6 @@
 #include <numeric>
 #include <random>
 
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/gltf_writer.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -1,13 +1,12 @@
-#include <mlfe/formats/draco_io.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/openmesh_io.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <random>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/openmesh_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {
@@ -27,7 +26,7 @@ TEST(DracoQuantizationBits, AreTheSmallestThatMeetTheTolerance) {
   // 100 mm at 0.01 mm needs 2^b - 1 >= 5000 steps: b = 13.
   EXPECT_EQ(quantization_bits_for(0.01, 100.0), 13);
   EXPECT_GT(100.0 / ((1 << 12) - 1) / 2, 0.01);
-  EXPECT_EQ(quantization_bits_for(1.0, 1.0), 8);    // lower clamp
+  EXPECT_EQ(quantization_bits_for(1.0, 1.0), 8);     // lower clamp
   EXPECT_EQ(quantization_bits_for(1e-12, 1e3), 30);  // upper clamp
   EXPECT_EQ(quantization_bits_for(0.5, 0.0), 8);
   EXPECT_THROW(quantization_bits_for(0.0, 1.0), Error);
@@ -51,7 +50,8 @@ TEST(DracoRoundTrip, KeepsEveryTriangleWithinTheTolerance) {
     for (std::size_t i = 0; i < out.positions.size(); ++i) {
       const auto& p = out.positions[i];
       const auto& n = out.normals[i];
-      const double r = std::sqrt((p[0] - 10) * (p[0] - 10) + (p[1] + 20) * (p[1] + 20) + (p[2] - 30) * (p[2] - 30));
+      const double r =
+          std::sqrt((p[0] - 10) * (p[0] - 10) + (p[1] + 20) * (p[1] + 20) + (p[2] - 30) * (p[2] - 30));
       const double dot = (n[0] * (p[0] - 10) + n[1] * (p[1] + 20) + n[2] * (p[2] - 30)) / r;
       ASSERT_GT(dot, std::cos(2.0 * M_PI / 180.0)) << "vertex " << i;
     }

@@ -1,13 +1,14 @@
 // EXR output as other tools see it (exrheader from the openexr package, and OpenEXR's reader),
 // the PNG preview, and ParaView transfer-function files.
-#include <mlfe/formats/exr_writer.h>
-
 #include <ImfArray.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfMatrixAttribute.h>
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/exr_writer.h>
+#include <mlfe/formats/transfer_function_io.h>
 
 #include <cmath>
 #include <cstdio>
@@ -16,8 +17,6 @@
 #include <limits>
 #include <sstream>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/transfer_function_io.h>
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;

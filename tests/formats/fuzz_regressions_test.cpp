@@ -1,12 +1,11 @@
 // Inputs the fuzzers once crashed on (tests/data/fuzz_regressions/): each must now be
 // refused with mlfe::Error naming the file — never a crash or an abort inside a library.
 #include <gtest/gtest.h>
-
-#include <filesystem>
-
 #include <mlfe/core/error.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/volume_reader.h>
+
+#include <filesystem>
 
 namespace mlfe {
 namespace {
@@ -28,7 +27,8 @@ TEST(FuzzRegressions, EveryRecordedCrashIsNowAnError) {
 }
 
 TEST(FuzzRegressions, CorruptDracoPayloadsAreErrors) {
-  const std::filesystem::path dir = std::filesystem::path(MLFE_SOURCE_DIR) / "tests/data/fuzz_regressions_draco";
+  const std::filesystem::path dir =
+      std::filesystem::path(MLFE_SOURCE_DIR) / "tests/data/fuzz_regressions_draco";
   int n = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     ++n;

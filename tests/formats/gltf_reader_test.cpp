@@ -1,15 +1,14 @@
 // formats/gltf_reader: geometry back from mlfe's own .glb/.gltf (Draco, plain, quantized), node
 // transforms applied (a mirroring one flips the winding), and bad files end in mlfe::Error.
-#include <mlfe/formats/gltf_reader.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/gltf_reader.h>
+#include <mlfe/formats/gltf_writer.h>
 
 #include <cmath>
 #include <fstream>
 #include <random>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/gltf_writer.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -1,16 +1,14 @@
-#include <mlfe/formats/gltf_writer.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_writer.h>
 #include <sys/wait.h>
 
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-
 #include <nlohmann/json.hpp>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/draco_io.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {
@@ -79,7 +77,8 @@ std::vector<GltfSurface> two_surface_scene(bool with_lods = false) {
   skin.iso_value = -300;
   skin.mesh = icosphere(3, 80.0f, {12.0f, -30.0f, 140.0f});
   skin.color = {0.9f, 0.75f, 0.65f, 0.4f};
-  if (with_lods) skin.lods = {icosphere(2, 80.0f, {12.0f, -30.0f, 140.0f}), icosphere(1, 80.0f, {12.0f, -30.0f, 140.0f})};
+  if (with_lods)
+    skin.lods = {icosphere(2, 80.0f, {12.0f, -30.0f, 140.0f}), icosphere(1, 80.0f, {12.0f, -30.0f, 140.0f})};
   GltfSurface bone;
   bone.name = "bone";
   bone.iso_value = 400.5;
@@ -104,7 +103,9 @@ void expected_bounds(const std::vector<GltfSurface>& s, const std::string& space
 }
 
 enum class Mode { kDraco, kFloat, kQuantized };
-const char* mode_name(Mode m) { return m == Mode::kDraco ? "draco" : m == Mode::kFloat ? "float" : "quantized"; }
+const char* mode_name(Mode m) {
+  return m == Mode::kDraco ? "draco" : m == Mode::kFloat ? "float" : "quantized";
+}
 
 GltfOptions options_for(Mode mode, const std::string& space = "RAS") {
   GltfOptions o;
@@ -126,16 +127,19 @@ TEST_P(GltfValidation, PassesTheKhronosValidatorWithoutErrorsOrWarnings) {
   EXPECT_EQ(r.status, 0) << r.output;
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Encodings, GltfValidation,
-    ::testing::Combine(::testing::Values(std::string(".glb"), std::string(".gltf")),
-                       ::testing::Values(Mode::kDraco, Mode::kFloat, Mode::kQuantized)),
-    [](const auto& info) { return std::get<0>(info.param).substr(1) + "_" + mode_name(std::get<1>(info.param)); });
+INSTANTIATE_TEST_SUITE_P(Encodings, GltfValidation,
+                         ::testing::Combine(::testing::Values(std::string(".glb"), std::string(".gltf")),
+                                            ::testing::Values(Mode::kDraco, Mode::kFloat, Mode::kQuantized)),
+                         [](const auto& info) {
+                           return std::get<0>(info.param).substr(1) + "_" +
+                                  mode_name(std::get<1>(info.param));
+                         });
 
 TEST(GltfValidator, RejectsAnInvalidAsset) {
   // Guards the validation tests above: the script must really report problems.
   const std::string path = scratch_dir() + "/invalid.gltf";
-  std::ofstream(path) << R"({"asset":{"version":"2.0"},"accessors":[{"componentType":5126,"count":0,"type":"VEC3"}]})";
+  std::ofstream(path)
+      << R"({"asset":{"version":"2.0"},"accessors":[{"componentType":5126,"count":0,"type":"VEC3"}]})";
   EXPECT_NE(validate(path).status, 0);
 }
 
@@ -176,7 +180,8 @@ INSTANTIATE_TEST_SUITE_P(Encodings, GltfBoundingBox,
                          ::testing::Combine(::testing::Values(Mode::kDraco, Mode::kFloat, Mode::kQuantized),
                                             ::testing::Values(std::string("RAS"), std::string("LPS"))),
                          [](const auto& info) {
-                           return std::string(mode_name(std::get<0>(info.param))) + "_" + std::get<1>(info.param);
+                           return std::string(mode_name(std::get<0>(info.param))) + "_" +
+                                  std::get<1>(info.param);
                          });
 
 TEST(GltfDraco, PayloadDecodesToWhatTheAccessorsDeclare) {
@@ -199,7 +204,8 @@ TEST(GltfDraco, PayloadDecodesToWhatTheAccessorsDeclare) {
     const json& nrm = g["accessors"][prim["attributes"]["NORMAL"].get<int>()];
     const json& idx = g["accessors"][prim["indices"].get<int>()];
     for (const json* a : {&pos, &nrm, &idx}) EXPECT_FALSE(a->contains("bufferView"));
-    const std::string bytes = glb.bin.substr(view.value("byteOffset", 0), view["byteLength"].get<std::size_t>());
+    const std::string bytes =
+        glb.bin.substr(view.value("byteOffset", 0), view["byteLength"].get<std::size_t>());
     const TriangleMesh dec = decode_draco(bytes.data(), bytes.size(), "payload");
     EXPECT_EQ(pos["count"].get<std::size_t>(), dec.positions.size());
     EXPECT_EQ(nrm["count"].get<std::size_t>(), dec.normals.size());
@@ -236,7 +242,8 @@ TEST(GltfWriter, BadPathThrowsAndLeavesNoFile) {
   const std::string path = scratch_dir() + "/no/such/dir/scene.glb";
   EXPECT_THROW(write_gltf(path, two_surface_scene(), options_for(Mode::kDraco)), Error);
   EXPECT_FALSE(test::file_exists(path));
-  EXPECT_THROW(write_gltf(scratch_dir() + "/scene.obj", two_surface_scene(), options_for(Mode::kDraco)), Error);
+  EXPECT_THROW(write_gltf(scratch_dir() + "/scene.obj", two_surface_scene(), options_for(Mode::kDraco)),
+               Error);
   EXPECT_FALSE(test::file_exists(scratch_dir() + "/scene.obj"));
   GltfOptions bad_space = options_for(Mode::kFloat, "RAI");
   EXPECT_THROW(write_gltf(scratch_dir() + "/space.glb", two_surface_scene(), bad_space), Error);
@@ -266,11 +273,13 @@ TEST(GltfWriter, RecordsFrameProvenanceNamesAndMaterials) {
   EXPECT_EQ(g["nodes"][lods[0].get<int>()]["name"], "iso -300 lod 1");
   EXPECT_EQ(g["nodes"][lods[1].get<int>()]["name"], "iso -300 lod 2");
 
-  const json& skin_mat = g["materials"][g["meshes"][skin["mesh"].get<int>()]["primitives"][0]["material"].get<int>()];
+  const json& skin_mat =
+      g["materials"][g["meshes"][skin["mesh"].get<int>()]["primitives"][0]["material"].get<int>()];
   EXPECT_EQ(skin_mat["alphaMode"], "BLEND");
   EXPECT_EQ(skin_mat["doubleSided"], true);
   EXPECT_NEAR(skin_mat["pbrMetallicRoughness"]["baseColorFactor"][3].get<double>(), 0.4, 1e-6);
-  const json& bone_mat = g["materials"][g["meshes"][bone["mesh"].get<int>()]["primitives"][0]["material"].get<int>()];
+  const json& bone_mat =
+      g["materials"][g["meshes"][bone["mesh"].get<int>()]["primitives"][0]["material"].get<int>()];
   EXPECT_FALSE(bone_mat.contains("alphaMode"));
 }
 
@@ -300,7 +309,8 @@ TEST(GltfWriter, KeepsWindingNormalsAndOutwardOrientation) {
       const float* a = pos + 3 * idx[3 * t];
       const float* b = pos + 3 * idx[3 * t + 1];
       const float* d = pos + 3 * idx[3 * t + 2];
-      const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
+      const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]},
+                   v[3] = {d[0] - a[0], d[1] - a[1], d[2] - a[2]};
       const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
       const float* vn = nrm + 3 * idx[3 * t];
       ASSERT_GT(n[0] * vn[0] + n[1] * vn[1] + n[2] * vn[2], 0.0) << space << " triangle " << t;
@@ -312,7 +322,8 @@ TEST(GltfWriter, KeepsWindingNormalsAndOutwardOrientation) {
 
 TEST(GltfFrame, MatricesAreScaledProperRotationsToYUp) {
   auto apply = [](const std::array<double, 9>& m, std::array<double, 3> p) {
-    return std::array<double, 3>{m[0] * p[0] + m[1] * p[1] + m[2] * p[2], m[3] * p[0] + m[4] * p[1] + m[5] * p[2],
+    return std::array<double, 3>{m[0] * p[0] + m[1] * p[1] + m[2] * p[2],
+                                 m[3] * p[0] + m[4] * p[1] + m[5] * p[2],
                                  m[6] * p[0] + m[7] * p[1] + m[8] * p[2]};
   };
   for (const std::string space : {"RAS", "LPS", ""}) {

@@ -1,6 +1,6 @@
-#include <mlfe/formats/hierarchy_io.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/hierarchy_io.h>
 #include <zlib.h>
 
 #include <cmath>
@@ -11,7 +11,6 @@
 #include <random>
 #include <string>
 
-#include <mlfe/core/error.h>
 #include "tests/core/test_hierarchies.h"
 #include "tests/test_paths.h"
 
@@ -216,7 +215,8 @@ TEST(HierarchyFileRead, SurvivesCorruptionBehindAValidChecksum) {
   int rejected = 0;
   for (int trial = 0; trial < 2000; ++trial) {
     Bytes c = b;
-    for (int k = 0; k < 1 + trial % 3; ++k) c[rng() % (c.size() - 4)] ^= static_cast<std::uint8_t>(1 + rng() % 255);
+    for (int k = 0; k < 1 + trial % 3; ++k)
+      c[rng() % (c.size() - 4)] ^= static_cast<std::uint8_t>(1 + rng() % 255);
     fix_crc(c);
     write_bytes(q, c);
     try {

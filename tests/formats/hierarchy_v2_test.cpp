@@ -2,6 +2,10 @@
 // bound, prefixes as the hierarchical-basis approximation of their level, v1 still read,
 // truncated and bit-flipped files rejected.
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/hierarchy_levels.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,10 +17,6 @@
 #include <random>
 #include <string>
 
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchical_basis.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/hierarchy_levels.h>
 #include "tests/core/test_hierarchies.h"
 
 namespace mlfe {

@@ -1,7 +1,5 @@
 // formats/image_reader: EXR channels and attributes (data window not at the origin), PNG
 // channel layout and scaling, and truncated files end in mlfe::Error.
-#include <mlfe/formats/image_reader.h>
-
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
@@ -9,12 +7,13 @@
 #include <ImfStringAttribute.h>
 #include <gtest/gtest.h>
 #include <half.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/image_reader.h>
 #include <png.h>
 
 #include <cstring>
 #include <fstream>
 
-#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

@@ -1,12 +1,11 @@
-#include <mlfe/formats/openmesh_io.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/openmesh_io.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 
-#include <mlfe/core/error.h>
 #include "tests/test_meshes.h"
 
 namespace mlfe {

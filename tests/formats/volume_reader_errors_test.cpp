@@ -2,6 +2,8 @@
 // problem, never a crash, an abort or an exit from inside a library.
 #include <dirent.h>
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/volume_reader.h>
 #include <nifti2_io.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -18,8 +20,6 @@
 #include <string>
 #include <vector>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/volume_reader.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -52,17 +52,19 @@ void spit(const std::string& p, const std::string& bytes) {
 
 // Expects read_volume to throw one mlfe::Error line that names `file` (default: path) and
 // contains every string in `parts`.
-void expect_error(const std::string& path, const std::vector<std::string>& parts, const VolumeReadOptions& opts = {},
-                  std::string file = "") {
+void expect_error(const std::string& path, const std::vector<std::string>& parts,
+                  const VolumeReadOptions& opts = {}, std::string file = "") {
   if (file.empty()) file = path;
   try {
     ScalarGrid g = read_volume(path, opts);
-    ADD_FAILURE() << "no error for " << path << " (read " << g.dims[0] << "x" << g.dims[1] << "x" << g.dims[2] << ")";
+    ADD_FAILURE() << "no error for " << path << " (read " << g.dims[0] << "x" << g.dims[1] << "x" << g.dims[2]
+                  << ")";
   } catch (const Error& e) {
     const std::string m = e.what();
     EXPECT_EQ(m.find('\n'), std::string::npos) << m;
     EXPECT_EQ(m.rfind(file + ": ", 0), 0u) << "message does not start with the file name: " << m;
-    for (const auto& p : parts) EXPECT_NE(m.find(p), std::string::npos) << "missing \"" << p << "\" in: " << m;
+    for (const auto& p : parts)
+      EXPECT_NE(m.find(p), std::string::npos) << "missing \"" << p << "\" in: " << m;
   }
 }
 
@@ -100,13 +102,18 @@ TEST(VolumeReaderErrors, NrrdTruncatedDataIsRefusedBeforeTeemAllocates) {
 
 TEST(VolumeReaderErrors, NrrdAbsurdDimsAreRefusedWithoutAllocating) {
   const std::string dir = temp_dir();
-  spit(dir + "huge.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: raw") + "abcd");
+  spit(dir + "huge.nrrd",
+       nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: raw") +
+           "abcd");
   // The file is far too short: that is found before the memory check.
   expect_error(dir + "huge.nrrd", {"truncated", "4000000000000000 bytes"});
-  spit(dir + "hugegz.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: gzip") + "abcd");
+  spit(dir + "hugegz.nrrd",
+       nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: gzip") +
+           "abcd");
   expect_error(dir + "hugegz.nrrd", {"needs", "bytes of memory are available"});
-  spit(dir + "overflow.nrrd",
-           nrrd_header("type: double\ndimension: 3\nsizes: 2000000000 2000000000 2000000000\nendian: little\nencoding: raw") + "x");
+  spit(dir + "overflow.nrrd", nrrd_header("type: double\ndimension: 3\nsizes: 2000000000 2000000000 "
+                                          "2000000000\nendian: little\nencoding: raw") +
+                                  "x");
   expect_error(dir + "overflow.nrrd", {"too large"});
   spit(dir + "zero.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 4 0 4\nencoding: raw"));
   expect_error(dir + "zero.nrrd", {"bad NRRD header"});
@@ -124,9 +131,12 @@ TEST(VolumeReaderErrors, MemoryLimitNamesBytesNeededAndAvailable) {
 
 TEST(VolumeReaderErrors, NrrdUnsupportedTypeAndDimension) {
   const std::string dir = temp_dir();
-  spit(dir + "ll.nrrd", nrrd_header("type: long long\ndimension: 2\nsizes: 2 2\nendian: little\nencoding: raw") + std::string(32, '\0'));
+  spit(dir + "ll.nrrd",
+       nrrd_header("type: long long\ndimension: 2\nsizes: 2 2\nendian: little\nencoding: raw") +
+           std::string(32, '\0'));
   expect_error(dir + "ll.nrrd", {"unsupported NRRD type"});
-  spit(dir + "4d.nrrd", nrrd_header("type: uchar\ndimension: 4\nsizes: 2 2 2 2\nencoding: raw") + std::string(16, '\0'));
+  spit(dir + "4d.nrrd",
+       nrrd_header("type: uchar\ndimension: 4\nsizes: 2 2 2 2\nencoding: raw") + std::string(16, '\0'));
   expect_error(dir + "4d.nrrd", {"4 axes"});
 }
 
@@ -248,18 +258,24 @@ TEST(VolumeReaderErrors, VdbCorruptLengthFieldIsRefusedBeforeOpenVdbAllocates) {
 
 TEST(VolumeReaderErrors, MetaImageAndPgmHeaders) {
   const std::string dir = temp_dir();
-  spit(dir + "a.mha", "ObjectType = Image\nNDims = 3\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
+  spit(dir + "a.mha",
+       "ObjectType = Image\nNDims = 3\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
   expect_error(dir + "a.mha", {"DimSize needs 3 numbers"});
-  spit(dir + "b.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_LONG_LONG\nElementDataFile = LOCAL\n");
+  spit(
+      dir + "b.mha",
+      "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_LONG_LONG\nElementDataFile = LOCAL\n");
   expect_error(dir + "b.mha", {"unsupported MetaImage ElementType MET_LONG_LONG"});
-  spit(dir + "c.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
+  spit(dir + "c.mha",
+       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
   expect_error(dir + "c.mha", {"truncated", "16 bytes"}, {}, dir + "c.mha");
-  spit(dir + "d.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nCompressedData = True\n"
-                      "ElementDataFile = LOCAL\nxxxxxxxxxxxxxxxx");
+  spit(dir + "d.mha",
+       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nCompressedData = True\n"
+       "ElementDataFile = LOCAL\nxxxxxxxxxxxxxxxx");
   expect_error(dir + "d.mha", {"corrupt compressed data"});
   spit(dir + "e.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\n");
   expect_error(dir + "e.mha", {"no ElementDataFile"});
-  spit(dir + "f.mhd", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n");
+  spit(dir + "f.mhd",
+       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n");
   expect_error(dir + "f.mhd", {"cannot open"}, {}, dir + "gone.raw");
   spit(dir + "a.pgm", "P5\n4 4\n70000\n");
   expect_error(dir + "a.pgm", {"maxval 70000"});

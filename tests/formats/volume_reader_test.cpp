@@ -1,5 +1,7 @@
 // Importers: round trips through each library's own writer, and the shared real files.
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/volume_reader.h>
 #include <nifti2_io.h>
 #include <openvdb/io/File.h>
 #include <openvdb/openvdb.h>
@@ -14,8 +16,6 @@
 #include <string>
 #include <vector>
 
-#include <mlfe/core/error.h>
-#include <mlfe/formats/volume_reader.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -86,8 +86,8 @@ TEST(NrrdReader, RoundTripThroughTeemKeepsVoxelsAndObliqueTransform) {
   for (const NrrdEncoding* enc : {nrrdEncodingRaw, nrrdEncodingGzip}) {
     for (int type : {int(nrrdTypeShort), int(nrrdTypeFloat)}) {
       const std::string path = dir + "rt_" + enc->name + "_" + std::to_string(type) + ".nrrd";
-      write_nrrd(path, type == nrrdTypeShort ? static_cast<const void*>(s.data()) : f.data(), type, nx, ny, nz,
-                 dirs, origin, nrrdSpaceLeftPosteriorSuperior, enc);
+      write_nrrd(path, type == nrrdTypeShort ? static_cast<const void*>(s.data()) : f.data(), type, nx, ny,
+                 nz, dirs, origin, nrrdSpaceLeftPosteriorSuperior, enc);
       ScalarGrid g = read_volume(path);
       SCOPED_TRACE(path);
       EXPECT_EQ(g.format, "nrrd");
@@ -176,8 +176,10 @@ void write_nifti(const std::string& path, int datatype, bool nifti2, double slop
     for (int j = 0; j < 5; ++j)
       for (int i = 0; i < 6; ++i) {
         const int idx = i + 6 * (j + 5 * k);
-        if (datatype == DT_INT16) static_cast<short*>(nim->data)[idx] = short(pattern(i, j, k));
-        else static_cast<double*>(nim->data)[idx] = pattern(i, j, k) * 0.125;
+        if (datatype == DT_INT16)
+          static_cast<short*>(nim->data)[idx] = short(pattern(i, j, k));
+        else
+          static_cast<double*>(nim->data)[idx] = pattern(i, j, k) * 0.125;
       }
   nim->scl_slope = slope;
   nim->scl_inter = inter;
@@ -239,7 +241,8 @@ TEST(NiftiReader, BigEndianFileMatchesLibniftiAndHasExpectedDims) {
   ScalarGrid g = read_volume(path);
   EXPECT_EQ(g.dims, (std::array<std::int64_t, 3>{33, 41, 25}));
   nifti_set_debug_level(0);
-  std::unique_ptr<nifti_image, void (*)(nifti_image*)> nim(nifti_image_read(path.c_str(), 1), nifti_image_free);
+  std::unique_ptr<nifti_image, void (*)(nifti_image*)> nim(nifti_image_read(path.c_str(), 1),
+                                                           nifti_image_free);
   ASSERT_NE(nim, nullptr);
   ASSERT_EQ(nim->nvox, 33 * 41 * 25);
   ASSERT_EQ(nim->byteorder, 2);  // MSB_FIRST (defined only inside libnifti)
@@ -248,11 +251,20 @@ TEST(NiftiReader, BigEndianFileMatchesLibniftiAndHasExpectedDims) {
   for (std::int64_t i = 0; i < nim->nvox; ++i) {
     double v = 0;
     switch (nim->datatype) {
-      case DT_INT16: v = static_cast<short*>(nim->data)[i]; break;
-      case DT_UINT8: v = static_cast<unsigned char*>(nim->data)[i]; break;
-      case DT_FLOAT32: v = static_cast<float*>(nim->data)[i]; break;
-      case DT_INT32: v = static_cast<int*>(nim->data)[i]; break;
-      default: FAIL() << "unexpected datatype " << nim->datatype;
+      case DT_INT16:
+        v = static_cast<short*>(nim->data)[i];
+        break;
+      case DT_UINT8:
+        v = static_cast<unsigned char*>(nim->data)[i];
+        break;
+      case DT_FLOAT32:
+        v = static_cast<float*>(nim->data)[i];
+        break;
+      case DT_INT32:
+        v = static_cast<int*>(nim->data)[i];
+        break;
+      default:
+        FAIL() << "unexpected datatype " << nim->datatype;
     }
     ASSERT_FLOAT_EQ(g.values[i], float(v * slope + inter)) << i;
   }
@@ -344,7 +356,8 @@ TEST(VdbReader, RoundTripThroughOpenVdbUsesActiveBoxAndLinearTransform) {
 TEST(VdbReader, LevelSetSphereKeepsSignInsideAndOut) {
   openvdb::initialize();
   const std::string path = temp_dir() + "sphere.vdb";
-  auto ls = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(2.0f, openvdb::Vec3f(0, 0, 0), 0.25f, 3.0f);
+  auto ls =
+      openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(2.0f, openvdb::Vec3f(0, 0, 0), 0.25f, 3.0f);
   ls->setName("surface");
   openvdb::io::File(path).write({ls});
   ScalarGrid g = read_volume(path);
@@ -397,7 +410,8 @@ TEST(RawReader, FlagsReadHeaderlessDataWithOffsetAndBigEndian) {
       for (int j = 0; j < 4; ++j)
         for (int i = 0; i < 5; ++i) {
           short v = short(pattern(i, j, k));
-          unsigned char b[2] = {static_cast<unsigned char>((v >> 8) & 0xff), static_cast<unsigned char>(v & 0xff)};
+          unsigned char b[2] = {static_cast<unsigned char>((v >> 8) & 0xff),
+                                static_cast<unsigned char>(v & 0xff)};
           out.write(reinterpret_cast<char*>(b), 2);
         }
   }

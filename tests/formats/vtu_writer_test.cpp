@@ -1,6 +1,6 @@
-#include <mlfe/formats/vtu_writer.h>
-
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/formats/vtu_writer.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -13,7 +13,6 @@
 #include <regex>
 #include <string>
 
-#include <mlfe/core/error.h>
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -32,8 +31,8 @@ std::string read_all(const fs::path& p) {
 // appended blocks (UInt64 byte count + data) at the offsets the XML names.
 struct ParsedVtu {
   std::size_t points = 0, cells = 0;
-  std::map<std::string, std::string> type_of;          // array name -> VTK type
-  std::map<std::string, std::string> data_of;          // array name -> raw bytes
+  std::map<std::string, std::string> type_of;  // array name -> VTK type
+  std::map<std::string, std::string> data_of;  // array name -> raw bytes
   std::map<std::string, int> components_of;
 
   template <class T>
@@ -154,7 +153,8 @@ TEST(VtuWriter, WritesOnlyTheUsedVerticesOfALevelAndAppliesTheTransform) {
   EXPECT_EQ(v.data_of.count("u"), 0u);
   const auto points = v.get<double>("Points");
   for (int c = 0; c < 8; ++c) {
-    const auto q = t.local_to_physical({h.point(VertexId(c))[0], h.point(VertexId(c))[1], h.point(VertexId(c))[2]});
+    const auto q =
+        t.local_to_physical({h.point(VertexId(c))[0], h.point(VertexId(c))[1], h.point(VertexId(c))[2]});
     for (int a = 0; a < 3; ++a) EXPECT_DOUBLE_EQ(points[3 * c + a], q[a]);
   }
 }
@@ -186,25 +186,28 @@ TEST(VtuWriter, RejectsBadArgumentsWithoutLeavingAFile) {
   fs::remove(path);
   std::vector<double> short_values(h.vertex_count() - 1, 0.0);
   EXPECT_THROW(write_vtu<3>(path.string(), h, h.leaves(), &short_values, nullptr), Error);
-  EXPECT_THROW(write_vtu<3>(path.string(), h, {ElemId(static_cast<std::uint32_t>(h.element_count()))}, nullptr,
-                            nullptr),
+  EXPECT_THROW(write_vtu<3>(path.string(), h, {ElemId(static_cast<std::uint32_t>(h.element_count()))},
+                            nullptr, nullptr),
                Error);
   EXPECT_FALSE(fs::exists(path));
-  EXPECT_THROW(write_vtu<3>((temp_file("no_such_dir") / "x.vtu").string(), h, h.leaves(), nullptr, nullptr), Error);
+  EXPECT_THROW(write_vtu<3>((temp_file("no_such_dir") / "x.vtu").string(), h, h.leaves(), nullptr, nullptr),
+               Error);
 }
 
 // VTK's own reader, when python3-vtk9 is installed (it is optional: a bench-only package).
 TEST(VtuWriter, ReadsBackWithVtkWhenAvailable) {
-  if (std::system("python3 -c 'import vtk' > /dev/null 2>&1") != 0) GTEST_SKIP() << "python3-vtk9 not installed";
+  if (std::system("python3 -c 'import vtk' > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "python3-vtk9 not installed";
   const Hierarchy<3> h = refined_box();
   std::vector<double> u(h.vertex_count(), 1.5);
   const fs::path path = temp_file("vtk.vtu");
   write_vtu<3>(path.string(), h, h.leaves(), &u, nullptr);
-  const std::string cmd = "python3 -c \"import vtk,sys; r=vtk.vtkXMLUnstructuredGridReader(); r.SetFileName('" +
-                          path.string() + "'); r.Update(); g=r.GetOutput(); sys.exit(0 if g.GetNumberOfCells()==" +
-                          std::to_string(h.leaves().size()) + " and g.GetNumberOfPoints()==" +
-                          std::to_string(h.vertex_count()) + " and g.GetPointData().GetArray('u').GetValue(0)==1.5 "
-                          "else 1)\"";
+  const std::string cmd =
+      "python3 -c \"import vtk,sys; r=vtk.vtkXMLUnstructuredGridReader(); r.SetFileName('" + path.string() +
+      "'); r.Update(); g=r.GetOutput(); sys.exit(0 if g.GetNumberOfCells()==" +
+      std::to_string(h.leaves().size()) + " and g.GetNumberOfPoints()==" + std::to_string(h.vertex_count()) +
+      " and g.GetPointData().GetArray('u').GetValue(0)==1.5 "
+      "else 1)\"";
   EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
 }
 

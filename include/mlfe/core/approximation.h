@@ -12,30 +12,30 @@
 // refined where the iso-surfaces need it, decided from the data before the first solve, and
 // u is then checked against the same rule.
 #pragma once
+#include <mlfe/core/field.h>
+#include <mlfe/core/hierarchy.h>
+
 #include <cstddef>
 #include <functional>
 #include <string>
 #include <vector>
 
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchy.h>
-
 namespace mlfe {
 
 struct IterationStats {
   int iteration = 0;
-  int level = 0;                 ///< finest element level
+  int level = 0;  ///< finest element level
   std::size_t vertices = 0;
-  std::size_t elements = 0;      ///< leaf elements
-  std::size_t marked = 0;        ///< elements marked for refinement after this solve
-  double l2_error = 0;           ///< sqrt(Σ E_T), data units × length^(D/2)
-  double rms_error = 0;          ///< l2_error / sqrt(|Ω|), data units
-  double rms_percent = 0;        ///< rms_error / value range × 100
-  double psnr_db = 0;            ///< 20 log10(range / rms_error)
-  int cg_iterations = 0;         ///< 0 for a direct solve
+  std::size_t elements = 0;  ///< leaf elements
+  std::size_t marked = 0;    ///< elements marked for refinement after this solve
+  double l2_error = 0;       ///< sqrt(Σ E_T), data units × length^(D/2)
+  double rms_error = 0;      ///< l2_error / sqrt(|Ω|), data units
+  double rms_percent = 0;    ///< rms_error / value range × 100
+  double psnr_db = 0;        ///< 20 log10(range / rms_error)
+  int cg_iterations = 0;     ///< 0 for a direct solve
   double cg_residual = 0;
   double assembly_seconds = 0, solve_seconds = 0, estimate_seconds = 0, refine_seconds = 0;
-  double seconds = 0;            ///< since the start
+  double seconds = 0;  ///< since the start
 };
 
 /// One pass of the surface-driven refinement before the first solve.
@@ -44,20 +44,20 @@ struct SurfacePassStats {
   std::size_t elements = 0;    ///< leaf elements
   std::size_t candidates = 0;  ///< leaves whose data range brackets an iso-value
   std::size_t marked = 0;
-  double seconds = 0;          ///< since the start of approximate()
+  double seconds = 0;  ///< since the start of approximate()
 };
 
 enum class Preconditioner { kBpx, kJacobi, kNone };
 
 struct ApproximationOptions {
-  double target_rms = 0;          ///< stop when RMS error ≤ this (data units); 0: unused
-  double threshold = 0;           ///< paper's rule: refine T when sqrt(E_T/|T|) > threshold; 0: unused
-  std::size_t max_vertices = 0;   ///< never exceed this many vertices; 0: no limit
-  int max_level = 20;             ///< elements of this level are not refined
-  int max_iterations = 60;        ///< refine-solve cycles
-  int start_level = -1;           ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
-  bool h1 = false;                ///< (u,v) + s²(∇u,∇v) instead of (u,v)
-  double quadrature_edge = 0;     ///< sub-simplex size for integration; 0: 2 × Field::voxel_size()
+  double target_rms = 0;         ///< stop when RMS error ≤ this (data units); 0: unused
+  double threshold = 0;          ///< paper's rule: refine T when sqrt(E_T/|T|) > threshold; 0: unused
+  std::size_t max_vertices = 0;  ///< never exceed this many vertices; 0: no limit
+  int max_level = 20;            ///< elements of this level are not refined
+  int max_iterations = 60;       ///< refine-solve cycles
+  int start_level = -1;          ///< uniform levels before adapting; -1: until edges ≤ 16 voxels
+  bool h1 = false;               ///< (u,v) + s²(∇u,∇v) instead of (u,v)
+  double quadrature_edge = 0;    ///< sub-simplex size for integration; 0: 2 × Field::voxel_size()
   /// Iso-aware refinement: elements where f or u crosses one of these values are also refined
   /// while the surface's estimated distance error sqrt(E_T/|T|) / |∇u| exceeds
   /// surface_tolerance voxels (or the surface is missing from u), down to voxel-sized elements.
@@ -87,17 +87,17 @@ struct ApproximationOptions {
   /// matrix, solver vectors: estimated_memory_bytes()) would exceed this; 0: no limit.
   std::size_t max_memory_bytes = 0;
   Preconditioner preconditioner = Preconditioner::kBpx;
-  double cg_tolerance = 1e-9;     ///< relative residual
-  int direct_solve_max = 1000;    ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
-                                  ///< uniform levels; beyond, 3D fill-in makes BPX-CG cheaper); 0: never
-  std::function<void(const IterationStats&)> progress;  ///< called after every solve
+  double cg_tolerance = 1e-9;   ///< relative residual
+  int direct_solve_max = 1000;  ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
+                                ///< uniform levels; beyond, 3D fill-in makes BPX-CG cheaper); 0: never
+  std::function<void(const IterationStats&)> progress;            ///< called after every solve
   std::function<void(const SurfacePassStats&)> surface_progress;  ///< after every surface pass
 };
 
 template <int D>
 struct Approximation {
   Hierarchy<D> hierarchy;
-  std::vector<double> values;     ///< u at every vertex of the hierarchy (local frame)
+  std::vector<double> values;  ///< u at every vertex of the hierarchy (local frame)
   std::vector<SurfacePassStats> surface_passes;
   std::vector<IterationStats> iterations;
   std::vector<double> leaf_errors;  ///< E_T per leaf (h.leaves() order) of the final u

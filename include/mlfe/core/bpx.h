@@ -14,12 +14,12 @@
 // interpolates from its two parent vertices), so one application costs O(Σ_k |V_k|) —
 // proportional to the number of unknowns on geometrically growing hierarchies.
 #pragma once
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/linear_operator.h>
+
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/linear_operator.h>
 
 namespace mlfe {
 

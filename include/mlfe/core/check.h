@@ -5,20 +5,19 @@
 #include <cstdio>
 #include <cstdlib>
 
-#define MLFE_CHECK(cond)                                                                   \
-  do {                                                                                     \
-    if (!(cond)) {                                                                         \
-      std::fprintf(stderr, "mlfe: internal check failed: %s at %s:%d\n", #cond, __FILE__, \
-                   __LINE__);                                                              \
-      std::abort();                                                                        \
-    }                                                                                      \
+#define MLFE_CHECK(cond)                                                                             \
+  do {                                                                                               \
+    if (!(cond)) {                                                                                   \
+      std::fprintf(stderr, "mlfe: internal check failed: %s at %s:%d\n", #cond, __FILE__, __LINE__); \
+      std::abort();                                                                                  \
+    }                                                                                                \
   } while (0)
 
-#define MLFE_CHECK_MSG(cond, msg)                                                             \
-  do {                                                                                        \
-    if (!(cond)) {                                                                            \
-      std::fprintf(stderr, "mlfe: internal check failed: %s (%s) at %s:%d\n", #cond, (msg),  \
-                   __FILE__, __LINE__);                                                       \
-      std::abort();                                                                           \
-    }                                                                                         \
+#define MLFE_CHECK_MSG(cond, msg)                                                                     \
+  do {                                                                                                \
+    if (!(cond)) {                                                                                    \
+      std::fprintf(stderr, "mlfe: internal check failed: %s (%s) at %s:%d\n", #cond, (msg), __FILE__, \
+                   __LINE__);                                                                         \
+      std::abort();                                                                                   \
+    }                                                                                                 \
   } while (0)

@@ -5,11 +5,11 @@
 // Contract: keys are unordered vertex pairs {a, b} with a != b. find() is safe to call
 // concurrently with other find() calls; insert() is not thread-safe.
 #pragma once
-#include <cstdint>
-#include <vector>
-
 #include <mlfe/core/check.h>
 #include <mlfe/core/ids.h>
+
+#include <cstdint>
+#include <vector>
 
 namespace mlfe {
 

@@ -16,9 +16,9 @@
 // accumulated point by point in the fixed depth-first order of the sub-simplices, so the
 // result does not depend on the batching, bit for bit.
 #pragma once
-#include <array>
-
 #include <mlfe/core/field.h>
+
+#include <array>
 
 namespace mlfe {
 

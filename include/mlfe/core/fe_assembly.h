@@ -7,20 +7,19 @@
 // All functions are TBB-parallel and bitwise deterministic: per-element results go to fixed
 // slots and are summed in element order.
 #pragma once
-#include <vector>
-
 #include <mlfe/core/element_integrals.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
+
+#include <vector>
 
 namespace mlfe {
 
 /// Resolving integrals of f for each element of `elems` (see element_integrals.h).
 template <int D>
 std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
-                                                           const std::vector<ElemId>& elems,
-                                                           const Field& f, double max_sub_edge,
-                                                           bool gradients);
+                                                           const std::vector<ElemId>& elems, const Field& f,
+                                                           double max_sub_edge, bool gradients);
 
 /// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()).
 template <int D>
@@ -41,8 +40,7 @@ Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
 /// E_T for each leaf, from the cached integrals and nodal values U (never negative).
 template <int D>
 std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                                   const std::vector<ElementIntegrals<D>>& integrals,
-                                   const Vector& u, double gradient_weight,
-                                   IntegralIndex index = IntegralIndex::kLeafOrder);
+                                   const std::vector<ElementIntegrals<D>>& integrals, const Vector& u,
+                                   double gradient_weight, IntegralIndex index = IntegralIndex::kLeafOrder);
 
 }  // namespace mlfe

@@ -2,14 +2,14 @@
 // (physical units: index .* spacing, origin at voxel 0). The finite-element core only sees this
 // interface, so VDB or unstructured inputs plug in the same way.
 #pragma once
+#include <mlfe/core/minmax_pyramid.h>
+#include <mlfe/core/scalar_grid.h>
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <mutex>
-
-#include <mlfe/core/minmax_pyramid.h>
-#include <mlfe/core/scalar_grid.h>
 
 namespace mlfe {
 

@@ -6,9 +6,9 @@
 // bisects. Dropping the surpluses of levels > k gives the approximation on T_k (expressed at
 // all vertices by interpolation), which is how coarser levels of detail are produced.
 #pragma once
-#include <vector>
-
 #include <mlfe/core/hierarchy.h>
+
+#include <vector>
 
 namespace mlfe {
 

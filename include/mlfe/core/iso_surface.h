@@ -12,12 +12,12 @@
 // triangles; each triangle oriented so that its normal points toward lower values of u (or
 // higher, by option); vertex and triangle order are a deterministic function of the input.
 #pragma once
-#include <vector>
-
 #include <mlfe/core/field.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/core/triangle_mesh.h>
+
+#include <vector>
 
 namespace mlfe {
 

@@ -68,7 +68,7 @@ struct CgResult {
 /// Preconditioned conjugate gradients for SPD A and SPD preconditioner M (≈ A^{-1}).
 /// x holds the start value (warm start) and receives the solution. Stops when
 /// ||r|| <= rtol ||b|| or after max_iterations. b == 0 gives x = 0.
-CgResult conjugate_gradient(const LinearOperator& a, const LinearOperator& m, const Vector& b,
-                            Vector& x, double rtol, int max_iterations);
+CgResult conjugate_gradient(const LinearOperator& a, const LinearOperator& m, const Vector& b, Vector& x,
+                            double rtol, int max_iterations);
 
 }  // namespace mlfe

@@ -3,14 +3,14 @@
 // passes before the first solve. Kept apart from the mesh and the solver, as MFEM keeps its
 // ThresholdRefiner apart from Mesh.
 #pragma once
-#include <cstddef>
-#include <vector>
-
 #include <mlfe/core/approximation.h>
 #include <mlfe/core/fe_assembly.h>
 #include <mlfe/core/field.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
+
+#include <cstddef>
+#include <vector>
 
 namespace mlfe {
 

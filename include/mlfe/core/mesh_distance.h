@@ -6,13 +6,13 @@
 // generator drawn sequentially, queries run in parallel but write to their own slot, and the
 // reductions over the slots are sequential, so results are identical for any thread count.
 #pragma once
+#include <mlfe/core/ids.h>
+#include <mlfe/core/triangle_mesh.h>
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
-
-#include <mlfe/core/ids.h>
-#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 

@@ -8,11 +8,11 @@
 // its samples' range, so the answer contains the range of f over the box (conservative: it may
 // be wider by up to one block).
 #pragma once
+#include <mlfe/core/scalar_grid.h>
+
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <mlfe/core/scalar_grid.h>
 
 namespace mlfe {
 

@@ -38,15 +38,15 @@ struct GridTransform {
 };
 
 struct ScalarGrid {
-  int dim = 3;                                   ///< 2 or 3
-  std::array<std::int64_t, 3> dims{0, 0, 0};     ///< nx, ny, nz (nz == 1 in 2D)
-  std::vector<float> values;                     ///< nx*ny*nz values, x fastest
+  int dim = 3;                                ///< 2 or 3
+  std::array<std::int64_t, 3> dims{0, 0, 0};  ///< nx, ny, nz (nz == 1 in 2D)
+  std::vector<float> values;                  ///< nx*ny*nz values, x fastest
   GridTransform transform;
-  std::string space;                             ///< "RAS", "LPS" or ""
-  ScalarType source_type = ScalarType::F32;      ///< the type stored in the file
-  std::string format;                            ///< "nrrd", "nifti", "raw", "vdb", ...
-  std::string source;                            ///< the file it came from
-  std::string notes;                             ///< conversions applied, one per line
+  std::string space;                         ///< "RAS", "LPS" or ""
+  ScalarType source_type = ScalarType::F32;  ///< the type stored in the file
+  std::string format;                        ///< "nrrd", "nifti", "raw", "vdb", ...
+  std::string source;                        ///< the file it came from
+  std::string notes;                         ///< conversions applied, one per line
 
   std::int64_t voxel_count() const { return dims[0] * dims[1] * dims[2]; }
   float at(std::int64_t i, std::int64_t j, std::int64_t k) const {

@@ -10,10 +10,10 @@
 // surface that f does not have. Noise away from the surfaces never changes a side, so it does
 // not drive refinement (an L2 estimate would refine all of it).
 #pragma once
+#include <mlfe/core/field.h>
+
 #include <array>
 #include <vector>
-
-#include <mlfe/core/field.h>
 
 namespace mlfe {
 

@@ -3,9 +3,9 @@
 // of the input stays within a tolerance of the simplified surface. No I/O; TBB-parallel and
 // deterministic whatever the thread count.
 #pragma once
-#include <cstddef>
-
 #include <mlfe/core/triangle_mesh.h>
+
+#include <cstddef>
 
 namespace mlfe {
 

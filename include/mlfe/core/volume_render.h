@@ -28,15 +28,15 @@
 // Exit test: the parametric form of the face-crossing test (as in Bunyk et al.) with the
 // entry-face exclusion as tie-break, not Plücker coordinates (Platis & Theoharis 2003).
 #pragma once
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/transfer_function.h>
+
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/core/transfer_function.h>
 
 namespace mlfe {
 

@@ -21,12 +21,12 @@
 //
 // Results depend only on the files and the options (never on the thread count).
 #pragma once
+#include <mlfe/core/triangle_mesh.h>
+
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 

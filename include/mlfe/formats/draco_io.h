@@ -3,12 +3,12 @@
 // surfaces encoded with the same DracoOptions box land on the same grid points: shared
 // boundaries stay crack-free after decoding.
 #pragma once
+#include <mlfe/core/triangle_mesh.h>
+
 #include <array>
 #include <cstddef>
 #include <string>
 #include <vector>
-
-#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 

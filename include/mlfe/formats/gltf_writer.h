@@ -5,18 +5,17 @@
 // maps to +Y and anterior to +Z, so a viewer shows the patient upright, facing the camera.
 // The matrix used is recorded in asset.extras.mlfe.physical_to_gltf.
 #pragma once
+#include <mlfe/core/triangle_mesh.h>
+
 #include <array>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
-
-#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 
 struct GltfSurface {
-  std::string name;   ///< mesh name; empty gives "iso <iso_value>"
+  std::string name;  ///< mesh name; empty gives "iso <iso_value>"
   double iso_value = 0.0;
   TriangleMesh mesh;  ///< physical millimetres in GltfOptions::space; normals optional
   std::array<float, 4> color{0.8f, 0.8f, 0.8f, 1.0f};  ///< linear RGBA in [0,1]; alpha < 1 => BLEND
@@ -24,12 +23,12 @@ struct GltfSurface {
 };
 
 struct GltfOptions {
-  bool draco = true;      ///< KHR_draco_mesh_compression (required extension)
-  bool quantize = false;  ///< KHR_mesh_quantization for uncompressed output (ignored with draco)
+  bool draco = true;           ///< KHR_draco_mesh_compression (required extension)
+  bool quantize = false;       ///< KHR_mesh_quantization for uncompressed output (ignored with draco)
   double tolerance_mm = 0.01;  ///< max position error per coordinate from Draco/quantization, mm
-  std::string space;      ///< "RAS", "LPS" or "" (unknown, treated as RAS) of the input positions
+  std::string space;           ///< "RAS", "LPS" or "" (unknown, treated as RAS) of the input positions
   nlohmann::json extras = nlohmann::json::object();  ///< provenance, copied into asset.extras
-  std::string generator = "mlfe";                     ///< asset.generator
+  std::string generator = "mlfe";                    ///< asset.generator
 };
 
 /// Writes one scene with one node, mesh and material per surface, to `path` (.glb binary or
@@ -47,7 +46,8 @@ struct GltfOptions {
 /// The file appears atomically; same inputs give byte-identical files.
 /// Throws mlfe::Error ("<path>: <problem>") for an unknown extension or space, non-finite
 /// or out-of-range mesh data, tolerance_mm <= 0 with compression, encoder failures and I/O errors.
-void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces, const GltfOptions& options);
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                const GltfOptions& options);
 
 /// Row-major 3x3 matrix M with gltf_metres = M * physical_mm for input space "RAS" (also "")
 /// or "LPS": RAS -> 0.001*(-x, z, y), LPS -> 0.001*(x, z, -y). 1000*M is a proper rotation

@@ -56,24 +56,23 @@
 // f64). Any prefix of complete levels is a valid, coarser file content.
 //
 #pragma once
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/scalar_grid.h>
+
 #include <cstdint>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <variant>
 #include <vector>
-
-#include <nlohmann/json.hpp>
-
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/scalar_grid.h>
 
 namespace mlfe {
 
 /// Everything in a hierarchy file besides the hierarchy and its values.
 struct HierarchyFileInfo {
-  GridTransform transform;   ///< local frame → physical
-  std::string space;         ///< "RAS", "LPS" or "" (at most 64 printable ASCII characters)
-  double value_min = 0.0;    ///< value range of the source data
+  GridTransform transform;  ///< local frame → physical
+  std::string space;        ///< "RAS", "LPS" or "" (at most 64 printable ASCII characters)
+  double value_min = 0.0;   ///< value range of the source data
   double value_max = 0.0;
   nlohmann::json metadata = nlohmann::json::object();  ///< provenance (must be an object)
   // Error figures of the stored approximation against its source, in data units (v2 only;
@@ -108,7 +107,7 @@ struct HierarchyFile : HierarchyFileInfo {
 struct HierarchyWriteOptions {
   bool compress = true;  ///< zstd-compress the array section (v1) or the sections (v2)
   int zstd_level = 3;
-  int version = 1;       ///< 1 keeps the ids and exact values; 2 is the compact progressive file
+  int version = 1;  ///< 1 keeps the ids and exact values; 2 is the compact progressive file
   /// v2: quantize values so every decoded vertex value is within this bound (data units) of
   /// the given one; 0 stores them exactly (f64).
   double max_error = 0;
@@ -144,11 +143,9 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level = -1);
 /// unreadable or short file gives false).
 bool is_hierarchy_file(const std::string& path);
 
-extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&,
-                                        const std::vector<double>&, const HierarchyFileInfo&,
-                                        const HierarchyWriteOptions&);
-extern template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&,
-                                        const std::vector<double>&, const HierarchyFileInfo&,
-                                        const HierarchyWriteOptions&);
+extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const std::vector<double>&,
+                                        const HierarchyFileInfo&, const HierarchyWriteOptions&);
+extern template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,
+                                        const HierarchyFileInfo&, const HierarchyWriteOptions&);
 
 }  // namespace mlfe

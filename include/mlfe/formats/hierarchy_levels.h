@@ -15,11 +15,11 @@
 // the same elements, vertices and levels in a canonical numbering (the ids differ from the
 // original's in general, the mesh does not).
 #pragma once
-#include <cstdint>
-#include <vector>
-
 #include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
+
+#include <cstdint>
+#include <vector>
 
 namespace mlfe {
 

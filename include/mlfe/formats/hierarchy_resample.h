@@ -1,12 +1,12 @@
 // The piecewise-linear function of a hierarchy's leaves sampled back onto a voxel grid, for
 // `mlfe export` and for the error figures of the hierarchy file against its source.
 #pragma once
+#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/scalar_grid.h>
+
 #include <array>
 #include <cstdint>
 #include <vector>
-
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/scalar_grid.h>
 
 namespace mlfe {
 

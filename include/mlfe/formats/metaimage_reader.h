@@ -1,9 +1,9 @@
 // MetaImage (.mha with the data in the same file, .mhd with a separate data file).
 #pragma once
-#include <string>
-
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
+
+#include <string>
 
 namespace mlfe {
 

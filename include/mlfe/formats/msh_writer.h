@@ -8,12 +8,12 @@
 // ordered so a tetrahedron has positive volume (Gmsh's reference orientation);
 // $NodeData "u" (when values are given) and $ElementData "level".
 #pragma once
-#include <string>
-#include <vector>
-
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/ids.h>
 #include <mlfe/core/scalar_grid.h>
+
+#include <string>
+#include <vector>
 
 namespace mlfe {
 

@@ -1,9 +1,9 @@
 // NRRD volumes and height fields (.nrrd with attached data, .nhdr with detached data) via Teem.
 #pragma once
-#include <string>
-
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
+
+#include <string>
 
 namespace mlfe {
 

@@ -2,12 +2,12 @@
 // .off, .stl) and quadric decimation for coarser levels of detail.
 #pragma once
 // OpenMesh registers its readers/writers only when MeshIO.hh is seen before a mesh kernel.
+#include <mlfe/core/triangle_mesh.h>
+
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <cstddef>
 #include <string>
-
-#include <mlfe/core/triangle_mesh.h>
 
 namespace mlfe {
 

@@ -1,9 +1,9 @@
 // Grey PNG height fields (8 or 16 bit) via libpng.
 #pragma once
-#include <string>
-
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
+
+#include <string>
 
 namespace mlfe {
 

@@ -1,11 +1,11 @@
 // Headerless raw volumes described by a JSON sidecar (FILE.json) or by command-line flags.
 #pragma once
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
 #include <cstddef>
 #include <istream>
 #include <string>
-
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
 
 namespace mlfe {
 

@@ -6,9 +6,9 @@
 // Only linear opacity segments (midpoint 0.5, sharpness 0, ParaView's default) are accepted:
 // other values would need ParaView's Hermite-shaped segments. "Name" becomes the name.
 #pragma once
-#include <string>
-
 #include <mlfe/core/transfer_function.h>
+
+#include <string>
 
 namespace mlfe {
 

@@ -1,10 +1,10 @@
 // OpenVDB volumes (.vdb): level sets, fog volumes and other scalar grids.
 #pragma once
-#include <string>
-#include <vector>
-
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
+
+#include <string>
+#include <vector>
 
 namespace mlfe {
 

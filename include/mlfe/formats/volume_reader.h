@@ -9,13 +9,13 @@
 // of any kind is reported as mlfe::Error with one line "<file>: <problem>"; the libraries'
 // own diagnostics are captured and never printed, and no library may end the process.
 #pragma once
+#include <mlfe/core/scalar_grid.h>
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
-
-#include <mlfe/core/scalar_grid.h>
 
 namespace mlfe {
 
@@ -28,10 +28,10 @@ struct VolumeReadOptions {
   std::string space;
   // Headerless raw files: used when there is no sidecar, and override the sidecar's fields.
   std::optional<std::array<std::int64_t, 3>> raw_dims;  ///< nz == 1 (or 0) for a 2D grid
-  std::string raw_dtype;                 ///< "uint8" ... "float64" (also u8, i16, f32, ...)
-  std::string raw_endian = "little";     ///< "little" or "big"
+  std::string raw_dtype;                                ///< "uint8" ... "float64" (also u8, i16, f32, ...)
+  std::string raw_endian = "little";                    ///< "little" or "big"
   std::optional<std::array<double, 3>> raw_spacing, raw_origin;
-  std::int64_t raw_offset = 0;           ///< bytes to skip before the voxels
+  std::int64_t raw_offset = 0;  ///< bytes to skip before the voxels
   /// Upper bound in bytes for what reading may allocate; 0: MemAvailable from /proc/meminfo.
   std::size_t max_bytes = 0;
 };

@@ -2,9 +2,9 @@
 // OpenVDB), keeping the grid's index-to-physical transform, so `mlfe export` output opens in
 // other tools in the frame of the data it came from.
 #pragma once
-#include <string>
-
 #include <mlfe/core/scalar_grid.h>
+
+#include <string>
 
 namespace mlfe {
 

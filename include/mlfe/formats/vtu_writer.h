@@ -8,12 +8,12 @@
 // All arrays are in one <AppendedData encoding="raw"> block, each preceded by its byte count as
 // a UInt64, in the order the DataArray elements appear; the XML offsets point at those counts.
 #pragma once
-#include <string>
-#include <vector>
-
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/ids.h>
 #include <mlfe/core/scalar_grid.h>
+
+#include <string>
+#include <vector>
 
 namespace mlfe {
 
