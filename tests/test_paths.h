@@ -2,9 +2,13 @@
 // (samples/, also the main job's inputs), the small test inputs (tests/data), the golden files
 // (tests/golden), and a scratch folder per test binary, removed at exit.
 #pragma once
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 namespace mlfe::test {
@@ -41,5 +45,24 @@ inline std::string scratch_dir(const std::string& sub = "") {
   std::filesystem::create_directories(p);
   return p.string();
 }
+
+#ifdef MLFE_BINARY
+/// What the mlfe command line printed and returned.
+struct CliResult {
+  int status;  ///< exit status (-1 when it did not exit normally)
+  std::string out, err;
+};
+
+/// Runs `mlfe ARGS` (the build's binary), capturing stdout and stderr.
+inline CliResult run_mlfe(const std::string& args) {
+  const std::string dir = scratch_dir("cli"), out = dir + "/out.txt", err = dir + "/err.txt";
+  const int rc = std::system((std::string(MLFE_BINARY) + " " + args + " > " + out + " 2> " + err).c_str());
+  const auto slurp = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(out), slurp(err)};
+}
+#endif
 
 }  // namespace mlfe::test

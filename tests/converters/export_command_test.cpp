@@ -16,6 +16,9 @@
 #include <sstream>
 #include <string>
 
+#include "tests/test_meshes.h"
+#include "tests/test_paths.h"
+
 namespace fs = std::filesystem;
 
 namespace mlfe {
@@ -24,30 +27,11 @@ namespace {
 const std::string kSkull = std::string(MLFE_SOURCE_DIR) + "/samples/ct_skull_64.nrrd";
 const std::string kMri = std::string(MLFE_SOURCE_DIR) + "/tests/data/mri_small_bigendian.nii";
 
-struct RunResult {
-  int status;
-  std::string out, err;
-};
+using RunResult = test::CliResult;
+using test::read_bytes;
 
-std::string scratch() {
-  static const std::string dir = [] {
-    const fs::path d = fs::temp_directory_path() / ("mlfe_export_test_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    return d.string();
-  }();
-  return dir;
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
-RunResult run(const std::string& args) {
-  const std::string out = scratch() + "/out.txt", err = scratch() + "/err.txt";
-  const int rc = std::system((std::string(MLFE_BINARY) + " " + args + " > " + out + " 2> " + err).c_str());
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(out), slurp(err)};
-}
+std::string scratch() { return test::scratch_dir("export"); }
+RunResult run(const std::string& args) { return test::run_mlfe(args); }
 
 // Physical position of voxel (i, j, k) in RAS (NIfTI's frame), whatever the grid's space.
 std::array<double, 3> ras(const ScalarGrid& g, double i, double j, double k) {
@@ -137,12 +121,12 @@ TEST(ExportCommand, VtuReadsInVtk) {
   const std::string summary = scratch() + "/vtu.txt";
   ASSERT_EQ(std::system(("/usr/bin/python3 " + script + " " + vtu + " > " + summary).c_str()), 0)
       << "python3-vtk9 (scripts/install_deps.sh) reads " << vtu;
-  std::istringstream in(slurp(summary));
+  std::istringstream in(read_bytes(summary));
   std::size_t cells = 0, points = 0, tets = 0;
   double umin = 0, umax = 0, vol = 0;
   int lmax = -1;
   in >> cells >> points >> tets >> umin >> umax >> lmax >> vol;
-  ASSERT_TRUE(in) << slurp(summary);
+  ASSERT_TRUE(in) << read_bytes(summary);
   EXPECT_EQ(cells, hh.leaves().size());
   EXPECT_EQ(tets, cells);
   EXPECT_EQ(points, hh.vertex_count());
@@ -167,7 +151,7 @@ TEST(ExportCommand, MshIsAValidGmsh41Mesh) {
   ASSERT_EQ(run("export " + h + " -o " + msh).status, 0);
   const HierarchyFile f = read_hierarchy(h);
   const auto& hh = std::get<Hierarchy<3>>(f.hierarchy);
-  std::istringstream in(slurp(msh));
+  std::istringstream in(read_bytes(msh));
   std::string tok;
   in >> tok;
   ASSERT_EQ(tok, "$MeshFormat");
@@ -253,7 +237,7 @@ TEST(ExportCommand, BadRequestsExit2AndWriteNothing) {
   }
   // A truncated file: the error names it, and no output appears.
   const std::string cut = scratch() + "/cut.mlfeh", out = scratch() + "/cut.nii.gz";
-  const std::string bytes = slurp(h);
+  const std::string bytes = read_bytes(h);
   std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() - 7);
   const RunResult r = run("export " + cut + " -o " + out);
   EXPECT_EQ(r.status, 2);

@@ -12,6 +12,7 @@
 #include <sstream>
 #include <string>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
@@ -21,30 +22,11 @@ namespace {
 
 const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 
-struct RunResult {
-  int status;
-  std::string out, err;
-};
+using RunResult = test::CliResult;
+using test::read_bytes;
 
-std::string scratch() {
-  static const std::string dir = [] {
-    const fs::path d = fs::temp_directory_path() / ("mlfe_hfile_cmd_test_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    return d.string();
-  }();
-  return dir;
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
-RunResult run(const std::string& args) {
-  const std::string out = scratch() + "/out.txt", err = scratch() + "/err.txt";
-  const int rc = std::system((std::string(MLFE_BINARY) + " " + args + " > " + out + " 2> " + err).c_str());
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(out), slurp(err)};
-}
+std::string scratch() { return test::scratch_dir("hfile"); }
+RunResult run(const std::string& args) { return test::run_mlfe(args); }
 
 TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
   const std::string h = scratch() + "/skull.mlfeh", rep = scratch() + "/skull.json";
@@ -53,7 +35,7 @@ TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
   const HierarchyFile f = read_hierarchy(h);
   EXPECT_EQ(f.version, 2);
   EXPECT_EQ(f.value_bound, 0.02);
-  const auto report = nlohmann::json::parse(slurp(rep));
+  const auto report = nlohmann::json::parse(read_bytes(rep));
   // The input is 1 MiB of float32; the target is ≤ 1/10 of gzip -9 of it.
   EXPECT_LT(fs::file_size(h), fs::file_size(kSkull) / 20);
   EXPECT_EQ(report["file"]["bytes"].get<double>(), static_cast<double>(fs::file_size(h)));
@@ -90,7 +72,7 @@ TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
 TEST(HierarchyFileCommand, ACorruptFileExitsWithStatus2AndNamesIt) {
   const std::string h = scratch() + "/corrupt.mlfeh";
   ASSERT_EQ(run("build " + kSkull + " -o " + h + " --max-vertices 3000").status, 0);
-  const std::string good = slurp(h);
+  const std::string good = read_bytes(h);
   std::string bytes = good;
   bytes[bytes.size() / 2] ^= 0x10;
   std::ofstream(h, std::ios::binary | std::ios::trunc) << bytes;
