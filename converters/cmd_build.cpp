@@ -108,17 +108,19 @@ void run_build(const BuildState& s) {
                  {"encode_seconds", fig.encode_seconds}};
     write_json(s.report, r);
   }
+  // The closing summary, like convert's: on stderr, unless --quiet.
   const auto& last = b.iterations().back();
-  std::fprintf(stderr,
-               "mlfe build: %zu vertices, %zu elements, %d levels, RMS %.4g (%.3f%%), PSNR %.2f dB (%s)\n",
-               b.vertices(), b.leaves(), b.levels(), last.rms_error, last.rms_percent, last.psnr_db,
-               b.stop_reason().c_str());
-  std::fprintf(
-      stderr,
-      "mlfe build: file %.0f bytes (%.3f bits/voxel), values within %.4g; on the voxels RMS %.4g, max %.4g, "
-      "PSNR %.2f dB\n",
-      bytes, 8 * bytes / static_cast<double>(grid.voxel_count()), fig.bound, fig.errors.rms, fig.errors.max,
-      fig.errors.psnr);
+  if (!s.params.quiet) {
+    std::fprintf(stderr,
+                 "mlfe build: %zu vertices, %zu elements, %d levels, RMS %.4g (%.3f%%), PSNR %.2f dB (%s)\n",
+                 b.vertices(), b.leaves(), b.levels(), last.rms_error, last.rms_percent, last.psnr_db,
+                 b.stop_reason().c_str());
+    std::fprintf(stderr,
+                 "mlfe build: file %.0f bytes (%.3f bits/voxel), values within %.4g; "
+                 "on the voxels RMS %.4g, max %.4g, PSNR %.2f dB\n",
+                 bytes, 8 * bytes / static_cast<double>(grid.voxel_count()), fig.bound, fig.errors.rms,
+                 fig.errors.max, fig.errors.psnr);
+  }
   std::printf("%s\n", s.output.c_str());
 }
 

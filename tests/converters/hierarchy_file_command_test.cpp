@@ -49,6 +49,17 @@ TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
   EXPECT_EQ(f.norm, "l2");
 }
 
+TEST(HierarchyFileCommand, BuildPrintsItsSummaryUnlessQuiet) {
+  const std::string h = scratch() + "/quiet.mlfeh";
+  const RunResult loud = run("build " + kSkull + " -o " + h + " --max-vertices 3000");
+  ASSERT_EQ(loud.status, 0) << loud.err;
+  EXPECT_NE(loud.err.find("mlfe build: file"), std::string::npos) << loud.err;
+  const RunResult quiet = run("build " + kSkull + " -o " + h + " --max-vertices 3000 --quiet");
+  ASSERT_EQ(quiet.status, 0) << quiet.err;
+  EXPECT_EQ(quiet.err, "");
+  EXPECT_EQ(quiet.out, h + "\n");  // stdout still names the file written, for scripts
+}
+
 TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
   const std::string h = scratch() + "/info.mlfeh";
   ASSERT_EQ(run("build " + kSkull + " -o " + h + " --psnr 50").status, 0);
