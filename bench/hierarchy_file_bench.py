@@ -112,9 +112,9 @@ def main():
         ("CT", "ct_skull_64.nrrd",
          [[], ["--max-error", "0.05"], ["--rms", "0.25%"], ["--rms", "0.1%"], ["--rms", "1%"], ["--rms", "2%"],
           ["--rms", "4%"]],
-         [0.1, 0.25, 0.5, 1, 2, 4, 8, 16]),
+         [0.1, 0.25, 0.5, 1, 2, 4, 8, 16, 32]),
         ("MRI", "mri_colin27_brain.nii.gz", [[], ["--rms", "1%"], ["--rms", "2%"], ["--rms", "4%"]],
-         [4, 8, 16, 32, 64, 128, 256, 512]),
+         [4, 8, 16, 32, 64, 128, 256, 512, 1024]),
     ]
     results = {"load_average": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                "inputs": {}}
