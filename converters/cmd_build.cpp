@@ -48,8 +48,8 @@ using Measure = std::function<GridErrors(const Hierarchy<D>&, const std::vector<
 // Writes the v2 file: values quantized to the bound, the error figures measured against the
 // input (`measure`) from exactly the values a reader decodes.
 template <int D>
-FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a, const Measure<D>& measure,
-                       const nlohmann::json& input_metadata) {
+FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a,
+                       const Measure<D>& measure, const nlohmann::json& input_metadata) {
   FileFigures fig;
   const auto t0 = std::chrono::steady_clock::now();
   const double range = b.value_max - b.value_min;
@@ -93,7 +93,8 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
 template <int D>
 Measure<D> on_grid(const ScalarGrid& grid, const std::string& input, double range) {
   return [&grid, input, range](const Hierarchy<D>& h, const std::vector<double>& values) {
-    return grid_errors(resample_to_grid(h, values, grid.dims, grid.transform.spacing), grid.values, range, input);
+    return grid_errors(resample_to_grid(h, values, grid.dims, grid.transform.spacing), grid.values, range,
+                       input);
   };
 }
 
@@ -126,8 +127,8 @@ Measure<3> at_mesh_points(const TetMesh& mesh, const TetMeshField& input, double
   };
 }
 
-void report_and_print(const BuildState& s, const Built& b, const FileFigures& fig, const nlohmann::json& report,
-                      double samples, const char* per) {
+void report_and_print(const BuildState& s, const Built& b, const FileFigures& fig,
+                      const nlohmann::json& report, double samples, const char* per) {
   const double bytes = static_cast<double>(std::filesystem::file_size(s.output));
   if (!s.report.empty()) {
     nlohmann::json r = report;
@@ -163,9 +164,8 @@ void run_mesh_build(const BuildState& s) {
   const TetMeshField f(mesh);
   const Built b = build(f, mesh_input(f, mesh), build_options(s.params), {});
   warn_if_memory_limited(b, mesh.source, s.params.max_memory);
-  const nlohmann::json meta = {{"points", mesh.points.size()},
-                               {"tetrahedra", mesh.tets.size()},
-                               {"point_data", mesh.value_name}};
+  const nlohmann::json meta = {
+      {"points", mesh.points.size()}, {"tetrahedra", mesh.tets.size()}, {"point_data", mesh.value_name}};
   const FileFigures fig =
       write_file(s, b, b.get<3>(), at_mesh_points(mesh, f, b.value_max - b.value_min), meta);
   nlohmann::json r = build_report(s.input, nullptr, b);
@@ -185,7 +185,8 @@ void run_build(const BuildState& s) {
   const nlohmann::json meta = {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}};
   const FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), on_grid<2>(grid, s.input, range), meta)
                                        : write_file(s, b, b.get<3>(), on_grid<3>(grid, s.input, range), meta);
-  report_and_print(s, b, fig, build_report(s.input, &grid, b), static_cast<double>(grid.voxel_count()), "voxel");
+  report_and_print(s, b, fig, build_report(s.input, &grid, b), static_cast<double>(grid.voxel_count()),
+                   "voxel");
 }
 
 void add_build_command(CLI::App& app) {

@@ -103,7 +103,8 @@ Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<dou
   return build(GridField(grid), input, p, iso_values);
 }
 
-Built build(const Field& f, const FieldInput& input, const BuildOptions& p, const std::vector<double>& iso_values) {
+Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
+            const std::vector<double>& iso_values) {
   for (double v : iso_values)
     if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
   check_build_options(p);
@@ -139,9 +140,9 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p, cons
     // and writing.
     const double room = 0.9 * double(budget) - input.bytes;
     if (room < 8.0 * 1024 * 1024)
-      throw Error(
-          fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
-                      input.source, input.bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
+      throw Error(fmt::format(
+          "{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)", input.source,
+          input.bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);
   }
   o.progress = p.progress;

@@ -38,7 +38,8 @@ V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c) {
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) return axpy(a, d2 / (d2 - d6), ac);
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return axpy(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), sub(c, b));
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+    return axpy(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), sub(c, b));
   const double denom = 1.0 / (va + vb + vc);
   const double v = vb * denom, w = vc * denom;
   return {a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w};
@@ -61,8 +62,7 @@ constexpr double kInsideTolerance = 1e-12;
 
 }  // namespace
 
-// Value ranges of the buckets over index boxes: level k holds blocks of 2^k cells per axis,
-// so a box is covered by at most 2 blocks per axis of the first level where it fits.
+// Value ranges of the buckets over index boxes: level k holds blocks of 2^k cells per axis.
 struct TetMeshField::RangePyramid {
   struct Level {
     std::array<std::int64_t, 3> n;
@@ -91,12 +91,16 @@ struct TetMeshField::RangePyramid {
     }
   }
 
-  // Cells [i0, i1] inclusive (already clamped to the grid).
+  // Cells [i0, i1] inclusive (already clamped to the grid): the blocks of the finest level
+  // where the box covers at most 512 of them, so small boxes get the buckets' own ranges.
   std::array<double, 2> range(const std::int64_t i0[3], const std::int64_t i1[3]) const {
+    const auto blocks = [&](std::size_t k) {
+      std::int64_t n = 1;
+      for (int a = 0; a < 3; ++a) n *= (i1[a] >> k) - (i0[a] >> k) + 1;
+      return n;
+    };
     std::size_t k = 0;
-    while (k + 1 < levels.size() &&
-           ((i1[0] >> k) - (i0[0] >> k) > 1 || (i1[1] >> k) - (i0[1] >> k) > 1 || (i1[2] >> k) - (i0[2] >> k) > 1))
-      ++k;
+    while (k + 1 < levels.size() && blocks(k) > 512) ++k;
     const Level& l = levels[k];
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
     for (std::int64_t z = i0[2] >> k; z <= (i1[2] >> k); ++z)
@@ -254,7 +258,8 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
     tet_cells(tets_[t], i0, i1);
     for (std::int64_t k = i0[2]; k <= i1[2]; ++k)
       for (std::int64_t j = i0[1]; j <= i1[1]; ++j)
-        for (std::int64_t i = i0[0]; i <= i1[0]; ++i) cell_tets_[fill[std::size_t(i + n_[0] * (j + n_[1] * k))]++] = t;
+        for (std::int64_t i = i0[0]; i <= i1[0]; ++i)
+          cell_tets_[fill[std::size_t(i + n_[0] * (j + n_[1] * k))]++] = t;
   }
   // Chebyshev distance to the nearest non-empty cell: breadth-first over the 26 neighbours.
   empty_distance_.assign(cells, -1);
@@ -320,7 +325,8 @@ TetMeshField::Hit TetMeshField::locate(const std::array<double, 3>& x_in) const 
     for (std::uint32_t s = cell_start_[b]; s < cell_start_[b + 1]; ++s) {
       const std::uint32_t t = cell_tets_[s];
       const Tet& T = tets_[t];
-      const V3 p[4] = {points_[T.vertex[0]], points_[T.vertex[1]], points_[T.vertex[2]], points_[T.vertex[3]]};
+      const V3 p[4] = {points_[T.vertex[0]], points_[T.vertex[1]], points_[T.vertex[2]],
+                       points_[T.vertex[3]]};
       static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
       for (const auto& f : kFaces) {
         const V3 q = closest_on_triangle(x, p[f[0]], p[f[1]], p[f[2]]);
@@ -374,7 +380,8 @@ std::array<double, 3> TetMeshField::gradient(const std::array<double, 3>& x) con
   return tets_[locate(x).tet].grad;
 }
 
-void TetMeshField::gradients(const std::array<double, 3>* x, std::array<double, 3>* out, std::size_t n) const {
+void TetMeshField::gradients(const std::array<double, 3>* x, std::array<double, 3>* out,
+                             std::size_t n) const {
   for (std::size_t j = 0; j < n; ++j) out[j] = tets_[locate(x[j]).tet].grad;
 }
 

@@ -85,7 +85,8 @@ class Cursor {
       n = std::uint64_t(v);
     }
     if (n > remaining() / min_bytes)
-      fail(path_, fmt::format("{}: {} entries cannot fit in the {} bytes left (truncated file?)", what, n, remaining()));
+      fail(path_, fmt::format("{}: {} entries cannot fit in the {} bytes left (truncated file?)", what, n,
+                              remaining()));
     return n;
   }
   void expect_end(const std::string& section) {
@@ -120,7 +121,8 @@ struct Msh {
 
 class Reader {
  public:
-  Reader(const std::string& path, const std::string& data, const TetMeshReadOptions& options, std::uint64_t limit)
+  Reader(const std::string& path, const std::string& data, const TetMeshReadOptions& options,
+         std::uint64_t limit)
       : path_(path), c_(path, data), options_(options), limit_(limit) {}
 
   TetMesh read() {
@@ -128,7 +130,8 @@ class Reader {
     bool nodes = false, elements = false;
     while (!c_.at_end()) {
       const std::string l = c_.next_line();
-      if (l.empty() || l[0] != '$') fail(path_, fmt::format("expected a section ($Name), found '{}'", l.substr(0, 40)));
+      if (l.empty() || l[0] != '$')
+        fail(path_, fmt::format("expected a section ($Name), found '{}'", l.substr(0, 40)));
       const std::string name = l.substr(1);
       if (name == "Nodes") {
         if (nodes) fail(path_, "more than one $Nodes section");
@@ -196,12 +199,14 @@ class Reader {
     for (std::uint64_t i = 0; i < n; ++i) {
       if (binary_) {
         const int tag = c_.binary<int>("$Nodes");
-        const double x = c_.binary<double>("$Nodes"), y = c_.binary<double>("$Nodes"), z = c_.binary<double>("$Nodes");
+        const double x = c_.binary<double>("$Nodes"), y = c_.binary<double>("$Nodes"),
+                     z = c_.binary<double>("$Nodes");
         if (tag < 0) fail(path_, fmt::format("negative node tag {}", tag));
         add_node(std::uint64_t(tag), x, y, z);
       } else {
         const auto tag = c_.number<std::uint64_t>("$Nodes");
-        const double x = c_.number<double>("$Nodes"), y = c_.number<double>("$Nodes"), z = c_.number<double>("$Nodes");
+        const double x = c_.number<double>("$Nodes"), y = c_.number<double>("$Nodes"),
+                     z = c_.number<double>("$Nodes");
         add_node(tag, x, y, z);
       }
     }
@@ -228,14 +233,17 @@ class Reader {
       if (dim < 0 || dim > 3 || parametric < 0 || parametric > 1)
         fail(path_, fmt::format("$Nodes: bad entity block (dimension {}, parametric {})", dim, parametric));
       const int per_node = 3 + (parametric ? dim : 0);
-      const std::uint64_t k = c_.count<std::uint64_t>(binary_, binary_ ? std::size_t(8 + 8 * per_node) : 8, "$Nodes");
+      const std::uint64_t k =
+          c_.count<std::uint64_t>(binary_, binary_ ? std::size_t(8 + 8 * per_node) : 8, "$Nodes");
       if (k > n - total) fail(path_, fmt::format("$Nodes: blocks hold more than the {} nodes announced", n));
       total += k;
-      std::vector<std::uint64_t> tags(std::size_t(k));
-      for (auto& t : tags) t = binary_ ? c_.binary<std::uint64_t>("$Nodes") : c_.number<std::uint64_t>("$Nodes");
+      std::vector<std::uint64_t> tags(static_cast<std::size_t>(k));
+      for (auto& t : tags)
+        t = binary_ ? c_.binary<std::uint64_t>("$Nodes") : c_.number<std::uint64_t>("$Nodes");
       for (std::uint64_t i = 0; i < k; ++i) {
         double v[6];
-        for (int j = 0; j < per_node; ++j) v[j] = binary_ ? c_.binary<double>("$Nodes") : c_.number<double>("$Nodes");
+        for (int j = 0; j < per_node; ++j)
+          v[j] = binary_ ? c_.binary<double>("$Nodes") : c_.number<double>("$Nodes");
         add_node(tags[i], v[0], v[1], v[2]);
       }
     }
@@ -243,12 +251,14 @@ class Reader {
   }
 
   void element(int type, const std::uint64_t* nodes, std::size_t count) {
-    if (type < 1 || type > 19 || !kNodesPerType[type]) fail(path_, fmt::format("unknown element type {}", type));
+    if (type < 1 || type > 19 || !kNodesPerType[type])
+      fail(path_, fmt::format("unknown element type {}", type));
     if (type != 4 && is_volume_type(type))
       fail(path_, fmt::format("only 4-node tetrahedra (element type 4) are supported, found type {}", type));
     if (type != 4) return;
     if (count != 4) fail(path_, "a tetrahedron without 4 nodes");
-    if (m_.tets.size() == m_.tets.capacity()) check_mesh_memory(path_, m_.node_tags.size(), 2 * m_.tets.size() + 1, limit_);
+    if (m_.tets.size() == m_.tets.capacity())
+      check_mesh_memory(path_, m_.node_tags.size(), 2 * m_.tets.size() + 1, limit_);
     m_.tets.push_back({nodes[0], nodes[1], nodes[2], nodes[3]});
   }
 
@@ -261,7 +271,8 @@ class Reader {
         const int type = c_.binary<int>("$Elements");
         const int count = c_.binary<int>("$Elements");
         const int ntags = c_.binary<int>("$Elements");
-        if (type < 1 || type > 19 || !kNodesPerType[type]) fail(path_, fmt::format("unknown element type {}", type));
+        if (type < 1 || type > 19 || !kNodesPerType[type])
+          fail(path_, fmt::format("unknown element type {}", type));
         if (count <= 0 || ntags < 0 || ntags > 1000 || std::uint64_t(count) > n - done)
           fail(path_, fmt::format("$Elements: bad block header (count {}, tags {})", count, ntags));
         const int nn = kNodesPerType[type];
@@ -287,7 +298,8 @@ class Reader {
       const int ntags = c_.number<int>("$Elements");
       if (ntags < 0 || ntags > 1000) fail(path_, fmt::format("$Elements: bad tag count {}", ntags));
       for (int t = 0; t < ntags; ++t) c_.number<long long>("$Elements");
-      if (type < 1 || type > 19 || !kNodesPerType[type]) fail(path_, fmt::format("unknown element type {}", type));
+      if (type < 1 || type > 19 || !kNodesPerType[type])
+        fail(path_, fmt::format("unknown element type {}", type));
       const int nn = kNodesPerType[type];
       std::uint64_t nodes[27];
       for (int k = 0; k < nn; ++k) nodes[k] = c_.number<std::uint64_t>("$Elements");
@@ -312,11 +324,13 @@ class Reader {
         c_.number<int>("$Elements");
         type = c_.number<int>("$Elements");
       }
-      if (type < 1 || type > 19 || !kNodesPerType[type]) fail(path_, fmt::format("unknown element type {}", type));
+      if (type < 1 || type > 19 || !kNodesPerType[type])
+        fail(path_, fmt::format("unknown element type {}", type));
       const int nn = kNodesPerType[type];
-      const std::uint64_t k =
-          c_.count<std::uint64_t>(binary_, binary_ ? std::size_t(8 * (1 + nn)) : std::size_t(2 * (1 + nn)), "$Elements");
-      if (k > n - total) fail(path_, fmt::format("$Elements: blocks hold more than the {} elements announced", n));
+      const std::uint64_t k = c_.count<std::uint64_t>(
+          binary_, binary_ ? std::size_t(8 * (1 + nn)) : std::size_t(2 * (1 + nn)), "$Elements");
+      if (k > n - total)
+        fail(path_, fmt::format("$Elements: blocks hold more than the {} elements announced", n));
       total += k;
       for (std::uint64_t e = 0; e < k; ++e) {
         binary_ ? c_.binary<std::uint64_t>("$Elements") : c_.number<std::uint64_t>("$Elements");
@@ -357,7 +371,8 @@ class Reader {
       return false;
     }
     if (std::uint64_t(entries) > c_.remaining() / (binary_ ? 12 : 4))
-      fail(path_, fmt::format("$NodeData: {} entries cannot fit in the bytes left (truncated file?)", entries));
+      fail(path_,
+           fmt::format("$NodeData: {} entries cannot fit in the bytes left (truncated file?)", entries));
     check_mesh_memory(path_, std::uint64_t(entries), 0, limit_);
     m_.data.reserve(std::size_t(entries));
     if (binary_) c_.line();
@@ -424,7 +439,8 @@ class Reader {
     }
     for (std::size_t i = 0; i < point.size(); ++i)
       if (point[i] != kUnused && !have[std::size_t(point[i])])
-        fail(path_, fmt::format("$NodeData '{}' has no value for node tag {}", m_.data_name, m_.node_tags[i]));
+        fail(path_,
+             fmt::format("$NodeData '{}' has no value for node tag {}", m_.data_name, m_.node_tags[i]));
     m.value_name = m_.data_name;
     m.source = path_;
     return m;

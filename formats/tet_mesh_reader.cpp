@@ -16,7 +16,8 @@ namespace mlfe {
 
 namespace tet_mesh_detail {
 
-void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets, std::uint64_t limit) {
+void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets,
+                       std::uint64_t limit) {
   // Per point: coordinates, value, tag and index while reading, the field's local copy;
   // per tetrahedron: indices while reading and the field's ~160 bytes.
   constexpr std::uint64_t kPerPoint = 96, kPerTet = 224;
@@ -25,9 +26,10 @@ void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint6
     volume_detail::fail(path, fmt::format("{} points, {} cells: too many", points, tets));
   const std::uint64_t bytes = points * kPerPoint + tets * kPerTet;
   if (bytes > limit)
-    volume_detail::fail(path, fmt::format("needs {} bytes for {} points and {} tetrahedra but only {} bytes of "
-                                          "memory are available",
-                                          bytes, points, tets, limit));
+    volume_detail::fail(path,
+                        fmt::format("needs {} bytes for {} points and {} tetrahedra but only {} bytes of "
+                                    "memory are available",
+                                    bytes, points, tets, limit));
 }
 
 }  // namespace tet_mesh_detail
@@ -67,7 +69,8 @@ TetMesh read_tet_mesh(const std::string& path, const TetMeshReadOptions& options
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
       volume_detail::fail(path, fmt::format("point {} has a coordinate that is not a finite number", i));
     if (!std::isfinite(m.values[i]))
-      volume_detail::fail(path, fmt::format("the value '{}' at point {} is not a finite number", m.value_name, i));
+      volume_detail::fail(path,
+                          fmt::format("the value '{}' at point {} is not a finite number", m.value_name, i));
   }
   for (std::size_t t = 0; t < m.tets.size(); ++t)
     for (std::int32_t v : m.tets[t])

@@ -17,6 +17,7 @@ TetMesh read_msh(const std::string& path, const std::string& data, const TetMesh
 
 /// Throws "<path>: needs N bytes for WHAT but only M bytes of memory are available" when
 /// `points` points and `tets` tetrahedra (with values and the reader's scratch) exceed `limit`.
-void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets, std::uint64_t limit);
+void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets,
+                       std::uint64_t limit);
 
 }  // namespace mlfe::tet_mesh_detail

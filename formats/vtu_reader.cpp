@@ -95,7 +95,8 @@ void XMLCALL on_start(void* user, const XML_Char* name, const XML_Char** atts) {
     if (const char* v = attribute(atts, "offset")) {
       std::uint64_t o = 0;
       const char* end = v + std::strlen(v);
-      if (std::from_chars(v, end, o).ptr != end) return stop(d, fmt::format("DataArray {}: bad offset '{}'", a.name, v));
+      if (std::from_chars(v, end, o).ptr != end)
+        return stop(d, fmt::format("DataArray {}: bad offset '{}'", a.name, v));
       a.offset = o;
     }
     d.arrays.push_back(std::move(a));
@@ -159,8 +160,8 @@ class Base64 {
           if (v[k] < 0) return false;
         }
       }
-      const std::uint32_t w = std::uint32_t(v[0]) << 18 | std::uint32_t(v[1]) << 12 | std::uint32_t(v[2]) << 6 |
-                              std::uint32_t(v[3]);
+      const std::uint32_t w = std::uint32_t(v[0]) << 18 | std::uint32_t(v[1]) << 12 |
+                              std::uint32_t(v[2]) << 6 | std::uint32_t(v[3]);
       out.push_back(static_cast<unsigned char>(w >> 16));
       if (pad < 2) out.push_back(static_cast<unsigned char>(w >> 8));
       if (pad < 1) out.push_back(static_cast<unsigned char>(w));
@@ -190,7 +191,8 @@ std::string without_space(const char* p, const char* end) {
 
 class Reader {
  public:
-  Reader(const std::string& path, const std::string& data, const TetMeshReadOptions& options, std::uint64_t limit)
+  Reader(const std::string& path, const std::string& data, const TetMeshReadOptions& options,
+         std::uint64_t limit)
       : path_(path), data_(data), options_(options), limit_(limit) {}
 
   TetMesh read() {
@@ -218,14 +220,16 @@ class Reader {
     m.points.resize(np);
     for (std::uint64_t i = 0; i < np; ++i) m.points[i] = {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]};
 
-    const std::vector<std::int64_t> types = numbers<std::int64_t>(find("Cells", "types", 1, "Cells/types"), nc);
+    const std::vector<std::int64_t> types =
+        numbers<std::int64_t>(find("Cells", "types", 1, "Cells/types"), nc);
     for (std::int64_t t : types)
       if (t != 10) fail(path_, fmt::format("only tetrahedra (VTK type 10) are supported, found type {}", t));
     const std::vector<std::int64_t> offsets =
         numbers<std::int64_t>(find("Cells", "offsets", 1, "Cells/offsets"), nc);
     for (std::uint64_t c = 0; c < nc; ++c)
       if (offsets[c] != std::int64_t(4 * (c + 1)))
-        fail(path_, fmt::format("cell {}: offset {} where a tetrahedron ends at {}", c, offsets[c], 4 * (c + 1)));
+        fail(path_,
+             fmt::format("cell {}: offset {} where a tetrahedron ends at {}", c, offsets[c], 4 * (c + 1)));
     const std::vector<std::int64_t> conn =
         numbers<std::int64_t>(find("Cells", "connectivity", 1, "Cells/connectivity"), 4 * nc);
     m.tets.resize(nc);
@@ -277,7 +281,8 @@ class Reader {
     XML_SetUserData(p, &doc_);
     XML_SetElementHandler(p, on_start, on_end);
     XML_SetCharacterDataHandler(p, on_text);
-    const XML_Status st = XML_Parse(p, text.data(), int(std::min<std::size_t>(text.size(), INT32_MAX)), XML_TRUE);
+    const XML_Status st =
+        XML_Parse(p, text.data(), int(std::min<std::size_t>(text.size(), INT32_MAX)), XML_TRUE);
     std::string error;
     if (!doc_.error.empty())
       error = doc_.error;
@@ -358,7 +363,8 @@ class Reader {
     // of 3 bytes looks the same either way, otherwise padding ('=') at its end tells.
     std::vector<unsigned char> head;
     const std::uint64_t first = compressed ? 3 * hs : hs;
-    if (!b64.decode(0, (first + 2) / 3 * 4, head) || head.size() < first) fail(path_, what + ": bad base64 data");
+    if (!b64.decode(0, (first + 2) / 3 * 4, head) || head.size() < first)
+      fail(path_, what + ": bad base64 data");
     std::uint64_t header_bytes = hs, data_bytes = 0;
     if (compressed) {
       const std::uint64_t nb = word(head.data());
@@ -368,7 +374,8 @@ class Reader {
     const std::uint64_t header_chars = (header_bytes + 2) / 3 * 4;
     if (header_chars > b64.size()) fail(path_, what + ": truncated");
     const bool separate = header_bytes % 3 != 0 && b64.at(std::size_t(header_chars - 1)) == '=';
-    if (!b64.decode(0, header_chars, head) || head.size() < header_bytes) fail(path_, what + ": bad base64 data");
+    if (!b64.decode(0, header_chars, head) || head.size() < header_bytes)
+      fail(path_, what + ": bad base64 data");
     if (compressed) {
       const std::uint64_t nb = word(head.data());
       for (std::uint64_t i = 0; i < nb; ++i) {
@@ -378,7 +385,8 @@ class Reader {
       }
     } else {
       data_bytes = word(head.data());
-      if (data_bytes != bytes) fail(path_, fmt::format("{}: {} bytes where {} are expected", what, data_bytes, bytes));
+      if (data_bytes != bytes)
+        fail(path_, fmt::format("{}: {} bytes where {} are expected", what, data_bytes, bytes));
     }
     if (data_bytes > b64.size()) fail(path_, what + ": truncated");
     std::vector<unsigned char> body;
@@ -400,10 +408,12 @@ class Reader {
   }
 
   // vtkZLibDataCompressor: header [blocks, block size, last block size, compressed sizes...].
-  void inflate_blocks(const std::string& what, const std::vector<unsigned char>& header, const unsigned char* p,
-                      std::uint64_t avail, std::uint64_t bytes, std::vector<unsigned char>& out) const {
+  void inflate_blocks(const std::string& what, const std::vector<unsigned char>& header,
+                      const unsigned char* p, std::uint64_t avail, std::uint64_t bytes,
+                      std::vector<unsigned char>& out) const {
     const std::uint64_t hs = std::uint64_t(header_size_);
-    const std::uint64_t nb = word(header.data()), bs = word(header.data() + hs), last = word(header.data() + 2 * hs);
+    const std::uint64_t nb = word(header.data()), bs = word(header.data() + hs),
+                        last = word(header.data() + 2 * hs);
     std::uint64_t total = 0;
     if (nb > 0) {
       const std::uint64_t tail = last ? last : bs;
@@ -432,7 +442,8 @@ class Reader {
     while (p < end && std::isspace(static_cast<unsigned char>(*p))) ++p;
     if (p == end) return false;
     const auto r = std::from_chars(p, end, v);
-    if (r.ec != std::errc() || (r.ptr < end && !std::isspace(static_cast<unsigned char>(*r.ptr)))) return false;
+    if (r.ec != std::errc() || (r.ptr < end && !std::isspace(static_cast<unsigned char>(*r.ptr))))
+      return false;
     p = r.ptr;
     return true;
   }

@@ -1,7 +1,7 @@
 // libFuzzer entry point for one reader: writes the input to a temporary file with the
-// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh). mlfe::Error is the expected
-// outcome for bad input; anything else (a crash, a sanitizer report, another exception, an
-// exit from inside a library) is a finding.
+// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh).
+// mlfe::Error is the expected outcome for bad input; anything else (a crash, a sanitizer report, another
+// exception, an exit from inside a library) is a finding.
 #include <mlfe/core/error.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>

@@ -25,7 +25,8 @@ inline TetMesh kuhn_mesh(int n, const std::function<double(const std::array<doub
   for (int k = 0; k <= n; ++k)
     for (int j = 0; j <= n; ++j)
       for (int i = 0; i <= n; ++i) {
-        const std::array<double, 3> p{origin[0] + size * i / n, origin[1] + size * j / n, origin[2] + size * k / n};
+        const std::array<double, 3> p{origin[0] + size * i / n, origin[1] + size * j / n,
+                                      origin[2] + size * k / n};
         m.points.push_back(p);
         m.values.push_back(f(p));
       }
@@ -60,7 +61,7 @@ inline double poisson_u(const std::array<double, 3>& p) {
   const double x = p[0] - 0.5, y = p[1] - 0.5;
   const double r = std::sqrt(x * x + y * y);
   if (r == 0) return 0;
-  double theta = std::atan2(y, x);  // (-π, π]; the cut is θ in (0, π/2)
+  double theta = std::atan2(y, x);   // (-π, π]; the cut is θ in (0, π/2)
   if (theta < 0) theta += 2 * M_PI;  // [0, 2π)
   // The material is θ in [π/2, 2π] (the cut x, y > 0.5 is θ in (0, π/2)); measure from π/2.
   const double phi = std::clamp(theta - M_PI / 2, 0.0, 1.5 * M_PI);
