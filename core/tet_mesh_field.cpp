@@ -129,6 +129,9 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
     const auto& p = mesh.points[i];
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
       throw Error(src + ": point " + std::to_string(i) + " has a coordinate that is not a finite number");
+    // Beyond that, products of coordinate differences (volumes, inverses) overflow.
+    if (std::max({std::abs(p[0]), std::abs(p[1]), std::abs(p[2])}) > 1e100)
+      throw Error(src + ": point " + std::to_string(i) + " has a coordinate beyond ±1e100");
     if (!std::isfinite(mesh.values[i]))
       throw Error(src + ": the value at point " + std::to_string(i) + " is not a finite number");
   }
@@ -150,7 +153,16 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
       longest = std::max(longest, dot(e, e));
     }
     const double det = dot(d1, cross(d2, d3));
-    if (longest > 0 && std::abs(det) > 1e-12 * longest * std::sqrt(longest))
+    // The inverse and the gradient must be representable too (tiny tetrahedra, huge values).
+    bool ok = longest > 0 && std::abs(det) > 1e-12 * longest * std::sqrt(longest);
+    if (ok) {
+      const V3 r[3] = {cross(d2, d3), cross(d3, d1), cross(d1, d2)};
+      for (int k = 0; k < 3; ++k) {
+        const double dv = mesh.values[c[k + 1]] - mesh.values[c[0]];
+        for (int a = 0; a < 3; ++a) ok &= std::isfinite(r[k][a] / det) && std::isfinite(dv * (r[k][a] / det));
+      }
+    }
+    if (ok)
       keep.push_back(std::uint32_t(t));
     else
       ++degenerate_;
@@ -213,7 +225,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
   };
   resolution_ = percentile10(edges);
   voxel_size_ = percentile10(sizes);
-  if (!(extent_[0] > 0 && extent_[1] > 0 && extent_[2] > 0) || !(resolution_ > 0) || !(voxel_size_ > 0))
+  if (!(extent_[0] * extent_[1] * extent_[2] > 0) || !(resolution_ > 0) || !(voxel_size_ > 0))
     throw Error(src + ": the mesh is flat (its bounding box has no volume)");
   if (!std::isfinite(extent_[0] * extent_[1] * extent_[2]))
     throw Error(src + ": the mesh's bounding box is too large for double precision");
@@ -223,7 +235,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
   const double target = std::clamp(double(tets_.size()) / 2.0, 1.0, double(1 << 22));
   const double side = std::cbrt(extent_[0] * extent_[1] * extent_[2] / target);
   for (int a = 0; a < 3; ++a) {
-    n_[a] = std::clamp<std::int64_t>(std::int64_t(std::ceil(extent_[a] / side)), 1, 1 << 12);
+    n_[a] = std::int64_t(std::clamp(std::ceil(extent_[a] / side), 1.0, double(1 << 12)));
     cell_size_[a] = extent_[a] / double(n_[a]);
     inv_cell_[a] = double(n_[a]) / extent_[a];
   }
