@@ -12,6 +12,7 @@
 #include <fstream>
 #include <random>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 #include "tests/tet_meshes.h"
 
@@ -136,6 +137,15 @@ TEST(UnstructuredInput, CommandLineBuildsAndConvertsAMesh) {
 
   r = test::run_mlfe("convert " + poisson_vtu() + " -o " + glb + " --iso 0.3 --quiet");
   ASSERT_EQ(r.status, 0) << r.err;
+  // The same bytes with one thread (point location is sequential per point, ties by index).
+  const std::string h1 = scratch("poisson_t1.mlfeh"), glb1 = scratch("poisson_t1.glb");
+  ASSERT_EQ(test::run_mlfe("--threads 1 build " + poisson_vtu() + " -o " + h1 + " --rms 1% --quiet").status,
+            0);
+  ASSERT_EQ(
+      test::run_mlfe("--threads 1 convert " + poisson_vtu() + " -o " + glb1 + " --iso 0.3 --quiet").status,
+      0);
+  EXPECT_EQ(test::read_bytes(h1), test::read_bytes(h));
+  EXPECT_EQ(test::read_bytes(glb1), test::read_bytes(glb));
   EXPECT_GT(fs::file_size(glb), 1000u);
   r = test::run_mlfe("iso " + poisson_vtu() + " -o " + scratch("iso.ply") + " --iso 0.3 --quiet");
   ASSERT_EQ(r.status, 0) << r.err;
