@@ -247,6 +247,24 @@ TEST(TetMeshReader, ReadsMsh22AsciiAndBinaryAndMsh41Binary) {
   }
 }
 
+TEST(TetMeshReader, ReadsTheBundledSeeds) {
+  for (const char* name : {"small_tets_zlib_base64.vtu", "small_tets_raw.vtu", "small_tets_bin22.msh"}) {
+    SCOPED_TRACE(name);
+    const TetMesh m = read_tet_mesh(test::test_data_path(name));
+    EXPECT_EQ(m.value_name, "u");
+    EXPECT_EQ(m.tets.size(), 42u);  // 7 cubes of 6
+    // .msh input keeps the nodes the tetrahedra use: not the far corner of the cube left out.
+    EXPECT_EQ(m.points.size(), std::string(name).find(".msh") != std::string::npos ? 26u : 27u);
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      const V3& p = m.points[i];
+      EXPECT_NEAR(m.values[i], p[0] * p[0] - p[1] + 0.5 * p[2], 1e-12);
+    }
+    const TetMeshField f(m);
+    EXPECT_TRUE(f.inside({0.25, 0.75, 0.75}));
+    EXPECT_FALSE(f.inside({0.75, 0.75, 0.75}));  // the cube left out
+  }
+}
+
 TEST(TetMeshReader, RejectsTruncatedFilesWithOneLineNamingTheFile) {
   const Written w;
   const std::string vtu = scratch("whole.vtu"), msh41 = scratch("whole.msh");
