@@ -1,4 +1,4 @@
-// mlfe build: volume → adaptive hierarchy (.mlfeh) + JSON report.
+// mlfe build: volume or tetrahedral mesh → adaptive hierarchy (.mlfeh) + JSON report.
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/formats/hierarchy_levels.h>
@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <memory>
 
 #include "converters/commands.h"
@@ -40,11 +41,15 @@ struct FileFigures {
   double encode_seconds = 0;
 };
 
-// Writes the v2 file: values quantized to the bound, the error figures measured on the voxel
-// grid from exactly the values a reader decodes.
+// Errors of the decoded values (the function linear on every leaf) against the input.
+template <int D>
+using Measure = std::function<GridErrors(const Hierarchy<D>&, const std::vector<double>&)>;
+
+// Writes the v2 file: values quantized to the bound, the error figures measured against the
+// input (`measure`) from exactly the values a reader decodes.
 template <int D>
 FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a,
-                       const ScalarGrid& grid) {
+                       const Measure<D>& measure, const nlohmann::json& input_metadata) {
   FileFigures fig;
   const auto t0 = std::chrono::steady_clock::now();
   const double range = b.value_max - b.value_min;
@@ -55,17 +60,14 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
   } catch (const Error& e) {
     throw Error(s.output + ": " + e.what());
   }
-  const std::vector<float> approx = resample_to_grid(a.hierarchy, decoded, grid.dims, grid.transform.spacing);
-  fig.errors = grid_errors(approx, grid.values, range, s.input);
+  fig.errors = measure(a.hierarchy, decoded);
   HierarchyFileInfo info;
   info.transform = b.transform;
   info.space = b.space;
   info.value_min = b.value_min;
   info.value_max = b.value_max;
-  info.metadata = {{"input", s.input},
-                   {"tool", std::string("mlfe ") + MLFE_VERSION},
-                   {"dims", grid.dims},
-                   {"source_type", scalar_type_name(grid.source_type)}};
+  info.metadata = {{"input", s.input}, {"tool", std::string("mlfe ") + MLFE_VERSION}};
+  info.metadata.update(input_metadata);
   if (b.surface_driven) info.metadata["refinement"] = "surface-driven";
   info.norm = s.params.norm;
   info.rms_error = fig.errors.rms;
@@ -80,27 +82,58 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
   } catch (const LevelRebuildError& e) {
     std::fprintf(stderr, "mlfe: warning: %s; writing format version 1 (exact, larger)\n", e.what());
     write_hierarchy(s.output, a.hierarchy, a.values, info);
-    fig.errors = grid_errors(resample_to_grid(a.hierarchy, a.values, grid.dims, grid.transform.spacing),
-                             grid.values, range, s.input);
+    fig.errors = measure(a.hierarchy, a.values);
     fig.bound = 0;
   }
   fig.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return fig;
 }
 
-void run_build(const BuildState& s) {
-  check_output_path(s.output, {".mlfeh"});
-  if (!s.report.empty()) check_output_path(s.report, {});
-  const ScalarGrid grid = read_volume(s.input, s.read);
-  if (s.max_error > 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
-  const Built b = build_from_grid(grid, s.params, {});
-  const FileFigures fig =
-      b.dim() == 2 ? write_file(s, b, b.get<2>(), grid) : write_file(s, b, b.get<3>(), grid);
+// The decoded function on the voxel grid against the volume.
+template <int D>
+Measure<D> on_grid(const ScalarGrid& grid, const std::string& input, double range) {
+  return [&grid, input, range](const Hierarchy<D>& h, const std::vector<double>& values) {
+    return grid_errors(resample_to_grid(h, values, grid.dims, grid.transform.spacing), grid.values, range,
+                       input);
+  };
+}
+
+// The decoded function at the mesh's points against their values (the leaves located with a
+// TetMeshField of their own: it interpolates them exactly, and T0's box starts at 0 like the
+// input's local frame).
+Measure<3> at_mesh_points(const TetMesh& mesh, const TetMeshField& input, double range) {
+  return [&mesh, &input, range](const Hierarchy<3>& h, const std::vector<double>& values) {
+    TetMesh leaves;
+    leaves.source = mesh.source;
+    for (std::size_t v = 0; v < h.vertex_count(); ++v) {
+      const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
+      leaves.points.push_back({p[0], p[1], p[2]});
+    }
+    for (ElemId e : h.leaves()) {
+      const auto& c = h.cell(e);
+      leaves.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
+                             std::int32_t(c[3].value)});
+    }
+    leaves.values = values;
+    const TetMeshField u(leaves);
+    std::vector<float> approx(mesh.points.size()), data(mesh.points.size());
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+      std::array<double, 3> local;
+      for (int a = 0; a < 3; ++a) local[a] = mesh.points[i][a] - input.origin()[a];
+      approx[i] = static_cast<float>(u.value(local));
+      data[i] = static_cast<float>(mesh.values[i]);
+    }
+    return grid_errors(approx, data, range, mesh.source);
+  };
+}
+
+void report_and_print(const BuildState& s, const Built& b, const FileFigures& fig,
+                      const nlohmann::json& report, double samples, const char* per) {
   const double bytes = static_cast<double>(std::filesystem::file_size(s.output));
   if (!s.report.empty()) {
-    nlohmann::json r = build_report(s.input, &grid, b);
+    nlohmann::json r = report;
     r["file"] = {{"bytes", bytes},
-                 {"bits_per_voxel", 8 * bytes / static_cast<double>(grid.voxel_count())},
+                 {std::string("bits_per_") + per, 8 * bytes / samples},
                  {"value_bound", fig.bound},
                  {"rms_error", fig.errors.rms},
                  {"max_error", fig.errors.max},
@@ -115,20 +148,58 @@ void run_build(const BuildState& s) {
                  "mlfe build: %zu vertices, %zu elements, %d levels, RMS %.4g (%.3f%%), PSNR %.2f dB (%s)\n",
                  b.vertices(), b.leaves(), b.levels(), last.rms_error, last.rms_percent, last.psnr_db,
                  b.stop_reason().c_str());
+    const bool voxels = std::string(per) == "voxel";
     std::fprintf(stderr,
-                 "mlfe build: file %.0f bytes (%.3f bits/voxel), values within %.4g; "
-                 "on the voxels RMS %.4g, max %.4g, PSNR %.2f dB\n",
-                 bytes, 8 * bytes / static_cast<double>(grid.voxel_count()), fig.bound, fig.errors.rms,
-                 fig.errors.max, fig.errors.psnr);
+                 "mlfe build: file %.0f bytes (%.3f bits/%s), values within %.4g; "
+                 "%s RMS %.4g, max %.4g, PSNR %.2f dB\n",
+                 bytes, 8 * bytes / samples, per, fig.bound,
+                 voxels ? "on the voxels" : "at the mesh's points", fig.errors.rms, fig.errors.max,
+                 fig.errors.psnr);
   }
   std::printf("%s\n", s.output.c_str());
+}
+
+// A tetrahedral mesh input: its P1 interpolant is the input function.
+void run_mesh_build(const BuildState& s) {
+  TetMeshReadOptions ro;
+  ro.array_name = s.read.grid_name;
+  ro.max_bytes = s.read.max_bytes;
+  const TetMesh mesh = read_tet_mesh(s.input, ro);
+  const TetMeshField f(mesh);
+  const Built b = build(f, mesh_input(f, mesh), build_options(s.params), {});
+  warn_if_memory_limited(b, mesh.source, s.params.max_memory);
+  const nlohmann::json meta = {
+      {"points", mesh.points.size()}, {"tetrahedra", mesh.tets.size()}, {"point_data", mesh.value_name}};
+  const FileFigures fig =
+      write_file(s, b, b.get<3>(), at_mesh_points(mesh, f, b.value_max - b.value_min), meta);
+  nlohmann::json r = build_report(s.input, nullptr, b);
+  r.update(meta);
+  r["degenerate_tetrahedra"] = f.degenerate_count();
+  report_and_print(s, b, fig, r, double(mesh.points.size()), "point");
+}
+
+void run_build(const BuildState& s) {
+  check_output_path(s.output, {".mlfeh"});
+  if (!s.report.empty()) check_output_path(s.report, {});
+  if (s.max_error > 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
+  if (!detect_tet_mesh_format(s.input).empty()) return run_mesh_build(s);
+  const ScalarGrid grid = read_volume(s.input, s.read);
+  const Built b = build_from_grid(grid, s.params, {});
+  const double range = b.value_max - b.value_min;
+  const nlohmann::json meta = {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}};
+  const FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), on_grid<2>(grid, s.input, range), meta)
+                                       : write_file(s, b, b.get<3>(), on_grid<3>(grid, s.input, range), meta);
+  report_and_print(s, b, fig, build_report(s.input, &grid, b), static_cast<double>(grid.voxel_count()),
+                   "voxel");
 }
 
 void add_build_command(CLI::App& app) {
   auto state = std::make_shared<BuildState>();
   CLI::App* cmd = app.add_subcommand(
       "build", "Adaptive L2 (or H1) approximation of a volume on a red-green tetrahedral hierarchy");
-  cmd->add_option("input", state->input, "volume or height field (vdb, nrrd, nii, mha, raw+json, pgm, png)")
+  cmd->add_option("input", state->input,
+                  "volume or height field (vdb, nrrd, nii, mha, raw+json, pgm, png) or tetrahedral mesh with "
+                  "point values (vtu, msh)")
       ->required();
   cmd->add_option("-o,--output", state->output, "hierarchy file (.mlfeh)")->required();
   cmd->add_option("--report", state->report, "JSON report of the build");

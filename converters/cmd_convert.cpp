@@ -44,13 +44,24 @@ void run_convert(const ConvertState& s, const char* command) {
   c.keep_u = !s.render.empty();  // the image is of u
   // The provenance keeps --rms as it was spelled.
   if (!s.params.rms.empty()) c.provenance["options"]["rms"] = s.params.rms;
-  const ScalarGrid grid = read_volume(s.input, s.read);
-  const ConvertResult r = convert(grid, s.output, c);
-  warn_if_memory_limited(r.built, grid.source, s.params.max_memory);
-  print_written(s, r.asset, command);
+  // A tetrahedral mesh input: its P1 interpolant is the input function (no voxel grid).
+  std::optional<ScalarGrid> grid;
+  std::optional<ConvertResult> r;
+  if (!detect_tet_mesh_format(s.input).empty()) {
+    TetMeshReadOptions ro;
+    ro.array_name = s.read.grid_name;
+    ro.max_bytes = s.read.max_bytes;
+    r = convert(read_tet_mesh(s.input, ro), s.output, c);
+  } else {
+    grid = read_volume(s.input, s.read);
+    r = convert(*grid, s.output, c);
+  }
+  warn_if_memory_limited(r->built, s.input, s.params.max_memory);
+  print_written(s, r->asset, command);
   // convert --render: the image of the hierarchy just built, with mlfe render's defaults.
   if (!s.render.empty())
-    for (const auto& f : render_outputs(s.render, RenderParams{}, r.built, &grid, s.input, s.params.quiet))
+    for (const auto& f :
+         render_outputs(s.render, RenderParams{}, r->built, grid ? &*grid : nullptr, s.input, s.params.quiet))
       std::printf("%s\n", f.c_str());
 }
 
@@ -60,7 +71,7 @@ void add_convert_command(CLI::App& app) {
   auto state = std::make_shared<ConvertState>();
   CLI::App* cmd = app.add_subcommand(
       "convert", "Volume in, iso-surface asset out: adaptive build + marching tetrahedra + glTF/Draco");
-  cmd->add_option("input", state->input, "volume or height field")->required();
+  cmd->add_option("input", state->input, "volume, height field or tetrahedral mesh (vtu, msh)")->required();
   cmd->add_option("--hierarchy", state->hierarchy, "also keep the hierarchy it built (.mlfeh)");
   cmd->add_option("--render", state->render,
                   "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");

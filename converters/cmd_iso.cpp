@@ -75,7 +75,8 @@ void add_iso_command(CLI::App& app) {
   auto state = std::make_shared<ConvertState>();
   CLI::App* cmd =
       app.add_subcommand("iso", "Iso-surfaces from a hierarchy (.mlfeh) or a volume (built first)");
-  cmd->add_option("input", state->input, "hierarchy (.mlfeh) or volume")->required();
+  cmd->add_option("input", state->input, "hierarchy (.mlfeh), volume or tetrahedral mesh (vtu, msh)")
+      ->required();
   cmd->add_option(
       "--volume", state->volume,
       "with a hierarchy input: the volume it was built from, so surfaces snap onto it as in convert");

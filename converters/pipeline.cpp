@@ -76,9 +76,8 @@ void check_build_options(const BuildOptions& p) {
     throw Error(fmt::format("surface_tolerance: expected a positive value, got {}", p.surface_tolerance));
 }
 
-}  // namespace
-
-Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<double>& iso_values) {
+// A grid build() and convert() can use (GridField relies on it), as the input they record.
+FieldInput checked_grid_input(const ScalarGrid& grid) {
   if (grid.dim != 2 && grid.dim != 3)
     throw Error(fmt::format("{}: expected a 2D or 3D grid, got dim {}", grid.source, grid.dim));
   for (int a = 0; a < grid.dim; ++a)
@@ -93,16 +92,29 @@ Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<dou
     if (!(grid.transform.spacing[a] > 0) || !std::isfinite(grid.transform.spacing[a]))
       throw Error(fmt::format("{}: spacing must be positive (axis {}: {})", grid.source, a,
                               grid.transform.spacing[a]));
+  // The volume and its min/max pyramid.
+  return {grid.transform, grid.space, grid.source, double(grid.voxel_count()) * (sizeof(float) + 1.2)};
+}
+
+}  // namespace
+
+Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<double>& iso_values) {
+  const FieldInput input = checked_grid_input(grid);
+  return build(GridField(grid), input, p, iso_values);
+}
+
+Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
+            const std::vector<double>& iso_values) {
   for (double v : iso_values)
     if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
   check_build_options(p);
   Built b;
-  b.transform = grid.transform;
-  b.space = grid.space;
-  const auto range = grid.value_range();
+  b.transform = input.transform;
+  b.space = input.space;
+  const auto range = f.range();
   b.value_min = range[0];
   b.value_max = range[1];
-  const double span = range[1] > range[0] ? double(range[1]) - double(range[0]) : 1.0;
+  const double span = range[1] > range[0] ? range[1] - range[0] : 1.0;
 
   ApproximationOptions o;
   // With surfaces to extract and no global target, refine for the surfaces alone.
@@ -124,28 +136,41 @@ Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<dou
   o.solve = p.solve_u || p.check_against_u;
   const std::size_t budget = p.max_memory.bytes();
   if (budget > 0) {
-    // What the build may use: the budget less the volume (and its min/max pyramid), with a
-    // tenth kept for extraction and writing.
-    const double grid_bytes = double(grid.voxel_count()) * (sizeof(float) + 1.2);
-    const double room = 0.9 * double(budget) - grid_bytes;
+    // What the build may use: the budget less the input, with a tenth kept for extraction
+    // and writing.
+    const double room = 0.9 * double(budget) - input.bytes;
     if (room < 8.0 * 1024 * 1024)
-      throw Error(
-          fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)",
-                      grid.source, grid_bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
+      throw Error(fmt::format(
+          "{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)", input.source,
+          input.bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);
   }
   o.progress = p.progress;
   o.surface_progress = p.surface_progress;
   b.memory_budget_bytes = o.max_memory_bytes;
   const auto t0 = std::chrono::steady_clock::now();
-  GridField f(grid);
   b.surface_driven = o.surface_driven;
-  if (grid.dim == 2)
+  if (f.dim() == 2)
     b.approximation = approximate<2>(f, o);
   else
     b.approximation = approximate<3>(f, o);
   b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return b;
+}
+
+FieldInput mesh_input(const TetMeshField& f, const TetMesh& mesh) {
+  FieldInput in;
+  in.transform.origin = f.origin();
+  in.transform.spacing = {f.resolution(), f.resolution(), f.resolution()};
+  in.source = mesh.source;
+  // The field's copy: points, tetrahedra with their inverse matrices and buckets.
+  in.bytes = double(mesh.points.size()) * 24 + double(f.tet_count()) * 200;
+  return in;
+}
+
+Built build(const TetMesh& mesh, const BuildOptions& p, const std::vector<double>& iso_values) {
+  const TetMeshField f(mesh);
+  return build(f, mesh_input(f, mesh), p, iso_values);
 }
 
 Built built_from_file(const std::string& path) {
@@ -458,7 +483,12 @@ std::string rms_text(const RmsTarget& r) {
 
 }  // namespace
 
-ConvertResult convert(const ScalarGrid& grid, const std::string& out, const ConvertOptions& c) {
+namespace {
+
+// convert() on any input function; `grid` (may be null) is the voxel volume f interpolates,
+// for snapping and the report's grid figures.
+ConvertResult convert_field(const Field& f, const FieldInput& input, const ScalarGrid* grid,
+                            const std::string& out, const ConvertOptions& c) {
   check_output_path(out, kAssetExtensions);
   if (!c.hierarchy.empty()) check_output_path(c.hierarchy, {".mlfeh"});
   if (!c.report.empty()) check_output_path(c.report, {});
@@ -466,14 +496,14 @@ ConvertResult convert(const ScalarGrid& grid, const std::string& out, const Conv
   BuildOptions p = c.build;
   p.solve_u = !c.hierarchy.empty() || c.keep_u;
   std::vector<double> isos;
-  if (grid.dim == 3) {
+  if (f.dim() == 3) {
     if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     isos = c.asset.iso;
   }
   ConvertResult result;
   Built& b = result.built;
-  b = build(grid, p, isos);
-  nlohmann::json prov = {{"input", fs::path(grid.source).filename().string()},
+  b = build(f, input, p, isos);
+  nlohmann::json prov = {{"input", fs::path(input.source).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
   if (!b.iterations().empty()) {
     const auto& last = b.iterations().back();
@@ -495,9 +525,9 @@ ConvertResult convert(const ScalarGrid& grid, const std::string& out, const Conv
   prov["refinement"] = b.surface_driven ? "surface-driven" : "global";
   if (c.provenance.is_object()) prov.merge_patch(c.provenance);
   if (!c.hierarchy.empty()) write_built(c.hierarchy, b, prov);
-  result.asset = write_assets(out, b, c.asset, prov, &grid);
+  result.asset = write_assets(out, b, c.asset, prov, grid);
   if (!c.report.empty()) {
-    nlohmann::json r = build_report(grid.source, &grid, b);
+    nlohmann::json r = build_report(input.source, grid, b);
     r["asset"] = result.asset;
     r["peak_rss_mb"] = peak_rss_mb();
     write_json(c.report, r);
@@ -505,11 +535,30 @@ ConvertResult convert(const ScalarGrid& grid, const std::string& out, const Conv
   return result;
 }
 
+}  // namespace
+
+ConvertResult convert(const ScalarGrid& grid, const std::string& out, const ConvertOptions& c) {
+  check_output_path(out, kAssetExtensions);
+  const FieldInput input = checked_grid_input(grid);
+  return convert_field(GridField(grid), input, &grid, out, c);
+}
+
+ConvertResult convert(const TetMesh& mesh, const std::string& out, const ConvertOptions& c) {
+  check_output_path(out, kAssetExtensions);
+  const TetMeshField f(mesh);
+  return convert_field(f, mesh_input(f, mesh), nullptr, out, c);
+}
+
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read) {
   check_output_path(out, kAssetExtensions);
   if (!options.hierarchy.empty()) check_output_path(options.hierarchy, {".mlfeh"});
   if (!options.report.empty()) check_output_path(options.report, {});
+  if (!detect_tet_mesh_format(input).empty()) {
+    TetMeshReadOptions mr;
+    mr.max_bytes = read.max_bytes;
+    return convert(read_tet_mesh(input, mr), out, options);
+  }
   return convert(read_volume(input, read), out, options);
 }
 

@@ -6,7 +6,9 @@ namespace mlfe::cli {
 
 void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
   VolumeReadOptions* o = &opts;
-  cmd->add_option("--grid", opts.grid_name, "VDB: name of the grid to read (default: the first scalar grid)");
+  cmd->add_option("--grid", opts.grid_name,
+                  "VDB: name of the grid to read (default: the first scalar grid); .vtu/.msh: the point-data "
+                  "array or $NodeData view (default: the first scalar one)");
   cmd->add_flag("--vec-magnitude", opts.vec_magnitude, "VDB: read a vector grid as its magnitude");
   cmd->add_option_function<double>(
       "--nan-as", [o](const double& v) { o->nan_as = v; },

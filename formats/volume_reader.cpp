@@ -5,6 +5,7 @@
 #include <mlfe/formats/pgm_reader.h>
 #include <mlfe/formats/png_reader.h>
 #include <mlfe/formats/raw_reader.h>
+#include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/vdb_reader.h>
 #include <mlfe/formats/volume_reader.h>
 #include <sys/stat.h>
@@ -352,6 +353,8 @@ std::string detect_volume_format(const std::string& path) {
 ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
   std::string format = detect_volume_format(path);
   if (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty())) format = "raw";
+  if (format.empty() && !detect_tet_mesh_format(path).empty())
+    fail(path, "a tetrahedral mesh (.vtu/.msh): build, convert and iso read it; this needs a voxel volume");
   if (format.empty()) {
     std::string head = read_prefix(path, 8);
     std::string hex;

@@ -1,8 +1,9 @@
 // libFuzzer entry point for one reader: writes the input to a temporary file with the
-// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume. mlfe::Error is the expected
-// outcome for bad input; anything else (a crash, a sanitizer report, another exception, an
-// exit from inside a library) is a finding.
+// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh).
+// mlfe::Error is the expected outcome for bad input; anything else (a crash, a sanitizer report, another
+// exception, an exit from inside a library) is a finding.
 #include <mlfe/core/error.h>
+#include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
 #include <unistd.h>
 
@@ -57,6 +58,20 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   write_file(path, data, size);
+  if (kind == "vtu" || kind == "msh") {
+    // A mesh the reader accepts goes on to the field, which checks what the reader leaves to it
+    // (flat tetrahedra, a flat box).
+    mlfe::TetMeshReadOptions mesh_opts;
+    mesh_opts.max_bytes = opts.max_bytes;
+    try {
+      const mlfe::TetMesh mesh = mlfe::read_tet_mesh(path, mesh_opts);
+      const mlfe::TetMeshField field(mesh);
+      field.value({0.5, 0.5, 0.5});
+      field.range_in_box({0, 0, 0}, field.extent());
+    } catch (const mlfe::Error&) {
+    }
+    return 0;
+  }
   try {
     mlfe::read_volume(path, opts);
   } catch (const mlfe::Error&) {

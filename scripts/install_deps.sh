@@ -10,7 +10,7 @@ PKGS=(
   libopenmesh-dev libdraco-dev draco libtinygltf-dev libmeshoptimizer-dev
   libopenexr-dev openexr
   libcli11-dev nlohmann-json3-dev libfmt-dev
-  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev
+  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev libexpat1-dev
   googletest libgtest-dev libbenchmark-dev
   python3 python3-dev pybind11-dev python3-pybind11 python3-numpy
   clang libclang-rt-14-dev clang-format

@@ -6,9 +6,11 @@
 #pragma once
 #include <mlfe/core/approximation.h>
 #include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/tet_mesh_field.h>
 #include <mlfe/core/triangle_mesh.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>
@@ -126,6 +128,26 @@ struct Built {
 /// fill the dims, non-positive spacing) or options out of range.
 Built build(const ScalarGrid& grid, const BuildOptions& options, const std::vector<double>& iso_values = {});
 
+/// What build() records about an input function besides the function itself.
+struct FieldInput {
+  GridTransform transform;  ///< the field's local frame → physical coordinates
+  std::string space;        ///< "RAS", "LPS" or ""
+  std::string source;       ///< the file (for messages)
+  double bytes = 0;         ///< memory the input holds, counted against BuildOptions::max_memory
+};
+
+/// The same on any input function: the domain is [0, f.extent()], the value range f.range().
+/// The grid overload checks its grid and calls this one.
+Built build(const Field& f, const FieldInput& input, const BuildOptions& options,
+            const std::vector<double>& iso_values = {});
+
+/// The frame of a mesh input: origin at the field's box corner, spacing its resolution() on
+/// every axis (tolerances "in voxels" are then in units of the mesh's fine edges).
+FieldInput mesh_input(const TetMeshField& f, const TetMesh& mesh);
+
+/// build() on a tetrahedral mesh's P1 interpolant (TetMeshField).
+Built build(const TetMesh& mesh, const BuildOptions& options, const std::vector<double>& iso_values = {});
+
 /// Loads a hierarchy file as a Built (values required).
 Built built_from_file(const std::string& path);
 
@@ -228,7 +250,11 @@ struct ConvertResult {
 /// then write_assets with the volume at hand, and the hierarchy and report when asked. All
 /// output paths are checked before any work.
 ConvertResult convert(const ScalarGrid& grid, const std::string& out, const ConvertOptions& options);
-/// The same from a volume file (any format read_volume reads).
+/// The same from a tetrahedral mesh with point values: assets from its P1 interpolant (no
+/// snapping: that needs a voxel volume).
+ConvertResult convert(const TetMesh& mesh, const std::string& out, const ConvertOptions& options);
+/// The same from a volume file (any format read_volume reads) or a tetrahedral mesh file
+/// (.vtu, .msh; read_tet_mesh).
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read = {});
 

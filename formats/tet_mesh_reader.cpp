@@ -1,0 +1,83 @@
+// Tetrahedral mesh input (.vtu, .msh): format detection, the memory check both readers share,
+// and the checks every mesh passes before the finite-element core sees it.
+#include <fmt/format.h>
+#include <mlfe/formats/tet_mesh_reader.h>
+#include <mlfe/formats/volume_reader.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <new>
+
+#include "formats/tet_mesh_reader_detail.h"
+#include "formats/volume_reader_detail.h"
+
+namespace mlfe {
+
+namespace tet_mesh_detail {
+
+void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets,
+                       std::uint64_t limit) {
+  // Per point: coordinates, value, tag and index while reading, the field's local copy;
+  // per tetrahedron: indices while reading and the field's ~160 bytes.
+  constexpr std::uint64_t kPerPoint = 96, kPerTet = 224;
+  constexpr std::uint64_t kMax = std::uint64_t(1) << 40;
+  if (points > kMax || tets > kMax)
+    volume_detail::fail(path, fmt::format("{} points, {} cells: too many", points, tets));
+  const std::uint64_t bytes = points * kPerPoint + tets * kPerTet;
+  if (bytes > limit)
+    volume_detail::fail(path,
+                        fmt::format("needs {} bytes for {} points and {} tetrahedra but only {} bytes of "
+                                    "memory are available",
+                                    bytes, points, tets, limit));
+}
+
+}  // namespace tet_mesh_detail
+
+std::string detect_tet_mesh_format(const std::string& path) {
+  const std::string head = volume_detail::read_prefix(path, 512);
+  if (head.compare(0, 11, "$MeshFormat") == 0) return "msh";
+  if (head.find("<VTKFile") != std::string::npos && head.find("UnstructuredGrid") != std::string::npos)
+    return "vtu";
+  std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (ext == ".vtu") return "vtu";
+  if (ext == ".msh") return "msh";
+  return "";
+}
+
+TetMesh read_tet_mesh(const std::string& path, const TetMeshReadOptions& options) {
+  const std::string format = detect_tet_mesh_format(path);
+  if (format.empty()) volume_detail::fail(path, "not a tetrahedral mesh (.vtu or .msh)");
+  const std::uint64_t limit = options.max_bytes ? options.max_bytes : default_memory_limit();
+  TetMesh m;
+  try {
+    const std::string data = volume_detail::read_whole_file(path, limit);
+    m = format == "vtu" ? tet_mesh_detail::read_vtu(path, data, options, limit)
+                        : tet_mesh_detail::read_msh(path, data, options, limit);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    volume_detail::fail(path, "out of memory while reading");
+  } catch (const std::exception& e) {
+    volume_detail::fail(path, e.what());
+  }
+  if (m.tets.empty()) volume_detail::fail(path, "no tetrahedra");
+  const std::size_t np = m.points.size();
+  for (std::size_t i = 0; i < np; ++i) {
+    const auto& p = m.points[i];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+      volume_detail::fail(path, fmt::format("point {} has a coordinate that is not a finite number", i));
+    if (!std::isfinite(m.values[i]))
+      volume_detail::fail(path,
+                          fmt::format("the value '{}' at point {} is not a finite number", m.value_name, i));
+  }
+  for (std::size_t t = 0; t < m.tets.size(); ++t)
+    for (std::int32_t v : m.tets[t])
+      if (v < 0 || std::size_t(v) >= np)
+        volume_detail::fail(path, fmt::format("tetrahedron {} has point index {} out of range", t, v));
+  m.source = path;
+  return m;
+}
+
+}  // namespace mlfe

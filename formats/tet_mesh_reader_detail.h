@@ -1,0 +1,23 @@
+// Helpers shared by the tetrahedral mesh readers (formats/vtu_reader.cpp, msh_reader.cpp).
+// Not part of the public API.
+#pragma once
+#include <mlfe/formats/tet_mesh_reader.h>
+
+#include <cstdint>
+#include <string>
+
+namespace mlfe::tet_mesh_detail {
+
+/// The mesh in the VTK XML UnstructuredGrid held in `data` (the whole file).
+TetMesh read_vtu(const std::string& path, const std::string& data, const TetMeshReadOptions& options,
+                 std::uint64_t memory_limit);
+/// The mesh in the Gmsh MSH 2.2 / 4.1 file held in `data`.
+TetMesh read_msh(const std::string& path, const std::string& data, const TetMeshReadOptions& options,
+                 std::uint64_t memory_limit);
+
+/// Throws "<path>: needs N bytes for WHAT but only M bytes of memory are available" when
+/// `points` points and `tets` tetrahedra (with values and the reader's scratch) exceed `limit`.
+void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint64_t tets,
+                       std::uint64_t limit);
+
+}  // namespace mlfe::tet_mesh_detail
