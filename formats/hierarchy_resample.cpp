@@ -1,11 +1,13 @@
 // Leaf mesh → voxel grid by barycentric interpolation (see hierarchy_resample.h).
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
+#include <mlfe/core/p1_element.h>
 #include <mlfe/formats/hierarchy_resample.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -66,30 +68,12 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
                         const std::int64_t s_lo = s * slab, s_hi = std::min(n_slab_axis - 1, s_lo + slab - 1);
                         for (std::uint32_t l : buckets[s]) {
                           const auto& c = h.cell(leaves[l]);
-                          // Barycentric map: λ_{1..D} = M⁻¹ (x − p0), λ_0 = 1 − Σ.
-                          double m[3][3] = {}, inv[3][3] = {};
-                          const auto& p0 = h.point(c[0]);
-                          for (int i = 0; i < D; ++i)
-                            for (int a = 0; a < D; ++a) m[a][i] = h.point(c[i + 1])[a] - p0[a];
-                          double det;
-                          if (D == 2) {
-                            det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-                            inv[0][0] = m[1][1] / det, inv[0][1] = -m[0][1] / det;
-                            inv[1][0] = -m[1][0] / det, inv[1][1] = m[0][0] / det;
-                          } else {
-                            det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
-                                  m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
-                                  m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-                            inv[0][0] = (m[1][1] * m[2][2] - m[1][2] * m[2][1]) / det;
-                            inv[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) / det;
-                            inv[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) / det;
-                            inv[1][0] = (m[1][2] * m[2][0] - m[1][0] * m[2][2]) / det;
-                            inv[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) / det;
-                            inv[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) / det;
-                            inv[2][0] = (m[1][0] * m[2][1] - m[1][1] * m[2][0]) / det;
-                            inv[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) / det;
-                            inv[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) / det;
-                          }
+                          // Barycentric map: λ_{1..D} = ∇λ_{1..D} · (x − p0), λ_0 = 1 − Σ.
+                          std::array<std::array<double, D>, D + 1> p;
+                          for (int i = 0; i <= D; ++i) p[i] = h.point(c[i]);
+                          const P1Element<D> el(p);
+                          MLFE_CHECK(el.measure > 0);  // hierarchies have no flat simplices
+                          const auto& p0 = p[0];
                           double u[D + 1];
                           for (int i = 0; i <= D; ++i) u[i] = values[c[i].value];
                           const std::int64_t k_lo = D == 3 ? std::max(box[l][2], s_lo) : 0,
@@ -107,7 +91,7 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
                                 bool inside = true;
                                 for (int a = 0; a < D; ++a) {
                                   double t = 0;
-                                  for (int b = 0; b < D; ++b) t += inv[a][b] * x[b];
+                                  for (int b = 0; b < D; ++b) t += el.grad[a + 1][b] * x[b];
                                   lam[a + 1] = t;
                                   sum += t;
                                   inside = inside && t >= -kTol;

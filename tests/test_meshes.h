@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -98,6 +99,14 @@ inline TriangleMesh uv_sphere(int rings, int segments, float radius,
 inline std::string read_bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+/// Writes `bytes` as the whole file at `path`, as a new file rather than a truncated one: ext4
+/// flushes truncate-and-rewrite on close, which made the readers' prefix sweeps take a minute.
+inline void write_bytes(const std::string& path, const std::string& bytes) {
+  std::remove(path.c_str());
+  std::ofstream out(path, std::ios::binary);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 inline bool file_exists(const std::string& path) { return std::ifstream(path).good(); }

@@ -29,6 +29,8 @@ using nlohmann::json;
 namespace mlfe {
 namespace {
 
+using test::read_bytes;
+
 const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 const std::string kGolden = std::string(MLFE_SOURCE_DIR) + "/tests/golden";
 
@@ -47,13 +49,6 @@ RunResult run(const std::string& args) {
   std::stringstream ss;
   ss << in.rdbuf();
   return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
-}
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 bool validator_accepts(const std::string& path, std::string* report) {

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <string>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
@@ -18,16 +19,11 @@ namespace fs = std::filesystem;
 namespace mlfe {
 namespace {
 
+using test::read_bytes;
+
 const std::string kSkull = test::sample_path("ct_skull_64.nrrd");
 
 std::string scratch() { return test::scratch_dir("pipeline"); }
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 std::string cli_convert(const std::string& args, const std::string& out) {
   const std::string cmd = std::string(MLFE_BINARY) + " convert " + kSkull + " " + args + " --quiet -o " +

@@ -15,25 +15,20 @@
 #include <iterator>
 #include <sstream>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 #include "tests/tet_meshes.h"
 
 namespace mlfe {
 namespace {
 
+using test::read_bytes;
+using test::write_bytes;
+
 namespace fs = std::filesystem;
 using V3 = std::array<double, 3>;
 
 std::string scratch(const std::string& name) { return test::scratch_dir("tet_mesh_reader") + "/" + name; }
-
-std::string slurp(const std::string& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-void spit(const std::string& p, const std::string& bytes) {
-  std::ofstream out(p, std::ios::binary);
-  out << bytes;
-}
 
 double f(const V3& p) { return 0.25 + p[0] * p[0] - 2 * p[1] + std::sin(p[2]); }
 
@@ -116,7 +111,7 @@ TEST(TetMeshReader, ReadsEveryEncodingVtkWrites) {
   const std::string cmd = "/usr/bin/python3 " + std::string(MLFE_SOURCE_DIR) +
                           "/tests/formats/write_vtu_variants.py " + src + " " + dir + " > " + list;
   ASSERT_EQ(std::system(cmd.c_str()), 0);
-  std::istringstream files(slurp(list));
+  std::istringstream files(read_bytes(list));
   int n = 0;
   for (std::string file; std::getline(files, file); ++n) {
     SCOPED_TRACE(file);
@@ -236,7 +231,7 @@ TEST(TetMeshReader, ReadsMsh22AsciiAndBinaryAndMsh41Binary) {
   for (const auto& [version, binary] :
        {std::pair{"2.2", false}, std::pair{"2.2", true}, std::pair{"4.1", true}}) {
     const std::string p = scratch(std::string("hand_") + version + (binary ? "_bin" : "_ascii") + ".msh");
-    spit(p, msh(version, binary, m));
+    write_bytes(p, msh(version, binary, m));
     SCOPED_TRACE(p);
     const TetMesh r = read_tet_mesh(p);
     EXPECT_EQ(r.value_name, "temperature");
@@ -272,15 +267,15 @@ TEST(TetMeshReader, RejectsTruncatedFilesWithOneLineNamingTheFile) {
   write_msh(msh41, w.h, w.h.leaves(), &w.values, &w.t);
   const TetMesh small = test::kuhn_mesh(2, f);
   const std::string bin22 = scratch("whole22.msh");
-  spit(bin22, msh("2.2", true, small));
+  write_bytes(bin22, msh("2.2", true, small));
   for (const std::string& whole : {vtu, msh41, bin22}) {
-    const std::string bytes = slurp(whole);
+    const std::string bytes = read_bytes(whole);
     const std::string cut = scratch("cut" + fs::path(whole).extension().string());
     for (int i = 1; i < 40; ++i) {
       const std::size_t at = bytes.size() * std::size_t(i) / 40;
       // The .vtu's tail after the appended data is only closing tags the reader does not need.
       if (whole == vtu && at > bytes.size() - 40) continue;
-      spit(cut, bytes.substr(0, at));
+      write_bytes(cut, bytes.substr(0, at));
       SCOPED_TRACE(whole + " cut at " + std::to_string(at));
       EXPECT_THROW(read_tet_mesh(cut), Error);
       try {
@@ -318,21 +313,21 @@ TEST(TetMeshReader, RejectsBadIndicesCellTypesAndValues) {
     for (int v : t) conn += std::to_string(v) + " ";
   for (double v : m.values) values += std::to_string(v) + " ";
   const std::string good = scratch("good.vtu");
-  spit(good, ascii_vtu(conn, "10 10 10 10 10 10", values));
+  write_bytes(good, ascii_vtu(conn, "10 10 10 10 10 10", values));
   EXPECT_EQ(read_tet_mesh(good).tets, m.tets);
 
   const std::string bad = scratch("bad.vtu");
-  spit(bad, ascii_vtu("99 " + conn.substr(2), "10 10 10 10 10 10", values));
+  write_bytes(bad, ascii_vtu("99 " + conn.substr(2), "10 10 10 10 10 10", values));
   expect_error(bad, "point index 99 out of range");
-  spit(bad, ascii_vtu(conn, "10 10 12 10 10 10", values));
+  write_bytes(bad, ascii_vtu(conn, "10 10 12 10 10 10", values));
   expect_error(bad, "only tetrahedra (VTK type 10) are supported, found type 12");
-  spit(bad, ascii_vtu(conn, "10 10 10 10 10 10", "nan " + values.substr(values.find(' ') + 1)));
+  write_bytes(bad, ascii_vtu(conn, "10 10 10 10 10 10", "nan " + values.substr(values.find(' ') + 1)));
   expect_error(bad, "not a finite number");
-  spit(bad, ascii_vtu(conn, "10 10 10 10 10 10", "1 2 3"));
+  write_bytes(bad, ascii_vtu(conn, "10 10 10 10 10 10", "1 2 3"));
   expect_error(bad, "DataArray u: fewer than 8 values");
-  spit(bad, ascii_vtu(conn, "10 10 10 10 10 10", "1 2 3 4 5 6 7 x"));
+  write_bytes(bad, ascii_vtu(conn, "10 10 10 10 10 10", "1 2 3 4 5 6 7 x"));
   expect_error(bad, "DataArray u: value 7 is missing or not a number");
-  spit(bad, ascii_vtu(conn, "10 10 10 10 10 10", values).substr(0, 300));
+  write_bytes(bad, ascii_vtu(conn, "10 10 10 10 10 10", values).substr(0, 300));
   expect_error(bad, "XML error");
 
   // MSH: a hexahedron, a node that does not exist, no values.
@@ -340,18 +335,18 @@ TEST(TetMeshReader, RejectsBadIndicesCellTypesAndValues) {
   const std::string head =
       "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n";
   const std::string data = "$NodeData\n1\n\"u\"\n1\n0\n3\n0\n1\n4\n1 1\n2 2\n3 3\n4 4\n$EndNodeData\n";
-  spit(bm, head + "$Elements\n1\n1 5 0 1 2 3 4 1 2 3 4\n$EndElements\n" + data);
+  write_bytes(bm, head + "$Elements\n1\n1 5 0 1 2 3 4 1 2 3 4\n$EndElements\n" + data);
   expect_error(bm, "only 4-node tetrahedra (element type 4) are supported, found type 5");
-  spit(bm, head + "$Elements\n1\n1 4 0 1 2 3 9\n$EndElements\n" + data);
+  write_bytes(bm, head + "$Elements\n1\n1 4 0 1 2 3 9\n$EndElements\n" + data);
   expect_error(bm, "node tag 9");
-  spit(bm, head + "$Elements\n1\n1 4 0 1 2 3 4\n$EndElements\n");
+  write_bytes(bm, head + "$Elements\n1\n1 4 0 1 2 3 4\n$EndElements\n");
   expect_error(bm, "no scalar $NodeData");
-  spit(bm, head + "$Elements\n1\n1 4 0 1 2 3 4\n$EndElements\n" + data);
+  write_bytes(bm, head + "$Elements\n1\n1 4 0 1 2 3 4\n$EndElements\n" + data);
   EXPECT_EQ(read_tet_mesh(bm).values, (std::vector<double>{1, 2, 3, 4}));
-  spit(bm, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n");
+  write_bytes(bm, "$MeshFormat\n3.0 0 8\n$EndMeshFormat\n");
   expect_error(bm, "MSH version 3.0 is not supported");
   // Counts far beyond the file.
-  spit(bm, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n99999999999\n1 0 0 0\n$EndNodes\n");
+  write_bytes(bm, "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n99999999999\n1 0 0 0\n$EndNodes\n");
   expect_error(bm, "cannot fit");
 }
 

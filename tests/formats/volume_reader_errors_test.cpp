@@ -20,10 +20,14 @@
 #include <string>
 #include <vector>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
+
+using test::read_bytes;
+using test::write_bytes;
 
 const std::string kData = std::string(MLFE_SOURCE_DIR) + "/tests/data/";
 
@@ -33,21 +37,6 @@ std::string temp_dir() {
   buf.push_back('\0');
   if (!mkdtemp(buf.data())) throw std::runtime_error("mkdtemp failed");
   return std::string(buf.data()) + "/";
-}
-
-std::string slurp(const std::string& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-void spit(const std::string& p, const std::string& bytes) {
-  // A new file rather than a truncated one: ext4 flushes truncate-and-rewrite on close, which
-  // made the prefix sweep take a minute.
-  std::remove(p.c_str());
-  std::ofstream out(p, std::ios::binary);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 // Expects read_volume to throw one mlfe::Error line that names `file` (default: path) and
@@ -73,51 +62,53 @@ std::string nrrd_header(const std::string& fields) { return "NRRD0004\n" + field
 TEST(VolumeReaderErrors, MissingFileAndUnknownFormat) {
   const std::string dir = temp_dir();
   expect_error(dir + "nope.nrrd", {"cannot open"});
-  spit(dir + "empty.xyz", "");
+  write_bytes(dir + "empty.xyz", "");
   expect_error(dir + "empty.xyz", {"unrecognised volume format"});
-  spit(dir + "junk.xyz", "some text that is no volume");
+  write_bytes(dir + "junk.xyz", "some text that is no volume");
   expect_error(dir + "junk.xyz", {"unrecognised volume format", "736f6d65"});
 }
 
 TEST(VolumeReaderErrors, WrongMagicForTheExtension) {
   const std::string dir = temp_dir();
-  spit(dir + "bad.nii", std::string(400, 'x'));
+  write_bytes(dir + "bad.nii", std::string(400, 'x'));
   expect_error(dir + "bad.nii", {"not a NIfTI"});
-  spit(dir + "bad.vdb", "definitely not a vdb file");
+  write_bytes(dir + "bad.vdb", "definitely not a vdb file");
   expect_error(dir + "bad.vdb", {"not an OpenVDB file"});
-  spit(dir + "bad.nrrd", "NRRX0004\ntype: float\n");
+  write_bytes(dir + "bad.nrrd", "NRRX0004\ntype: float\n");
   expect_error(dir + "bad.nrrd", {"not a NRRD"});
-  spit(dir + "bad.png", "\x89PNX....");
+  write_bytes(dir + "bad.png", "\x89PNX....");
   expect_error(dir + "bad.png", {"not a PNG"});
-  spit(dir + "bad.pgm", "P6\n1 1\n255\nabc");
+  write_bytes(dir + "bad.pgm", "P6\n1 1\n255\nabc");
   expect_error(dir + "bad.pgm", {"not a binary PGM"});
 }
 
 TEST(VolumeReaderErrors, NrrdTruncatedDataIsRefusedBeforeTeemAllocates) {
   const std::string dir = temp_dir();
-  std::string full = slurp(test::sample_path("ct_skull_64.nrrd"));
-  spit(dir + "cut.nrrd", full.substr(0, full.size() - 1000));
+  std::string full = read_bytes(test::sample_path("ct_skull_64.nrrd"));
+  write_bytes(dir + "cut.nrrd", full.substr(0, full.size() - 1000));
   expect_error(dir + "cut.nrrd", {"truncated", "1048576 bytes"});
 }
 
 TEST(VolumeReaderErrors, NrrdAbsurdDimsAreRefusedWithoutAllocating) {
   const std::string dir = temp_dir();
-  spit(dir + "huge.nrrd",
-       nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: raw") +
-           "abcd");
+  write_bytes(
+      dir + "huge.nrrd",
+      nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: raw") +
+          "abcd");
   // The file is far too short: that is found before the memory check.
   expect_error(dir + "huge.nrrd", {"truncated", "4000000000000000 bytes"});
-  spit(dir + "hugegz.nrrd",
-       nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: gzip") +
-           "abcd");
+  write_bytes(
+      dir + "hugegz.nrrd",
+      nrrd_header("type: float\ndimension: 3\nsizes: 100000 100000 100000\nendian: little\nencoding: gzip") +
+          "abcd");
   expect_error(dir + "hugegz.nrrd", {"needs", "bytes of memory are available"});
-  spit(dir + "overflow.nrrd", nrrd_header("type: double\ndimension: 3\nsizes: 2000000000 2000000000 "
-                                          "2000000000\nendian: little\nencoding: raw") +
-                                  "x");
+  write_bytes(dir + "overflow.nrrd", nrrd_header("type: double\ndimension: 3\nsizes: 2000000000 2000000000 "
+                                                 "2000000000\nendian: little\nencoding: raw") +
+                                         "x");
   expect_error(dir + "overflow.nrrd", {"too large"});
-  spit(dir + "zero.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 4 0 4\nencoding: raw"));
+  write_bytes(dir + "zero.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 4 0 4\nencoding: raw"));
   expect_error(dir + "zero.nrrd", {"bad NRRD header"});
-  spit(dir + "neg.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 4 -3 4\nencoding: raw"));
+  write_bytes(dir + "neg.nrrd", nrrd_header("type: float\ndimension: 3\nsizes: 4 -3 4\nencoding: raw"));
   expect_error(dir + "neg.nrrd", {"bad NRRD header"});
 }
 
@@ -131,19 +122,19 @@ TEST(VolumeReaderErrors, MemoryLimitNamesBytesNeededAndAvailable) {
 
 TEST(VolumeReaderErrors, NrrdUnsupportedTypeAndDimension) {
   const std::string dir = temp_dir();
-  spit(dir + "ll.nrrd",
-       nrrd_header("type: long long\ndimension: 2\nsizes: 2 2\nendian: little\nencoding: raw") +
-           std::string(32, '\0'));
+  write_bytes(dir + "ll.nrrd",
+              nrrd_header("type: long long\ndimension: 2\nsizes: 2 2\nendian: little\nencoding: raw") +
+                  std::string(32, '\0'));
   expect_error(dir + "ll.nrrd", {"unsupported NRRD type"});
-  spit(dir + "4d.nrrd",
-       nrrd_header("type: uchar\ndimension: 4\nsizes: 2 2 2 2\nencoding: raw") + std::string(16, '\0'));
+  write_bytes(dir + "4d.nrrd", nrrd_header("type: uchar\ndimension: 4\nsizes: 2 2 2 2\nencoding: raw") +
+                                   std::string(16, '\0'));
   expect_error(dir + "4d.nrrd", {"4 axes"});
 }
 
 TEST(VolumeReaderErrors, NrrdCorruptGzip) {
   const std::string dir = temp_dir();
-  spit(dir + "z.nrrd", nrrd_header("type: float\ndimension: 2\nsizes: 8 8\nencoding: gzip") +
-                           std::string("\x1f\x8b\x08\x00garbagegarbagegarbage", 25));
+  write_bytes(dir + "z.nrrd", nrrd_header("type: float\ndimension: 2\nsizes: 8 8\nencoding: gzip") +
+                                  std::string("\x1f\x8b\x08\x00garbagegarbagegarbage", 25));
   expect_error(dir + "z.nrrd", {});
 }
 
@@ -152,8 +143,8 @@ TEST(VolumeReaderErrors, NanVoxelsNeedNanAs) {
   std::vector<float> v(8, 1.0f);
   v[5] = std::numeric_limits<float>::quiet_NaN();
   v[6] = std::numeric_limits<float>::infinity();
-  spit(dir + "n.raw", std::string(reinterpret_cast<char*>(v.data()), v.size() * 4));
-  spit(dir + "n.raw.json", R"({"dims":[2,2,2],"dtype":"float32"})");
+  write_bytes(dir + "n.raw", std::string(reinterpret_cast<char*>(v.data()), v.size() * 4));
+  write_bytes(dir + "n.raw.json", R"({"dims":[2,2,2],"dtype":"float32"})");
   expect_error(dir + "n.raw", {"2 voxels are NaN or infinite", "index 1,0,1", "--nan-as"});
   VolumeReadOptions o;
   o.nan_as = -3.0;
@@ -165,33 +156,33 @@ TEST(VolumeReaderErrors, NanVoxelsNeedNanAs) {
 
 TEST(VolumeReaderErrors, RawSizeMismatchAndSidecarProblems) {
   const std::string dir = temp_dir();
-  spit(dir + "a.raw", std::string(100, '\0'));
-  spit(dir + "a.raw.json", R"({"dims":[5,5,5],"dtype":"uint8"})");
+  write_bytes(dir + "a.raw", std::string(100, '\0'));
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,5],"dtype":"uint8"})");
   expect_error(dir + "a.raw", {"size mismatch", "need 125 bytes", "the file has 100"});
-  spit(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8","offset":1})");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8","offset":1})");
   expect_error(dir + "a.raw", {"size mismatch", "need 101 bytes"});
-  spit(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8")");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8")");
   expect_error(dir + "a.raw", {"bad JSON"}, {}, dir + "a.raw.json");
-  spit(dir + "a.raw.json", R"({"dtype":"uint8"})");
+  write_bytes(dir + "a.raw.json", R"({"dtype":"uint8"})");
   expect_error(dir + "a.raw", {"missing \"dims\""}, {}, dir + "a.raw.json");
-  spit(dir + "a.raw.json", R"({"dims":[5,5,4]})");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,4]})");
   expect_error(dir + "a.raw", {"missing \"dtype\""}, {}, dir + "a.raw.json");
-  spit(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"complex64"})");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"complex64"})");
   expect_error(dir + "a.raw", {"unsupported dtype"}, {}, dir + "a.raw.json");
-  spit(dir + "a.raw.json", R"({"dims":[5,-5,4],"dtype":"uint8"})");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,-5,4],"dtype":"uint8"})");
   expect_error(dir + "a.raw", {"not a positive integer"}, {}, dir + "a.raw.json");
-  spit(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8","spacing":[1,0,1]})");
+  write_bytes(dir + "a.raw.json", R"({"dims":[5,5,4],"dtype":"uint8","spacing":[1,0,1]})");
   expect_error(dir + "a.raw", {"\"spacing\" entries must be positive"}, {}, dir + "a.raw.json");
-  spit(dir + "b.raw", std::string(10, '\0'));
+  write_bytes(dir + "b.raw", std::string(10, '\0'));
   expect_error(dir + "b.raw", {"needs a sidecar", "--raw-dims"});
 }
 
 TEST(VolumeReaderErrors, NiftiTruncatedAndUnsupported) {
   const std::string dir = temp_dir();
-  std::string full = slurp(kData + "mri_small_bigendian.nii");
-  spit(dir + "cut.nii", full.substr(0, full.size() / 2));
+  std::string full = read_bytes(kData + "mri_small_bigendian.nii");
+  write_bytes(dir + "cut.nii", full.substr(0, full.size() / 2));
   expect_error(dir + "cut.nii", {"truncated"});
-  spit(dir + "hdr.nii", full.substr(0, 200));
+  write_bytes(dir + "hdr.nii", full.substr(0, 200));
   expect_error(dir + "hdr.nii", {"truncated NIfTI header"});
   // Truncated and corrupt gzip.
   std::string gz;
@@ -200,13 +191,13 @@ TEST(VolumeReaderErrors, NiftiTruncatedAndUnsupported) {
     gzFile f = gzopen(p.c_str(), "wb");
     gzwrite(f, full.data(), static_cast<unsigned>(full.size()));
     gzclose(f);
-    gz = slurp(p);
+    gz = read_bytes(p);
   }
-  spit(dir + "cut.nii.gz", gz.substr(0, gz.size() * 2 / 3));
+  write_bytes(dir + "cut.nii.gz", gz.substr(0, gz.size() * 2 / 3));
   expect_error(dir + "cut.nii.gz", {"truncated or unreadable"});
   std::string bad = gz;
   for (std::size_t i = 400; i < bad.size() - 20; i += 7) bad[i] = static_cast<char>(bad[i] ^ 0x5a);
-  spit(dir + "bad.nii.gz", bad);
+  write_bytes(dir + "bad.nii.gz", bad);
   expect_error(dir + "bad.nii.gz", {});
   // Unsupported datatype (complex64 = 32) written by libnifti itself.
   int64_t dims[8] = {3, 2, 2, 2, 1, 1, 1, 1};
@@ -234,54 +225,57 @@ TEST(VolumeReaderErrors, VdbWithoutScalarOrEmptyGrid) {
   expect_error(dir + "empty.vdb", {"no grid named 'missing'", "empty (float)"}, o);
   openvdb::io::File(dir + "none.vdb").write(openvdb::GridPtrVec{});
   expect_error(dir + "none.vdb", {"no grids"});
-  std::string full = slurp(dir + "empty.vdb");
-  spit(dir + "cut.vdb", full.substr(0, full.size() / 2));
+  std::string full = read_bytes(dir + "empty.vdb");
+  write_bytes(dir + "cut.vdb", full.substr(0, full.size() / 2));
   expect_error(dir + "cut.vdb", {});
 }
 
 TEST(VolumeReaderErrors, VdbCorruptLengthFieldIsRefusedBeforeOpenVdbAllocates) {
   const std::string dir = temp_dir();
-  std::string bytes = slurp(kData + "small_sphere.vdb");
+  std::string bytes = read_bytes(kData + "small_sphere.vdb");
   ASSERT_GT(bytes.size(), 0x80u);
   ASSERT_EQ(bytes.substr(0x45, 7), "surface");  // the first grid name, after its 4-byte length
   bytes[0x41] = '\x00';
   bytes[0x42] = '\x00';
   bytes[0x43] = '\x00';
   bytes[0x44] = '\xf0';  // length 0xf0000000: OpenVDB alone would allocate 4 GB
-  spit(dir + "len.vdb", bytes);
+  write_bytes(dir + "len.vdb", bytes);
   expect_error(dir + "len.vdb", {"truncated or corrupt OpenVDB file", "grid name"});
-  bytes = slurp(kData + "small_sphere.vdb");
+  bytes = read_bytes(kData + "small_sphere.vdb");
   bytes[8] = '\x10';  // file version 16
-  spit(dir + "ver.vdb", bytes);
+  write_bytes(dir + "ver.vdb", bytes);
   expect_error(dir + "ver.vdb", {"unsupported OpenVDB file version 16"});
 }
 
 TEST(VolumeReaderErrors, MetaImageAndPgmHeaders) {
   const std::string dir = temp_dir();
-  spit(dir + "a.mha",
-       "ObjectType = Image\nNDims = 3\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
+  write_bytes(
+      dir + "a.mha",
+      "ObjectType = Image\nNDims = 3\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n");
   expect_error(dir + "a.mha", {"DimSize needs 3 numbers"});
-  spit(
+  write_bytes(
       dir + "b.mha",
       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_LONG_LONG\nElementDataFile = LOCAL\n");
   expect_error(dir + "b.mha", {"unsupported MetaImage ElementType MET_LONG_LONG"});
-  spit(dir + "c.mha",
-       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
+  write_bytes(
+      dir + "c.mha",
+      "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = LOCAL\nabc");
   expect_error(dir + "c.mha", {"truncated", "16 bytes"}, {}, dir + "c.mha");
-  spit(dir + "d.mha",
-       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nCompressedData = True\n"
-       "ElementDataFile = LOCAL\nxxxxxxxxxxxxxxxx");
+  write_bytes(dir + "d.mha",
+              "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nCompressedData = True\n"
+              "ElementDataFile = LOCAL\nxxxxxxxxxxxxxxxx");
   expect_error(dir + "d.mha", {"corrupt compressed data"});
-  spit(dir + "e.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\n");
+  write_bytes(dir + "e.mha", "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\n");
   expect_error(dir + "e.mha", {"no ElementDataFile"});
-  spit(dir + "f.mhd",
-       "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n");
+  write_bytes(
+      dir + "f.mhd",
+      "ObjectType = Image\nNDims = 2\nDimSize = 4 4\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n");
   expect_error(dir + "f.mhd", {"cannot open"}, {}, dir + "gone.raw");
-  spit(dir + "a.pgm", "P5\n4 4\n70000\n");
+  write_bytes(dir + "a.pgm", "P5\n4 4\n70000\n");
   expect_error(dir + "a.pgm", {"maxval 70000"});
-  spit(dir + "b.pgm", "P5\n4 4\n65535\nabc");
+  write_bytes(dir + "b.pgm", "P5\n4 4\n65535\nabc");
   expect_error(dir + "b.pgm", {"truncated", "32 bytes"});
-  spit(dir + "c.pgm", "P5\n4 0\n255\n");
+  write_bytes(dir + "c.pgm", "P5\n4 0\n255\n");
   expect_error(dir + "c.pgm", {"invalid dimensions"});
 }
 
@@ -304,7 +298,7 @@ TEST(VolumeReaderErrors, TruncatedPrefixesOfEverySampleReadOrThrow) {
   ASSERT_GE(samples.size(), 8u);
   int errors = 0, reads = 0;
   for (const auto& name : samples) {
-    const std::string full = slurp(kData + name);
+    const std::string full = read_bytes(kData + name);
     std::set<std::size_t> cuts;
     const std::size_t small = std::min<std::size_t>(full.size(), 4096);
     for (std::size_t n = 0; n <= small; n += (n < 400 ? 1 : 11)) cuts.insert(n);
@@ -312,13 +306,14 @@ TEST(VolumeReaderErrors, TruncatedPrefixesOfEverySampleReadOrThrow) {
     for (std::size_t back = 1; back <= 16 && back <= full.size(); ++back) cuts.insert(full.size() - back);
     // Companion files stay complete so that only the sample itself is cut.
     for (const char* comp : {".json"}) {
-      std::string c = slurp(kData + name + comp);
-      if (!c.empty()) spit(dir + name + comp, c);
+      std::string c = read_bytes(kData + name + comp);
+      if (!c.empty()) write_bytes(dir + name + comp, c);
     }
-    if (name == "small_float_z.mhd") spit(dir + "small_float_z.zraw", slurp(kData + "small_float_z.zraw"));
+    if (name == "small_float_z.mhd")
+      write_bytes(dir + "small_float_z.zraw", read_bytes(kData + "small_float_z.zraw"));
     for (std::size_t n : cuts) {
       const std::string path = dir + name;
-      spit(path, full.substr(0, n));
+      write_bytes(path, full.substr(0, n));
       try {
         read_volume(path);
         ++reads;

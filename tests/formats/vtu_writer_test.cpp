@@ -196,15 +196,15 @@ TEST(VtuWriter, RejectsBadArgumentsWithoutLeavingAFile) {
 
 // VTK's own reader, when python3-vtk9 is installed (it is optional: a bench-only package).
 TEST(VtuWriter, ReadsBackWithVtkWhenAvailable) {
-  if (std::system("python3 -c 'import vtk' > /dev/null 2>&1") != 0)
+  if (std::system("/usr/bin/python3 -c 'import vtk' > /dev/null 2>&1") != 0)
     GTEST_SKIP() << "python3-vtk9 not installed";
   const Hierarchy<3> h = refined_box();
   std::vector<double> u(h.vertex_count(), 1.5);
   const fs::path path = temp_file("vtk.vtu");
   write_vtu<3>(path.string(), h, h.leaves(), &u, nullptr);
   const std::string cmd =
-      "python3 -c \"import vtk,sys; r=vtk.vtkXMLUnstructuredGridReader(); r.SetFileName('" + path.string() +
-      "'); r.Update(); g=r.GetOutput(); sys.exit(0 if g.GetNumberOfCells()==" +
+      "/usr/bin/python3 -c \"import vtk,sys; r=vtk.vtkXMLUnstructuredGridReader(); r.SetFileName('" +
+      path.string() + "'); r.Update(); g=r.GetOutput(); sys.exit(0 if g.GetNumberOfCells()==" +
       std::to_string(h.leaves().size()) + " and g.GetNumberOfPoints()==" + std::to_string(h.vertex_count()) +
       " and g.GetPointData().GetArray('u').GetValue(0)==1.5 "
       "else 1)\"";
