@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -288,7 +289,7 @@ TEST(VolumeReaderErrors, TruncatedPrefixesOfEverySampleReadOrThrow) {
   ASSERT_NE(d, nullptr);
   while (dirent* e = readdir(d)) {
     std::string n = e->d_name;
-    if (n[0] == '.' || n.size() < 4) continue;
+    if (n[0] == '.' || n.size() < 4 || !std::filesystem::is_regular_file(kData + n)) continue;
     std::string ext = n.substr(n.find_last_of('.') + 1);
     if (ext == "md" || ext == "json" || ext == "zraw") continue;  // companions are kept whole
     samples.push_back(n);
