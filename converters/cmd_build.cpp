@@ -116,12 +116,17 @@ Measure<3> at_mesh_points(const TetMesh& mesh, const TetMeshField& input, double
     }
     leaves.values = values;
     const TetMeshField u(leaves);
-    std::vector<float> approx(mesh.points.size()), data(mesh.points.size());
+    // Points no tetrahedron uses (a .vtu may carry them) are not samples of the input function.
+    std::vector<char> used(mesh.points.size(), 0);
+    for (const auto& t : mesh.tets)
+      for (std::int32_t v : t) used[static_cast<std::size_t>(v)] = 1;
+    std::vector<float> approx, data;
     for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+      if (!used[i]) continue;
       std::array<double, 3> local;
       for (int a = 0; a < 3; ++a) local[a] = mesh.points[i][a] - input.origin()[a];
-      approx[i] = static_cast<float>(u.value(local));
-      data[i] = static_cast<float>(mesh.values[i]);
+      approx.push_back(static_cast<float>(u.value(local)));
+      data.push_back(static_cast<float>(mesh.values[i]));
     }
     return grid_errors(approx, data, range, mesh.source);
   };

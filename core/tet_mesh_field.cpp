@@ -23,6 +23,9 @@ V3 cross(const V3& a, const V3& b) {
 }
 V3 axpy(const V3& p, double s, const V3& d) { return {p[0] + s * d[0], p[1] + s * d[1], p[2] + s * d[2]}; }
 
+// Face f of a tetrahedron is the one opposite its vertex f.
+constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+
 V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c) {
   const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
   const double d1 = dot(ab, ap), d2 = dot(ac, ap);
@@ -273,12 +276,81 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
         for (std::int64_t i = i0[0]; i <= i1[0]; ++i)
           cell_tets_[fill[std::size_t(i + n_[0] * (j + n_[1] * k))]++] = t;
   }
-  // Chebyshev distance to the nearest non-empty cell: breadth-first over the 26 neighbours.
-  empty_distance_.assign(cells, -1);
+
+  // Step 4: the boundary faces (faces of one kept tetrahedron only). Outside the mesh the
+  // closest point of the mesh lies on one of them, so the outside search visits them alone
+  // and not every tetrahedron around (the search grows in rings until it passes the closest
+  // point: over the interior's tetrahedra that cost ~1 ms per point a cell deep in a cut corner).
+  struct FaceKey {
+    std::array<std::int32_t, 3> v;
+    std::uint32_t tet;
+    std::uint8_t face;
+  };
+  std::vector<FaceKey> keys;
+  keys.reserve(tets_.size() * 4);
+  for (std::uint32_t t = 0; t < tets_.size(); ++t)
+    for (std::uint8_t f = 0; f < 4; ++f) {
+      std::array<std::int32_t, 3> v{tets_[t].vertex[kFaces[f][0]], tets_[t].vertex[kFaces[f][1]],
+                                    tets_[t].vertex[kFaces[f][2]]};
+      std::sort(v.begin(), v.end());
+      keys.push_back({v, t, f});
+    }
+  std::sort(keys.begin(), keys.end(), [](const FaceKey& a, const FaceKey& b) {
+    return a.v != b.v ? a.v < b.v : a.tet != b.tet ? a.tet < b.tet : a.face < b.face;
+  });
+  for (std::size_t i = 0; i < keys.size();) {
+    std::size_t j = i + 1;
+    while (j < keys.size() && keys[j].v == keys[i].v) ++j;
+    if (j - i == 1) boundary_.push_back({keys[i].tet, keys[i].face});
+    i = j;
+  }
+  std::vector<FaceKey>().swap(keys);
+  const auto face_cells = [&](const BoundaryFace& bf, std::int64_t i0[3], std::int64_t i1[3]) {
+    const Tet& T = tets_[bf.tet];
+    V3 flo = points_[T.vertex[kFaces[bf.face][0]]], fhi = flo;
+    for (int i = 1; i < 3; ++i)
+      for (int a = 0; a < 3; ++a) {
+        flo[a] = std::min(flo[a], points_[T.vertex[kFaces[bf.face][i]]][a]);
+        fhi[a] = std::max(fhi[a], points_[T.vertex[kFaces[bf.face][i]]][a]);
+      }
+    cell_of(flo, i0);
+    cell_of(fhi, i1);
+  };
+  std::fill(count.begin(), count.end(), 0);
+  for (const BoundaryFace& bf : boundary_) {
+    std::int64_t i0[3], i1[3];
+    face_cells(bf, i0, i1);
+    for (std::int64_t k = i0[2]; k <= i1[2]; ++k)
+      for (std::int64_t j = i0[1]; j <= i1[1]; ++j)
+        for (std::int64_t i = i0[0]; i <= i1[0]; ++i) ++count[std::size_t(i + n_[0] * (j + n_[1] * k)) + 1];
+  }
+  for (std::size_t c = 0; c < cells; ++c) count[c + 1] += count[c];
+  if (count[cells] >= std::numeric_limits<std::uint32_t>::max())
+    throw Error(src + ": the boundary faces cover too many buckets for point location (" +
+                std::to_string(count[cells]) + ")");
+  face_start_.assign(count.begin(), count.end());
+  face_ids_.resize(face_start_.back());
+  fill.assign(face_start_.begin(), face_start_.end() - 1);
+  for (std::uint32_t b = 0; b < boundary_.size(); ++b) {
+    std::int64_t i0[3], i1[3];
+    face_cells(boundary_[b], i0, i1);
+    for (std::int64_t k = i0[2]; k <= i1[2]; ++k)
+      for (std::int64_t j = i0[1]; j <= i1[1]; ++j)
+        for (std::int64_t i = i0[0]; i <= i1[0]; ++i)
+          face_ids_[fill[std::size_t(i + n_[0] * (j + n_[1] * k))]++] = b;
+  }
+  face_distance_ = chebyshev_distance_to_filled(face_start_);
+}
+
+std::vector<std::int32_t> TetMeshField::chebyshev_distance_to_filled(
+    const std::vector<std::uint32_t>& start) const {
+  // Breadth-first over the 26 neighbours from every cell that lists something.
+  const std::size_t cells = start.size() - 1;
+  std::vector<std::int32_t> dist(cells, -1);
   std::deque<std::int64_t> queue;
   for (std::size_t c = 0; c < cells; ++c)
-    if (cell_start_[c + 1] > cell_start_[c]) {
-      empty_distance_[c] = 0;
+    if (start[c + 1] > start[c]) {
+      dist[c] = 0;
       queue.push_back(std::int64_t(c));
     }
   while (!queue.empty()) {
@@ -291,11 +363,12 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
           const std::int64_t i = ci + di, j = cj + dj, k = ck + dk;
           if (i < 0 || j < 0 || k < 0 || i >= n_[0] || j >= n_[1] || k >= n_[2]) continue;
           const std::size_t d = std::size_t(i + n_[0] * (j + n_[1] * k));
-          if (empty_distance_[d] >= 0) continue;
-          empty_distance_[d] = empty_distance_[std::size_t(c)] + 1;
+          if (dist[d] >= 0) continue;
+          dist[d] = dist[std::size_t(c)] + 1;
           queue.push_back(std::int64_t(d));
         }
   }
+  return dist;
 }
 
 std::int64_t TetMeshField::cell_of(const std::array<double, 3>& x, std::int64_t c[3]) const {
@@ -334,24 +407,20 @@ TetMeshField::Hit TetMeshField::locate(const std::array<double, 3>& x_in) const 
   const auto visit = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
     if (i < 0 || j < 0 || k < 0 || i >= n_[0] || j >= n_[1] || k >= n_[2]) return;
     const std::size_t b = std::size_t(i + n_[0] * (j + n_[1] * k));
-    for (std::uint32_t s = cell_start_[b]; s < cell_start_[b + 1]; ++s) {
-      const std::uint32_t t = cell_tets_[s];
-      const Tet& T = tets_[t];
-      const V3 p[4] = {points_[T.vertex[0]], points_[T.vertex[1]], points_[T.vertex[2]],
-                       points_[T.vertex[3]]};
-      static constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
-      for (const auto& f : kFaces) {
-        const V3 q = closest_on_triangle(x, p[f[0]], p[f[1]], p[f[2]]);
-        const V3 d = sub(q, x);
-        const double d2 = dot(d, d);
-        if (d2 < best_d2 || (d2 == best_d2 && t < best.tet)) {
-          best_d2 = d2;
-          best = {t, q};
-        }
+    for (std::uint32_t s = face_start_[b]; s < face_start_[b + 1]; ++s) {
+      const BoundaryFace& bf = boundary_[face_ids_[s]];
+      const auto& v = tets_[bf.tet].vertex;
+      const int* f = kFaces[bf.face];
+      const V3 q = closest_on_triangle(x, points_[v[f[0]]], points_[v[f[1]]], points_[v[f[2]]]);
+      const V3 d = sub(q, x);
+      const double d2 = dot(d, d);
+      if (d2 < best_d2 || (d2 == best_d2 && bf.tet < best.tet)) {
+        best_d2 = d2;
+        best = {bf.tet, q};
       }
     }
   };
-  for (std::int64_t r = std::max<std::int64_t>(0, empty_distance_[cell]); r <= max_ring; ++r) {
+  for (std::int64_t r = std::max<std::int64_t>(0, face_distance_[cell]); r <= max_ring; ++r) {
     for (std::int64_t dk = -r; dk <= r; ++dk)
       for (std::int64_t dj = -r; dj <= r; ++dj) {
         const bool face = std::abs(dk) == r || std::abs(dj) == r;

@@ -112,7 +112,9 @@ TEST(UnstructuredInput, PoissonExampleRefinesAtTheReentrantEdgeAndConverges) {
     const auto [near, far] = leaf_density_near_and_far(b);
     // At 0.5% the mesh is still about the uniform start (a few levels); the tighter targets
     // refine at the edge.
-    if (percent < 0.5) EXPECT_GT(near, 10 * far) << "near " << near << " far " << far;
+    if (percent < 0.5) {
+      EXPECT_GT(near, 10 * far) << "near " << near << " far " << far;
+    }
     errors.push_back(rms_error_against_u(b));
   }
   EXPECT_LT(errors[1], 0.7 * errors[0]) << errors[0] << " " << errors[1];

@@ -85,6 +85,9 @@ class TetMeshField final : public Field {
   Hit locate(const std::array<double, 3>& x) const;
   std::int64_t cell_of(const std::array<double, 3>& x, std::int64_t c[3]) const;
   void build_ranges() const;
+  // Per cell, the Chebyshev distance in cells to the nearest cell that lists something in the
+  // CSR `start` (-1 when none does).
+  std::vector<std::int32_t> chebyshev_distance_to_filled(const std::vector<std::uint32_t>& start) const;
 
   std::vector<std::array<double, 3>> points_;  // local frame
   std::vector<Tet> tets_;
@@ -93,12 +96,20 @@ class TetMeshField final : public Field {
   double resolution_ = 0, voxel_size_ = 0;
   std::array<double, 2> range_{0, 0};
   // Buckets: cell (i, j, k) lists the tetrahedra whose bounding box overlaps it, in index
-  // order (cell_start_ as in CSR); empty_distance_ is the Chebyshev distance in cells to the
-  // nearest non-empty cell, so searches outside the mesh skip the empty rings.
+  // order (cell_start_ as in CSR).
   std::array<std::int64_t, 3> n_{1, 1, 1};
   std::array<double, 3> cell_size_{1, 1, 1}, inv_cell_{1, 1, 1};
   std::vector<std::uint32_t> cell_start_, cell_tets_;
-  std::vector<std::int32_t> empty_distance_;
+  // The boundary faces (face `face` of tetrahedron `tet`, on no other tetrahedron) in buckets of
+  // their own, with the Chebyshev distance in cells from each cell to the nearest one that lists a face, so
+  // that the search outside the mesh starts at the first ring that can hold one.
+  struct BoundaryFace {
+    std::uint32_t tet;
+    std::uint8_t face;
+  };
+  std::vector<BoundaryFace> boundary_;
+  std::vector<std::uint32_t> face_start_, face_ids_;
+  std::vector<std::int32_t> face_distance_;
   struct RangePyramid;
   mutable std::once_flag ranges_once_;
   mutable std::unique_ptr<RangePyramid> ranges_;
