@@ -845,6 +845,14 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
   const CompiledTransferFunction* skip = opt.skip_empty ? &ctf : nullptr;
   Counters n;
   RenderImage img = blank_image(camera);
+  // All rays share their direction (orthographic) or their origin (perspective): mapped to the
+  // local frame once, with the same arithmetic as per ray.
+  Vec3 shared_local;
+  {
+    Vec3 ow, dw;
+    rays.ray(0, 0, ow, dw);
+    shared_local = camera.perspective ? to_local.point(ow) : to_local.direction(dw);
+  }
   const int tx = (camera.width + kTile - 1) / kTile, ty = (camera.height + kTile - 1) / kTile;
   tbb::parallel_for(0, tx * ty, [&](int tile) {
     std::optional<RayAccumulator> accs[kLanes];
@@ -857,6 +865,8 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     const int x0 = (tile % tx) * kTile, y0 = (tile / tx) * kTile;
     const int w = std::min(x0 + kTile, camera.width) - x0, h = std::min(y0 + kTile, camera.height) - y0;
     auto state_of = [&](std::uint32_t e) { return state[e]; };
+    // The tile's counts, added to the shared ones once (atomics per ray cost measurably).
+    std::uint64_t tile_rays = 0, tile_segments = 0, tile_skips = 0, tile_relocations = 0, tile_bound = 0;
     for (int first = 0; first < w * h; first += kLanes) {
       const int lanes = std::min(kLanes, w * h - first);
       for (int l = 0; l < lanes; ++l) {
@@ -865,7 +875,9 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
         segs[l] = 0;
         Vec3 ow, dw;
         rays.ray(px[l], py[l], ow, dw);
-        begin_walk(m, to_local.point(ow), to_local.direction(dw), skip, &hint, walk[l]);
+        const Vec3 o = camera.perspective ? shared_local : to_local.point(ow);
+        const Vec3 d = camera.perspective ? to_local.direction(dw) : shared_local;
+        begin_walk(m, o, d, skip, &hint, walk[l]);
       }
       for (bool any = true; any;) {
         any = false;
@@ -890,13 +902,18 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
         store(img, px[l], py[l], acc(l));
         const TraceResult& r = walk[l].res;
         if (!r.hit) continue;
-        n.rays.fetch_add(1, std::memory_order_relaxed);
-        n.segments.fetch_add(segs[l], std::memory_order_relaxed);
-        if (r.skips) n.skips.fetch_add(r.skips, std::memory_order_relaxed);
-        if (r.relocations) n.relocations.fetch_add(r.relocations, std::memory_order_relaxed);
-        if (r.step_bound_hit) n.bound.fetch_add(1, std::memory_order_relaxed);
+        ++tile_rays;
+        tile_segments += segs[l];
+        tile_skips += r.skips;
+        tile_relocations += r.relocations;
+        tile_bound += r.step_bound_hit;
       }
     }
+    n.rays.fetch_add(tile_rays, std::memory_order_relaxed);
+    n.segments.fetch_add(tile_segments, std::memory_order_relaxed);
+    n.skips.fetch_add(tile_skips, std::memory_order_relaxed);
+    n.relocations.fetch_add(tile_relocations, std::memory_order_relaxed);
+    n.bound.fetch_add(tile_bound, std::memory_order_relaxed);
   });
   n.to(stats);
   return img;
