@@ -8,6 +8,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace mlfe {
 
@@ -214,9 +217,24 @@ const float* psi_table() {
   return table.v.data();
 }
 
+// Two doubles in one SSE register (GCC / Clang vector extension): the square roots and
+// divisions of both table coordinates as one packed instruction each, half the work of the
+// divider, which every visible piece keeps busy (1-2 % of a frame measured). IEEE square root and
+// division are correctly rounded in either form, so the values are those of the scalar code.
+using Double2 = double __attribute__((vector_size(16)));
+
+inline Double2 sqrt2(Double2 v) {
+#if defined(__SSE2__)
+  return _mm_sqrt_pd(v);
+#else
+  return Double2{std::sqrt(v[0]), std::sqrt(v[1])};
+#endif
+}
+
 double psi_lookup(const float* t, double a, double b) {
-  const double x = (1.0 - 1.0 / std::sqrt(1.0 + a)) * (kPsiN - 1);
-  const double y = (1.0 - 1.0 / std::sqrt(1.0 + b)) * (kPsiN - 1);
+  const Double2 one{1.0, 1.0};
+  const Double2 xy = (one - one / sqrt2(one + Double2{a, b})) * double(kPsiN - 1);
+  const double x = xy[0], y = xy[1];
   const int i = std::min(int(x), kPsiN - 2), j = std::min(int(y), kPsiN - 2);
   const double fx = x - i, fy = y - j;
   const float* p = t + std::size_t(i) * kPsiN + std::size_t(j);
