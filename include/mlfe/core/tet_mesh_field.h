@@ -1,7 +1,8 @@
 // P1 (barycentric) interpolation of point values on a tetrahedral mesh as the input function
 // f, so mlfe reduces irregular grids (finite-element solutions, .vtu / .msh) the way it
 // reduces voxel volumes. Points are located with a uniform bucket grid over the tetrahedra's
-// bounding boxes (a few tetrahedra per bucket).
+// bounding boxes (a few tetrahedra per bucket); outside the mesh, the closest boundary face
+// comes from a bounding-volume tree of the boundary faces.
 //
 // Domain: the mesh's axis-aligned bounding box, as the local frame [0, extent] with the box's
 // lower corner at 0 (origin() gives it, for GridTransform::origin). The hierarchy covers the
@@ -85,9 +86,6 @@ class TetMeshField final : public Field {
   Hit locate(const std::array<double, 3>& x) const;
   std::int64_t cell_of(const std::array<double, 3>& x, std::int64_t c[3]) const;
   void build_ranges() const;
-  // Per cell, the Chebyshev distance in cells to the nearest cell that lists something in the
-  // CSR `start` (-1 when none does).
-  std::vector<std::int32_t> chebyshev_distance_to_filled(const std::vector<std::uint32_t>& start) const;
 
   std::vector<std::array<double, 3>> points_;  // local frame
   std::vector<Tet> tets_;
@@ -100,16 +98,16 @@ class TetMeshField final : public Field {
   std::array<std::int64_t, 3> n_{1, 1, 1};
   std::array<double, 3> cell_size_{1, 1, 1}, inv_cell_{1, 1, 1};
   std::vector<std::uint32_t> cell_start_, cell_tets_;
-  // The boundary faces (face `face` of tetrahedron `tet`, on no other tetrahedron) in buckets of
-  // their own, with the Chebyshev distance in cells from each cell to the nearest one that lists a face, so
-  // that the search outside the mesh starts at the first ring that can hold one.
+  // The boundary faces (face `face` of tetrahedron `tet`, on no other tetrahedron), in a
+  // bounding-volume tree for the closest-point search outside the mesh.
   struct BoundaryFace {
     std::uint32_t tet;
     std::uint8_t face;
   };
+  struct FaceTree;
+  struct ClosestFace;
   std::vector<BoundaryFace> boundary_;
-  std::vector<std::uint32_t> face_start_, face_ids_;
-  std::vector<std::int32_t> face_distance_;
+  std::unique_ptr<FaceTree> faces_;
   struct RangePyramid;
   mutable std::once_flag ranges_once_;
   mutable std::unique_ptr<RangePyramid> ranges_;
