@@ -240,11 +240,19 @@ py::tuple read_volume_py(const py::object& path) {
 }
 
 // A built hierarchy with the grid it came from (for extraction from the data's interpolant and
-// snapping, as `mlfe convert` does).
+// snapping, as `mlfe convert` does); no grid for a tetrahedral mesh input.
 struct PyBuilt {
   std::shared_ptr<const Built> built;
   std::shared_ptr<const ScalarGrid> grid;
+  std::string source;  // the input, for reports and provenance
 };
+
+// The path of a .vtu/.msh tetrahedral mesh, or "" for anything else (arrays, volume files).
+std::string tet_mesh_path(const py::object& volume) {
+  if (!py::isinstance<py::str>(volume) && !py::hasattr(volume, "__fspath__")) return "";
+  const std::string path = py::str(py::module_::import("os").attr("fspath")(volume));
+  return detect_tet_mesh_format(path).empty() ? "" : path;
+}
 
 py::tuple mesh_arrays(TriangleMesh&& m) {
   auto owner = std::make_shared<TriangleMesh>(std::move(m));
@@ -268,9 +276,18 @@ PyBuilt build_py(const py::object& volume, const py::object& iso, const py::obje
   kw.finish();
   const std::vector<double> isos = iso.is_none() ? std::vector<double>{} : iso.cast<std::vector<double>>();
   PyBuilt out;
+  if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
+    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
+      throw Error("spacing, origin and direction are for arrays; a file brings its own");
+    py::gil_scoped_release release;
+    out.built = std::make_shared<const Built>(build(read_tet_mesh(mesh), options, isos));
+    out.source = mesh;
+    return out;
+  }
   auto grid = grid_from(volume, spacing, origin, direction, space);
   py::gil_scoped_release release;
   out.built = std::make_shared<const Built>(build(*grid, options, isos));
+  out.source = grid->source;
   out.grid = std::move(grid);
   return out;
 }
@@ -292,8 +309,17 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
   // Checked before reading or copying the volume.
   check_output_path(out_path, kAssetExtensions);
-  auto grid = grid_from(volume, spacing, origin, direction, space);
   ConvertResult r;
+  if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
+    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
+      throw Error("spacing, origin and direction are for arrays; a file brings its own");
+    {
+      py::gil_scoped_release release;
+      r = convert(mesh, out_path, c);
+    }
+    return to_python(r.asset);
+  }
+  auto grid = grid_from(volume, spacing, origin, direction, space);
   {
     py::gil_scoped_release release;
     r = convert(*grid, out_path, c);
@@ -345,7 +371,7 @@ PYBIND11_MODULE(mlfe, m) {
           "the final error of u against the data: rms, rms_percent (of the value range), l2, psnr_db")
       .def_property_readonly(
           "report",
-          [](const PyBuilt& b) { return to_python(build_report(b.grid->source, b.grid.get(), *b.built)); },
+          [](const PyBuilt& b) { return to_python(build_report(b.source, b.grid.get(), *b.built)); },
           "the JSON report of `mlfe build --report` as a dict (per-iteration rows included)")
       .def_property_readonly(
           "values",
@@ -382,7 +408,7 @@ PYBIND11_MODULE(mlfe, m) {
             kw.finish();
             if (!iso.is_none()) o.iso = iso.cast<std::vector<double>>();
             const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
-            const nlohmann::json prov = {{"input", b.grid->source},
+            const nlohmann::json prov = {{"input", b.source},
                                          {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
             nlohmann::json summary;
             {
@@ -398,14 +424,15 @@ PYBIND11_MODULE(mlfe, m) {
             const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
             check_output_path(path, {".mlfeh"});
             py::gil_scoped_release release;
-            write_built(path, *b.built, {{"input", b.grid->source}});
+            write_built(path, *b.built, {{"input", b.source}});
           },
           py::arg("out"), "Writes the hierarchy file (.mlfeh).");
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
         py::arg("space") = "",
-        "Builds the adaptive approximation of `volume` (a path or an array indexed [i, j, k]).\n"
+        "Builds the adaptive approximation of `volume`: a volume file, a tetrahedral mesh with point\n"
+        "values (.vtu, .msh: its P1 interpolant is the input), or an array indexed [i, j, k].\n"
         "Options as `mlfe build`: rms ('0.5%' or a number in data units), threshold, max_vertices,\n"
         "max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,\n"
         "max_memory ('50%' or bytes). With iso values and no global target, refinement follows\n"
@@ -413,7 +440,8 @@ PYBIND11_MODULE(mlfe, m) {
   m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
         py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
-        "Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as `mlfe convert`. Returns the\n"
+        "Volume (file, .vtu/.msh mesh or array) in, asset out (.glb .gltf .drc .ply .obj .stl .off),\n"
+        "as `mlfe convert`. Returns the\n"
         "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
         "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap,\n"
         "normals_toward_higher, normals, placement, z_scale, level.");

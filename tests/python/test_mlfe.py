@@ -2,6 +2,7 @@
 against the command line's result, and bad input raising mlfe.Error instead of crashing.
 Run by ctest with /usr/bin/python3 (tests/CMakeLists.txt): PYTHONPATH holds the built module,
 MLFE_BINARY the command line and MLFE_SOURCE_DIR the repository."""
+import json
 import os
 import re
 import subprocess
@@ -105,6 +106,31 @@ class PythonModuleTest(unittest.TestCase):
                 self.assertEqual(normals.shape, vertices.shape)
                 self.assertLess(int(indices.max()), len(vertices))
                 self.assertFalse(vertices.flags.owndata)  # a view of the C++ mesh
+
+    def test_tet_mesh_input_matches_the_command_line(self):
+        """A .vtu tetrahedral mesh as the input function: build and convert from Python give the
+        command line's hierarchy and surfaces."""
+        vtu = os.path.join(self.dir, "poisson.vtu")
+        subprocess.run(["/usr/bin/python3", os.path.join(SOURCE, "bench", "make_poisson_vtu.py"), vtu, "--n", "8"],
+                       check=True, capture_output=True)
+        b = mlfe.build(vtu, rms="1%")
+        rep = os.path.join(self.dir, "cli.json")
+        subprocess.run([BINARY, "build", vtu, "--rms", "1%", "--quiet", "-o", os.path.join(self.dir, "cli.mlfeh"),
+                        "--report", rep], check=True, capture_output=True)
+        with open(rep) as f:
+            cli = json.load(f)
+        self.assertGreater(b.vertices, 8)
+        self.assertEqual((b.vertices, b.elements, b.levels), (cli["vertices"], cli["elements"], cli["levels"]))
+        py_ply, cli_ply = os.path.join(self.dir, "py.ply"), os.path.join(self.dir, "cli.ply")
+        mlfe.convert(vtu, py_ply, iso=[0.3], rms="1%")
+        subprocess.run([BINARY, "convert", vtu, "--iso", "0.3", "--rms", "1%", "--quiet", "-o", cli_ply], check=True,
+                       capture_output=True)
+        with open(py_ply, "rb") as f1, open(cli_ply, "rb") as f2:
+            py_bytes, cli_bytes = f1.read(), f2.read()
+        self.assertGreater(ply_counts(py_ply)[1], 0)
+        self.assertEqual(py_bytes, cli_bytes)
+        with self.assertRaisesRegex(mlfe.Error, "spacing, origin and direction"):
+            mlfe.build(vtu, spacing=(1, 1, 1))
 
     def test_build_reports_levels_counts_and_errors(self):
         b = mlfe.build(SKULL, rms="2%")
