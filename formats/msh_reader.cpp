@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <charconv>
 #include <cstring>
 #include <type_traits>
 #include <vector>
@@ -53,12 +52,9 @@ class Cursor {
   }
   template <class T>
   T number(const char* what) {
-    skip_space();
     T v{};
-    const auto r = std::from_chars(p_, end_, v);
-    if (r.ec != std::errc() || (r.ptr < end_ && !std::isspace(static_cast<unsigned char>(*r.ptr))))
+    if (!next_number(p_, end_, v))
       fail(path_, fmt::format("{}: expected a number at byte {}", what, offset()));
-    p_ = r.ptr;
     return v;
   }
   template <class T>

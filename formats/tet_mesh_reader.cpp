@@ -24,12 +24,8 @@ void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint6
   constexpr std::uint64_t kMax = std::uint64_t(1) << 40;
   if (points > kMax || tets > kMax)
     volume_detail::fail(path, fmt::format("{} points, {} cells: too many", points, tets));
-  const std::uint64_t bytes = points * kPerPoint + tets * kPerTet;
-  if (bytes > limit)
-    volume_detail::fail(path,
-                        fmt::format("needs {} bytes for {} points and {} tetrahedra but only {} bytes of "
-                                    "memory are available",
-                                    bytes, points, tets, limit));
+  volume_detail::check_memory(path, points * kPerPoint + tets * kPerTet, limit,
+                              fmt::format("{} points and {} tetrahedra", points, tets));
 }
 
 }  // namespace tet_mesh_detail

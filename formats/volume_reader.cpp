@@ -126,12 +126,16 @@ std::uint64_t memory_limit(const VolumeReadOptions& opts) {
   return opts.max_bytes ? opts.max_bytes : default_memory_limit();
 }
 
-void check_memory(const std::string& path, std::uint64_t bytes, const VolumeReadOptions& opts,
+void check_memory(const std::string& path, std::uint64_t bytes, std::uint64_t limit,
                   const std::string& what) {
-  std::uint64_t limit = memory_limit(opts);
   if (bytes > limit)
     fail(path,
          fmt::format("needs {} bytes for {} but only {} bytes of memory are available", bytes, what, limit));
+}
+
+void check_memory(const std::string& path, std::uint64_t bytes, const VolumeReadOptions& opts,
+                  const std::string& what) {
+  check_memory(path, bytes, memory_limit(opts), what);
 }
 
 namespace {

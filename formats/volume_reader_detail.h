@@ -35,7 +35,9 @@ std::uint64_t checked_bytes(const std::string& path, std::int64_t voxels, std::u
 /// The limit for opts (max_bytes or default_memory_limit()).
 std::uint64_t memory_limit(const VolumeReadOptions& opts);
 /// Throws "<path>: needs N bytes for WHAT but only M bytes of memory are available" when
-/// `bytes` exceeds the memory limit.
+/// `bytes` exceeds `limit`.
+void check_memory(const std::string& path, std::uint64_t bytes, std::uint64_t limit, const std::string& what);
+/// The same against the memory limit of opts.
 void check_memory(const std::string& path, std::uint64_t bytes, const VolumeReadOptions& opts,
                   const std::string& what);
 

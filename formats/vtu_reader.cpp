@@ -437,17 +437,6 @@ class Reader {
     }
   }
 
-  template <class T>
-  static bool parse_token(const char*& p, const char* end, T& v) {
-    while (p < end && std::isspace(static_cast<unsigned char>(*p))) ++p;
-    if (p == end) return false;
-    const auto r = std::from_chars(p, end, v);
-    if (r.ec != std::errc() || (r.ptr < end && !std::isspace(static_cast<unsigned char>(*r.ptr))))
-      return false;
-    p = r.ptr;
-    return true;
-  }
-
   // `count` values of the array as T (double for coordinates and values, int64 for cells).
   template <class T>
   std::vector<T> numbers(const Array& a, std::uint64_t count) const {
@@ -465,12 +454,12 @@ class Reader {
       for (std::uint64_t i = 0; i < count; ++i) {
         bool ok;
         if constexpr (std::is_integral_v<T>) {
-          ok = parse_token(p, end, out[i]);
+          ok = next_number(p, end, out[i]);
         } else if (is_float) {
-          ok = parse_token(p, end, out[i]);
+          ok = next_number(p, end, out[i]);
         } else {
           std::int64_t v = 0;
-          ok = parse_token(p, end, v);
+          ok = next_number(p, end, v);
           out[i] = T(v);
         }
         if (!ok) fail(path_, fmt::format("{}: value {} is missing or not a number", what, i));
