@@ -103,18 +103,8 @@ Measure<D> on_grid(const ScalarGrid& grid, const std::string& input, double rang
 // input's local frame).
 Measure<3> at_mesh_points(const TetMesh& mesh, const TetMeshField& input, double range) {
   return [&mesh, &input, range](const Hierarchy<3>& h, const std::vector<double>& values) {
-    TetMesh leaves;
+    TetMesh leaves = leaf_mesh(h, values);
     leaves.source = mesh.source;
-    for (std::size_t v = 0; v < h.vertex_count(); ++v) {
-      const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
-      leaves.points.push_back({p[0], p[1], p[2]});
-    }
-    for (ElemId e : h.leaves()) {
-      const auto& c = h.cell(e);
-      leaves.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
-                             std::int32_t(c[3].value)});
-    }
-    leaves.values = values;
     const TetMeshField u(leaves);
     // Points no tetrahedron uses (a .vtu may carry them) are not samples of the input function.
     std::vector<char> used(mesh.points.size(), 0);

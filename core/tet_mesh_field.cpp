@@ -156,6 +156,21 @@ struct TetMeshField::ClosestFace {
   }
 };
 
+TetMesh leaf_mesh(const Hierarchy<3>& h, const std::vector<double>& values) {
+  MLFE_CHECK(values.size() == h.vertex_count());
+  TetMesh m;
+  m.points.reserve(h.vertex_count());
+  for (std::size_t v = 0; v < h.vertex_count(); ++v) m.points.push_back(h.point(VertexId(std::uint32_t(v))));
+  m.tets.reserve(h.leaves().size());
+  for (ElemId e : h.leaves()) {
+    const auto& c = h.cell(e);
+    m.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
+                      std::int32_t(c[3].value)});
+  }
+  m.values = values;
+  return m;
+}
+
 TetMeshField::~TetMeshField() = default;
 
 TetMeshField::TetMeshField(const TetMesh& mesh) {

@@ -47,18 +47,7 @@ const std::string& poisson_vtu() {
 // The approximation's function (linear on every leaf), located with a TetMeshField of the leaves.
 TetMeshField leaf_function(const Built& b) {
   const auto& a = b.get<3>();
-  TetMesh leaves;
-  for (std::size_t v = 0; v < a.hierarchy.vertex_count(); ++v) {
-    const auto& p = a.hierarchy.point(VertexId(std::uint32_t(v)));
-    leaves.points.push_back({p[0], p[1], p[2]});
-  }
-  for (ElemId e : a.hierarchy.leaves()) {
-    const auto& c = a.hierarchy.cell(e);
-    leaves.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
-                           std::int32_t(c[3].value)});
-  }
-  leaves.values = a.values;
-  return TetMeshField(leaves);
+  return TetMeshField(leaf_mesh(a.hierarchy, a.values));
 }
 
 // RMS of (approximation − u) at random points of the mesh (not in the cut corner).

@@ -13,6 +13,7 @@
 // error against that extension.
 #pragma once
 #include <mlfe/core/field.h>
+#include <mlfe/core/hierarchy.h>
 
 #include <array>
 #include <cstddef>
@@ -32,6 +33,10 @@ struct TetMesh {
   std::string value_name;                         ///< the point-data array the values came from
   std::string source;                             ///< the file it came from (for messages)
 };
+
+/// The leaves of `h` with one value per vertex of `h` (`values`, in VertexId order), so that a
+/// TetMeshField evaluates the hierarchy's piecewise-linear function at any point of its box.
+TetMesh leaf_mesh(const Hierarchy<3>& h, const std::vector<double>& values);
 
 /// f on the mesh's bounding box (see the file comment). Holds its own copy of what it needs;
 /// const member functions are thread-safe. Throws mlfe::Error ("<source>: ...") when the mesh
