@@ -16,27 +16,20 @@ level at 8, exports the decoded approximation and measures it on the original vo
 Prints one markdown table row per build: the unpadded default and the padded, aligned one.
 """
 import argparse
-import gzip
 import json
 import math
 import os
-import struct
 import subprocess
 import time
 
 import numpy as np
 
-
-def read_nifti_u8(path):
-    raw = gzip.open(path).read()
-    off = int(struct.unpack("<f", raw[108:112])[0])
-    nx, ny, nz = struct.unpack("<8h", raw[40:56])[1:4]
-    if struct.unpack("<h", raw[70:72])[0] != 2:
-        raise SystemExit(f"{path}: expected uint8 voxels")
-    return np.frombuffer(raw[off:off + nx * ny * nz], dtype=np.uint8).reshape(nz, ny, nx)
+from hierarchy_file_bench import errors, read_voxels
 
 
-def build_and_measure(mlfe, inp, out, opts, crop, orig):
+def build_and_measure(mlfe, inp, out, opts, orig):
+    """Builds `inp`, exports the decoded approximation and measures it on the voxels of `orig`
+    (its leading corner when the input was padded); orig is indexed [k, j, i]."""
     h = os.path.join(out, os.path.basename(inp).split(".")[0] + ".mlfeh")
     rep = h + ".json"
     t0 = time.perf_counter()
@@ -44,15 +37,13 @@ def build_and_measure(mlfe, inp, out, opts, crop, orig):
     secs = time.perf_counter() - t0
     x = os.path.join(out, "decoded.raw")
     subprocess.run([mlfe, "export", h, "-o", x], check=True, stdout=subprocess.DEVNULL)
-    r = json.load(open(rep))
     dims = json.load(open(x + ".json"))["dims"]
     dec = np.fromfile(x, dtype=np.float32).reshape(dims[2], dims[1], dims[0])
-    d = dec[:crop[0], :crop[1], :crop[2]].astype(np.float64) - orig
-    rms = math.sqrt(float(np.mean(d * d)))
+    nz, ny, nx = orig.shape
+    e = errors(dec[:nz, :ny, :nx], orig, 133.0)
     size = os.path.getsize(h)
-    return {"opts": " ".join(opts) or "(default)", "vertices": r.get("vertices"), "bytes": size,
-            "bpv": 8 * size / orig.size, "psnr": 20 * math.log10(133.0 / rms), "max": float(np.max(np.abs(d))),
-            "seconds": secs}
+    return {"opts": " ".join(opts) or "(default)", "vertices": json.load(open(rep)).get("vertices"),
+            "bytes": size, "bpv": 8 * size / orig.size, "psnr": e["psnr_db"], "max": e["max"], "seconds": secs}
 
 
 def main():
@@ -64,9 +55,8 @@ def main():
     mlfe = os.path.abspath(a.mlfe)
     os.makedirs(a.out, exist_ok=True)
     src = os.path.join(a.data, "mri_colin27_brain.nii.gz")
-    vol = read_nifti_u8(src)
-    orig = vol.astype(np.float64)
-    nz, ny, nx = vol.shape
+    flat, (nx, ny, nz) = read_voxels(src)
+    vol = flat.reshape(nz, ny, nx)
     pad = np.zeros((257, 257, 257), np.uint8)
     pad[:nz, :ny, :nx] = vol
     praw = os.path.join(a.out, "colin27_pad257.raw")
@@ -75,9 +65,8 @@ def main():
     # The default target, 0.5 % of the range 0..133 over the original domain, as an absolute RMS
     # over the padded domain (error in the flat padding ~0).
     rms_pad = 0.005 * 133 * math.sqrt(vol.size / pad.size)
-    rows = [build_and_measure(mlfe, src, a.out, [], (nz, ny, nx), orig),
-            build_and_measure(mlfe, praw, a.out, ["--rms", f"{rms_pad:.4f}", "--max-level", "8"], (nz, ny, nx),
-                              orig)]
+    rows = [build_and_measure(mlfe, src, a.out, [], vol),
+            build_and_measure(mlfe, praw, a.out, ["--rms", f"{rms_pad:.4f}", "--max-level", "8"], vol)]
     print(f"date {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.2f}\n")
     print("| build | vertices | bytes | bpv (original voxels) | PSNR dB | max error | build s |")
     print("|---|---:|---:|---:|---:|---:|---:|")
