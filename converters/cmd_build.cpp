@@ -156,10 +156,7 @@ void report_and_print(const BuildState& s, const Built& b, const FileFigures& fi
 
 // A tetrahedral mesh input: its P1 interpolant is the input function.
 void run_mesh_build(const BuildState& s) {
-  TetMeshReadOptions ro;
-  ro.array_name = s.read.grid_name;
-  ro.max_bytes = s.read.max_bytes;
-  const TetMesh mesh = read_tet_mesh(s.input, ro);
+  const TetMesh mesh = read_tet_mesh(s.input, tet_mesh_read_options(s.read));
   const TetMeshField f(mesh);
   const Built b = build(f, mesh_input(f, mesh), build_options(s.params), {});
   warn_if_memory_limited(b, mesh.source, s.params.max_memory);

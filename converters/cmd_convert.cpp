@@ -48,10 +48,7 @@ void run_convert(const ConvertState& s, const char* command) {
   std::optional<ScalarGrid> grid;
   std::optional<ConvertResult> r;
   if (!detect_tet_mesh_format(s.input).empty()) {
-    TetMeshReadOptions ro;
-    ro.array_name = s.read.grid_name;
-    ro.max_bytes = s.read.max_bytes;
-    r = convert(read_tet_mesh(s.input, ro), s.output, c);
+    r = convert(read_tet_mesh(s.input, tet_mesh_read_options(s.read)), s.output, c);
   } else {
     grid = read_volume(s.input, s.read);
     r = convert(*grid, s.output, c);

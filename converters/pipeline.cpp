@@ -555,9 +555,7 @@ ConvertResult convert(const std::string& input, const std::string& out, const Co
   if (!options.hierarchy.empty()) check_output_path(options.hierarchy, {".mlfeh"});
   if (!options.report.empty()) check_output_path(options.report, {});
   if (!detect_tet_mesh_format(input).empty()) {
-    TetMeshReadOptions mr;
-    mr.max_bytes = read.max_bytes;
-    return convert(read_tet_mesh(input, mr), out, options);
+    return convert(read_tet_mesh(input, tet_mesh_read_options(read)), out, options);
   }
   return convert(read_volume(input, read), out, options);
 }

@@ -42,6 +42,13 @@ std::string detect_tet_mesh_format(const std::string& path) {
   return "";
 }
 
+TetMeshReadOptions tet_mesh_read_options(const VolumeReadOptions& volume) {
+  TetMeshReadOptions o;
+  o.array_name = volume.grid_name;
+  o.max_bytes = volume.max_bytes;
+  return o;
+}
+
 TetMesh read_tet_mesh(const std::string& path, const TetMeshReadOptions& options) {
   const std::string format = detect_tet_mesh_format(path);
   if (format.empty()) volume_detail::fail(path, "not a tetrahedral mesh (.vtu or .msh)");

@@ -254,7 +254,7 @@ ConvertResult convert(const ScalarGrid& grid, const std::string& out, const Conv
 /// snapping: that needs a voxel volume).
 ConvertResult convert(const TetMesh& mesh, const std::string& out, const ConvertOptions& options);
 /// The same from a volume file (any format read_volume reads) or a tetrahedral mesh file
-/// (.vtu, .msh; read_tet_mesh).
+/// (.vtu, .msh; read_tet_mesh with tet_mesh_read_options(read)).
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read = {});
 

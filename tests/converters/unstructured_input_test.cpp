@@ -113,15 +113,21 @@ TEST(UnstructuredInput, PoissonExampleRefinesAtTheReentrantEdgeAndConverges) {
 }
 
 // An ASCII .vtu of `m` with every point, used or not (readers keep them: VTK files may carry
-// points no cell uses).
-std::string ascii_vtu(const TetMesh& m) {
+// points no cell uses): its values as the point-data array "u", then `w`, when given, as "w".
+std::string ascii_vtu(const TetMesh& m, const std::vector<double>* w = nullptr) {
   std::ostringstream s;
   s.precision(17);
   s << "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\">\n<UnstructuredGrid>\n"
     << "<Piece NumberOfPoints=\"" << m.points.size() << "\" NumberOfCells=\"" << m.tets.size() << "\">\n"
     << "<PointData>\n<DataArray type=\"Float64\" Name=\"u\" format=\"ascii\">";
   for (double v : m.values) s << v << " ";
-  s << "</DataArray>\n</PointData>\n<Points>\n"
+  s << "</DataArray>\n";
+  if (w) {
+    s << "<DataArray type=\"Float64\" Name=\"w\" format=\"ascii\">";
+    for (double v : *w) s << v << " ";
+    s << "</DataArray>\n";
+  }
+  s << "</PointData>\n<Points>\n"
     << "<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">";
   for (const auto& p : m.points) s << p[0] << " " << p[1] << " " << p[2] << " ";
   s << "</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int32\" Name=\"connectivity\" format=\"ascii\">";
@@ -167,6 +173,30 @@ TEST(UnstructuredInput, FileErrorsAreMeasuredAtThePointsTheTetrahedraUse) {
   const auto with_unused = file_errors(all, "with_unused"), without = file_errors(used, "without_unused");
   EXPECT_EQ(with_unused, without);
   EXPECT_LT(without.second, 0.01);  // range 3.5: the linear function is nearly exact on the mesh
+}
+
+// The library's convert from a path reads the point-data array VolumeReadOptions::grid_name
+// names, as the command line's --grid does: the same surface as from a file holding that array
+// alone.
+TEST(UnstructuredInput, ConvertFromAPathReadsTheNamedArray) {
+  const TetMesh m = test::kuhn_mesh(6, [](const V3& p) { return p[0] + p[1]; });
+  TetMesh only_w = m;
+  for (std::size_t i = 0; i < m.points.size(); ++i) only_w.values[i] = test::poisson_u(m.points[i]) + 1;
+  const std::string both = scratch("two_arrays.vtu"), single = scratch("w_only.vtu");
+  test::write_bytes(both, ascii_vtu(m, &only_w.values));
+  test::write_bytes(single, ascii_vtu(only_w));
+  ConvertOptions o;
+  o.asset.iso = {1.2};
+  VolumeReadOptions w;
+  w.grid_name = "w";
+  const std::string from_both = scratch("from_both.ply"), from_single = scratch("from_single.ply"),
+                    from_u = scratch("from_u.ply");
+  convert(both, from_both, o, w);
+  convert(single, from_single, o);
+  convert(both, from_u, o);
+  EXPECT_EQ(test::read_bytes(from_single).find("element face 0\n"), std::string::npos);  // a surface
+  EXPECT_EQ(test::read_bytes(from_both), test::read_bytes(from_single));
+  EXPECT_NE(test::read_bytes(from_u), test::read_bytes(from_single));
 }
 
 TEST(UnstructuredInput, CommandLineBuildsAndConvertsAMesh) {

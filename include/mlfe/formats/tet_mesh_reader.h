@@ -14,6 +14,7 @@
 // one line "<file>: <problem>".
 #pragma once
 #include <mlfe/core/tet_mesh_field.h>
+#include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>
 #include <string>
@@ -26,6 +27,10 @@ struct TetMeshReadOptions {
   /// Upper bound in bytes for what reading may allocate; 0: default_memory_limit().
   std::size_t max_bytes = 0;
 };
+
+/// The mesh options a volume command's options stand for: grid_name names the point-data array
+/// (.vtu) or $NodeData view (.msh), and max_bytes is the same memory limit.
+TetMeshReadOptions tet_mesh_read_options(const VolumeReadOptions& volume);
 
 /// Reads the mesh and point values at `path` (format by magic, then extension). Indices are
 /// checked against the points, coordinates and values must be finite. Throws mlfe::Error.

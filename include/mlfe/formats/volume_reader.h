@@ -20,8 +20,8 @@
 namespace mlfe {
 
 struct VolumeReadOptions {
-  std::string grid_name;         ///< VDB: name of the grid to read (default: first scalar grid); the CLI also
-                                 ///< passes it as the point-data array of .vtu/.msh input
+  std::string grid_name;         ///< VDB: name of the grid to read (default: first scalar grid); for a
+                                 ///< .vtu/.msh input, the point-data array (tet_mesh_read_options)
   bool vec_magnitude = false;    ///< VDB vector grids are read as their magnitude
   std::optional<double> nan_as;  ///< NaN/Inf voxels become this value; unset: NaN/Inf is an error
   /// "ras", "lps" (any case) or "": convert the transform to this output convention by
