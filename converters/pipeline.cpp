@@ -2,6 +2,7 @@
 #include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
 #include <mlfe/core/iso_surface.h>
+#include <mlfe/core/noise_estimate.h>
 #include <mlfe/core/surface_simplification.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
@@ -105,6 +106,8 @@ Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<dou
 
 Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
             const std::vector<double>& iso_values) {
+  // RMS target of the default build relative to the noise (bench/RESULTS.md, noise).
+  constexpr double kNoiseTargetFactor = 1.0;
   for (double v : iso_values)
     if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
   check_build_options(p);
@@ -124,6 +127,16 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   } else if (!o.surface_driven) {
     const RmsTarget r = p.rms.value_or(RmsTarget{});
     o.target_rms = r.percent_of_range ? r.value / 100.0 * span : r.value;
+    // The default does not store the noise: a scan's samples carry noise of deviation σ that
+    // no approximation should chase, so the target is at least σ (bench/RESULTS.md, noise).
+    if (const ScalarGrid* g = f.samples(); g && !p.rms) {
+      b.noise_sigma = estimate_noise_sigma(*g);
+      if (kNoiseTargetFactor * b.noise_sigma > o.target_rms) {
+        o.target_rms = kNoiseTargetFactor * b.noise_sigma;
+        b.target_from_noise = true;
+      }
+    }
+    b.target_rms = o.target_rms;
   }
   o.max_vertices = p.max_vertices;
   o.max_level = p.max_level;
@@ -243,6 +256,14 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
     r["psnr_db"] = its.back().psnr_db;
   }
   r["value_range"] = {b.value_min, b.value_max};
+  const bool lattice = b.visit([](const auto& a) { return a.on_lattice; });
+  r["errors_at"] = lattice ? "samples" : "continuous L2 over the domain";
+  if (b.target_rms > 0) r["rms_target"] = b.target_rms;
+  if (b.noise_sigma > 0 || b.target_from_noise) {
+    r["noise_sigma"] = b.noise_sigma;
+    r["rms_target_rule"] =
+        b.target_from_noise ? "the estimated noise level (no --rms given)" : "--rms or its default";
+  }
   r["stop_reason"] = b.stop_reason();
   r["seconds"] = b.seconds;
   r["peak_rss_mb"] = peak_rss_mb();

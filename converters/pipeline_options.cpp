@@ -29,8 +29,9 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
   cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
       ->check(CLI::IsMember({"l2", "h1"}))
       ->capture_default_str();
-  cmd->add_option("--preconditioner", p.preconditioner, "CG preconditioner")
-      ->check(CLI::IsMember({"bpx", "jacobi", "none"}))
+  cmd->add_option("--preconditioner", p.preconditioner,
+                  "CG preconditioner (auto: Jacobi for least squares at the samples, else BPX)")
+      ->check(CLI::IsMember({"auto", "bpx", "jacobi", "none"}))
       ->capture_default_str();
   cmd->add_option("--surface-tolerance", p.surface_tolerance,
                   "with iso-values: refine until surfaces are within this many voxels")
@@ -155,7 +156,8 @@ BuildOptions build_options(const BuildParams& p) {
   o.max_level = p.max_level;
   o.start_level = p.start_level;
   o.norm = p.norm == "h1" ? Norm::kH1 : Norm::kL2;
-  o.preconditioner = p.preconditioner == "bpx"      ? Preconditioner::kBpx
+  o.preconditioner = p.preconditioner == "auto"     ? Preconditioner::kAuto
+                     : p.preconditioner == "bpx"    ? Preconditioner::kBpx
                      : p.preconditioner == "jacobi" ? Preconditioner::kJacobi
                                                     : Preconditioner::kNone;
   o.surface_tolerance = p.surface_tolerance;

@@ -19,7 +19,7 @@ struct BuildParams {
   int max_level = 20;
   int start_level = -1;
   std::string norm = "l2";             ///< "l2" or "h1"
-  std::string preconditioner = "bpx";  ///< "bpx", "jacobi", "none"
+  std::string preconditioner = "auto";  ///< "auto", "bpx", "jacobi", "none"
   double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
   bool check_against_u = false;        ///< surface-driven: refine where u misses the data's surfaces
   /// Memory budget of the build: "50%" of the machine's RAM (default), or bytes with an

@@ -42,7 +42,7 @@ double default_quadrature_edge(const Field& f, const ApproximationOptions& o) {
 
 template <int D>
 Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& rhs, const Vector& start,
-                    const ApproximationOptions& opts, double gw, IterationStats& st) {
+                    const ApproximationOptions& opts, double gw, IterationStats& st, bool sampled) {
   const auto n = m.rows();
   if (opts.direct_solve_max > 0 && n <= opts.direct_solve_max) {
     Eigen::SparseMatrix<double> mc = m;  // column major for the factorization
@@ -55,7 +55,11 @@ Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& 
   }
   SparseOperator a(m);
   std::unique_ptr<LinearOperator> pre;
-  switch (opts.preconditioner) {
+  Preconditioner which = opts.preconditioner;
+  if (which == Preconditioner::kAuto)
+    which = sampled && gw == 0 ? Preconditioner::kJacobi : Preconditioner::kBpx;
+  switch (which) {
+    case Preconditioner::kAuto:
     case Preconditioner::kBpx:
       pre = std::make_unique<BpxPreconditioner<D>>(h, gw);
       break;
@@ -84,6 +88,30 @@ double sample_or_value(const ScalarGrid& g, const Field& f, const std::array<dou
     idx[a] = static_cast<std::int64_t>(r);
   }
   return g.at(idx[0], idx[1], idx[2]);
+}
+
+// Vertices beyond the data's box (the padding, sample_lattice.h) see few samples or none:
+// their rows of the sampled mass are tiny or zero. A weight of kPaddingWeight samples pulling
+// each toward f there (the data clamped to its box) makes them determined without moving
+// u at the samples measurably.
+constexpr double kPaddingWeight = 0.01;
+
+template <int D>
+void regularize_padding(const Hierarchy<D>& h, const Field& f, const SampleLattice& lat, SparseMatrix& m,
+                        Vector& rhs) {
+  const auto ext = lat.data_extent();
+  const double w = kPaddingWeight * lat.sample_weight;
+  for (std::size_t v = 0; v < h.vertex_count(); ++v) {
+    const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
+    bool outside = false;
+    for (int a = 0; a < D; ++a) outside |= p[a] > ext[a] + 0.25 * lat.spacing[a];
+    if (!outside) continue;
+    std::array<double, 3> q{0, 0, 0};
+    for (int a = 0; a < D; ++a) q[a] = p[a];
+    const auto i = static_cast<Eigen::Index>(v);
+    m.coeffRef(i, i) += w;
+    rhs[i] += w * f.value(q);
+  }
 }
 
 std::vector<double> to_std(const Vector& x) { return std::vector<double>(x.data(), x.data() + x.size()); }
@@ -251,13 +279,15 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   const double qedge = default_quadrature_edge(f, opts);
   const auto leaves = h.leaves();
   const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1, lattice);
-  const SparseMatrix m = assemble_matrix(h, leaves, gw, &integrals);
-  const Vector rhs = assemble_load(h, leaves, integrals, gw);
+  SparseMatrix m = assemble_matrix(h, leaves, gw, &integrals);
+  Vector rhs = assemble_load(h, leaves, integrals, gw);
+  if (lattice) regularize_padding(h, f, *lattice, m, rhs);
   Vector start = Vector::Zero(rhs.size());
   if (warm.size() == h.vertex_count())
     for (std::size_t i = 0; i < warm.size(); ++i) start[i] = warm[i];
   IterationStats local;
-  std::vector<double> x = to_std(solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local));
+  std::vector<double> x =
+      to_std(solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local, lattice != nullptr));
   if (lattice) fill_unseen(h, f, leaves, integrals, IntegralIndex::kLeafOrder, x);
   return x;
 }
@@ -365,8 +395,9 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    const SparseMatrix m = assemble_matrix(h, leaves, gw, &cache, kById);
-    const Vector rhs = assemble_load(h, leaves, cache, gw, kById);
+    SparseMatrix m = assemble_matrix(h, leaves, gw, &cache, kById);
+    Vector rhs = assemble_load(h, leaves, cache, gw, kById);
+    if (lattice) regularize_padding(h, f, *lattice, m, rhs);
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
@@ -377,7 +408,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     else
       prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
     Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-    Vector x = solve_system(h, m, rhs, start, opts, gw, st);
+    Vector x = solve_system(h, m, rhs, start, opts, gw, st, lattice != nullptr);
     values.assign(x.data(), x.data() + x.size());
     if (lattice) {
       fill_unseen(h, f, leaves, cache, kById, values);

@@ -16,14 +16,6 @@
 namespace mlfe {
 
 namespace {
-// Position of the diagonal entry of row v (every row holds its diagonal).
-std::size_t slot_diag(const std::vector<std::pair<int, double>>& row, std::size_t v) {
-  for (std::size_t k = 0; k < row.size(); ++k)
-    if (row[k].first == int(v)) return k;
-  MLFE_CHECK_MSG(false, "matrix row without its diagonal");
-  return 0;
-}
-
 template <int D>
 std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, ElemId e) {
   std::array<std::array<double, D>, D + 1> p;
@@ -146,11 +138,6 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
               }
             }
             for (const auto& e : row) slot[e.first] = kNone;
-            // A vertex no sample sees (only padding around it, see sample_lattice.h) does not
-            // change u at any sample: it gets an identity row, and the caller its value.
-            if (sampled && row[slot_diag(row, v)].second == 0) {
-              for (auto& e : row) e.second = e.first == int(v) ? 1.0 : 0.0;
-            }
             std::sort(row.begin(), row.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
             for (const auto& e : row) {
               blk.cols.push_back(e.first);

@@ -13,6 +13,9 @@ namespace {
 
 using I64 = std::int64_t;
 
+// ⌊a / b⌋ for b > 0.
+I64 floor_div(I64 a, I64 b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
 // Corners in index space: lattice points, so integers (CHECKed: a corner off the lattice is a
 // bug of T0 or of the refinement).
 template <int D>
@@ -161,21 +164,43 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
   float fmin = 0, fmax = 0;
   bool any = false;
   const I64 nx = lat.dims[0], ny = lat.dims[1];
+  // Row by row: the samples of a row (fixed y, z) inside the closed simplex form one interval
+  // of x, found from the D + 1 face inequalities; only samples on a face (a numerator 0) need
+  // the push rule.
   for (I64 z = lo[2]; z <= hi[2]; ++z)
-    for (I64 y = lo[1]; y <= hi[1]; ++y)
-      for (I64 x = lo[0]; x <= hi[0]; ++x) {
-        const I64 q[3] = {x, y, z};
-        std::array<int, D> s;
-        for (int a = 0; a < D; ++a) s[a] = q[a] == lat.dims[a] - 1 ? -1 : 1;
-        std::array<I64, D + 1> nn;
-        bool inside = true;
-        for (int i = 0; i <= D && inside; ++i) {
-          I64 v = num.k[i];
-          for (int a = 0; a < D; ++a) v += num.n[i][a] * q[a];
-          nn[i] = v;
-          inside = v > 0 || (v == 0 && pushed_inside<D>(num.n[i], s));
+    for (I64 y = lo[1]; y <= hi[1]; ++y) {
+      const I64 q12[3] = {0, y, z};
+      I64 xa = lo[0], xb = hi[0];
+      std::array<I64, D + 1> r;
+      for (int i = 0; i <= D; ++i) {
+        I64 v = num.k[i];
+        for (int a = 1; a < D; ++a) v += num.n[i][a] * q12[a];
+        r[i] = v;
+        const I64 c = num.n[i][0];  // N_i(x) = c x + v >= 0
+        if (c > 0) {
+          xa = std::max(xa, floor_div(-v + c - 1, c));
+        } else if (c < 0) {
+          xb = std::min(xb, floor_div(v, -c));
+        } else if (v < 0) {
+          xb = xa - 1;
         }
-        if (!inside) continue;
+      }
+      for (I64 x = xa; x <= xb; ++x) {
+        const I64 q[3] = {x, y, z};
+        std::array<I64, D + 1> nn;
+        bool tie = false;
+        for (int i = 0; i <= D; ++i) {
+          nn[i] = r[i] + num.n[i][0] * x;
+          tie |= nn[i] == 0;
+        }
+        if (tie) {
+          std::array<int, D> s;
+          for (int a = 0; a < D; ++a) s[a] = q[a] == lat.dims[a] - 1 ? -1 : 1;
+          bool inside = true;
+          for (int i = 0; i <= D && inside; ++i)
+            inside = nn[i] > 0 || (nn[i] == 0 && pushed_inside<D>(num.n[i], s));
+          if (!inside) continue;
+        }
         const float fv = grid.values[static_cast<std::size_t>(x + nx * (y + ny * z))];
         const double fs = fv;
         std::array<double, D + 1> lam;
@@ -199,6 +224,7 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
         any = true;
         ++out.points;
       }
+    }
   out.fmin = fmin;
   out.fmax = fmax;
   return out;

@@ -112,13 +112,15 @@ BuildOptions build_options(Options& kw) {
   kw.get("max_vertices", o.max_vertices);
   kw.get("max_level", o.max_level);
   kw.get("start_level", o.start_level);
-  std::string norm = "l2", pre = "bpx";
+  std::string norm = "l2", pre = "auto";
   kw.get("norm", norm);
   o.norm = choice<Norm>(norm, "norm", {{"l2", Norm::kL2}, {"h1", Norm::kH1}});
   kw.get("preconditioner", pre);
-  o.preconditioner = choice<Preconditioner>(
-      pre, "preconditioner",
-      {{"bpx", Preconditioner::kBpx}, {"jacobi", Preconditioner::kJacobi}, {"none", Preconditioner::kNone}});
+  o.preconditioner = choice<Preconditioner>(pre, "preconditioner",
+                                            {{"auto", Preconditioner::kAuto},
+                                             {"bpx", Preconditioner::kBpx},
+                                             {"jacobi", Preconditioner::kJacobi},
+                                             {"none", Preconditioner::kNone}});
   kw.get("surface_tolerance", o.surface_tolerance);
   kw.get("check_u", o.check_against_u);
   if (kw.has("max_memory")) {

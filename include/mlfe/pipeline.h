@@ -52,7 +52,7 @@ struct BuildOptions {
   int max_level = 20;            ///< 0..40
   int start_level = -1;          ///< -1..12; -1: until edges <= 16 voxels
   Norm norm = Norm::kL2;
-  Preconditioner preconditioner = Preconditioner::kBpx;
+  Preconditioner preconditioner = Preconditioner::kAuto;
   double surface_tolerance = 0.5;  ///< voxels, for iso-aware refinement (> 0)
   bool check_against_u = false;    ///< surface-driven: refine where u misses the data's surfaces
   /// Surface-driven builds: false skips assembling and solving for u (values are then the
@@ -79,6 +79,12 @@ struct Built {
   bool surface_driven = false;
   /// The memory the build was allowed (0: no budget); see memory_limited().
   std::size_t memory_budget_bytes = 0;
+  /// The RMS target the build ran to (0: none), and for gridded input without --rms the
+  /// estimated noise deviation of the samples (core/noise_estimate.h); target_from_noise when
+  /// the noise, not --rms's default, set the target.
+  double target_rms = 0;
+  double noise_sigma = 0;
+  bool target_from_noise = false;
 
   int dim() const { return std::holds_alternative<Approximation<2>>(approximation) ? 2 : 3; }
   template <int D>

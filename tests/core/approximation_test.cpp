@@ -184,6 +184,7 @@ TEST(Approximation, ReportedErrorMatchesBruteForceVoxelSum) {
   ApproximationOptions o;
   o.start_level = 1;
   o.target_rms = 1.0;
+  o.lattice = false;  // the continuous L2 norm (unstructured input); the lattice: sample_lattice_test
   const auto a = approximate<3>(f, o);
   const auto& st = a.iterations.back();
   // Brute force: (f - u)² at the centres of a lattice 5x finer than the voxels (midpoint
@@ -226,6 +227,50 @@ TEST(Approximation, ReportedErrorMatchesBruteForceVoxelSum) {
   sum *= sp[0] * sp[1] * sp[2] / (sub * sub * sub);
   const double brute = std::sqrt(sum);
   EXPECT_NEAR(st.l2_error, brute, 0.02 * brute) << "estimate " << st.l2_error << " brute force " << brute;
+}
+
+// On the samples' lattice the reported error is the samples' own: Σ_s w (f_s − u(x_s))², each
+// sample located in a leaf by a barycentric test.
+TEST(Approximation, ReportedErrorOnTheLatticeIsTheSampleSum) {
+  const auto g = make_grid(3, 25, 1.0, [](double x, double y, double z) {
+    return 50 + 40 * std::exp(-((x - 9) * (x - 9) + (y - 14) * (y - 14) + (z - 11) * (z - 11)) / 30.0);
+  });
+  GridField f(g);
+  ApproximationOptions o;
+  o.target_rms = 1.0;
+  const auto a = approximate<3>(f, o);
+  ASSERT_TRUE(a.on_lattice);
+  const auto& st = a.iterations.back();
+  const auto leaves = a.hierarchy.leaves();
+  std::vector<std::array<double, 6>> box(leaves.size());
+  for (std::size_t l = 0; l < leaves.size(); ++l) {
+    box[l] = {1e300, 1e300, 1e300, -1e300, -1e300, -1e300};
+    for (VertexId v : a.hierarchy.cell(leaves[l]))
+      for (int c = 0; c < 3; ++c) {
+        box[l][c] = std::min(box[l][c], a.hierarchy.point(v)[c]);
+        box[l][c + 3] = std::max(box[l][c + 3], a.hierarchy.point(v)[c]);
+      }
+  }
+  double sum = 0;
+  for (std::int64_t k = 0; k < g.dims[2]; ++k)
+    for (std::int64_t j = 0; j < g.dims[1]; ++j)
+      for (std::int64_t i = 0; i < g.dims[0]; ++i) {
+        const std::array<double, 3> x{i * g.transform.spacing[0], j * g.transform.spacing[1],
+                                      k * g.transform.spacing[2]};
+        double uv = std::nan("");
+        for (std::size_t l = 0; l < leaves.size() && std::isnan(uv); ++l) {
+          bool in = true;
+          for (int c = 0; c < 3; ++c) in = in && x[c] >= box[l][c] - 1e-9 && x[c] <= box[l][c + 3] + 1e-9;
+          if (in) uv = eval_u_in(a.hierarchy, leaves[l], a.values, x);
+        }
+        ASSERT_FALSE(std::isnan(uv));
+        const double d = g.at(i, j, k) - uv;
+        sum += d * d;
+      }
+  const double brute =
+      std::sqrt(sum * g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2]);
+  EXPECT_NEAR(st.l2_error, brute, 1e-6 * brute);
+  EXPECT_NEAR(st.rms_error, brute / std::sqrt(a.domain_measure), 1e-6 * st.rms_error);
 }
 
 TEST(Approximation, SmallFeatureInsideOneCoarseElementIsFoundAndRefined) {

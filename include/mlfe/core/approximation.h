@@ -48,7 +48,12 @@ struct SurfacePassStats {
   double seconds = 0;  ///< since the start of approximate()
 };
 
-enum class Preconditioner { kBpx, kJacobi, kNone };
+/// kAuto: BPX, except for the least squares at the samples in the L2 norm, where the matrix is
+/// a (sampled) mass matrix, well conditioned after diagonal scaling alone, while BPX's
+/// level scaling of the continuous mass does not fit vertices that few samples see
+/// (the padding's rim): 20 CG iterations with Jacobi against 500-1500 with BPX
+/// (bench/RESULTS.md, session 10).
+enum class Preconditioner { kAuto, kBpx, kJacobi, kNone };
 
 struct ApproximationOptions {
   double target_rms = 0;         ///< stop when RMS error ≤ this (data units); 0: unused
@@ -91,7 +96,7 @@ struct ApproximationOptions {
   /// at the samples (sample_lattice.h). false keeps the paper's box over the extent and the
   /// continuous L2 norm (always the case for fields without samples).
   bool lattice = true;
-  Preconditioner preconditioner = Preconditioner::kBpx;
+  Preconditioner preconditioner = Preconditioner::kAuto;
   double cg_tolerance = 1e-9;   ///< relative residual
   int direct_solve_max = 1000;  ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
                                 ///< uniform levels; beyond, 3D fill-in makes BPX-CG cheaper); 0: never

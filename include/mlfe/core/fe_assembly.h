@@ -31,8 +31,8 @@ std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h
                                                            const SampleLattice* lattice = nullptr);
 
 /// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()). With
-/// sampled `integrals` (least squares at the samples), M is their sampled mass, and a vertex
-/// that no sample sees gets an identity row (it changes u at no sample).
+/// sampled `integrals` (least squares at the samples), M is their sampled mass (singular for
+/// vertices in the padding that no sample sees: see regularize_padding in approximation.cpp).
 template <int D>
 SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
                              const std::vector<ElementIntegrals<D>>* integrals = nullptr,
