@@ -44,8 +44,9 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
   g.dim = D;
   g.transform = f.transform;
   g.space = f.space;
+  // On the samples' lattice (v3) T0 is a padded cube: the grid is the data's, not T0's box.
   try {
-    g.dims = hierarchy_grid_dims(h, f.transform.spacing);
+    g.dims = f.on_lattice ? f.data_dims : hierarchy_grid_dims(h, f.transform.spacing);
   } catch (const Error& e) {
     throw Error(s.input + ": " + e.what());
   }

@@ -137,14 +137,13 @@ bool outside_data(const std::array<std::array<double, D>, D + 1>& p, const Sampl
   return false;
 }
 
-template <int D>
-ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
-                                     const SampleLattice& lat, const ScalarGrid& grid, const Field& f,
-                                     bool gradients) {
-  ElementIntegrals<D> out;
-  out.sampled = true;
-  const auto c = index_corners<D>(p, lat);
-  const Numerators<D> num = numerators<D>(c);
+namespace {
+
+// Calls visit(q, nn) for every sample the element with lattice corners c owns (sample_lattice.h:
+// the exact integer rule), nn being the barycentric numerators; visit returns false to stop.
+template <int D, class Visit>
+void for_each_owned_sample(const std::array<std::array<I64, D>, D + 1>& c, const Numerators<D>& num,
+                           const SampleLattice& lat, Visit&& visit) {
   std::array<I64, 3> lo{0, 0, 0}, hi{0, 0, 0};
   for (int a = 0; a < D; ++a) {
     lo[a] = hi[a] = c[0][a];
@@ -155,16 +154,10 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
     lo[a] = std::max<I64>(lo[a], 0);
     hi[a] = std::min<I64>(hi[a], lat.dims[a] - 1);
   }
-  std::array<double, D + 1> inv;
-  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
-  const double w = lat.sample_weight;
-  float fmin = 0, fmax = 0;
-  bool any = false;
-  const I64 nx = lat.dims[0], ny = lat.dims[1];
   for (I64 z = lo[2]; z <= hi[2]; ++z)
     for (I64 y = lo[1]; y <= hi[1]; ++y)
       for (I64 x = lo[0]; x <= hi[0]; ++x) {
-        const I64 q[3] = {x, y, z};
+        const std::array<I64, 3> q{x, y, z};
         std::array<int, D> s;
         for (int a = 0; a < D; ++a) s[a] = q[a] == lat.dims[a] - 1 ? -1 : 1;
         std::array<I64, D + 1> nn;
@@ -175,32 +168,78 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
           nn[i] = v;
           inside = v > 0 || (v == 0 && pushed_inside<D>(num.n[i], s));
         }
-        if (!inside) continue;
-        const float fv = grid.values[static_cast<std::size_t>(x + nx * (y + ny * z))];
-        const double fs = fv;
-        std::array<double, D + 1> lam;
-        for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
-        out.f2 += w * fs * fs;
-        for (int i = 0, m = 0; i <= D; ++i) {
-          out.fphi[i] += w * fs * lam[i];
-          for (int j = i; j <= D; ++j) out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
-        }
-        if (gradients) {
-          std::array<double, 3> xl{0, 0, 0};
-          for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
-          const auto g = f.gradient(xl);
-          for (int a = 0; a < D; ++a) {
-            out.grad[a] += w * g[a];
-            out.grad2 += w * g[a] * g[a];
-          }
-        }
-        if (!any || fv < fmin) fmin = fv;
-        if (!any || fv > fmax) fmax = fv;
-        any = true;
-        ++out.points;
+        if (inside && !visit(q, nn)) return;
       }
+}
+
+}  // namespace
+
+template <int D>
+ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
+                                     const SampleLattice& lat, const ScalarGrid& grid, const Field& f,
+                                     bool gradients) {
+  ElementIntegrals<D> out;
+  out.sampled = true;
+  const auto c = index_corners<D>(p, lat);
+  const Numerators<D> num = numerators<D>(c);
+  std::array<double, D + 1> inv;
+  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const double w = lat.sample_weight;
+  float fmin = 0, fmax = 0;
+  bool any = false;
+  const I64 nx = lat.dims[0], ny = lat.dims[1];
+  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+    const float fv = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
+    const double fs = fv;
+    std::array<double, D + 1> lam;
+    for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
+    out.f2 += w * fs * fs;
+    for (int i = 0, m = 0; i <= D; ++i) {
+      out.fphi[i] += w * fs * lam[i];
+      for (int j = i; j <= D; ++j) out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
+    }
+    if (gradients) {
+      std::array<double, 3> xl{0, 0, 0};
+      for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
+      const auto g = f.gradient(xl);
+      for (int a = 0; a < D; ++a) {
+        out.grad[a] += w * g[a];
+        out.grad2 += w * g[a] * g[a];
+      }
+    }
+    if (!any || fv < fmin) fmin = fv;
+    if (!any || fv > fmax) fmax = fv;
+    any = true;
+    ++out.points;
+    return true;
+  });
   out.fmin = fmin;
   out.fmax = fmax;
+  return out;
+}
+
+template <int D>
+SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
+                                 const ScalarGrid& grid, const std::array<double, D + 1>& v, double stop) {
+  SampleDeviation out;
+  const auto c = index_corners<D>(p, lat);
+  const Numerators<D> num = numerators<D>(c);
+  std::array<double, D + 1> inv;
+  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const I64 nx = lat.dims[0], ny = lat.dims[1];
+  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+    const double fs = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
+    // Relative to corner 0, so a flat element interpolates its value bit for bit, and at a
+    // corner (λ exactly a unit vector) the interpolant is that corner's value.
+    double u = v[0];
+    for (int i = 1; i <= D; ++i)
+      if (nn[i] != 0) u += double(nn[i]) * inv[i] * (v[i] - v[0]);
+    const double d = std::fabs(fs - u);
+    out.max = std::max(out.max, d);
+    out.sum2 += d * d;
+    ++out.samples;
+    return !(out.max > stop);
+  });
   return out;
 }
 
@@ -208,6 +247,12 @@ template ElementIntegrals<2> sample_integrals<2>(const std::array<std::array<dou
                                                  const SampleLattice&, const ScalarGrid&, const Field&, bool);
 template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<double, 3>, 4>&,
                                                  const SampleLattice&, const ScalarGrid&, const Field&, bool);
+template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
+                                             const SampleLattice&, const ScalarGrid&,
+                                             const std::array<double, 3>&, double);
+template SampleDeviation sample_deviation<3>(const std::array<std::array<double, 3>, 4>&,
+                                             const SampleLattice&, const ScalarGrid&,
+                                             const std::array<double, 4>&, double);
 template bool outside_data<2>(const std::array<std::array<double, 2>, 3>&, const SampleLattice&);
 template bool outside_data<3>(const std::array<std::array<double, 3>, 4>&, const SampleLattice&);
 

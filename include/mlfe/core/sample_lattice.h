@@ -67,6 +67,21 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
                                      const SampleLattice& lattice, const ScalarGrid& grid, const Field& f,
                                      bool gradients);
 
+/// How far the samples an element owns (the rule above) are from the linear interpolant of
+/// the corner values v: the largest |f_s − Σ λ_i v_i|, the sum of squares and the count. At a
+/// sample on a corner, and on an element whose corner values are equal, the interpolant is
+/// exact; elsewhere it carries the rounding of double arithmetic (~1e-16 relative). Stops scanning once the
+/// largest exceeds `stop` (then sum2 and samples are partial). Corners as for sample_integrals.
+struct SampleDeviation {
+  double max = 0;
+  double sum2 = 0;
+  std::int64_t samples = 0;
+};
+template <int D>
+SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p,
+                                 const SampleLattice& lattice, const ScalarGrid& grid,
+                                 const std::array<double, D + 1>& v, double stop);
+
 /// Whether the simplex with corners p (local frame) lies wholly outside the data box's
 /// interior: it owns no sample and is never refined.
 template <int D>
