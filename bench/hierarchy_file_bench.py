@@ -199,6 +199,8 @@ def max_error_main(args):
             for j, opts in enumerate(opt_sets):
                 r = run_mlfe(os.path.abspath(args.mlfe), inp, opts + ["--quiet"], args.out, f"{name}_e{i}_{j}", n)
                 d = r.pop("decoded")
+                if r["psnr_db"] is None:  # the report's JSON has no infinity: lossless
+                    r["psnr_db"] = float("inf")
                 err = errors(d, vox, peak)
                 r["max_check"] = err["max"]  # from the export, voxel for voxel
                 r["bound_e"] = e
