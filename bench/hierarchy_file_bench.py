@@ -8,8 +8,15 @@ wall time and the report's encode figure), and decode seconds (`mlfe export H -o
 rebuild, resample the full grid, write). ZFP (python3-zfpy) compresses the voxels as float32
 at several tolerances; its PSNR and max error are measured the same way.
 
+With --max-error (issue #23): error-bounded and lossless files instead: `mlfe build
+--max-error E` for E = 0 (lossless on integer data, checked voxel for voxel after export) and a
+few E relative to the value range, against ZFP fixed-accuracy at tolerance E (equal max error)
+and ZFP interpolated to mlfe's PSNR (equal PSNR); inputs: the CT, the brain MRI and a noisy full
+head (--fullhead, default /work/data/fullhead.nii.gz; make one with bench/make_fullhead.py).
+--share S1,S2 adds rows with `--quantization-share S` (how E is split; chosen by measurement).
+
 Usage: /usr/bin/python3 bench/hierarchy_file_bench.py [--mlfe build/converters/mlfe]
-           [--data /work/shared/data] [--out /tmp/hfile_bench] [--quick]
+           [--data /work/shared/data] [--out /tmp/hfile_bench] [--quick] [--max-error]
 Prints a Markdown table and writes OUT/results.json. Dependencies: scripts/install_bench_deps.sh.
 """
 import argparse
@@ -70,7 +77,7 @@ def run_mlfe(mlfe, inp, opts, out_dir, tag, n):
     resample = float(p.stderr.split("resampled in ")[1].split(" s")[0])
     decoded = np.fromfile(x, dtype="<f4")
     os.remove(x)
-    assert decoded.size == n
+    assert decoded.size == n, (decoded.size, n)
     return {"coder": "mlfe " + (" ".join(opts) or "default"), "bytes": f["bytes"], "bpv": f["bits_per_voxel"],
             "psnr_db": f["psnr_db"], "rms": f["rms_error"], "max": f["max_error"], "bound": f["value_bound"],
             "encode_s": f["encode_seconds"], "build_s": build_s, "decode_s": decode_s,
@@ -106,8 +113,14 @@ def main():
     ap.add_argument("--data", default="/work/shared/data")
     ap.add_argument("--out", default="/tmp/hfile_bench")
     ap.add_argument("--quick", action="store_true", help="one mlfe setting per input")
+    ap.add_argument("--max-error", action="store_true", help="error-bounded and lossless files (issue #23)")
+    ap.add_argument("--fullhead", default="/work/data/fullhead.nii.gz")
+    ap.add_argument("--share", default="", help="quantization shares to try at the middle E, e.g. 0.25,0.75")
+    ap.add_argument("--only", default="", help="comma-separated input names (CT, MRI, HEAD)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
+    if args.max_error:
+        return max_error_main(args)
     cases = [
         ("CT", "ct_skull_64.nrrd",
          [[], ["--max-error", "0.05"], ["--rms", "0.25%"], ["--rms", "0.1%"], ["--rms", "1%"], ["--rms", "2%"],
@@ -156,6 +169,79 @@ def main():
                 z = zfp_bpv_at(zfp, x["psnr_db"])
                 eq = f"{z:.3f} (mlfe {x['bpv'] / z:.2f}x)" if z else "outside ZFP's range"
             print(f"| {x['coder']} | {x['bytes']} | {x['bpv']:.3f} | {psnr} | {mx} | {enc} | {dec} | {eq} |")
+
+
+def max_error_main(args):
+    cases = [("CT", os.path.join(args.data, "ct_skull_64.nrrd"), [0.001, 0.005, 0.02]),
+             ("MRI", os.path.join(args.data, "mri_colin27_brain.nii.gz"), [1, 2, 4, 8]),
+             ("HEAD", args.fullhead, [1, 2, 4, 8])]
+    only = set(filter(None, args.only.split(",")))
+    shares = [float(x) for x in filter(None, args.share.split(","))]
+    results = {"load_average": os.getloadavg(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+               "machine": os.uname().nodename + ", " + str(os.cpu_count()) + " cores", "inputs": {}}
+    for name, inp, es in cases:
+        if (only and name not in only) or not os.path.exists(inp):
+            continue
+        vox, dims = read_voxels(inp)
+        n = vox.size
+        peak = float(vox.max()) - float(vox.min())
+        integer = vox.dtype.kind in "iu"
+        # Integer data: E in data units; float data: E as a fraction of the value range.
+        bounds = [0] + [e if integer else e * peak for e in es]
+        raw = os.path.join(args.out, name + ".raw")
+        vox.tofile(raw)
+        rows = lossless(raw, n)
+        os.remove(raw)
+        for i, e in enumerate(bounds):
+            opt_sets = [["--max-error", f"{e:.6g}"]]
+            if shares and i == len(bounds) // 2:
+                opt_sets += [["--max-error", f"{e:.6g}", "--quantization-share", str(s)] for s in shares]
+            for j, opts in enumerate(opt_sets):
+                r = run_mlfe(os.path.abspath(args.mlfe), inp, opts + ["--quiet"], args.out, f"{name}_e{i}_{j}", n)
+                d = r.pop("decoded")
+                if r["psnr_db"] is None:  # the report's JSON has no infinity: lossless
+                    r["psnr_db"] = float("inf")
+                err = errors(d, vox, peak)
+                r["max_check"] = err["max"]  # from the export, voxel for voxel
+                r["bound_e"] = e
+                r["lossless_check"] = bool(e == 0 and np.array_equal(d, vox.astype(np.float32)))
+                assert err["max"] <= e * (1 + 1e-6) + 1e-12, (name, opts, err["max"])
+                rows.append(r)
+                print(name, r["coder"], f"{r['bpv']:.3f} bpv {r['psnr_db']:.2f} dB max {err['max']:.4g}",
+                      file=sys.stderr)
+            if zfpy and e > 0:
+                z = run_zfp(vox, dims, e, peak)
+                z["coder"] = f"ZFP accuracy {e:.6g} (equal max error)"
+                rows.append(z)
+        if zfpy:
+            zt = [peak * 2.0 ** -k for k in range(2, 16)]
+            zpts = sorted((x["psnr_db"], x["bpv"]) for x in (run_zfp(vox, dims, t, peak) for t in zt))
+            for x in rows:
+                if x["coder"].startswith("mlfe") and math.isfinite(x["psnr_db"]):
+                    x["zfp_bpv_equal_psnr"] = zfp_bpv_at(zpts, x["psnr_db"])
+        results["inputs"][name] = {"file": inp, "dims": dims, "dtype": str(vox.dtype), "voxels": n,
+                                   "raw_bytes": vox.nbytes, "rows": rows}
+    results["load_average_end"] = os.getloadavg()
+    json.dump(results, open(os.path.join(args.out, "results_max_error.json"), "w"), indent=1)
+    print(f"date {results['date']}, {results['machine']}, load average {results['load_average'][0]:.2f} (start) "
+          f"{results['load_average_end'][0]:.2f} (end)")
+    for name, r in results["inputs"].items():
+        print(f"\n{name}: {r['file']} {r['dims']} {r['dtype']}, {r['voxels']} voxels, raw {r['raw_bytes']} bytes\n")
+        zstd = next(x["bytes"] for x in r["rows"] if x["coder"] == "zstd -19")
+        print("| coder | bytes | bpv | x zstd -19 | PSNR dB | max error (export) | encode s | decode s | ZFP bpv at this PSNR |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for x in r["rows"]:
+            psnr = f"{x['psnr_db']:.2f}" if "psnr_db" in x else "lossless"
+            mx = f"{x.get('max_check', x.get('max', 0)):.4g}"
+            if x.get("lossless_check"):
+                mx += " (bit-exact)"
+            enc = f"{x['encode_s']:.2f}" + (f" (build {x['build_s']:.1f})" if "build_s" in x else "")
+            dec = f"{x['decode_s']:.2f}" if "decode_s" in x else ""
+            z = x.get("zfp_bpv_equal_psnr")
+            eq = (f"{z:.3f} (mlfe {x['bpv'] / z:.2f}x)" if z else "outside ZFP's range") \
+                if x["coder"].startswith("mlfe") else ""
+            print(f"| {x['coder']} | {x['bytes']} | {x['bpv']:.3f} | {x['bytes'] / zstd:.3f} | {psnr} | {mx} | {enc} | "
+                  f"{dec} | {eq} |")
 
 
 if __name__ == "__main__":

@@ -9,7 +9,9 @@
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <memory>
+#include <optional>
 
 #include "converters/commands.h"
 #include "converters/pipeline_options.h"
@@ -22,15 +24,50 @@ struct BuildState {
   std::string input, output, report;
   BuildParams params;
   VolumeReadOptions read;
-  double max_error = 0;  ///< value bound of the file (data units); 0: from --psnr or the default
-  double psnr = 0;       ///< quantization error alone at this PSNR (dB over the value range)
+  /// --max-error: every sample of the decoded file within this (data units); < 0: not given.
+  double max_error = -1;
+  /// Share of max_error spent on quantizing the values; the rest bounds the interpolation.
+  double quantization_share = 0.5;
+  double psnr = 0;  ///< quantization error alone at this PSNR (dB over the value range)
 };
+
+// How --max-error E is split: the build refines until every sample is within `tolerance` of
+// the interpolant of the samples at the vertices, and the values are quantized within
+// `quantization`, so every decoded sample is within tolerance + quantization ≤ E (the decoded
+// interpolant is a convex combination of decoded vertex values). Integer data keeps integer
+// values: an integer quantization bound (0 for E < 1/share: lossless values).
+struct ErrorSplit {
+  double tolerance = 0, quantization = 0;
+  bool integer = false;
+};
+
+bool integral_values(const ScalarGrid& g) {
+  for (float v : g.values)
+    if (!(std::fabs(v) <= 1073741824.0f) || v != std::nearbyint(v)) return false;
+  return true;
+}
+
+ErrorSplit split_max_error(const BuildState& s, const ScalarGrid& grid) {
+  ErrorSplit e;
+  e.integer = integral_values(grid);
+  if (e.integer) {
+    e.quantization = std::floor(s.quantization_share * s.max_error);
+    e.tolerance = s.max_error - e.quantization;
+    return e;
+  }
+  // The exported grid is float32: keep a margin for rounding the decoded values to it.
+  double big = 0;
+  for (float v : grid.values) big = std::max(big, double(std::fabs(v)));
+  const double budget = std::max(0.0, s.max_error - big * std::ldexp(1.0, -22));
+  e.quantization = s.quantization_share * budget;
+  e.tolerance = budget - e.quantization;
+  return e;
+}
 
 // The file's value bound E. Uniform quantization to steps of 2E adds at most E/√3 RMS; the
 // default E = RMS/2 thus adds at most ~4 % to the approximation's RMS error while most
 // surpluses round to 0.
 double value_bound(const BuildState& s, double rms, double range) {
-  if (s.max_error > 0) return s.max_error;
   if (s.psnr > 0) return std::sqrt(3.0) * (range > 0 ? range : 1.0) * std::pow(10.0, -s.psnr / 20.0);
   return rms > 0 ? 0.5 * rms : 1e-3 * (range > 0 ? range : 1.0);
 }
@@ -39,6 +76,9 @@ struct FileFigures {
   GridErrors errors;
   double bound = 0;
   double encode_seconds = 0;
+  int version = 3;
+  std::string coding;    ///< "quantized", "integer", "exact"
+  double tolerance = 0;  ///< --max-error: the interpolation's share
 };
 
 // Errors of the decoded values (the function linear on every leaf) against the input.
@@ -49,18 +89,28 @@ using Measure = std::function<GridErrors(const Hierarchy<D>&, const std::vector<
 // input (`measure`) from exactly the values a reader decodes.
 template <int D>
 FileFigures write_file(const BuildState& s, const Built& b, const Approximation<D>& a,
-                       const Measure<D>& measure, const nlohmann::json& input_metadata) {
+                       const Measure<D>& measure, const nlohmann::json& input_metadata,
+                       const ErrorSplit* split = nullptr) {
   FileFigures fig;
   const auto t0 = std::chrono::steady_clock::now();
   const double range = b.value_max - b.value_min;
-  fig.bound = value_bound(s, b.iterations().back().rms_error, range);
+  fig.bound = split ? split->quantization : value_bound(s, b.iterations().back().rms_error, range);
+  const bool integer = split && split->integer;
+  fig.coding = integer ? "integer" : fig.bound > 0 ? "quantized" : "exact";
   std::vector<double> decoded;
   try {
-    decoded = quantize_hierarchical(a.hierarchy, a.values, fig.bound);
+    decoded = integer                 ? quantize_integer(a.hierarchy, a.values, std::int64_t(fig.bound))
+              : fig.coding == "exact" ? a.values
+                                      : quantize_hierarchical(a.hierarchy, a.values, fig.bound);
   } catch (const Error& e) {
     throw Error(s.output + ": " + e.what());
   }
   fig.errors = measure(a.hierarchy, decoded);
+  // The promise of --max-error, checked on exactly what a reader decodes, before writing.
+  if (split && !(fig.errors.max <= s.max_error))
+    throw Error(
+        fmt::format("{}: the decoded samples are up to {:.6g} from the input, over --max-error {:.6g} ({})",
+                    s.output, fig.errors.max, s.max_error, b.stop_reason()));
   HierarchyFileInfo info;
   info.transform = b.transform;
   info.space = b.space;
@@ -69,21 +119,29 @@ FileFigures write_file(const BuildState& s, const Built& b, const Approximation<
   info.metadata = {{"input", s.input}, {"tool", std::string("mlfe ") + MLFE_VERSION}};
   info.metadata.update(input_metadata);
   if (b.surface_driven) info.metadata["refinement"] = "surface-driven";
-  info.norm = s.params.norm;
+  info.norm = split ? "" : s.params.norm;  // the error-bounded build interpolates: no norm
   info.rms_error = fig.errors.rms;
   info.max_error = fig.errors.max;
   info.psnr_db = fig.errors.psnr;
+  set_lattice_info(a, info);
+  if (split) info.sample_error_bound = s.max_error;
   HierarchyWriteOptions wo;
-  wo.version = 2;
+  wo.version = 3;
   wo.max_error = fig.bound;
+  wo.integer_values = integer;
   wo.zstd_level = 19;
   try {
     write_hierarchy(s.output, a.hierarchy, a.values, info, wo);
   } catch (const LevelRebuildError& e) {
     std::fprintf(stderr, "mlfe: warning: %s; writing format version 1 (exact, larger)\n", e.what());
-    write_hierarchy(s.output, a.hierarchy, a.values, info);
+    HierarchyFileInfo v1 = info;
+    v1.on_lattice = false;
+    v1.sample_error_bound = std::numeric_limits<double>::quiet_NaN();
+    write_hierarchy(s.output, a.hierarchy, a.values, v1);
     fig.errors = measure(a.hierarchy, a.values);
     fig.bound = 0;
+    fig.version = 1;
+    fig.coding = "exact";
   }
   fig.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return fig;
@@ -129,11 +187,20 @@ void report_and_print(const BuildState& s, const Built& b, const FileFigures& fi
     nlohmann::json r = report;
     r["file"] = {{"bytes", bytes},
                  {std::string("bits_per_") + per, 8 * bytes / samples},
+                 {"format_version", fig.version},
+                 {"value_coding", fig.coding},
                  {"value_bound", fig.bound},
+                 {"errors_at", std::string(per) == "voxel" ? "samples (every voxel, from the decoded values)"
+                                                           : "the mesh's points (from the decoded values)"},
                  {"rms_error", fig.errors.rms},
                  {"max_error", fig.errors.max},
                  {"psnr_db", fig.errors.psnr},
                  {"encode_seconds", fig.encode_seconds}};
+    if (s.max_error >= 0)
+      r["file"]["max_error_bound"] = {{"max_error", s.max_error},
+                                      {"refinement_tolerance", fig.tolerance},
+                                      {"quantization_bound", fig.bound},
+                                      {"verified", fig.errors.max <= s.max_error}};
     write_json(s.report, r);
   }
   // The closing summary, like convert's: on stderr, unless --quiet.
@@ -150,6 +217,10 @@ void report_and_print(const BuildState& s, const Built& b, const FileFigures& fi
                  bytes, 8 * bytes / samples, per, fig.bound,
                  voxels ? "on the voxels" : "at the mesh's points", fig.errors.rms, fig.errors.max,
                  fig.errors.psnr);
+    if (s.max_error >= 0)
+      std::fprintf(stderr,
+                   "mlfe build: every voxel of the decoded file within %.6g of the input (verified)%s\n",
+                   s.max_error, fig.errors.max == 0 ? ": lossless" : "");
   }
   std::printf("%s\n", s.output.c_str());
 }
@@ -173,14 +244,33 @@ void run_mesh_build(const BuildState& s) {
 void run_build(const BuildState& s) {
   check_output_path(s.output, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
-  if (s.max_error > 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
-  if (!detect_tet_mesh_format(s.input).empty()) return run_mesh_build(s);
+  if (s.max_error >= 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
+  if (!(s.quantization_share >= 0 && s.quantization_share < 1))
+    throw Error("build: --quantization-share must be in [0, 1)");
+  if (!detect_tet_mesh_format(s.input).empty()) {
+    if (s.max_error >= 0)
+      throw Error(s.input +
+                  ": --max-error bounds the error at a volume's samples; for a mesh use --rms or --psnr");
+    return run_mesh_build(s);
+  }
   const ScalarGrid grid = read_volume(s.input, s.read);
-  const Built b = build_from_grid(grid, s.params, {});
+  std::optional<ErrorSplit> split;
+  Built b;
+  if (s.max_error >= 0) {
+    split = split_max_error(s, grid);
+    BuildOptions o = build_options(s.params);
+    o.max_sample_error = split->tolerance;
+    b = build(grid, o, {});
+    warn_if_memory_limited(b, grid.source, s.params.max_memory);
+  } else {
+    b = build_from_grid(grid, s.params, {});
+  }
   const double range = b.value_max - b.value_min;
   const nlohmann::json meta = {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}};
-  const FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), on_grid<2>(grid, s.input, range), meta)
-                                       : write_file(s, b, b.get<3>(), on_grid<3>(grid, s.input, range), meta);
+  const ErrorSplit* sp = split ? &*split : nullptr;
+  FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), on_grid<2>(grid, s.input, range), meta, sp)
+                                 : write_file(s, b, b.get<3>(), on_grid<3>(grid, s.input, range), meta, sp);
+  if (sp) fig.tolerance = sp->tolerance;
   report_and_print(s, b, fig, build_report(s.input, &grid, b), static_cast<double>(grid.voxel_count()),
                    "voxel");
 }
@@ -197,9 +287,14 @@ void add_build_command(CLI::App& app) {
   cmd->add_option("--report", state->report, "JSON report of the build");
   cmd->add_option(
          "--max-error", state->max_error,
-         "every stored vertex value within this of the approximation's (data units; default: half the "
-         "achieved RMS error)")
-      ->check(CLI::PositiveNumber);
+         "every sample (voxel) of the decoded file within this of the input (data units; 0 on integer "
+         "data: lossless); without it, the least-squares build of --rms with values quantized to half "
+         "its RMS error")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--quantization-share", state->quantization_share,
+                  "with --max-error: the share of it spent on quantizing values, the rest on interpolation "
+                  "(integer data: rounded down to an integer)")
+      ->capture_default_str();
   cmd->add_option("--psnr", state->psnr,
                   "value quantization error alone at this PSNR (dB over the value range)")
       ->check(CLI::PositiveNumber);

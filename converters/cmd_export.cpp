@@ -2,6 +2,7 @@
 // OpenVDB) on the grid it was built from, or its leaf mesh (VTK .vtu, Gmsh .msh) with the
 // values and element levels, in the file's physical frame.
 #include <mlfe/core/error.h>
+#include <mlfe/core/sample_lattice.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_resample.h>
@@ -26,11 +27,32 @@ struct ExportState {
 };
 
 template <int D>
-void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierarchy<D>& h) {
+void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierarchy<D>& h_in) {
   const std::string ext = lower_extension(s.output);
   const std::vector<double>* values = f.values.empty() ? nullptr : &f.values;
   if (ext == ".vtu" || ext == ".msh") {
-    const std::vector<ElemId> leaves = h.leaves();
+    // On the samples' lattice the mesh is the data's box: the padding's leaves are left out and
+    // those across the box's faces refined until none is (u carried along its edges).
+    Hierarchy<D> conformed;
+    std::vector<double> conformed_values;
+    const Hierarchy<D>* hp = &h_in;
+    std::vector<ElemId> leaves;
+    if (f.on_lattice) {
+      conformed = h_in;
+      if (values) conformed_values = *values;
+      SampleLattice lat;
+      lat.dim = D;
+      lat.dims = f.data_dims;
+      lat.spacing = f.transform.spacing;
+      lat.level = f.lattice_level;
+      lat.width = std::int64_t(1) << f.lattice_level;
+      leaves = leaves_in_data(conformed, conformed_values, lat);
+      hp = &conformed;
+      if (values) values = &conformed_values;
+    } else {
+      leaves = h_in.leaves();
+    }
+    const Hierarchy<D>& h = *hp;
     if (ext == ".vtu")
       write_vtu(s.output, h, leaves, values, &f.transform);
     else
@@ -44,18 +66,19 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
   g.dim = D;
   g.transform = f.transform;
   g.space = f.space;
+  // On the samples' lattice (v3) T0 is a padded cube: the grid is the data's, not T0's box.
   try {
-    g.dims = hierarchy_grid_dims(h, f.transform.spacing);
+    g.dims = f.on_lattice ? f.data_dims : hierarchy_grid_dims(h_in, f.transform.spacing);
   } catch (const Error& e) {
     throw Error(s.input + ": " + e.what());
   }
   const auto t0 = std::chrono::steady_clock::now();
-  g.values = resample_to_grid(h, f.values, g.dims, f.transform.spacing);
+  g.values = resample_to_grid(h_in, f.values, g.dims, f.transform.spacing);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   write_volume(s.output, g);
   std::fprintf(stderr, "mlfe export: %lld x %lld x %lld grid from level %d (resampled in %.3f s)\n",
                static_cast<long long>(g.dims[0]), static_cast<long long>(g.dims[1]),
-               static_cast<long long>(g.dims[2]), h.max_level(), seconds);
+               static_cast<long long>(g.dims[2]), h_in.max_level(), seconds);
 }
 
 void run_export(const ExportState& s) {

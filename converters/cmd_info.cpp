@@ -58,8 +58,17 @@ void run_hierarchy_info(const InfoArgs& a) {
     j["elements"] = ne;
     j["leaves"] = nl;
     j["levels"] = f.file_levels + 1;
-    j["values"] = f.values.empty() ? "none" : f.value_bound > 0 ? "quantized" : "exact";
+    j["values"] = f.values.empty()    ? "none"
+                  : f.integer_values  ? "integer"
+                  : f.value_bound > 0 ? "quantized"
+                                      : "exact";
     j["value_bound"] = f.value_bound;
+    j["on_lattice"] = f.on_lattice;
+    if (f.on_lattice) {
+      j["lattice_level"] = f.lattice_level;
+      j["data_dims"] = f.data_dims;
+    }
+    j["sample_error_bound"] = num(f.sample_error_bound);
     j["range"] = {f.value_min, f.value_max};
     j["norm"] = f.norm;
     j["rms_error"] = num(f.rms_error);
@@ -85,10 +94,20 @@ void run_hierarchy_info(const InfoArgs& a) {
   fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", f.version, f.dim,
              total, seconds);
   fmt::print("mesh:      {} vertices, {} elements, {} leaves, {} levels\n", nv, ne, nl, f.file_levels + 1);
-  fmt::print("values:    {}\n", f.values.empty() ? std::string("none")
-                                : f.value_bound > 0
-                                    ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
-                                    : std::string("exact (f64)"));
+  fmt::print(
+      "values:    {}\n",
+      f.values.empty() ? std::string("none")
+      : f.integer_values
+          ? (f.value_bound > 0 ? fmt::format("integer surpluses, every vertex within {:.6g}", f.value_bound)
+                               : std::string("integer surpluses, exact"))
+      : f.value_bound > 0 ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
+                          : std::string("exact (f64)"));
+  if (f.on_lattice)
+    fmt::print("lattice:   level {} on the samples (T0 {} samples wide), data {} x {} x {} samples\n",
+               f.lattice_level, std::int64_t(1) << f.lattice_level, f.data_dims[0], f.data_dims[1],
+               f.data_dims[2]);
+  if (!std::isnan(f.sample_error_bound))
+    fmt::print("bound:     every sample within {:.6g} of the decoded function\n", f.sample_error_bound);
   fmt::print("range:     {} .. {}\n", f.value_min, f.value_max);
   if (!f.norm.empty()) fmt::print("norm:      {}\n", f.norm);
   if (!std::isnan(f.rms_error))

@@ -73,6 +73,8 @@ void check_build_options(const BuildOptions& p) {
     throw Error(fmt::format("max_level: expected 0..40, got {}", p.max_level));
   if (p.start_level < -1 || p.start_level > 12)
     throw Error(fmt::format("start_level: expected -1..12, got {}", p.start_level));
+  if (!(p.max_sample_error < 0 || std::isfinite(p.max_sample_error)))
+    throw Error("--max-error: expected a finite value >= 0");
   if (!(p.surface_tolerance > 0))
     throw Error(fmt::format("surface_tolerance: expected a positive value, got {}", p.surface_tolerance));
 }
@@ -147,6 +149,8 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   o.surface_tolerance = p.surface_tolerance;
   o.check_surfaces_against_u = p.check_against_u;
   o.solve = p.solve_u || p.check_against_u;
+  o.max_sample_error = p.max_sample_error;
+  if (o.max_sample_error >= 0) o.surface_driven = false;
   const std::size_t budget = p.max_memory.bytes();
   if (budget > 0) {
     // What the build may use: the budget less the input, with a tenth kept for extraction
@@ -186,6 +190,35 @@ Built build(const TetMesh& mesh, const BuildOptions& p, const std::vector<double
   return build(f, mesh_input(f, mesh), p, iso_values);
 }
 
+template <int D>
+void set_lattice_info(const Approximation<D>& a, HierarchyFileInfo& info) {
+  info.on_lattice = a.on_lattice;
+  info.lattice_level = a.on_lattice ? a.lattice.level : 0;
+  info.data_dims = a.on_lattice ? a.lattice.dims : std::array<std::int64_t, 3>{1, 1, 1};
+}
+
+template <int D>
+void set_lattice(const HierarchyFileInfo& info, Approximation<D>& a) {
+  a.on_lattice = info.on_lattice;
+  if (!info.on_lattice) return;
+  SampleLattice& lat = a.lattice;
+  lat.dim = D;
+  lat.dims = info.data_dims;
+  lat.level = info.lattice_level;
+  lat.width = std::int64_t(1) << info.lattice_level;
+  lat.sample_weight = 1;
+  for (int k = 0; k < 3; ++k) {
+    lat.spacing[k] = info.transform.spacing[k];
+    if (k < D) lat.sample_weight *= lat.spacing[k];
+  }
+  a.data_extent = lat.data_extent();
+}
+
+template void set_lattice_info<2>(const Approximation<2>&, HierarchyFileInfo&);
+template void set_lattice_info<3>(const Approximation<3>&, HierarchyFileInfo&);
+template void set_lattice<2>(const HierarchyFileInfo&, Approximation<2>&);
+template void set_lattice<3>(const HierarchyFileInfo&, Approximation<3>&);
+
 Built built_from_file(const std::string& path) {
   HierarchyFile hf = read_hierarchy(path);
   Built b;
@@ -199,11 +232,13 @@ Built built_from_file(const std::string& path) {
     Approximation<2> a;
     a.hierarchy = std::get<Hierarchy<2>>(std::move(hf.hierarchy));
     a.values = std::move(hf.values);
+    set_lattice(hf, a);
     b.approximation = std::move(a);
   } else {
     Approximation<3> a;
     a.hierarchy = std::get<Hierarchy<3>>(std::move(hf.hierarchy));
     a.values = std::move(hf.values);
+    set_lattice(hf, a);
     b.approximation = std::move(a);
   }
   return b;
@@ -216,13 +251,18 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
   info.value_min = b.value_min;
   info.value_max = b.value_max;
   info.metadata = provenance;
-  // v2 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
+  // v3 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
   // writer verifies that the file rebuilds this hierarchy; if it ever did not, v1 (exact) is
-  // written instead of a different hierarchy.
-  const HierarchyWriteOptions v2{true, 19, 2, 0.0};
+  // written instead of a different hierarchy (v1 has no lattice: outputs of such a file are
+  // not clipped to the data's box).
+  HierarchyWriteOptions v3;
+  v3.zstd_level = 19;
+  v3.version = 3;
   b.visit([&](const auto& a) {
+    HierarchyFileInfo li = info;
+    set_lattice_info(a, li);
     try {
-      write_hierarchy(path, a.hierarchy, a.values, info, v2);
+      write_hierarchy(path, a.hierarchy, a.values, li, v3);
     } catch (const LevelRebuildError& e) {
       std::fprintf(stderr, "mlfe: warning: %s; writing format version 1\n", e.what());
       write_hierarchy(path, a.hierarchy, a.values, info);

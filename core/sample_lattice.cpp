@@ -140,14 +140,13 @@ bool outside_data(const std::array<std::array<double, D>, D + 1>& p, const Sampl
   return false;
 }
 
-template <int D>
-ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
-                                     const SampleLattice& lat, const ScalarGrid& grid, const Field& f,
-                                     bool gradients) {
-  ElementIntegrals<D> out;
-  out.sampled = true;
-  const auto c = index_corners<D>(p, lat);
-  const Numerators<D> num = numerators<D>(c);
+namespace {
+
+// Calls visit(q, nn) for every sample the element with lattice corners c owns (sample_lattice.h:
+// the exact integer rule), nn being the barycentric numerators; visit returns false to stop.
+template <int D, class Visit>
+void for_each_owned_sample(const std::array<std::array<I64, D>, D + 1>& c, const Numerators<D>& num,
+                           const SampleLattice& lat, Visit&& visit) {
   std::array<I64, 3> lo{0, 0, 0}, hi{0, 0, 0};
   for (int a = 0; a < D; ++a) {
     lo[a] = hi[a] = c[0][a];
@@ -158,12 +157,6 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
     lo[a] = std::max<I64>(lo[a], 0);
     hi[a] = std::min<I64>(hi[a], lat.dims[a] - 1);
   }
-  std::array<double, D + 1> inv;
-  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
-  const double w = lat.sample_weight;
-  float fmin = 0, fmax = 0;
-  bool any = false;
-  const I64 nx = lat.dims[0], ny = lat.dims[1];
   // Row by row: the samples of a row (fixed y, z) inside the closed simplex form one interval
   // of x, found from the D + 1 face inequalities; only samples on a face (a numerator 0) need
   // the push rule.
@@ -176,17 +169,17 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
         I64 v = num.k[i];
         for (int a = 1; a < D; ++a) v += num.n[i][a] * q12[a];
         r[i] = v;
-        const I64 c = num.n[i][0];  // N_i(x) = c x + v >= 0
-        if (c > 0) {
-          xa = std::max(xa, floor_div(-v + c - 1, c));
-        } else if (c < 0) {
-          xb = std::min(xb, floor_div(v, -c));
+        const I64 cx = num.n[i][0];  // N_i(x) = cx x + v >= 0
+        if (cx > 0) {
+          xa = std::max(xa, floor_div(-v + cx - 1, cx));
+        } else if (cx < 0) {
+          xb = std::min(xb, floor_div(v, -cx));
         } else if (v < 0) {
           xb = xa - 1;
         }
       }
       for (I64 x = xa; x <= xb; ++x) {
-        const I64 q[3] = {x, y, z};
+        const std::array<I64, 3> q{x, y, z};
         std::array<I64, D + 1> nn;
         bool tie = false;
         for (int i = 0; i <= D; ++i) {
@@ -201,39 +194,125 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
             inside = nn[i] > 0 || (nn[i] == 0 && pushed_inside<D>(num.n[i], s));
           if (!inside) continue;
         }
-        const float fv = grid.values[static_cast<std::size_t>(x + nx * (y + ny * z))];
-        const double fs = fv;
-        std::array<double, D + 1> lam;
-        for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
-        out.f2 += w * fs * fs;
-        for (int i = 0, m = 0; i <= D; ++i) {
-          out.fphi[i] += w * fs * lam[i];
-          for (int j = i; j <= D; ++j) out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
-        }
-        if (gradients) {
-          std::array<double, 3> xl{0, 0, 0};
-          for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
-          const auto g = f.gradient(xl);
-          for (int a = 0; a < D; ++a) {
-            out.grad[a] += w * g[a];
-            out.grad2 += w * g[a] * g[a];
-          }
-        }
-        if (!any || fv < fmin) fmin = fv;
-        if (!any || fv > fmax) fmax = fv;
-        any = true;
-        ++out.points;
+        if (!visit(q, nn)) return;
       }
     }
+}
+
+}  // namespace
+
+template <int D>
+ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
+                                     const SampleLattice& lat, const ScalarGrid& grid, const Field& f,
+                                     bool gradients) {
+  ElementIntegrals<D> out;
+  out.sampled = true;
+  const auto c = index_corners<D>(p, lat);
+  const Numerators<D> num = numerators<D>(c);
+  std::array<double, D + 1> inv;
+  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const double w = lat.sample_weight;
+  float fmin = 0, fmax = 0;
+  bool any = false;
+  const I64 nx = lat.dims[0], ny = lat.dims[1];
+  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+    const float fv = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
+    const double fs = fv;
+    std::array<double, D + 1> lam;
+    for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
+    out.f2 += w * fs * fs;
+    for (int i = 0, m = 0; i <= D; ++i) {
+      out.fphi[i] += w * fs * lam[i];
+      for (int j = i; j <= D; ++j) out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
+    }
+    if (gradients) {
+      std::array<double, 3> xl{0, 0, 0};
+      for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
+      const auto g = f.gradient(xl);
+      for (int a = 0; a < D; ++a) {
+        out.grad[a] += w * g[a];
+        out.grad2 += w * g[a] * g[a];
+      }
+    }
+    if (!any || fv < fmin) fmin = fv;
+    if (!any || fv > fmax) fmax = fv;
+    any = true;
+    ++out.points;
+    return true;
+  });
   out.fmin = fmin;
   out.fmax = fmax;
   return out;
 }
 
+template <int D>
+SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
+                                 const ScalarGrid& grid, const std::array<double, D + 1>& v, double stop) {
+  SampleDeviation out;
+  const auto c = index_corners<D>(p, lat);
+  const Numerators<D> num = numerators<D>(c);
+  std::array<double, D + 1> inv;
+  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const I64 nx = lat.dims[0], ny = lat.dims[1];
+  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+    const double fs = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
+    // Relative to corner 0, so a flat element interpolates its value bit for bit, and at a
+    // corner (λ exactly a unit vector) the interpolant is that corner's value.
+    double u = v[0];
+    for (int i = 1; i <= D; ++i)
+      if (nn[i] != 0) u += double(nn[i]) * inv[i] * (v[i] - v[0]);
+    const double d = std::fabs(fs - u);
+    out.max = std::max(out.max, d);
+    out.sum2 += d * d;
+    ++out.samples;
+    return !(out.max > stop);
+  });
+  return out;
+}
+
+template <int D>
+std::vector<ElemId> leaves_in_data(Hierarchy<D>& h, std::vector<double>& values, const SampleLattice& lat) {
+  MLFE_CHECK(values.empty() || values.size() == h.vertex_count());
+  const auto ext = lat.data_extent();
+  auto corners = [&](ElemId e) {
+    std::array<std::array<double, D>, D + 1> p;
+    for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
+    return p;
+  };
+  for (;;) {
+    std::vector<ElemId> inside, straddling;
+    for (ElemId e : h.leaves()) {
+      const auto p = corners(e);
+      if (outside_data<D>(p, lat)) continue;
+      bool across = false;
+      for (int i = 0; i <= D; ++i)
+        for (int a = 0; a < D; ++a) across |= p[i][a] > ext[a] + 0.25 * lat.spacing[a];
+      (across ? straddling : inside).push_back(e);
+    }
+    if (straddling.empty()) return inside;
+    const std::size_t before = h.vertex_count();
+    h.refine(std::move(straddling));
+    if (values.empty()) continue;
+    values.resize(h.vertex_count());
+    for (std::size_t v = before; v < values.size(); ++v) {
+      const auto& par = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+      values[v] = 0.5 * (values[par[0].value] + values[par[1].value]);
+    }
+  }
+}
+
+template std::vector<ElemId> leaves_in_data<2>(Hierarchy<2>&, std::vector<double>&, const SampleLattice&);
+template std::vector<ElemId> leaves_in_data<3>(Hierarchy<3>&, std::vector<double>&, const SampleLattice&);
 template ElementIntegrals<2> sample_integrals<2>(const std::array<std::array<double, 2>, 3>&,
                                                  const SampleLattice&, const ScalarGrid&, const Field&, bool);
 template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<double, 3>, 4>&,
                                                  const SampleLattice&, const ScalarGrid&, const Field&, bool);
+template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
+                                             const SampleLattice&, const ScalarGrid&,
+                                             const std::array<double, 3>&, double);
+template SampleDeviation sample_deviation<3>(const std::array<std::array<double, 3>, 4>&,
+                                             const SampleLattice&, const ScalarGrid&,
+                                             const std::array<double, 4>&, double);
 template bool outside_data<2>(const std::array<std::array<double, 2>, 3>&, const SampleLattice&);
 template bool outside_data<3>(const std::array<std::array<double, 3>, 4>&, const SampleLattice&);
 

@@ -467,6 +467,22 @@ CompareResult compare_hierarchies(const std::string& expected, const std::string
     r.differences.push_back(
         {"value range", fmt::format("{} .. {} in EXPECTED, {} .. {} in ACTUAL", fmt_g(e.value_min),
                                     fmt_g(e.value_max), fmt_g(a.value_min), fmt_g(a.value_max))});
+  // Where the data lies in T0 (v3): a different lattice is a different grid.
+  const auto lattice_text = [](const HierarchyFile& f) {
+    return f.on_lattice ? fmt::format("lattice level {}, data {}x{}x{}", f.lattice_level, f.data_dims[0],
+                                      f.data_dims[1], f.data_dims[2])
+                        : std::string("no lattice");
+  };
+  r.report["lattice"] = {lattice_text(e), lattice_text(a)};
+  if (lattice_text(e) != lattice_text(a))
+    r.differences.push_back({"lattice", lattice_text(e) + " in EXPECTED, " + lattice_text(a) + " in ACTUAL"});
+  const auto bound_text = [](const HierarchyFile& f) {
+    return std::isnan(f.sample_error_bound) ? std::string("none") : fmt_g(f.sample_error_bound);
+  };
+  r.report["sample_error_bound"] = {bound_text(e), bound_text(a)};
+  if (bound_text(e) != bound_text(a))
+    r.differences.push_back(
+        {"sample error bound", bound_text(e) + " in EXPECTED, " + bound_text(a) + " in ACTUAL"});
   // Error figures and provenance live in the metadata.
   add_json_differences(e.metadata, a.metadata, "metadata", options, r);
   if (e.dim == 2)

@@ -20,10 +20,11 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "hierarchy_io assumes a
 namespace {
 
 constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'H', 'I', 'E', 'R'};
-constexpr std::uint32_t kVersion = 1, kVersion2 = 2;
+constexpr std::uint32_t kVersion = 1, kVersion2 = 2, kVersion3 = 3;
 constexpr std::size_t kHeaderSize = 200;
 constexpr std::uint32_t kFlagZstd = 1u, kFlagValues = 2u;
 constexpr std::uint64_t kMaxSpace = 64;
+constexpr int kMaxLatticeLevel = 24;  // sample_lattice(): at most 2^24 samples per axis
 constexpr std::uint64_t kMaxMetadata = 16u << 20;
 // Caps the allocation a small compressed file can demand.
 constexpr std::uint64_t kMaxRatio = 1024, kRatioSlack = 4096;
@@ -88,6 +89,41 @@ void check_info(const std::string& path, const HierarchyFileInfo& info) {
   if (!info.metadata.is_object()) throw Error(path + ": metadata must be a JSON object");
 }
 
+// The lattice fields of a v3 file (core/sample_lattice.h): dims ≥ 2 on the used axes, 1 on the
+// others, and L the smallest level with 2^L ≥ n − 1 on every axis.
+void check_lattice(const std::string& path, int dim, const HierarchyFileInfo& info) {
+  if (!std::isnan(info.sample_error_bound) &&
+      !(info.sample_error_bound >= 0 && std::isfinite(info.sample_error_bound)))
+    throw Error(path + ": sample error bound out of range");
+  if (!info.on_lattice) return;
+  std::int64_t longest = 1;
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t n = info.data_dims[a];
+    if (a < dim ? (n < 2 || n > (std::int64_t(1) << kMaxLatticeLevel)) : n != 1)
+      throw Error(path + ": lattice dims out of range (axis " + std::to_string(a) + ")");
+    longest = std::max(longest, n - 1);
+  }
+  const int level = info.lattice_level;
+  if (level < 0 || level > kMaxLatticeLevel || (std::int64_t(1) << level) < longest ||
+      (level > 0 && (std::int64_t(1) << (level - 1)) >= longest))
+    throw Error(path + ": lattice level " + std::to_string(level) + " does not fit the dims");
+}
+
+// T0 of a lattice file covers the cube [0, 2^L·spacing] on every axis.
+template <int D>
+void check_lattice_box(const std::string& path, const Hierarchy<D>& h, const HierarchyFileInfo& info) {
+  if (!info.on_lattice) return;
+  for (int a = 0; a < D; ++a) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (std::uint32_t v = 0; v < h.vertex_count(); ++v)
+      if (!h.vertex_parents(VertexId(v))[0].valid())
+        lo = std::min(lo, h.point(VertexId(v))[a]), hi = std::max(hi, h.point(VertexId(v))[a]);
+    const double w = std::ldexp(info.transform.spacing[a], info.lattice_level);
+    if (!(std::fabs(lo) <= 1e-9 * w && std::fabs(hi - w) <= 1e-9 * w))
+      throw Error(path + ": T0 is not the lattice's cube (axis " + std::to_string(a) + ")");
+  }
+}
+
 // Bounds-checked little-endian reader over a byte range.
 class Cursor {
  public:
@@ -145,11 +181,27 @@ constexpr std::uint32_t tag_of(const char (&s)[5]) {
 }
 constexpr std::uint32_t kTagHead = tag_of("HEAD"), kTagMesh = tag_of("MESH"), kTagLevel = tag_of("LEVL");
 constexpr std::uint32_t kCodecRaw = 0, kCodecZstd = 1;
-constexpr std::uint32_t kCodingNone = 0, kCodingQuantized = 1, kCodingExact = 2;
+constexpr std::uint32_t kCodingNone = 0, kCodingQuantized = 1, kCodingExact = 2, kCodingInteger = 3;
 constexpr std::size_t kPreambleSize = 16, kSectionHeaderSize = 28, kHeadFixedSize = 204;
 constexpr int kMaxLevels = 60;
 
 std::uint32_t norm_code(const std::string& norm) { return norm == "l2" ? 1 : norm == "h1" ? 2 : 0; }
+
+// Integer coding (v3): a vertex's code goes to the stream of its context, the bit width of
+// |d_a − d_b| of its decoded parents (capped; 0 for T0): large surpluses come where the parents
+// differ, so each stream holds codes of one magnitude and zstd's entropy stage codes them
+// with their own statistics (−9 % on the brain MRI's lossless file, bench/RESULTS.md).
+constexpr int kContexts = 7;
+template <int D>
+int integer_context(const Hierarchy<D>& h, const std::vector<double>& d, std::size_t v) {
+  const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+  if (!p[0].valid()) return 0;
+  auto diff = static_cast<std::uint64_t>(
+      std::llabs(static_cast<std::int64_t>(d[p[0].value]) - static_cast<std::int64_t>(d[p[1].value])));
+  int c = 0;
+  while (diff != 0 && c < kContexts - 1) diff >>= 1, ++c;
+  return c;
+}
 
 void put_varint(Bytes& out, std::int64_t q) {
   std::uint64_t z = (static_cast<std::uint64_t>(q) << 1) ^ static_cast<std::uint64_t>(q >> 63);  // zigzag
@@ -190,9 +242,16 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw Error(path + ": max error must be finite and >= 0");
   if (h.max_level() > kMaxLevels) throw Error(path + ": more than 60 levels");
-  const std::uint32_t coding = values.empty()          ? kCodingNone
-                               : options.max_error > 0 ? kCodingQuantized
-                                                       : kCodingExact;
+  const bool v3 = options.version == 3;
+  if (options.integer_values &&
+      (!v3 || options.max_error != std::floor(options.max_error) || options.max_error >= 2147483648.0))
+    throw Error(path + ": integer values need format version 3 and an integer bound below 2^31");
+  if (!v3 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
+    throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
+  const std::uint32_t coding = values.empty()           ? kCodingNone
+                               : options.integer_values ? kCodingInteger
+                               : options.max_error > 0  ? kCodingQuantized
+                                                        : kCodingExact;
   const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
   if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
 
@@ -206,23 +265,32 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
   std::vector<double> u(values.empty() ? 0 : h.vertex_count());
   for (std::size_t v = 0; v < u.size(); ++v) u[v] = values[enc.to_original[v].value];
   std::vector<std::int64_t> codes;
-  if (coding == kCodingQuantized) {
-    try {
-      quantize_hierarchical(enc.rebuilt, u, options.max_error, &codes);
-    } catch (const Error& e) {
-      throw Error(path + ": " + e.what());
-    }
+  std::vector<double> decoded;  // integer coding: the contexts come from the decoded parents
+  try {
+    if (coding == kCodingQuantized) quantize_hierarchical(enc.rebuilt, u, options.max_error, &codes);
+    if (coding == kCodingInteger)
+      decoded = quantize_integer(enc.rebuilt, u, static_cast<std::int64_t>(options.max_error), &codes);
+  } catch (const Error& e) {
+    throw Error(path + ": " + e.what());
   }
   const auto put_values = [&](Bytes& out, std::size_t from, std::size_t to) {
+    if (coding == kCodingInteger) {
+      std::array<Bytes, kContexts> streams;
+      for (std::size_t v = from; v < to; ++v)
+        put_varint(streams[integer_context(enc.rebuilt, decoded, v)], codes[v]);
+      for (const Bytes& b : streams) put(out, static_cast<std::uint32_t>(b.size()));
+      for (const Bytes& b : streams) put_array(out, b);
+      return;
+    }
     for (std::size_t v = from; v < to; ++v) {
-      if (coding == kCodingQuantized) put_varint(out, codes[v]);
+      if (coding == kCodingQuantized || coding == kCodingInteger) put_varint(out, codes[v]);
       if (coding == kCodingExact) put(out, u[v]);
     }
   };
 
   Bytes file;
   put_bytes(file, kMagic, 8);
-  put(file, kVersion2);
+  put(file, v3 ? kVersion3 : kVersion2);
   put(file, static_cast<std::uint32_t>(D));
 
   // Step 2: HEAD.
@@ -231,7 +299,7 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
   put(head, static_cast<std::uint64_t>(h.element_count()));
   put(head, static_cast<std::uint32_t>(h.max_level()));
   put(head, coding);
-  put(head, coding == kCodingQuantized ? options.max_error : 0.0);
+  put(head, coding == kCodingQuantized || coding == kCodingInteger ? options.max_error : 0.0);
   for (double x : info.transform.spacing) put(head, x);
   for (double x : info.transform.origin) put(head, x);
   for (double x : info.transform.direction) put(head, x);
@@ -241,6 +309,13 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
   put(head, info.max_error);
   put(head, info.psnr_db);
   put(head, norm_code(info.norm));
+  if (v3) {
+    put(head, static_cast<std::uint32_t>(info.on_lattice ? 1 : 0));
+    put(head, static_cast<std::uint32_t>(info.on_lattice ? info.lattice_level : 0));
+    for (std::int64_t n : info.on_lattice ? info.data_dims : std::array<std::int64_t, 3>{1, 1, 1})
+      put(head, static_cast<std::uint64_t>(n));
+    put(head, info.sample_error_bound);
+  }
   put(head, static_cast<std::uint32_t>(info.space.size()));
   put(head, static_cast<std::uint32_t>(meta.size()));
   put_bytes(head, info.space.data(), info.space.size());
@@ -284,9 +359,15 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
                     sizeof(ElemKind) == 1,
                 "arrays are copied as raw bytes");
   check_info(path, info);
-  if (options.version != 1 && options.version != 2)
+  check_lattice(path, D, info);
+  check_lattice_box(path, h, info);
+  if (options.version == 1 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
+    throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
+  if (options.version == 1 && options.integer_values)
+    throw Error(path + ": integer values need format version 3");
+  if (options.version < 1 || options.version > 3)
     throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
-  if (options.version == 2) {
+  if (options.version >= 2) {
     if (!values.empty() && values.size() != h.vertex_count())
       throw Error(path + ": " + std::to_string(values.size()) + " values for " +
                   std::to_string(h.vertex_count()) + " vertices");
@@ -553,7 +634,34 @@ void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const
                 std::size_t from, std::size_t to, std::vector<double>& d, const char* what) {
   if (head.coding == kCodingNone) return;
   d.resize(to);
+  // Integer coding: one stream per context, each with its byte length first.
+  std::array<Bytes, kContexts> stream_bytes;
+  std::vector<Cursor> streams;
+  streams.reserve(kContexts);
+  if (head.coding == kCodingInteger) {
+    std::array<std::uint32_t, kContexts> length;
+    for (auto& n : length) n = c.get<std::uint32_t>(what);
+    for (int k = 0; k < kContexts; ++k) {
+      stream_bytes[k] = c.get_array<std::uint8_t>(length[k], what);
+      streams.emplace_back(path, stream_bytes[k].data(), stream_bytes[k].size());
+    }
+  }
   for (std::size_t v = from; v < to; ++v) {
+    if (head.coding == kCodingInteger) {
+      // Decoded values stay integers below 2^52 in magnitude (checked), so the f64 values
+      // are exact and the prediction's integer arithmetic cannot overflow.
+      const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+      const std::int64_t pred = p[0].valid() ? integer_prediction(static_cast<std::int64_t>(d[p[0].value]),
+                                                                  static_cast<std::int64_t>(d[p[1].value]))
+                                             : 0;
+      const std::int64_t q = get_varint(path, streams[integer_context(h, d, v)], what);
+      const auto step = static_cast<std::int64_t>(2 * head.bound + 1);
+      constexpr std::int64_t kMax = std::int64_t(1) << 52;
+      if (q > kMax / step || q < -kMax / step || std::llabs(pred + q * step) >= kMax)
+        throw Error(path + ": value of a vertex in " + what + " is out of range");
+      d[v] = static_cast<double>(pred + q * step);
+      continue;
+    }
     if (head.coding == kCodingExact) {
       d[v] = c.get<double>(what);
     } else {
@@ -563,6 +671,8 @@ void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const
     }
     if (!std::isfinite(d[v])) throw Error(path + ": value of a vertex in " + what + " is not finite");
   }
+  for (const Cursor& sc : streams)
+    if (sc.left() != 0) throw Error(path + ": trailing bytes in a value stream of " + std::string(what));
 }
 
 template <int D>
@@ -585,6 +695,7 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
   a.level.assign(ne0, 0);
   a.kind.assign(ne0, ElemKind::kCoarse);
   Hierarchy<D> h = Hierarchy<D>::from_arrays(std::move(a), path + ": invalid T0");
+  check_lattice_box(path, h, f);
   get_values(path, c, h, head, 0, nv0, f.values, "T0");
   if (c.left() != 0) throw Error(path + ": trailing bytes in the T0 section");
 
@@ -628,8 +739,10 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   std::uint32_t dim;
   std::memcpy(&dim, preamble + 12, 4);
   if (dim != 2 && dim != 3) throw Error(path + ": dimension " + std::to_string(dim) + " is not 2 or 3");
+  std::uint32_t version;
+  std::memcpy(&version, preamble + 8, 4);
   HierarchyFile f;
-  f.version = 2;
+  f.version = static_cast<int>(version);
   f.dim = static_cast<int>(dim);
   f.sections.push_back({"preamble", -1, kPreambleSize, kPreambleSize});
   SectionReader r(path, in, file_size);
@@ -650,14 +763,31 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   f.max_error = c.get<double>("header");
   f.psnr_db = c.get<double>("header");
   const auto norm = c.get<std::uint32_t>("header");
+  if (version == 3) {
+    const auto lattice = c.get<std::uint32_t>("header");
+    const auto level = c.get<std::uint32_t>("header");
+    for (auto& n : f.data_dims)
+      n = static_cast<std::int64_t>(
+          std::min<std::uint64_t>(c.get<std::uint64_t>("header"), std::uint64_t(1) << 62));
+    f.sample_error_bound = c.get<double>("header");
+    if (lattice > 1) throw Error(path + ": unknown lattice flag " + std::to_string(lattice));
+    f.on_lattice = lattice == 1;
+    f.lattice_level = static_cast<int>(std::min<std::uint32_t>(level, 1000));
+    if (!f.on_lattice && (level != 0 || f.data_dims != std::array<std::int64_t, 3>{1, 1, 1}))
+      throw Error(path + ": lattice fields set without the lattice flag");
+  }
   const auto ls = c.get<std::uint32_t>("header");
   const auto lm = c.get<std::uint32_t>("header");
   if (head.nv >= VertexId::kInvalidValue) throw Error(path + ": vertex count too large");
   if (head.ne == 0 || head.ne >= ElemId::kInvalidValue) throw Error(path + ": element count out of range");
   if (head.levels > kMaxLevels) throw Error(path + ": more than 60 levels");
-  if (head.coding > kCodingExact) throw Error(path + ": unknown value coding " + std::to_string(head.coding));
-  if (head.coding == kCodingQuantized ? !(head.bound > 0 && std::isfinite(head.bound)) : head.bound != 0)
-    throw Error(path + ": value bound does not fit the value coding");
+  if (head.coding > (version == 3 ? kCodingInteger : kCodingExact))
+    throw Error(path + ": unknown value coding " + std::to_string(head.coding));
+  const bool bound_ok = head.coding == kCodingQuantized ? head.bound > 0 && std::isfinite(head.bound)
+                        : head.coding == kCodingInteger ? head.bound >= 0 && head.bound < 2147483648.0 &&
+                                                              head.bound == std::floor(head.bound)
+                                                        : head.bound == 0;
+  if (!bound_ok) throw Error(path + ": value bound does not fit the value coding");
   for (double e : {f.rms_error, f.max_error})
     if (!std::isnan(e) && !(e >= 0 && std::isfinite(e))) throw Error(path + ": error figures out of range");
   if (norm > 2) throw Error(path + ": unknown norm " + std::to_string(norm));
@@ -675,8 +805,10 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
     if (!f.metadata.is_object()) throw Error(path + ": metadata is not a JSON object");
   }
   check_info(path, f);
+  check_lattice(path, f.dim, f);
   f.file_levels = static_cast<int>(head.levels);
   f.value_bound = head.bound;
+  f.integer_values = head.coding == kCodingInteger;
   if (dim == 2)
     read_v2_body<2>(path, r, head, max_level, f);
   else
@@ -722,14 +854,14 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level) {
       throw Error(path + ": not an mlfe hierarchy file (bad magic)");
     if (file_size < 12) throw Error(path + ": truncated header");
     std::memcpy(&version, pre + 8, 4);
-    if (version == kVersion2) {
+    if (version == kVersion2 || version == kVersion3) {
       if (file_size < kPreambleSize) throw Error(path + ": truncated header");
       return read_v2(path, in, file_size, pre, max_level);
     }
   }
   if (version != kVersion)
     throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) +
-                " (this mlfe reads 1 and 2)");
+                " (this mlfe reads 1, 2 and 3)");
   HierarchyFile f = read_v1(path);
   if (max_level >= 0 && max_level < f.file_levels) {
     if (f.dim == 2)

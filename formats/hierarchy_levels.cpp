@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <string>
 #include <unordered_set>
 
@@ -164,6 +165,35 @@ std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vect
   return d;
 }
 
+template <int D>
+std::vector<double> quantize_integer(const Hierarchy<D>& h, const std::vector<double>& u,
+                                     std::int64_t max_error, std::vector<std::int64_t>* codes) {
+  MLFE_CHECK(u.size() == h.vertex_count());
+  MLFE_CHECK(max_error >= 0 && max_error < (std::int64_t(1) << 31));
+  constexpr double kMax = 4503599627370496.0;  // 2^52
+  const std::int64_t step = 2 * max_error + 1;
+  std::vector<std::int64_t> d(u.size());
+  if (codes) codes->assign(u.size(), 0);
+  for (std::size_t v = 0; v < u.size(); ++v) {
+    if (!(std::fabs(u[v]) < kMax) || u[v] != std::nearbyint(u[v]))
+      throw Error("value " + std::to_string(u[v]) + " is not an integer of magnitude below 2^52");
+    const auto x = static_cast<std::int64_t>(u[v]);
+    const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+    const std::int64_t pred = p[0].valid() ? integer_prediction(d[p[0].value], d[p[1].value]) : 0;
+    // Floor division of r + E by the step (r + E may be negative).
+    const std::int64_t r = x - pred + max_error;
+    const std::int64_t q = r >= 0 ? r / step : -((-r + step - 1) / step);
+    d[v] = pred + q * step;
+    MLFE_CHECK(std::llabs(d[v] - x) <= max_error);
+    if (codes) (*codes)[v] = q;
+  }
+  return std::vector<double>(d.begin(), d.end());
+}
+
+template std::vector<double> quantize_integer<2>(const Hierarchy<2>&, const std::vector<double>&,
+                                                 std::int64_t, std::vector<std::int64_t>*);
+template std::vector<double> quantize_integer<3>(const Hierarchy<3>&, const std::vector<double>&,
+                                                 std::int64_t, std::vector<std::int64_t>*);
 template struct LevelEncoding<2>;
 template struct LevelEncoding<3>;
 template std::vector<ElemId> refinement_candidates<2>(const Hierarchy<2>&, int);

@@ -59,6 +59,10 @@ struct BuildOptions {
   /// data's interpolant, the assets' source anyway; iterations stay empty and no RMS error is
   /// reported). convert() sets it from its outputs.
   bool solve_u = true;
+  /// ≥ 0: the error-bounded interpolating build (ApproximationOptions::max_sample_error, grids
+  /// only): every sample within this of the hierarchy's interpolant; rms, threshold and the
+  /// iso-values' refinement are then not used.
+  double max_sample_error = -1;
   /// Refinement stops at this budget (Built::memory_limited); the default is half the RAM.
   MemoryBudget max_memory;
   /// Progress of the refine-solve iterations and of the surface passes; may be empty.
@@ -156,6 +160,14 @@ Built build(const TetMesh& mesh, const BuildOptions& options, const std::vector<
 
 /// Loads a hierarchy file as a Built (values required).
 Built built_from_file(const std::string& path);
+
+/// The lattice fields of a hierarchy file (HierarchyFileInfo::on_lattice, lattice_level,
+/// data_dims) from an approximation, and back: the approximation's on_lattice, lattice and
+/// data_extent from a file's fields and frame (off the lattice: on_lattice false).
+template <int D>
+void set_lattice_info(const Approximation<D>& a, HierarchyFileInfo& info);
+template <int D>
+void set_lattice(const HierarchyFileInfo& info, Approximation<D>& a);
 
 /// Writes the hierarchy (.mlfeh) with provenance.
 void write_built(const std::string& path, const Built& b, const nlohmann::json& provenance);

@@ -1,9 +1,10 @@
-// `mlfe build` writes the compact v2 hierarchy file; `mlfe info` reports it; bad files exit 2.
+// `mlfe build` writes the compact v3 hierarchy file; `mlfe info` reports it; bad files exit 2.
 #include <gtest/gtest.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -30,21 +31,22 @@ RunResult run(const std::string& args) { return test::run_mlfe(args); }
 
 TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
   const std::string h = scratch() + "/skull.mlfeh", rep = scratch() + "/skull.json";
-  const RunResult r = run("build " + kSkull + " -o " + h + " --report " + rep + " --max-error 0.02");
+  const RunResult r = run("build " + kSkull + " -o " + h + " --report " + rep + " --psnr 50");
   ASSERT_EQ(r.status, 0) << r.err;
   const HierarchyFile f = read_hierarchy(h);
-  EXPECT_EQ(f.version, 2);
-  EXPECT_EQ(f.value_bound, 0.02);
+  EXPECT_EQ(f.version, 3);
+  EXPECT_TRUE(f.on_lattice);
+  EXPECT_TRUE(std::isnan(f.sample_error_bound));  // a least-squares build promises no bound
   const auto report = nlohmann::json::parse(read_bytes(rep));
+  EXPECT_EQ(f.value_bound, report["file"]["value_bound"].get<double>());
   // The input is 1 MiB of float32; the target is ≤ 1/10 of gzip -9 of it.
   EXPECT_LT(fs::file_size(h), fs::file_size(kSkull) / 20);
   EXPECT_EQ(report["file"]["bytes"].get<double>(), static_cast<double>(fs::file_size(h)));
   EXPECT_EQ(report["file"]["rms_error"].get<double>(), f.rms_error);
   EXPECT_EQ(report["file"]["max_error"].get<double>(), f.max_error);
-  // The file's figures are on the voxels, the solver's on the quadrature of the trilinear
-  // interpolant: the same order, the quantization adding a little.
-  EXPECT_GT(f.rms_error, 0.5 * report["rms_error"].get<double>());
-  EXPECT_LT(f.rms_error, 3 * report["rms_error"].get<double>());
+  // The file's figures and the build's are both at the samples; the quantization adds a little.
+  EXPECT_GE(f.rms_error, 0.99 * report["rms_error"].get<double>());
+  EXPECT_LT(f.rms_error, 1.5 * report["rms_error"].get<double>());
   EXPECT_GE(f.max_error, f.rms_error);
   EXPECT_EQ(f.norm, "l2");
 }
@@ -66,8 +68,10 @@ TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
   const RunResult r = run("info " + h + " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
-  EXPECT_EQ(j["version"], 2);
+  EXPECT_EQ(j["version"], 3);
   EXPECT_EQ(j["values"], "quantized");
+  EXPECT_EQ(j["on_lattice"], true);
+  EXPECT_EQ(j["data_dims"], nlohmann::json::array({64, 64, 64}));
   const int levels = j["levels"];
   ASSERT_GE(levels, 3);
   EXPECT_EQ(j["per_level"].size(), static_cast<std::size_t>(levels));
@@ -78,6 +82,7 @@ TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
   const RunResult t = run("info " + h);
   EXPECT_NE(t.out.find("level 1"), std::string::npos) << t.out;
   EXPECT_NE(t.out.find("PSNR"), std::string::npos) << t.out;
+  EXPECT_NE(t.out.find("lattice:   level 6"), std::string::npos) << t.out;
 }
 
 TEST(HierarchyFileCommand, ACorruptFileExitsWithStatus2AndNamesIt) {

@@ -96,6 +96,15 @@ struct ApproximationOptions {
   /// at the samples (sample_lattice.h). false keeps the paper's box over the extent and the
   /// continuous L2 norm (always the case for fields without samples).
   bool lattice = true;
+  /// ≥ 0: the error-bounded interpolating build instead of least squares (fields with samples
+  /// on the lattice; approximate() throws mlfe::Error otherwise). The values are the samples
+  /// themselves at the vertices (level L's vertices are the samples) and leaves are refined
+  /// while a sample they own deviates from their linear interpolant by more than this (data
+  /// units). Level L interpolates exactly, so the loop always ends with every sample within
+  /// the bound, unless max_vertices, max_memory_bytes or max_level stop it first (stop_reason
+  /// says so). Nothing is solved: iterations holds one row, with the errors at the samples;
+  /// target_rms, threshold and the iso-value options are not used.
+  double max_sample_error = -1;
   Preconditioner preconditioner = Preconditioner::kAuto;
   double cg_tolerance = 1e-9;   ///< relative residual
   int direct_solve_max = 1000;  ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
@@ -118,6 +127,12 @@ struct Approximation {
   bool on_lattice = false;
   SampleLattice lattice;
   std::array<double, 3> data_extent{0, 0, 0};
+  /// The interpolating build's bound (ApproximationOptions::max_sample_error), else −1.
+  double max_sample_error = -1;
+  /// Interpolating build on integer samples: every value is an integer (samples, and in the
+  /// padding floor((v_a + v_b) / 2) of the parents instead of their mean), so a file can store
+  /// them losslessly as integer surpluses.
+  bool integer_values = false;
   std::string stop_reason;
   bool memory_limited = false;  ///< refinement stopped at max_memory_bytes
   /// Surface-driven builds: f at every vertex (the nodal values of f's interpolant, which the

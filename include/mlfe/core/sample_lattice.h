@@ -30,10 +30,12 @@
 // in exact integer arithmetic, so no sample is counted twice or missed.
 #pragma once
 #include <mlfe/core/element_integrals.h>
+#include <mlfe/core/hierarchy.h>
 #include <mlfe/core/scalar_grid.h>
 
 #include <array>
 #include <cstdint>
+#include <vector>
 
 namespace mlfe {
 
@@ -67,9 +69,34 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
                                      const SampleLattice& lattice, const ScalarGrid& grid, const Field& f,
                                      bool gradients);
 
+/// How far the samples an element owns (the rule above) are from the linear interpolant of
+/// the corner values v: the largest |f_s − Σ λ_i v_i|, the sum of squares and the count. At a
+/// sample on a corner, and on an element whose corner values are equal, the interpolant is
+/// exact; elsewhere it carries the rounding of double arithmetic (~1e-16 relative). Stops scanning once the
+/// largest exceeds `stop` (then sum2 and samples are partial). Corners as for sample_integrals.
+struct SampleDeviation {
+  double max = 0;
+  double sum2 = 0;
+  std::int64_t samples = 0;
+};
+template <int D>
+SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p,
+                                 const SampleLattice& lattice, const ScalarGrid& grid,
+                                 const std::array<double, D + 1>& v, double stop);
+
 /// Whether the simplex with corners p (local frame) lies wholly outside the data box's
 /// interior: it owns no sample and is never refined.
 template <int D>
 bool outside_data(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lattice);
+
+/// A leaf mesh of exactly the data's box, for exports (simulation meshes): refines `h` until
+/// no leaf straddles the box's upper faces (a face is a plane of level L's lattice, so this
+/// ends there at the latest), giving new vertices the mean of their edge's values (u is
+/// linear along the edge; where a green family is replaced by its parent's red children, u
+/// changes within those elements to the interpolant of the same vertex values), and returns
+/// the leaves inside the box in id order. The caller's hierarchy and values change.
+template <int D>
+std::vector<ElemId> leaves_in_data(Hierarchy<D>& h, std::vector<double>& values,
+                                   const SampleLattice& lattice);
 
 }  // namespace mlfe

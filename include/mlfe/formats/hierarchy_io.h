@@ -55,10 +55,19 @@
 // adds, as hierarchical-basis codes quantized against the decoded coarser level (or exact
 // f64). Any prefix of complete levels is a valid, coarser file content.
 //
+// ---- Format, version 3 (docs/mlfeh-v3.md) ----
+//
+// Version 2's layout with a longer HEAD: whether the hierarchy is on the samples' lattice
+// (core/sample_lattice.h), the lattice level L and the data's samples per axis (so readers
+// know the data's grid and box inside T0's padded cube), and the error bound at the samples
+// of an error-bounded build; and one more value coding, integer surpluses (lossless for
+// integer data at bound 0).
+//
 #pragma once
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/scalar_grid.h>
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -81,6 +90,15 @@ struct HierarchyFileInfo {
   double rms_error = std::numeric_limits<double>::quiet_NaN();
   double max_error = std::numeric_limits<double>::quiet_NaN();
   double psnr_db = std::numeric_limits<double>::quiet_NaN();
+  /// v3: the hierarchy is on the samples' lattice: T0 is the cube 2^lattice_level samples
+  /// wide (local frame [0, 2^L·spacing]) and data_dims are the data's samples per axis (1 on
+  /// unused axes), its box [0, (n − 1)·spacing]. Earlier versions: false.
+  bool on_lattice = false;
+  int lattice_level = 0;
+  std::array<std::int64_t, 3> data_dims{1, 1, 1};
+  /// v3: every sample of the data is within this of the stored function as decoded (an
+  /// error-bounded build, `mlfe build --max-error`); NaN: no such bound.
+  double sample_error_bound = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// One section of a file as read: name ("header", "preamble", "T0", "level k", "arrays"),
@@ -98,19 +116,27 @@ struct HierarchyFile : HierarchyFileInfo {
   std::vector<double> values;  ///< u per vertex, or empty when the file stores none
   int version = 1;             ///< format version of the file read
   int file_levels = 0;         ///< max element level the file holds (v1: of its hierarchy)
-  /// v2 with quantized values: every value is within this bound of the writer's (0: exact
+  /// v2/v3 with quantized values: every value is within this bound of the writer's (0: exact
   /// values or none).
   double value_bound = 0;
+  /// v3: the values are stored as integer surpluses (integer values; lossless when
+  /// value_bound is 0).
+  bool integer_values = false;
   std::vector<HierarchySection> sections;  ///< what was read, in file order
 };
 
 struct HierarchyWriteOptions {
   bool compress = true;  ///< zstd-compress the array section (v1) or the sections (v2)
   int zstd_level = 3;
-  int version = 1;  ///< 1 keeps the ids and exact values; 2 is the compact progressive file
-  /// v2: quantize values so every decoded vertex value is within this bound (data units) of
-  /// the given one; 0 stores them exactly (f64).
+  /// 1 keeps the ids and exact values; 2 is the compact progressive file; 3 adds the lattice
+  /// and the integer coding (docs/mlfeh-v3.md).
+  int version = 1;
+  /// v2/v3: quantize values so every decoded vertex value is within this bound (data units) of
+  /// the given one; 0 stores them exactly (f64, or integers with integer_values).
   double max_error = 0;
+  /// v3: the values are integers (else mlfe::Error), stored as integer surpluses; max_error
+  /// must then be an integer (0: lossless).
+  bool integer_values = false;
 };
 
 /// Version 2 throws LevelRebuildError (formats/hierarchy_levels.h) for a hierarchy its
@@ -127,7 +153,7 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
                      const HierarchyWriteOptions& options = {});
 
-/// Reads and fully validates a hierarchy file (v1 or v2). Checks, in order: magic, version, the
+/// Reads and fully validates a hierarchy file (v1, v2 or v3). Checks, in order: magic, version, the
 /// header fields, the section sizes against the file size (before allocating anything large),
 /// the CRCs, the decompressed sizes, every array (v1: Hierarchy::from_arrays; v2: T0, marks and
 /// counts as the rebuild proceeds) and the values (finite). Throws mlfe::Error with a one-line

@@ -75,6 +75,20 @@ template <int D>
 std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vector<double>& u,
                                           double max_error, std::vector<std::int64_t>* codes = nullptr);
 
+/// Integer hierarchical-basis quantization (the .mlfeh v3 integer coding): values must be
+/// integers of magnitude < 2^52 (else mlfe::Error). Visiting vertices in id order, the
+/// prediction is 0 for vertices of T0 and floor((d_a + d_b) / 2) of the decoded parents
+/// otherwise; the code is q = floor((u − p + E) / (2E + 1)) and the decoded value p + q·(2E + 1),
+/// within E of u (E = 0: exactly u, lossless). Returns the decoded values; `codes` receives q.
+template <int D>
+std::vector<double> quantize_integer(const Hierarchy<D>& h, const std::vector<double>& u,
+                                     std::int64_t max_error, std::vector<std::int64_t>* codes = nullptr);
+
+/// The integer prediction of that coding: floor((a + b) / 2), exact for |a|, |b| < 2^62.
+inline std::int64_t integer_prediction(std::int64_t a, std::int64_t b) {
+  return (a >> 1) + (b >> 1) + (a & b & 1);
+}
+
 extern template struct LevelEncoding<2>;
 extern template struct LevelEncoding<3>;
 
