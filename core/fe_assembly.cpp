@@ -73,8 +73,11 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
   auto sampled_at = [&](std::size_t i) -> const ElementIntegrals<D>& {
     return index == IntegralIndex::kLeafOrder ? (*integrals)[i] : (*integrals)[leaves[i].value];
   };
+  // Sampled mass without a gradient term is read from the integrals in place (a copy would
+  // be 128 bytes per leaf).
+  const bool in_place = sampled && gradient_weight == 0;
   const bool with_grad = gradient_weight != 0 || sampled;
-  std::vector<double> local(with_grad ? ne * kLocal : ne);
+  std::vector<double> local(in_place ? 0 : with_grad ? ne * kLocal : ne);
   std::vector<std::array<std::uint32_t, D + 1>> corners(ne);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, ne, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -85,11 +88,8 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
             local[i] = P1Element<D>::measure_of(element_points(h, leaves[i]));
             continue;
           }
-          if (sampled && gradient_weight == 0) {
-            const auto& in = sampled_at(i);
-            MLFE_CHECK(in.sampled);
-            for (int a = 0; a <= D; ++a)
-              for (int b = 0; b <= D; ++b) local[i * kLocal + a * (D + 1) + b] = in.mass_at(a, b);
+          if (in_place) {
+            MLFE_CHECK(sampled_at(i).sampled);
             continue;
           }
           const P1Element<D> el(element_points(h, leaves[i]));
@@ -126,8 +126,9 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
               const int a = static_cast<int>(inc[k] % (D + 1));
               const auto& c = corners[i];
               for (int bb = 0; bb <= D; ++bb) {
-                const double x =
-                    with_grad ? local[i * kLocal + a * (D + 1) + bb] : P1Element<D>::mass_of(local[i], a, bb);
+                const double x = in_place    ? sampled_at(i).mass_at(a, bb)
+                                 : with_grad ? local[i * kLocal + a * (D + 1) + bb]
+                                             : P1Element<D>::mass_of(local[i], a, bb);
                 std::uint32_t& s = slot[c[bb]];
                 if (s == kNone) {
                   s = static_cast<std::uint32_t>(row.size());

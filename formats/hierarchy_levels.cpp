@@ -153,7 +153,15 @@ std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vect
       // Rounding of the product or the sum: the neighbouring code is within the bound.
       const std::int64_t alt = dv > u[v] ? q - 1 : q + 1;
       const double da = pred + static_cast<double>(alt) * step;
-      if (!(std::fabs(da - u[v]) <= max_error))
+      // A value exactly between two codes (u = 0 under a prediction that is an odd multiple of
+      // E, common over a zero background) is E from both; rounding of the product can put
+      // either an ulp beyond E.
+      if (!(std::fabs(da - u[v]) <= max_error) && std::fabs(dv - u[v]) <= max_error * (1 + 1e-12)) {
+        d[v] = dv;
+        if (codes) (*codes)[v] = q;
+        continue;
+      }
+      if (!(std::fabs(da - u[v]) <= max_error * (1 + 1e-12)))
         throw Error("max error " + std::to_string(max_error) +
                     " is below the rounding of values of magnitude " + std::to_string(std::fabs(u[v])));
       q = alt;

@@ -67,7 +67,8 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level = -1);
 /// prediction is 0 for vertices of T0 and the mean of the two decoded parent values otherwise;
 /// the stored integer is q = round((u − prediction) / (2E)) and the decoded value
 /// prediction + q·2E (q ± 1 when rounding of the product would leave the bound). Returns the
-/// decoded values, every one within `max_error` (> 0) of u; `codes` (if given) receives q.
+/// decoded values, every one within `max_error` (> 0) of u (an exact tie between two codes may
+/// exceed it by rounding, at most 1e-12 relative); `codes` (if given) receives q.
 /// The decoded value of a vertex depends only on its own value and its parents' decoded values,
 /// so it is the same whatever the vertex numbering. Throws mlfe::Error when |q| would reach 2^52
 /// (a bound too small for the values).
