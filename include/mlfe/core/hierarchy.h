@@ -8,6 +8,10 @@
 //       red descendants of a tetrahedron fall into at most 3 similarity classes; green
 //       closure with the four types kept by Grosso, Lürig & Ertl (IEEE Vis 1997, Fig. 3).
 //
+// For gridded input T0 is a cube 2^L samples wide and level L's vertices are the samples (the
+// samples' lattice, drawn in sample_lattice.h); the rules below put every level's vertices on
+// that lattice, since each new vertex bisects an edge between lattice points.
+//
 // Green elements are never refined: when one must be, its parent loses its green children and
 // is red-refined instead, and the closure runs again. So every vertex ever created is the
 // midpoint of an edge of a red-refined element; the edge→midpoint map records both parents,
