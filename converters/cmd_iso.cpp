@@ -18,7 +18,8 @@ namespace mlfe::cli {
 namespace {
 
 // The volume given for snapping must be the one the hierarchy was built from: same frame and
-// the same box (the hierarchy's coarse mesh spans the grid, [0, (n - 1) * spacing] per axis).
+// the same box ([0, (n - 1) * spacing] per axis: the hierarchy's coarse mesh, or its data box
+// on the samples' lattice).
 void check_volume_matches(const std::string& volume, const ScalarGrid& g, const std::string& hierarchy,
                           const Built& b) {
   if (b.dim() != 3 || g.dim != 3)
@@ -32,6 +33,8 @@ void check_volume_matches(const std::string& volume, const ScalarGrid& g, const 
   for (std::size_t e = 0; e < h.coarse_count(); ++e)
     for (VertexId v : h.cell(ElemId(std::uint32_t(e))))
       for (int a = 0; a < 3; ++a) hi[a] = std::max(hi[a], h.point(v)[a]);
+  // On the samples' lattice T0 is a padded cube: the data's box is the one to match.
+  if (b.get<3>().on_lattice) hi = b.get<3>().data_extent;
   for (int a = 0; a < 3; ++a) {
     if (!near(t.spacing[a], b.transform.spacing[a]) || !near(t.origin[a], b.transform.origin[a]))
       throw Error(volume + ": spacing or origin differ from the hierarchy's (" + hierarchy + ")");

@@ -543,7 +543,9 @@ TEST(Convert, IsoAwareRefinementDoesNotStall) {
       break;
     }
   EXPECT_LE(its.size(), first_small + 2);
-  EXPECT_NE(r["stop_reason"].get<std::string>().find("stalled"), std::string::npos) << r["stop_reason"];
+  // On the samples' lattice the loop may also meet its target before growth falls below 1 %.
+  const std::string stop = r["stop_reason"].get<std::string>();
+  EXPECT_TRUE(stop.find("stalled") != std::string::npos || stop == "target RMS error reached") << stop;
 }
 
 // Defaults at work: a big sphere and, 25 voxels away, a sphere two voxels across. The default
