@@ -2,6 +2,7 @@
 // OpenVDB) on the grid it was built from, or its leaf mesh (VTK .vtu, Gmsh .msh) with the
 // values and element levels, in the file's physical frame.
 #include <mlfe/core/error.h>
+#include <mlfe/core/usage_error.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_resample.h>
@@ -16,6 +17,7 @@
 #include <string>
 
 #include "converters/commands.h"
+#include "converters/volume_options.h"
 
 namespace mlfe::cli {
 namespace {
@@ -63,11 +65,14 @@ void run_export(const ExportState& s) {
   if (ext != ".vtu" && ext != ".msh" && !is_volume_output(s.output))
     throw Error(s.output + ": unknown output type '" + ext +
                 "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
+  check_distinct_files(
+      {{"input", s.input}},
+      {{"--output", s.output}, {"--output's sidecar", ext == ".raw" ? s.output + ".json" : ""}});
   check_output_path(s.output, {});
   const HierarchyFile f = read_hierarchy(s.input, s.level);
   if (s.level > f.file_levels)
-    throw Error(s.input + ": --level " + std::to_string(s.level) + " but the file has " +
-                std::to_string(f.file_levels) + " levels");
+    throw UsageError(s.input + ": --level " + std::to_string(s.level) + " but the file has " +
+                     std::to_string(f.file_levels) + " levels");
   if (f.dim == 2)
     export_hierarchy(s, f, std::get<Hierarchy<2>>(f.hierarchy));
   else
