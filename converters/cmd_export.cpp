@@ -62,12 +62,12 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
 
 void run_export(const ExportState& s) {
   const std::string ext = lower_extension(s.output);
-  if (ext != ".vtu" && ext != ".msh" && !is_volume_output(s.output))
-    throw Error(s.output + ": unknown output type '" + ext +
-                "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_distinct_files(
       {{"input", s.input}},
       {{"--output", s.output}, {"--output's sidecar", ext == ".raw" ? s.output + ".json" : ""}});
+  if (ext != ".vtu" && ext != ".msh" && !is_volume_output(s.output))
+    throw Error(s.output + ": unknown output type '" + ext +
+                "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_output_path(s.output, {});
   const HierarchyFile f = read_hierarchy(s.input, s.level);
   if (s.level > f.file_levels)

@@ -23,7 +23,15 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
   cmd->add_option("--max-vertices", p.max_vertices,
                   "vertex budget (never exceeded; at least the coarsest mesh's 8 vertices, 4 for a 2D height "
                   "field) [default: none]")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            return text.find_first_not_of("0123456789") == std::string::npos &&
+                           text.find_first_not_of('0') != std::string::npos
+                       ? std::string()
+                       : "expected a whole number of vertices >= 1 (omit the option for no budget), got '" +
+                             text + "'";
+          },
+          "N"));
   cmd->add_option("--max-level", p.max_level, "deepest refinement level")
       ->check(CLI::Range(0, 40))
       ->capture_default_str();

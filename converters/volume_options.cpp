@@ -53,9 +53,12 @@ namespace {
 
 bool same_file(const std::string& a, const std::string& b) {
   namespace fs = std::filesystem;
+  // weakly_canonical keeps a relative path relative when nothing of it exists yet.
+  std::error_code ea, eb;
+  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea);
+  const fs::path cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
+  if (!ea && !eb && ca == cb) return true;
   std::error_code ec;
-  if (fs::weakly_canonical(a, ec) == fs::weakly_canonical(b, ec) && !ec) return true;
-  ec.clear();
   return fs::equivalent(a, b, ec) && !ec;
 }
 
@@ -68,7 +71,8 @@ void check_distinct_files(const NamedPaths& inputs, const NamedPaths& outputs) {
     const std::string target = output_target(path);
     for (const auto& [in_name, in_path] : inputs)
       if (!in_path.empty() && same_file(target, in_path))
-        throw CLI::ValidationError(name, path + " is the input " + in_name + " (it would be overwritten)");
+        throw CLI::ValidationError(name,
+                                   path + " is also an input (" + in_name + "); it would be overwritten");
     for (const auto& [other, other_target] : written)
       if (same_file(target, other_target))
         throw CLI::ValidationError(name,

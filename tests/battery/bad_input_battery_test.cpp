@@ -5,7 +5,6 @@
 // child's peak resident memory.
 #include <fcntl.h>
 #include <gtest/gtest.h>
-#include <mlfe/formats/tet_mesh_reader.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -36,7 +35,7 @@ using mlfe::test::test_data_path;
 
 namespace {
 
-struct Run {
+struct ChildRun {
   int status = -1;  ///< exit status, -1 when killed by a signal
   int signal = 0;
   std::string out, err;
@@ -50,7 +49,7 @@ std::vector<std::string> split_args(const std::string& text) {
 
 /// Runs `mlfe ARGS` in `dir` (relative paths are the case's files). With fsize_limit, writes
 /// past that many bytes per file fail with EFBIG (SIGXFSZ ignored), like a full disk.
-Run run_in(const std::string& dir, const std::string& args, rlim_t fsize_limit = 0) {
+ChildRun run_in(const std::string& dir, const std::string& args, rlim_t fsize_limit = 0) {
   const std::string out = dir + "/.stdout", err = dir + "/.stderr";
   const pid_t pid = fork();
   if (pid == 0) {
@@ -73,7 +72,7 @@ Run run_in(const std::string& dir, const std::string& args, rlim_t fsize_limit =
     execv(MLFE_BINARY, argv.data());
     _exit(127);
   }
-  Run r;
+  ChildRun r;
   int st = 0;
   rusage ru{};
   wait4(pid, &st, 0, &ru);
@@ -253,13 +252,13 @@ std::vector<Case> battery() {
        none,
        "convert ct.nrrd --iso 2.5 -o o.glb --report ct.nrrd",
        1,
-       "ct.nrrd is the input",
+       "ct.nrrd is also an input",
        {"o.glb"}},
       {"convert_output_is_the_input_via_symlink",
        [](const std::string& d) { fs::create_symlink("ct.nrrd", d + "/link.ply"); },
        "convert ct.nrrd --iso 2.5 -o link.ply",
        1,
-       "is the input",
+       "is also an input",
        {}},
       {"convert_two_outputs_one_path",
        none,
@@ -273,9 +272,14 @@ std::vector<Case> battery() {
        1,
        "two outputs on one path",
        {"o.mlfeh"}},
-      {"export_output_is_the_input", none, "export h.mlfeh -o h.mlfeh", 1, "is the input", {}},
+      {"export_output_is_the_input", none, "export h.mlfeh -o h.mlfeh", 1, "is also an input", {}},
       {"render_png_is_the_exr", none, "render h.mlfeh -o x.exr --png x.exr", 1, "two outputs", {"x.exr"}},
-      {"compare_report_is_an_input", none, "compare h.mlfeh h.mlfeh --report h.mlfeh", 2, "is the input", {}},
+      {"compare_report_is_an_input",
+       none,
+       "compare h.mlfeh h.mlfeh --report h.mlfeh",
+       2,
+       "is also an input",
+       {}},
 
       // A full disk (here: a file size limit) while writing: exit 2, no file under the final name.
       {"full_disk_convert_ply",
@@ -527,7 +531,7 @@ TEST_P(Battery, ExitStatusMessageNoOutputBoundedMemory) {
   standard_inputs(d);
   c.make(d);
   const std::string ct = read_bytes(d + "/ct.nrrd");
-  const Run r = run_in(d, c.args, c.fsize_limit);
+  const ChildRun r = run_in(d, c.args, c.fsize_limit);
   EXPECT_EQ(r.signal, 0) << "crashed: mlfe " << c.args;
   EXPECT_EQ(r.status, c.status) << "mlfe " << c.args << "\nstderr: " << r.err << "\nstdout: " << r.out;
   EXPECT_TRUE(std::regex_search(r.err, std::regex(c.message)))
@@ -555,7 +559,7 @@ TEST(OutputPath, SymlinkIsFollowedAndModeKept) {
   write_bytes(d + "/real.ply", "old");
   chmod((d + "/real.ply").c_str(), 0600);
   fs::create_symlink("real.ply", d + "/link.ply");
-  const Run r = run_in(d, "convert ct.nrrd --iso 2.5 -o link.ply --quiet");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o link.ply --quiet");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_TRUE(fs::is_symlink(d + "/link.ply"));
   EXPECT_NE(read_bytes(d + "/real.ply"), "old");
@@ -569,7 +573,7 @@ TEST(OutputPath, OutputThatIsAFolderOrDeviceIsRefused) {
   const std::string d = scratch_dir("battery/device");
   standard_inputs(d);
   fs::create_symlink("/dev/null", d + "/null.ply");
-  const Run r = run_in(d, "convert ct.nrrd --iso 2.5 -o null.ply --quiet");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o null.ply --quiet");
   EXPECT_EQ(r.status, 2) << r.err;
   EXPECT_NE(r.err.find("not a regular file"), std::string::npos) << r.err;
 }
@@ -585,22 +589,39 @@ TEST(OutputPath, TemporariesOfKilledRunsAreRemovedNextTime) {
   const std::string live = d + "/.tmp-mlfe-" + std::to_string(getpid()) + "-other.glb";
   write_bytes(stale, "partial");
   write_bytes(live, "being written");
-  const Run r = run_in(d, "convert ct.nrrd --iso 2.5 -o o.ply --quiet");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o o.ply --quiet");
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_FALSE(fs::exists(stale));
   EXPECT_TRUE(fs::exists(live)) << "a running writer's temporary was removed";
   fs::remove(live);
 }
 
-// Every tetrahedron of a written .vtu has positive volume (VTK's convention).
+// Every tetrahedron of a written .vtu has positive volume (VTK's convention). The file is read
+// here from mlfe's own layout (raw appended Float64 points, Int64 connectivity, UInt64 sizes),
+// because refine's .vtu has no point values for read_tet_mesh.
 double min_signed_volume(const std::string& vtu) {
-  const mlfe::TetMesh m = mlfe::read_tet_mesh(vtu);
+  const std::string f = read_bytes(vtu);
+  const auto block = [&](const std::string& name) {
+    const std::size_t at = f.find("Name=\"" + name + "\"");
+    const std::size_t off = f.find("offset=\"", at);
+    const std::uint64_t offset = std::stoull(f.substr(off + 8));
+    const std::size_t data = f.find('_', f.find("<AppendedData")) + 1 + offset;
+    std::uint64_t bytes = 0;
+    std::memcpy(&bytes, f.data() + data, 8);
+    return std::string(f.data() + data + 8, bytes);
+  };
+  const std::string pts = block("Points"), conn = block("connectivity");
+  std::vector<double> p(pts.size() / 8);
+  std::memcpy(p.data(), pts.data(), pts.size());
+  std::vector<std::int64_t> c(conn.size() / 8);
+  std::memcpy(c.data(), conn.data(), conn.size());
+  EXPECT_GT(c.size(), 0u) << vtu;
   double lo = 1e300;
-  for (const auto& t : m.tets) {
-    const auto& a = m.points[t[0]];
+  for (std::size_t t = 0; t + 3 < c.size(); t += 4) {
+    const double* a = &p[3 * c[t]];
     double d[3][3];
     for (int k = 0; k < 3; ++k)
-      for (int r = 0; r < 3; ++r) d[k][r] = m.points[t[k + 1]][r] - a[r];
+      for (int r = 0; r < 3; ++r) d[k][r] = p[3 * c[t + k + 1] + r] - a[r];
     lo = std::min(lo, d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
                           d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
                           d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]));
@@ -626,14 +647,14 @@ TEST(CompareEncoding, DracoGlbEqualsItsNoDracoTwin) {
   ASSERT_EQ(run_in(d, "convert ct.nrrd --iso 2.5 -o plain.glb --no-draco --quiet").status, 0);
   // Draco rounds each coordinate to its tolerance (voxel/10 by default, 0.39 mm here), so
   // the copies agree within sqrt(3) times that (the README's rule): 0.68 mm.
-  const Run r = run_in(d, "compare plain.glb draco.glb --tolerance 7e-4");
+  const ChildRun r = run_in(d, "compare plain.glb draco.glb --tolerance 7e-4");
   EXPECT_EQ(r.status, 0) << r.out << r.err;
 }
 
 TEST(NiftiNan, NanAsReplacesThemAsForOtherReaders) {
   const std::string d = scratch_dir("battery/nifti_nan_as");
   write_bytes(d + "/nan.nii", nifti_file(352, NAN));
-  const Run r = run_in(d, "info nan.nii --nan-as 7");
+  const ChildRun r = run_in(d, "info nan.nii --nan-as 7");
   EXPECT_EQ(r.status, 0) << r.err;
   EXPECT_NE((r.out + r.err).find("replaced by 7"), std::string::npos) << r.out << r.err;
 }
