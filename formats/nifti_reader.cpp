@@ -107,6 +107,7 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   // libnifti prints "** ERROR" lines for bad datatypes and dims even at debug level 0, so
   // those fields are checked here first (NIfTI-1: dim int16[8] at 40, datatype int16 at 70;
   // NIfTI-2: datatype int16 at 12, dim int64[8] at 16).
+  double vox_offset = 0;
   {
     const bool swap = (v1 && sz != 348) || (v2 && sz != 540);
     auto field = [&](std::size_t at, std::size_t bytes) -> std::int64_t {
@@ -132,7 +133,6 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
       if (dim[a] < 1) fail(path, fmt::format("invalid NIfTI dimensions: dim[{}] = {}", a, dim[a]));
     // vox_offset (NIfTI-1: float32 at 108; NIfTI-2: int64 at 168). libnifti moves an offset
     // inside the header to its end and truncates huge ones, reading voxels from somewhere else.
-    double vox_offset = 0;
     if (v1) {
       unsigned char b[4];
       std::memcpy(b, hb.data() + 108, 4);
@@ -201,6 +201,9 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
     // into 0: the shared rule (an error unless --nan-as) must see them. The first 3D volume
     // is the first `bytes` bytes of the data.
     if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
+    if (static_cast<double>(nim->iname_offset) != vox_offset)
+      fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
+                             vox_offset, nim->iname_offset));
     znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
     if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
     std::vector<char> data(bytes);
