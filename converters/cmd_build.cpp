@@ -1,6 +1,7 @@
 // mlfe build: volume or tetrahedral mesh → adaptive hierarchy (.mlfeh) + JSON report.
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
+#include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/hierarchy_levels.h>
 #include <mlfe/formats/hierarchy_resample.h>
 #include <mlfe/version.h>
@@ -182,7 +183,7 @@ Measure<3> at_mesh_points(const TetMesh& mesh, const TetMeshField& input, double
 
 void report_and_print(const BuildState& s, const Built& b, const FileFigures& fig,
                       const nlohmann::json& report, double samples, const char* per) {
-  const double bytes = static_cast<double>(std::filesystem::file_size(s.output));
+  const double bytes = static_cast<double>(written_file_size(s.output));
   if (!s.report.empty()) {
     nlohmann::json r = report;
     r["file"] = {{"bytes", bytes},
@@ -242,6 +243,7 @@ void run_mesh_build(const BuildState& s) {
 }
 
 void run_build(const BuildState& s) {
+  check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--report", s.report}});
   check_output_path(s.output, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
   if (s.max_error >= 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
@@ -300,7 +302,10 @@ void add_build_command(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   add_build_options(cmd, state->params);
   add_volume_read_options(cmd, state->read);
-  cmd->callback([state] { run_build(*state); });
+  cmd->callback([state] {
+    apply_memory_budget(state->read, state->params);
+    run_build(*state);
+  });
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "converters/commands.h"
+#include "converters/volume_options.h"
 
 namespace mlfe::cli {
 namespace {
@@ -45,6 +46,7 @@ void run_compare(CompareArgs& a) {
   o.value_max = a.value_max;
   o.value_rms = a.value_rms;
   if (!a.count_tolerance.empty()) o.count_tolerance_percent = parse_percent(a.count_tolerance);
+  check_distinct_files({{"EXPECTED", a.expected}, {"ACTUAL", a.actual}}, {{"--report", a.report}});
   const CompareResult r = compare_files(a.expected, a.actual, o);
   if (!a.report.empty()) write_compare_report(a.report, a.expected, a.actual, r);
   if (r.equal()) {

@@ -35,6 +35,9 @@ void run_convert(const ConvertState& s, const char* command) {
   ConvertOptions c;
   c.hierarchy = s.hierarchy;
   c.report = s.report;
+  check_distinct_files(
+      {{"input", s.input}, {"--volume", s.volume}},
+      {{"--output", s.output}, {"--hierarchy", s.hierarchy}, {"--report", s.report}, {"--render", s.render}});
   check_output_path(s.output, kAssetExtensions);
   if (!c.hierarchy.empty()) check_output_path(c.hierarchy, {".mlfeh"});
   if (!c.report.empty()) check_output_path(c.report, {});
@@ -73,7 +76,10 @@ void add_convert_command(CLI::App& app) {
   cmd->add_option("--render", state->render,
                   "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
   add_convert_options(cmd, *state);
-  cmd->callback([state] { run_convert(*state, "convert"); });
+  cmd->callback([state] {
+    apply_memory_budget(state->read, state->params);
+    run_convert(*state, "convert");
+  });
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 // values and element levels, in the file's physical frame.
 #include <mlfe/core/error.h>
 #include <mlfe/core/sample_lattice.h>
+#include <mlfe/core/usage_error.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_resample.h>
@@ -17,6 +18,7 @@
 #include <string>
 
 #include "converters/commands.h"
+#include "converters/volume_options.h"
 
 namespace mlfe::cli {
 namespace {
@@ -83,14 +85,17 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
 
 void run_export(const ExportState& s) {
   const std::string ext = lower_extension(s.output);
+  check_distinct_files(
+      {{"input", s.input}},
+      {{"--output", s.output}, {"--output's sidecar", ext == ".raw" ? s.output + ".json" : ""}});
   if (ext != ".vtu" && ext != ".msh" && !is_volume_output(s.output))
     throw Error(s.output + ": unknown output type '" + ext +
                 "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_output_path(s.output, {});
   const HierarchyFile f = read_hierarchy(s.input, s.level);
   if (s.level > f.file_levels)
-    throw Error(s.input + ": --level " + std::to_string(s.level) + " but the file has " +
-                std::to_string(f.file_levels) + " levels");
+    throw UsageError(s.input + ": --level " + std::to_string(s.level) + " but the file has " +
+                     std::to_string(f.file_levels) + " levels");
   if (f.dim == 2)
     export_hierarchy(s, f, std::get<Hierarchy<2>>(f.hierarchy));
   else

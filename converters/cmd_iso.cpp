@@ -13,6 +13,7 @@
 
 #include "converters/commands.h"
 #include "converters/convert_command.h"
+#include "converters/volume_options.h"
 
 namespace mlfe::cli {
 namespace {
@@ -55,6 +56,8 @@ void run_iso(const ConvertState& s) {
   }
   const nlohmann::json prov = {{"input", std::filesystem::path(s.input).filename().string()},
                                {"tool", std::string("mlfe ") + MLFE_VERSION}};
+  check_distinct_files({{"input", s.input}, {"--volume", s.volume}},
+                       {{"--output", s.output}, {"--report", s.report}});
   check_output_path(s.output, kAssetExtensions);
   if (!s.report.empty()) check_output_path(s.report, {});
   const AssetOptions asset = asset_options(s.asset);
@@ -84,7 +87,10 @@ void add_iso_command(CLI::App& app) {
       "--volume", state->volume,
       "with a hierarchy input: the volume it was built from, so surfaces snap onto it as in convert");
   add_convert_options(cmd, *state);
-  cmd->callback([state] { run_iso(*state); });
+  cmd->callback([state] {
+    apply_memory_budget(state->read, state->params);
+    run_iso(*state);
+  });
 }
 
 }  // namespace

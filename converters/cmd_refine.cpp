@@ -5,6 +5,7 @@
 #include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/mesh_quality.h>
+#include <mlfe/core/usage_error.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/vtu_writer.h>
 
@@ -47,13 +48,13 @@ std::vector<double> parse_list(const std::string& option, const std::string& tex
     }
     while (used < item.size() && item[used] == ' ') ++used;
     if (used == 0 || used != item.size() || !std::isfinite(v))
-      throw Error(fmt::format("{}: '{}' is not a finite number", option, item));
+      throw UsageError(fmt::format("{}: '{}' is not a finite number", option, item));
     out.push_back(v);
   }
   if (!text.empty() && text.back() == ',')
-    throw Error(fmt::format("{}: trailing comma in '{}'", option, text));
+    throw UsageError(fmt::format("{}: trailing comma in '{}'", option, text));
   if (out.size() != n)
-    throw Error(
+    throw UsageError(
         fmt::format("{}: expected {} comma-separated numbers, got {} ('{}')", option, n, out.size(), text));
   return out;
 }
@@ -67,7 +68,7 @@ int parse_int(const std::string& option, const std::string& text, int lo, int hi
     used = 0;
   }
   if (used == 0 || used != text.size() || v < lo || v > hi)
-    throw Error(fmt::format("{}: '{}' is not an integer in [{}, {}]", option, text, lo, hi));
+    throw UsageError(fmt::format("{}: '{}' is not an integer in [{}, {}]", option, text, lo, hi));
   return static_cast<int>(v);
 }
 
@@ -217,7 +218,7 @@ void run_refine(const RefineArgs& a) {
   const std::vector<double> box = parse_list("--box", a.box, 2 * dim);
   for (int i = 0; i < dim; ++i)
     if (!(box[i] < box[dim + i]))
-      throw Error(fmt::format("--box: the lower corner must be below the upper corner on axis {}", i));
+      throw UsageError(fmt::format("--box: the lower corner must be below the upper corner on axis {}", i));
   Goal goal;
   if (a.toward == "point")
     goal.target = Target::kPoint;
@@ -226,28 +227,29 @@ void run_refine(const RefineArgs& a) {
   else if (a.toward == "sphere")
     goal.target = Target::kSphere;
   else
-    throw Error(fmt::format("--toward: '{}' is not one of point, plane, sphere", a.toward));
+    throw UsageError(fmt::format("--toward: '{}' is not one of point, plane, sphere", a.toward));
   const std::vector<double> at = parse_list("--at", a.at, dim);
   std::copy(at.begin(), at.end(), goal.at.begin());
   if (goal.target == Target::kPlane) {
-    if (a.normal.empty()) throw Error("--normal is required with --toward plane");
+    if (a.normal.empty()) throw UsageError("--normal is required with --toward plane");
     const std::vector<double> n = parse_list("--normal", a.normal, dim);
     std::copy(n.begin(), n.end(), goal.normal.begin());
     const double len = std::sqrt(dot(goal.normal, goal.normal));
-    if (!(len > 0)) throw Error("--normal must not be zero");
+    if (!(len > 0)) throw UsageError("--normal must not be zero");
     for (double& c : goal.normal) c /= len;
   } else if (!a.normal.empty()) {
-    throw Error("--normal is only used with --toward plane");
+    throw UsageError("--normal is only used with --toward plane");
   }
   if (goal.target == Target::kSphere) {
-    if (a.radius.empty()) throw Error("--radius is required with --toward sphere");
+    if (a.radius.empty()) throw UsageError("--radius is required with --toward sphere");
     goal.radius = parse_list("--radius", a.radius, 1)[0];
-    if (!(goal.radius > 0)) throw Error("--radius must be positive");
+    if (!(goal.radius > 0)) throw UsageError("--radius must be positive");
   } else if (!a.radius.empty()) {
-    throw Error("--radius is only used with --toward sphere");
+    throw UsageError("--radius is only used with --toward sphere");
   }
   const int levels = parse_int("--levels", a.levels, 0, kMaxLevels);
-  if (!a.hierarchy.empty() && a.hierarchy == a.output) throw Error("-o and --hierarchy name the same file");
+  if (!a.hierarchy.empty() && a.hierarchy == a.output)
+    throw UsageError("-o and --hierarchy name the same file");
   if (dim == 2)
     run<2>(a, goal, box, levels);
   else

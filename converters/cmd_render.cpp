@@ -2,6 +2,7 @@
 // same defaults as mlfe build), face to face through the adaptive tetrahedral mesh.
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
+#include <mlfe/core/usage_error.h>
 #include <mlfe/core/volume_render.h>
 #include <mlfe/formats/exr_writer.h>
 #include <mlfe/formats/file_names.h>
@@ -65,7 +66,7 @@ namespace {
 
 std::array<double, 3> parse3(const std::string& text, const std::string& what) {
   const auto v = parse_values(text, what);
-  if (v.size() != 3) throw Error(what + ": expected x,y,z, got '" + text + "'");
+  if (v.size() != 3) throw UsageError(what + ": expected x,y,z, got '" + text + "'");
   return {v[0], v[1], v[2]};
 }
 
@@ -97,9 +98,12 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
     char x = 0, rest = 0;
     if (std::sscanf(p.size.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || (x != 'x' && x != 'X') || w < 1 ||
         h < 1 || w > 16384 || h > 16384)
-      throw Error("--size: expected WxH (1..16384), got '" + p.size + "'");
+      throw UsageError("--size: expected WxH (1..16384), got '" + p.size + "'");
   }
   const auto bg = parse3(p.background, "--background");
+  // The orbit camera has its own target and up; silently dropping them would render another view.
+  if (p.position.empty() && (!p.target.empty() || !p.up.empty()))
+    throw UsageError(std::string(p.up.empty() ? "--target" : "--up") + ": needs --position");
   const GridTransform& tr = b.transform;
   const auto& hier = b.get<3>().hierarchy;
 
@@ -145,6 +149,9 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
   opt.shading = p.shading;
   opt.skip_empty = !p.no_skip;
 
+  if (p.level < -1 || p.level > hier.max_level())
+    throw UsageError(fmt::format("--level: expected -1 (finest) .. {} (the hierarchy's levels), got {}",
+                                 hier.max_level(), p.level));
   std::unique_ptr<TetRenderMesh> mesh;
   if (!p.reference) {
     const Approximation<3>& a3 = b.get<3>();
@@ -168,7 +175,7 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
       const double dist = std::sqrt(std::pow(cam.position[0] - cam.target[0], 2) +
                                     std::pow(cam.position[1] - cam.target[1], 2) +
                                     std::pow(cam.position[2] - cam.target[2], 2));
-      if (!(dist > 0)) throw Error("--position and --target must differ");
+      if (!(dist > 0)) throw UsageError("--position and --target must differ");
       const std::array<double, 3> f{cam.target[0] - cam.position[0], cam.target[1] - cam.position[1],
                                     cam.target[2] - cam.position[2]};
       const std::array<double, 3> side{f[1] * cam.up[2] - f[2] * cam.up[1],
@@ -176,7 +183,7 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
                                        f[0] * cam.up[1] - f[1] * cam.up[0]};
       const double up_len = std::sqrt(cam.up[0] * cam.up[0] + cam.up[1] * cam.up[1] + cam.up[2] * cam.up[2]);
       if (!(std::sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]) > 1e-9 * dist * up_len))
-        throw Error("--up must not be parallel to the viewing direction (or zero)");
+        throw UsageError("--up must not be parallel to the viewing direction (or zero)");
       cam.near_clip = std::max(dist - radius, 1e-3 * radius);
       cam.far_clip = dist + 2 * radius;
     }
@@ -232,6 +239,8 @@ struct RenderState {
 };
 
 void run_render(const RenderState& s) {
+  check_distinct_files({{"input", s.input}, {"--tf", s.render.tf}},
+                       {{"--output", s.output}, {"--png", s.render.png}});
   check_output_path(s.output, {".exr"});
   std::optional<ScalarGrid> grid;
   Built b;
@@ -271,7 +280,10 @@ void add_render_command(CLI::App& app) {
   add_render_options(cmd, state->render);
   add_build_options(cmd, state->build);
   add_volume_read_options(cmd, state->read);
-  cmd->callback([state] { run_render(*state); });
+  cmd->callback([state] {
+    apply_memory_budget(state->read, state->build);
+    run_render(*state);
+  });
 }
 
 }  // namespace

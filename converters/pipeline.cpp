@@ -4,6 +4,7 @@
 #include <mlfe/core/iso_surface.h>
 #include <mlfe/core/noise_estimate.h>
 #include <mlfe/core/surface_simplification.h>
+#include <mlfe/core/usage_error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
@@ -65,18 +66,34 @@ std::string MemoryBudget::text() const {
 namespace {
 
 // Values the approximation needs in range; the command line checks the same bounds.
-void check_build_options(const BuildOptions& p) {
+void check_build_options(const BuildOptions& p, int dim) {
   if (p.rms && !(p.rms->value > 0 && std::isfinite(p.rms->value)))
-    throw Error("--rms: expected one positive value, e.g. 0.5% or 2.0");
-  if (!(p.threshold >= 0)) throw Error(fmt::format("threshold: expected a value >= 0, got {}", p.threshold));
+    throw UsageError("--rms: expected one positive value, e.g. 0.5% or 2.0");
+  if (!(p.threshold >= 0) || !std::isfinite(p.threshold))
+    throw UsageError(fmt::format("--threshold: expected a finite value >= 0, got {}", p.threshold));
   if (p.max_level < 0 || p.max_level > 40)
-    throw Error(fmt::format("max_level: expected 0..40, got {}", p.max_level));
+    throw UsageError(fmt::format("--max-level: expected 0..40, got {}", p.max_level));
   if (p.start_level < -1 || p.start_level > 12)
-    throw Error(fmt::format("start_level: expected -1..12, got {}", p.start_level));
+    throw UsageError(fmt::format("--start-level: expected -1..12, got {}", p.start_level));
   if (!(p.max_sample_error < 0 || std::isfinite(p.max_sample_error)))
-    throw Error("--max-error: expected a finite value >= 0");
-  if (!(p.surface_tolerance > 0))
-    throw Error(fmt::format("surface_tolerance: expected a positive value, got {}", p.surface_tolerance));
+    throw UsageError("--max-error: expected a finite value >= 0");
+  if (!(p.surface_tolerance > 0) || !std::isfinite(p.surface_tolerance))
+    throw UsageError(
+        fmt::format("--surface-tolerance: expected a finite positive value, got {}", p.surface_tolerance));
+  // The budget counts the vertices of the whole mesh, and the coarsest one (the box as 6
+  // tetrahedra or 2 triangles) already has its corners; a smaller budget cannot be kept.
+  const std::size_t corners = dim == 2 ? 4 : 8;
+  if (p.max_vertices > 0 && p.max_vertices < corners)
+    throw UsageError(fmt::format("--max-vertices: the coarsest {}D mesh has {} vertices; got {}", dim,
+                                 corners, p.max_vertices));
+}
+
+// An iso-value the data never crosses gives an empty asset, which looks like success.
+void check_iso_in_range(const std::vector<double>& isos, double lo, double hi, const std::string& source) {
+  for (double v : isos)
+    if (!(v > lo && v < hi))
+      throw Error(fmt::format("{}: --iso {} is outside the data's range {:.6g} .. {:.6g} (no surface there)",
+                              source, v, lo, hi));
 }
 
 // A grid build() and convert() can use (GridField relies on it), as the input they record.
@@ -111,14 +128,15 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   // RMS target of the default build relative to the noise (bench/RESULTS.md, noise).
   constexpr double kNoiseTargetFactor = 1.0;
   for (double v : iso_values)
-    if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
-  check_build_options(p);
+    if (!std::isfinite(v)) throw UsageError("--iso: iso-values must be finite numbers");
+  check_build_options(p, f.dim());
   Built b;
   b.transform = input.transform;
   b.space = input.space;
   const auto range = f.range();
   b.value_min = range[0];
   b.value_max = range[1];
+  check_iso_in_range(iso_values, range[0], range[1], input.source);
   const double span = range[1] > range[0] ? range[1] - range[0] : 1.0;
 
   ApproximationOptions o;
@@ -383,7 +401,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
   if (dim == 3) {
     if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     for (double v : p.iso)
-      if (!std::isfinite(v)) throw Error("--iso: iso-values must be finite numbers");
+      if (!std::isfinite(v)) throw UsageError("--iso: iso-values must be finite numbers");
+    check_iso_in_range(p.iso, b.value_min, b.value_max, "the hierarchy");
     isos = p.iso;
     std::sort(isos.begin(), isos.end());
     const Approximation<3>& a3 = b.get<3>();
@@ -528,7 +547,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   summary["output"] = out;
   summary["surfaces"] = per;
   summary["triangles"] = total;
-  summary["bytes"] = std::filesystem::file_size(out);
+  summary["bytes"] = written_file_size(out);
   summary["tolerance_mm"] = tol;
   summary["seconds"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   summary["stage_seconds"] = {

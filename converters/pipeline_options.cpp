@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
+#include <mlfe/core/usage_error.h>
 
 #include <cctype>
 #include <cmath>
@@ -19,7 +20,18 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
          "--threshold", p.threshold,
          "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--max-vertices", p.max_vertices, "vertex budget (never exceeded)");
+  cmd->add_option("--max-vertices", p.max_vertices,
+                  "vertex budget (never exceeded; at least the coarsest mesh's 8 vertices, 4 for a 2D height "
+                  "field) [default: none]")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            return text.find_first_not_of("0123456789") == std::string::npos &&
+                           text.find_first_not_of('0') != std::string::npos
+                       ? std::string()
+                       : "expected a whole number of vertices >= 1 (omit the option for no budget), got '" +
+                             text + "'";
+          },
+          "N"));
   cmd->add_option("--max-level", p.max_level, "deepest refinement level")
       ->check(CLI::Range(0, 40))
       ->capture_default_str();
@@ -109,7 +121,7 @@ std::vector<double> parse_values(const std::string& text, const std::string& wha
       if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
       out.push_back(v);
     } catch (const std::exception&) {
-      throw Error(fmt::format("{}: not a number: '{}'", what, item));
+      throw UsageError(fmt::format("{}: not a finite number: '{}'", what, item));
     }
   }
   return out;
@@ -130,14 +142,19 @@ MemoryBudget parse_memory_budget(const std::string& text) {
   std::vector<double> v;
   try {
     v = parse_values(t, "--max-memory");
-  } catch (const Error&) {
+  } catch (const UsageError&) {
     v.clear();
   }
   if (v.size() != 1 || v[0] < 0 || (m.percent_of_ram && v[0] > 100))
-    throw Error("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
-                text + "'");
+    throw UsageError("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
+                     text + "'");
   m.amount = v[0];
   return m;
+}
+
+void apply_memory_budget(VolumeReadOptions& read, const BuildParams& p) {
+  const std::size_t budget = parse_memory_budget(p.max_memory).bytes();
+  if (budget > 0 && read.max_bytes == 0) read.max_bytes = budget;
 }
 
 BuildOptions build_options(const BuildParams& p) {
@@ -148,7 +165,7 @@ BuildOptions build_options(const BuildParams& p) {
     const bool percent = r.back() == '%';
     if (percent) r.pop_back();
     const auto v = parse_values(r, "--rms");
-    if (v.size() != 1 || v[0] <= 0) throw Error("--rms: expected one positive value, e.g. 0.5% or 2.0");
+    if (v.size() != 1 || v[0] <= 0) throw UsageError("--rms: expected one positive value, e.g. 0.5% or 2.0");
     o.rms = RmsTarget{v[0], percent};
   }
   o.threshold = p.threshold;

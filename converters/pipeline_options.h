@@ -47,6 +47,10 @@ Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::v
 /// The warning on stderr when `b` stopped refining at its memory budget.
 void warn_if_memory_limited(const Built& b, const std::string& source, const std::string& max_memory);
 
+/// Makes the readers refuse, before allocating, a volume that needs more than --max-memory
+/// (when it is not 0), as the build refuses to grow beyond it.
+void apply_memory_budget(VolumeReadOptions& read, const BuildParams& p);
+
 /// Parses "80,150" into numbers; throws mlfe::Error on bad input.
 std::vector<double> parse_values(const std::string& text, const std::string& what);
 

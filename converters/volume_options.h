@@ -4,6 +4,9 @@
 #include <mlfe/formats/volume_reader.h>
 
 #include <CLI/CLI.hpp>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace mlfe::cli {
 
@@ -12,6 +15,14 @@ namespace mlfe::cli {
 /// `opts` must outlive parsing (keep it next to the CLI::App, e.g. in a static or a
 /// shared_ptr captured by the callback).
 void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts);
+
+/// (option name, path) of a command's files; empty paths are skipped.
+using NamedPaths = std::vector<std::pair<std::string, std::string>>;
+
+/// Refuses before any work (a usage error) an output that is one of the inputs (the input would
+/// be lost) and two outputs on one path. Files are compared as what a write would replace:
+/// symbolic links followed, existing files also by device and inode (hard links, other spellings).
+void check_distinct_files(const NamedPaths& inputs, const NamedPaths& outputs);
 
 }  // namespace mlfe::cli
 

@@ -82,6 +82,27 @@ TriangleMesh read_any_mesh(const std::string& path) {
   return read_mesh_file(path);
 }
 
+/// Reads `path` as a file of kind `k`, for the reader's error on what is not one.
+void read_as(const std::string& path, Kind k) {
+  switch (k) {
+    case Kind::kGltf:
+      read_gltf(path);
+      return;
+    case Kind::kMesh:
+      read_any_mesh(path);
+      return;
+    case Kind::kImage:
+      read_image(path);
+      return;
+    case Kind::kVolume:
+      read_volume(path);
+      return;
+    case Kind::kHierarchy:
+      read_hierarchy(path);
+      return;
+  }
+}
+
 bool close(double a, double b, double rel) {
   return std::abs(a - b) <= rel * std::max({1.0, std::abs(a), std::abs(b)});
 }
@@ -614,6 +635,10 @@ CompareResult compare_files(const std::string& expected, const std::string& actu
       (ke == Kind::kMesh || ke == Kind::kGltf) && (ka == Kind::kMesh || ka == Kind::kGltf);
   CompareResult r;
   if (ke != ka && !both_meshes) {
+    // Different kinds are a difference only between two readable files: garbage with another
+    // file's extension is unreadable input (exit 2), not a different asset.
+    read_as(expected, ke);
+    read_as(actual, ka);
     r.kind = "mismatch";
     r.differences.push_back(
         {"kind", std::string("EXPECTED is a ") + kind_name(ke) + ", ACTUAL a " + kind_name(ka)});

@@ -1,6 +1,7 @@
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
 #include <ImfHeader.h>
+#include <ImfIO.h>
 #include <ImfOutputFile.h>
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
@@ -17,6 +18,22 @@
 namespace mlfe {
 
 namespace {
+
+// OpenEXR on the shared writer's stream, whose state that writer checks: OutputFile writes its
+// line offset table in its destructor, where a failed write is swallowed.
+class ExrStream : public Imf::OStream {
+ public:
+  ExrStream(std::ostream& out, const std::string& name) : Imf::OStream(name.c_str()), out_(out) {}
+  void write(const char c[], int n) override {
+    out_.write(c, n);
+    if (!out_) throw std::runtime_error("write failed (disk full?)");
+  }
+  uint64_t tellp() override { return static_cast<uint64_t>(out_.tellp()); }
+  void seekp(uint64_t pos) override { out_.seekp(static_cast<std::streamoff>(pos)); }
+
+ private:
+  std::ostream& out_;
+};
 
 // Imath multiplies row vectors (p' = p · M): the transpose of the column-vector matrix.
 Imath::M44f to_imath(const std::array<double, 16>& m) {
@@ -58,15 +75,15 @@ void write_exr(const std::string& path, const RenderImage& img, const ExrAttribu
                                    sizeof(half) * std::size_t(w)));
   fb.insert("Z", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(const_cast<float*>(img.z.data())),
                             sizeof(float), sizeof(float) * std::size_t(w)));
-  write_path_atomically(path, [&](const std::string& tmp) {
+  write_file_atomically(path, [&](std::ostream& out) {
     try {
-      Imf::OutputFile file(tmp.c_str(), header, 1);  // one thread: identical bytes whatever the machine
+      ExrStream stream(out, path);
+      Imf::OutputFile file(stream, header, 1);  // one thread: identical bytes whatever the machine
       file.setFrameBuffer(fb);
       file.writePixels(h);
     } catch (const std::exception& e) {
       throw Error(path + ": cannot write EXR: " + e.what());
     }
-    return true;
   });
 }
 

@@ -44,6 +44,14 @@ nlohmann::json parse_json(const std::string& path, const std::string& bytes) {
   std::string text = bytes;
   if (is_glb(bytes)) {
     if (bytes.size() < 20) fail(path, "truncated GLB header");
+    // The header's total length must be the file's: a cut or padded file is not the asset written.
+    std::uint32_t version = 0, total = 0;
+    std::memcpy(&version, bytes.data() + 4, 4);
+    std::memcpy(&total, bytes.data() + 8, 4);
+    if (version != 2) fail(path, "GLB version " + std::to_string(version) + " (expected 2)");
+    if (total != bytes.size())
+      fail(path, "GLB header says " + std::to_string(total) + " bytes, the file has " +
+                     std::to_string(bytes.size()));
     std::uint32_t chunk_length = 0, chunk_type = 0;
     std::memcpy(&chunk_length, bytes.data() + 12, 4);
     std::memcpy(&chunk_type, bytes.data() + 16, 4);
@@ -102,6 +110,12 @@ nlohmann::json strip_encoding(nlohmann::json j) {
         im.erase("bufferView");
         im.erase("uri");
       }
+  // mlfe's own record of the encoding (draco, quantized or float, and its tolerance) says how the
+  // geometry is stored, like the extensions above; the geometry comparison measures its effect.
+  if (j.contains("asset") && j["asset"].is_object() && j["asset"].contains("extras") &&
+      j["asset"]["extras"].is_object() && j["asset"]["extras"].contains("mlfe") &&
+      j["asset"]["extras"]["mlfe"].is_object())
+    for (const char* key : {"encoding", "tolerance_mm"}) j["asset"]["extras"]["mlfe"].erase(key);
   return j;
 }
 

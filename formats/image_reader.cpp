@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/png_reader.h>
 #include <png.h>
 
 #include <algorithm>
@@ -157,6 +158,11 @@ Image read_exr(const std::string& path) {
 Image read_png_image(const std::string& path) {
   Image img;
   img.format = "png";
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) fail(path, "cannot open file");
+    check_png_chunks(path, std::string(std::istreambuf_iterator<char>(in), {}));
+  }
   png_image image;
   std::memset(&image, 0, sizeof image);
   image.version = PNG_IMAGE_VERSION;

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include "formats/volume_reader_detail.h"
 
@@ -106,6 +107,7 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   // libnifti prints "** ERROR" lines for bad datatypes and dims even at debug level 0, so
   // those fields are checked here first (NIfTI-1: dim int16[8] at 40, datatype int16 at 70;
   // NIfTI-2: datatype int16 at 12, dim int64[8] at 16).
+  double vox_offset = 0;
   {
     const bool swap = (v1 && sz != 348) || (v2 && sz != 540);
     auto field = [&](std::size_t at, std::size_t bytes) -> std::int64_t {
@@ -129,6 +131,24 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
     if (dim[0] < 1 || dim[0] > 7) fail(path, fmt::format("invalid NIfTI dim[0] = {} (1..7)", dim[0]));
     for (int a = 1; a <= dim[0]; ++a)
       if (dim[a] < 1) fail(path, fmt::format("invalid NIfTI dimensions: dim[{}] = {}", a, dim[a]));
+    // vox_offset (NIfTI-1: float32 at 108; NIfTI-2: int64 at 168). libnifti moves an offset
+    // inside the header to its end and truncates huge ones, reading voxels from somewhere else.
+    if (v1) {
+      unsigned char b[4];
+      std::memcpy(b, hb.data() + 108, 4);
+      if (swap) std::reverse(b, b + 4);
+      float f;
+      std::memcpy(&f, b, 4);
+      vox_offset = f;
+    } else {
+      vox_offset = static_cast<double>(field(168, 8));
+    }
+    const bool single_file = hb.compare(v1 ? 344 : 4, 3, v1 ? "n+1" : "n+2") == 0;
+    const double header_end = v1 ? 352 : 544;
+    if (!std::isfinite(vox_offset) || vox_offset < (single_file ? header_end : 0) || vox_offset > 1e15 ||
+        vox_offset != std::floor(vox_offset))
+      fail(path, fmt::format("invalid NIfTI vox_offset {} (expected a whole number of bytes{})", vox_offset,
+                             single_file ? fmt::format(" after the {}-byte header", header_end) : ""));
   }
 
   std::lock_guard<std::mutex> lock(nifti_mutex());
@@ -176,23 +196,25 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   ScalarGrid grid;
   grid.dims = dims;
   grid.source_type = *type;
-  if (volumes > 1) {
-    // Only the first 3D volume: libnifti reads just that part of the file.
-    int64_t sel[8] = {0, -1, -1, -1, 0, 0, 0, 0};
-    void* data = nullptr;
-    int64_t got = nifti_read_collapsed_image(nim.get(), sel, &data);
-    std::unique_ptr<void, decltype(&std::free)> owned(data, &std::free);
-    if (got < 0 || static_cast<std::uint64_t>(got) != bytes || !data)
-      fail(path, "truncated or unreadable NIfTI voxel data");
+  {
+    // The voxels are read here, not by libnifti's loader, which silently turns NaN and Inf
+    // into 0: the shared rule (an error unless --nan-as) must see them. The first 3D volume
+    // is the first `bytes` bytes of the data.
+    if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
+    if (static_cast<double>(nim->iname_offset) != vox_offset)
+      fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
+                             vox_offset, nim->iname_offset));
+    znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
+    if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
+    std::vector<char> data(bytes);
+    const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) == 0;
+    const std::size_t got = positioned ? znzread(data.data(), 1, data.size(), fp) : 0;
+    znzclose(fp);
+    if (got != bytes) fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
     allocate_values(grid);
-    convert_to_float(data, *type, false, grid.values.data(), grid.values.size());
-    add_note(grid, fmt::format("NIfTI has {} volumes; read the first", volumes));
-  } else {
-    if (nifti_image_load(nim.get()) != 0 || !nim->data)
-      fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
-    allocate_values(grid);
-    convert_to_float(nim->data, *type, false, grid.values.data(), grid.values.size());
-    nifti_image_unload(nim.get());
+    convert_to_float(data.data(), *type, nim->byteorder != nifti_short_order(), grid.values.data(),
+                     grid.values.size());
+    if (volumes > 1) add_note(grid, fmt::format("NIfTI has {} volumes; read the first", volumes));
   }
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;

@@ -2,6 +2,8 @@
 #include <mlfe/formats/nrrd_reader.h>
 #include <teem/nrrd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -107,6 +109,15 @@ void check_header_lines(const std::string& path) {
     if (line[0] != '#' && line.size() > 900)
       fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (key/value lines are at most 900)",
                              number, line.size()));
+    // Teem stores an absent spacing as NaN, so a written "nan" or "inf" would silently become
+    // the default spacing 1; a spacing that is written must be a number.
+    if (line.rfind("spacings:", 0) == 0) {
+      std::string lower = line;
+      std::transform(lower.begin(), lower.end(), lower.begin(),
+                     [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+      if (lower.find("nan") != std::string::npos || lower.find("inf") != std::string::npos)
+        fail(path, "bad NRRD header: spacings must be finite numbers (" + line + ")");
+    }
     start = end + 1;
   }
 }
@@ -148,6 +159,23 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
   // array first and only then find the file short.
   const bool attached = nio->dataFNArr->len == 0 && !nio->dataFNFormat;
   const std::string encoding = nio->encoding ? nio->encoding->name : "";
+  // Deflate expands at most 1032:1, so gzip data cannot hold more than that many times its size;
+  // a small file claiming a huge grid is refused before Teem allocates the grid it claims.
+  if (encoding == "gzip") {
+    std::string data_file = attached ? path : (nio->dataFNArr->len == 1 ? std::string(nio->dataFN[0]) : "");
+    if (!data_file.empty()) {
+      std::uint64_t compressed = attached ? fsize : file_size(data_file);
+      if (attached) {
+        const auto hl = attached_header_length(path);
+        compressed -= std::min<std::uint64_t>(compressed, hl ? *hl : fsize);
+      }
+      constexpr std::uint64_t kMaxDeflateRatio = 1032;
+      if (bytes / kMaxDeflateRatio > compressed + 64)
+        fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, more than "
+                                    "{} bytes of gzip data can hold",
+                                    dims[0], dims[1], dims[2], scalar_type_name(*type), bytes, compressed));
+    }
+  }
   if (encoding == "raw" && nio->lineSkip == 0 && nio->byteSkip >= 0) {
     std::string data_file = attached ? path : (nio->dataFNArr->len == 1 ? std::string(nio->dataFN[0]) : "");
     if (!data_file.empty()) {

@@ -14,6 +14,8 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <mutex>
 
@@ -130,6 +132,46 @@ TriangleMesh from_openmesh(const OpenMeshTriMesh& om) {
   return mesh;
 }
 
+namespace {
+
+// OpenMesh reads what it can and skips the rest, so random bytes named .stl or .obj became an
+// empty mesh (and two such files compared equal). What each format must start with is checked
+// here; a binary STL must also be exactly as long as its triangle count says.
+void check_mesh_file_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(4096, '\0');
+  in.read(head.data(), std::streamsize(head.size()));
+  head.resize(std::size_t(in.gcount()));
+  in.clear();
+  in.seekg(0, std::ios::end);
+  const auto size = static_cast<std::uint64_t>(in.tellg());
+  const std::string ext = lower_extension(path);
+  const auto starts = [&](const char* s) { return head.compare(0, std::strlen(s), s) == 0; };
+  const auto text = [&] {
+    return std::all_of(head.begin(), head.end(), [](char c) {
+      const auto u = static_cast<unsigned char>(c);
+      return u >= 0x20 || c == '\n' || c == '\r' || c == '\t';
+    });
+  };
+  if (ext == ".ply" && !starts("ply\n") && !starts("ply\r\n")) throw Error(path + ": not a PLY file");
+  if (ext == ".off") {
+    const std::size_t first = head.find_first_not_of(" \t\r\n");
+    const std::string word = first == std::string::npos ? "" : head.substr(first, 6);
+    if (word.find("OFF") == std::string::npos) throw Error(path + ": not an OFF file");
+  }
+  if (ext == ".obj" && !text()) throw Error(path + ": not an OBJ file (binary bytes in a text format)");
+  if (ext == ".stl") {
+    std::uint32_t count = 0;
+    if (head.size() >= 84) std::memcpy(&count, head.data() + 80, 4);
+    const bool binary = size >= 84 && size == 84 + 50 * std::uint64_t(count);
+    if (!binary && !(starts("solid") && text()))
+      throw Error(path + ": not an STL file (binary: " + std::to_string(size) +
+                  " bytes do not match its triangle count; ASCII: does not start with 'solid')");
+  }
+}
+
+}  // namespace
+
 void write_mesh_file(const std::string& path, const TriangleMesh& mesh) {
   const std::string ext = lower_extension(path);
   OpenMesh::IO::Options opt;
@@ -148,13 +190,16 @@ void write_mesh_file(const std::string& path, const TriangleMesh& mesh) {
     opt += OpenMesh::IO::Options::VertexNormal;
   }
   const QuietOpenMesh quiet;
-  // 9 significant digits round-trip every float exactly in the text formats.
-  write_path_atomically(path,
-                        [&](const std::string& tmp) { return OpenMesh::IO::write_mesh(om, tmp, opt, 9); });
+  // 9 significant digits round-trip every float exactly in the text formats. On a stream of the
+  // shared writer, whose state is checked: OpenMesh does not report a failed write to a path.
+  write_file_atomically(path, [&](std::ostream& out) {
+    if (!OpenMesh::IO::write_mesh(om, out, ext, opt, 9)) throw Error(path + ": OpenMesh cannot write it");
+  });
 }
 
 TriangleMesh read_mesh_file(const std::string& path) {
   if (!std::ifstream(path).good()) throw Error(path + ": cannot open file");
+  check_mesh_file_header(path);
   OpenMeshTriMesh om;
   om.request_vertex_normals();
   OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexNormal;

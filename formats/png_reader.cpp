@@ -2,6 +2,7 @@
 #include <mlfe/formats/png_reader.h>
 #include <png.h>
 
+#include <cstdint>
 #include <cstring>
 #include <vector>
 
@@ -10,10 +11,25 @@
 namespace mlfe {
 using namespace volume_detail;
 
+void check_png_chunks(const std::string& path, const std::string& bytes) {
+  if (bytes.size() < 8 || std::memcmp(bytes.data(), "\x89PNG\r\n\x1a\n", 8) != 0)
+    fail(path, "not a PNG file (wrong signature)");
+  std::size_t at = 8;
+  while (true) {
+    if (bytes.size() - at < 12) fail(path, "truncated PNG (no IEND chunk)");
+    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data() + at);
+    const std::uint64_t length = (std::uint64_t(p[0]) << 24) | (p[1] << 16) | (p[2] << 8) | p[3];
+    if (length > bytes.size() - at - 12) fail(path, "truncated PNG (a chunk runs past the end)");
+    const bool end = std::memcmp(p + 4, "IEND", 4) == 0;
+    at += 12 + std::size_t(length);
+    if (end) break;
+  }
+  if (at != bytes.size()) fail(path, fmt::format("{} bytes after the PNG's IEND chunk", bytes.size() - at));
+}
+
 ScalarGrid read_png(const std::string& path, const VolumeReadOptions& opts) {
   const std::string data = read_whole_file(path, memory_limit(opts));
-  if (data.size() < 8 || std::memcmp(data.data(), "\x89PNG\r\n\x1a\n", 8) != 0)
-    fail(path, "not a PNG file (wrong signature)");
+  check_png_chunks(path, data);
   // The simplified libpng API keeps its setjmp handling inside libpng; errors come back as
   // a return value and image.message.
   png_image image;

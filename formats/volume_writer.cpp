@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -34,6 +35,13 @@ VolumeFormat format_of(const std::string& path) {
 }
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw Error(path + ": " + what); }
+
+// What openvdb::io::File::write does, on the shared writer's stream: File writes to its own
+// std::ofstream and never looks at its state, so a full disk went unnoticed.
+class VdbArchive : public openvdb::io::Archive {
+ public:
+  using openvdb::io::Archive::write;
+};
 
 // Physical step of index axis a: spacing[a] times column a of the direction matrix.
 std::array<double, 3> axis_step(const GridTransform& t, int a) {
@@ -70,11 +78,18 @@ void write_nifti(const std::string& path, const ScalarGrid& g) {
     nim->qto_xyz = m;
     nim->xyz_units = NIFTI_UNITS_MM;
     nim->nifti_type = NIFTI_FTYPE_NIFTI1_1;
+    // nifti_image_write only prints "wrote only 0 of ..." when the disk is full; the header and
+    // the data are written here through its pieces, whose results are checked.
     const bool named = nifti_set_filenames(nim.get(), tmp.c_str(), 0, 1) == 0;
-    if (named) nifti_image_write(nim.get());
+    znzFile fp = named ? nifti_image_write_hdr_img(nim.get(), 2, "wb") : nullptr;
     nim->data = nullptr;  // owned by g
-    std::ifstream written(tmp, std::ios::binary);
-    return named && written.good();
+    if (znz_isnull(fp)) fail(path, "cannot write the NIfTI header");
+    const auto bytes = static_cast<std::int64_t>(g.values.size() * sizeof(float));
+    const std::int64_t wrote = nifti_write_buffer(fp, g.values.data(), bytes);
+    const int closed = znzclose(fp);
+    if (wrote != bytes || closed != 0)
+      fail(path, fmt::format("write failed after {} of {} voxel bytes (disk full?)", wrote, bytes));
+    return true;
   });
 }
 
@@ -102,12 +117,20 @@ void write_nrrd(const std::string& path, const ScalarGrid& g) {
   write_path_atomically(path, [&](const std::string& tmp) {
     std::unique_ptr<NrrdIoState, NrrdIoState* (*)(NrrdIoState*)> nio(nrrdIoStateNew(), nrrdIoStateNix);
     nio->encoding = nrrdEncodingGzip->available() ? nrrdEncodingGzip : nrrdEncodingRaw;
-    if (nrrdSave(tmp.c_str(), n.get(), nio.get()) != 0) {
+    // Teem closes the files nrrdSave opens without looking at the result, so the last buffered
+    // bytes could be lost unnoticed; on our own FILE the error flag and fclose are checked.
+    std::FILE* file = std::fopen(tmp.c_str(), "wb");
+    if (!file) fail(path, std::string("cannot create file (") + std::strerror(errno) + ")");
+    const int status = nrrdWrite(file, n.get(), nio.get());
+    const bool stream_ok = !std::ferror(file) && std::fflush(file) == 0;
+    const bool closed = std::fclose(file) == 0;
+    if (status != 0) {
       char* err = biffGetDone(NRRD);
       const std::string msg = err ? err : "";
       std::free(err);
       fail(path, "Teem cannot write it: " + msg.substr(0, msg.find('\n')));
     }
+    if (!stream_ok || !closed) fail(path, "write failed (disk full?)");
     return true;
   });
 }
@@ -141,7 +164,8 @@ void write_raw(const std::string& path, const ScalarGrid& g) {
   try {
     write_file_atomically(path + ".json", [&](std::ostream& os) { os << j.dump(2) << "\n"; });
   } catch (...) {
-    std::remove(path.c_str());
+    // In a batch nothing was renamed yet (and `path` may be an older file to keep).
+    if (!OutputBatch::active()) std::remove(path.c_str());
     throw;
   }
 }
@@ -165,15 +189,12 @@ void write_vdb(const std::string& path, const ScalarGrid& g) {
     for (int j = 0; j < g.dims[1]; ++j)
       for (int i = 0; i < g.dims[0]; ++i) acc.setValueOn(openvdb::Coord(i, j, k), g.values[idx++]);
   if (!g.space.empty()) grid->insertMeta("space", openvdb::StringMetadata(g.space));
-  write_path_atomically(path, [&](const std::string& tmp) {
+  write_file_atomically(path, [&](std::ostream& out) {
     try {
-      openvdb::io::File f(tmp);
-      f.write({grid});
-      f.close();
+      VdbArchive().write(out, openvdb::GridCPtrVec{grid}, /*seekable=*/true);
     } catch (const openvdb::Exception& e) {
       fail(path, std::string("OpenVDB cannot write it: ") + e.what());
     }
-    return true;
   });
 }
 

@@ -270,6 +270,18 @@ class Reader {
       const std::size_t close = data_.find('>', tag);
       if (close == std::string::npos) fail(path_, "truncated AppendedData tag");
       const bool empty = data_[close - 1] == '/';
+      // expat never sees the end of the file, so its closing tags are checked here: a file cut
+      // inside them may have lost appended bytes, too.
+      std::size_t end = data_.find_last_not_of(" \t\r\n");
+      const auto ends_with = [&](const char* t) {
+        const std::size_t n = std::strlen(t);
+        if (end == std::string::npos || end + 1 < n || data_.compare(end + 1 - n, n, t) != 0) return false;
+        end = end + 1 - n == 0 ? std::string::npos : data_.find_last_not_of(" \t\r\n", end - n);
+        return true;
+      };
+      if (!ends_with("</VTKFile>") || (!empty && !ends_with("</AppendedData>")))
+        fail(path_, empty ? "truncated: the file does not end with </VTKFile>"
+                          : "truncated: the file does not end with </AppendedData></VTKFile>");
       xml = data_.substr(0, close + 1) + (empty ? "</VTKFile>" : "</AppendedData></VTKFile>");
       const std::size_t mark = data_.find('_', close);
       if (mark != std::string::npos) appended_ = mark + 1;

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <ostream>
 #include <sstream>
+#include <utility>
 
 namespace mlfe {
 
@@ -62,7 +63,21 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
   connectivity.reserve(elems.size() * (D + 1));
   offsets.reserve(elems.size());
   for (ElemId e : elems) {
+    const std::size_t first = connectivity.size();
     for (VertexId v : h.cell(e)) connectivity.push_back(new_index[v.value]);
+    // VTK's tetrahedron has positive volume (vtkMeshQuality, ParaView's filters rely on it);
+    // red-green refinement keeps no orientation, so order each one in the written frame, as the
+    // .msh writer does (a direction matrix with a negative determinant mirrors it, too).
+    if constexpr (D == 3) {
+      const auto at = [&](int k) { return &points[3 * static_cast<std::size_t>(connectivity[first + k])]; };
+      double d[3][3];
+      for (int k = 0; k < 3; ++k)
+        for (int r = 0; r < 3; ++r) d[k][r] = at(k + 1)[r] - at(0)[r];
+      const double volume6 = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                             d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                             d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
+      if (volume6 < 0) std::swap(connectivity[first + 2], connectivity[first + 3]);
+    }
     offsets.push_back(static_cast<std::int64_t>(connectivity.size()));
     types.push_back(D == 2 ? 5 : 10);
     levels.push_back(static_cast<std::uint8_t>(h.level(e)));

@@ -110,7 +110,8 @@ TEST(ExportCommand, LevelKIsTheCoarserApproximation) {
   EXPECT_GT(grid_errors(b.values, src.values, range, "level 1").rms,
             grid_errors(a.values, src.values, range, "all levels").rms);
   const RunResult r = run("export " + h + " --level 99 -o " + scratch() + "/lvl_99.raw");
-  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(r.status, 1);  // an option out of range: a usage error
+  EXPECT_NE(r.err.find("--level"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(scratch() + "/lvl_99.raw"));
 }
 

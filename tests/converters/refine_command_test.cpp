@@ -117,13 +117,14 @@ struct BadCase {
 
 class RefineCommandBadArguments : public ::testing::TestWithParam<BadCase> {};
 
-TEST_P(RefineCommandBadArguments, ExitWith2AndWriteNothing) {
+// Bad option values are usage errors (exit 1), as for every command.
+TEST_P(RefineCommandBadArguments, ExitWith1AndWriteNothing) {
   const fs::path vtu = temp_dir() / "bad.vtu", mlfeh = temp_dir() / "bad.mlfeh";
   fs::remove(vtu);
   fs::remove(mlfeh);
   const RunResult r =
       run_mlfe("refine " + GetParam().args + " -o " + vtu.string() + " --hierarchy " + mlfeh.string());
-  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_EQ(r.status, 1) << r.err;
   EXPECT_NE(r.err.find("mlfe: " + GetParam().message), std::string::npos) << r.err;
   EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
   EXPECT_FALSE(fs::exists(vtu));

@@ -85,10 +85,11 @@ TEST(Render, BadInputExitsTwoWithoutOutput) {
   EXPECT_NE(r.err.find("bad_tf.json"), std::string::npos) << r.err;
   r = run("render " + kSmall + " --tf nope -o " + out);
   EXPECT_EQ(r.status, 2);
+  // Bad option values are usage errors (1).
   r = run("render " + kSmall + " --size 10 -o " + out);
-  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(r.status, 1);
   r = run("render " + kSmall + " --position 0,0,100 --target 0,0,0 --up 0,0,1 -o " + out);
-  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(r.status, 1);
   EXPECT_NE(r.err.find("--up"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
   for (const auto& e : fs::directory_iterator(scratch()))

@@ -1,0 +1,662 @@
+// The bad-input battery: the command line's contract on hostile input, one table row per case
+// (issue 25). Each row makes its inputs, runs the mlfe binary as a child process (optionally
+// with a file size limit, which makes every write past it fail as on a full disk) and checks
+// the exit status, the message on stderr, that no output (and no temporary) was left, and the
+// child's peak resident memory.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <random>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tests/test_paths.h"
+
+namespace fs = std::filesystem;
+using mlfe::test::sample_path;
+using mlfe::test::scratch_dir;
+using mlfe::test::test_data_path;
+
+namespace {
+
+struct ChildRun {
+  int status = -1;  ///< exit status, -1 when killed by a signal
+  int signal = 0;
+  std::string out, err;
+  double peak_mb = 0;  ///< the child's peak resident set
+};
+
+std::vector<std::string> split_args(const std::string& text) {
+  std::istringstream in(text);
+  return {std::istream_iterator<std::string>(in), {}};
+}
+
+/// Runs `mlfe ARGS` in `dir` (relative paths are the case's files). With fsize_limit, writes
+/// past that many bytes per file fail with EFBIG (SIGXFSZ ignored), like a full disk.
+ChildRun run_in(const std::string& dir, const std::string& args, rlim_t fsize_limit = 0) {
+  const std::string out = dir + "/.stdout", err = dir + "/.stderr";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    if (chdir(dir.c_str()) != 0) _exit(127);
+    const int o = open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int e = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (o < 0 || e < 0) _exit(127);
+    dup2(o, 1);
+    dup2(e, 2);
+    if (fsize_limit) {
+      signal(SIGXFSZ, SIG_IGN);
+      const rlimit r{fsize_limit, fsize_limit};
+      setrlimit(RLIMIT_FSIZE, &r);
+    }
+    std::vector<std::string> words = split_args(args);
+    words.insert(words.begin(), MLFE_BINARY);
+    std::vector<char*> argv;
+    for (auto& w : words) argv.push_back(w.data());
+    argv.push_back(nullptr);
+    execv(MLFE_BINARY, argv.data());
+    _exit(127);
+  }
+  ChildRun r;
+  int st = 0;
+  rusage ru{};
+  wait4(pid, &st, 0, &ru);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  r.signal = WIFSIGNALED(st) ? WTERMSIG(st) : 0;
+  r.peak_mb = ru.ru_maxrss / 1024.0;
+  const auto slurp = [](const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  fs::remove(out);
+  fs::remove(err);
+  return r;
+}
+
+void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream(path, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
+}
+
+std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+std::string random_bytes(std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::string s(n, '\0');
+  for (auto& c : s) c = static_cast<char>(rng() & 0xff);
+  return s;
+}
+
+template <class T>
+void put(std::string& s, std::size_t at, T v) {
+  std::memcpy(s.data() + at, &v, sizeof v);
+}
+
+/// A NIfTI-1 single file (.nii) of 4x4x4 float32 voxels, the given vox_offset, and `bad` as
+/// voxel 5 (NaN, Inf or an ordinary number).
+std::string nifti_file(float vox_offset, float bad) {
+  std::string h(352, '\0');
+  put<std::int32_t>(h, 0, 348);
+  const std::int16_t dim[8] = {3, 4, 4, 4, 1, 1, 1, 1};
+  for (int i = 0; i < 8; ++i) put<std::int16_t>(h, 40 + 2 * i, dim[i]);
+  put<std::int16_t>(h, 70, 16);  // float32
+  put<std::int16_t>(h, 72, 32);
+  for (int i = 0; i < 8; ++i) put<float>(h, 76 + 4 * i, 1.0f);
+  put<float>(h, 108, vox_offset);
+  put<float>(h, 112, 1.0f);  // scl_slope
+  std::memcpy(h.data() + 344, "n+1\0", 4);
+  std::string data(64 * 4, '\0');
+  for (int i = 0; i < 64; ++i) put<float>(data, 4 * i, float(i));
+  put<float>(data, 4 * 5, bad);
+  return h + data;
+}
+
+/// A NRRD whose header claims `sizes` float voxels, with `payload` random bytes gzipped (they
+/// do not compress: the file is about `payload` bytes).
+std::string gzip_nrrd(const std::string& sizes, std::size_t payload) {
+  const std::string zeros = random_bytes(payload, 9);
+  z_stream z{};
+  deflateInit2(&z, 9, Z_DEFLATED, 15 + 16, 9, Z_DEFAULT_STRATEGY);  // +16: gzip wrapper
+  std::string out(deflateBound(&z, zeros.size()) + 64, '\0');
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(zeros.data()));
+  z.avail_in = static_cast<uInt>(zeros.size());
+  z.next_out = reinterpret_cast<Bytef*>(out.data());
+  z.avail_out = static_cast<uInt>(out.size());
+  deflate(&z, Z_FINISH);
+  out.resize(z.total_out);
+  deflateEnd(&z);
+  return "NRRD0004\ntype: float\ndimension: 3\nsizes: " + sizes + "\nendian: little\nencoding: gzip\n\n" +
+         out;
+}
+
+void copy_in(const std::string& from, const std::string& dir, const std::string& name) {
+  fs::copy_file(from, dir + "/" + name, fs::copy_options::overwrite_existing);
+}
+
+// Inputs every case may use, made once per case folder.
+void standard_inputs(const std::string& d) {
+  copy_in(sample_path("ct_skull_64.nrrd"), d, "ct.nrrd");
+  copy_in(test_data_path("small_skull.mlfeh"), d, "h.mlfeh");
+}
+
+struct Case {
+  std::string name;
+  std::function<void(const std::string& dir)> make;  ///< extra inputs (after standard_inputs)
+  std::string args;
+  int status;
+  std::string message;              ///< regex searched in stderr
+  std::vector<std::string> absent;  ///< files that must not exist afterwards
+  double max_peak_mb = 400;
+  rlim_t fsize_limit = 0;  ///< a "full disk" for the child: no file may grow past this
+};
+
+std::ostream& operator<<(std::ostream& os, const Case& c) { return os << c.name; }
+
+const auto none = [](const std::string&) {};
+
+std::vector<Case> battery() {
+  std::vector<Case> cases = {
+      // Rendering with non-finite camera options crashed in render_tiles (SIGSEGV).
+      {"render_azimuth_nan", none, "render h.mlfeh -o x.exr --azimuth nan", 1, "--azimuth", {"x.exr"}},
+      {"render_azimuth_inf", none, "render h.mlfeh -o x.exr --azimuth inf", 1, "--azimuth", {"x.exr"}},
+      {"render_elevation_nan", none, "render h.mlfeh -o x.exr --elevation nan", 1, "--elevation", {"x.exr"}},
+      {"render_perspective_azimuth_nan",
+       none,
+       "render h.mlfeh -o x.exr --camera perspective --azimuth -inf",
+       1,
+       "--azimuth",
+       {"x.exr"}},
+      {"render_stop_opacity_nan",
+       none,
+       "render h.mlfeh -o x.exr --stop-opacity nan",
+       1,
+       "--stop-opacity",
+       {"x.exr"}},
+      {"render_z_opacity_nan", none, "render h.mlfeh -o x.exr --z-opacity nan", 1, "--z-opacity", {"x.exr"}},
+      {"render_tf_unit_nan", none, "render h.mlfeh -o x.exr --tf-unit nan", 1, "--tf-unit", {"x.exr"}},
+      {"render_level_99", none, "render h.mlfeh -o x.exr --level 99", 1, "--level", {"x.exr"}},
+      {"render_level_minus5", none, "render h.mlfeh -o x.exr --level -5", 1, "--level", {"x.exr"}},
+      {"render_up_zero", none, "render h.mlfeh -o x.exr --position 0,0,500 --up 0,0,0", 1, "--up", {"x.exr"}},
+      {"render_up_without_position", none, "render h.mlfeh -o x.exr --up 0,0,0", 1, "--up", {"x.exr"}},
+      {"render_position_nan", none, "render h.mlfeh -o x.exr --position nan,0,0", 1, "--position", {"x.exr"}},
+      {"build_max_error_nan",
+       none,
+       "build ct.nrrd -o o.mlfeh --max-error nan",
+       1,
+       "--max-error",
+       {"o.mlfeh"}},
+      {"build_psnr_nan", none, "build ct.nrrd -o o.mlfeh --psnr nan", 1, "--psnr", {"o.mlfeh"}},
+      {"build_nan_as_nan", none, "build ct.nrrd -o o.mlfeh --nan-as nan", 1, "--nan-as", {"o.mlfeh"}},
+      {"build_threshold_inf",
+       none,
+       "build ct.nrrd -o o.mlfeh --threshold inf",
+       1,
+       "--threshold",
+       {"o.mlfeh"}},
+      {"build_max_vertices_1",
+       none,
+       "build ct.nrrd -o o.mlfeh --max-vertices 1",
+       1,
+       "--max-vertices",
+       {"o.mlfeh"}},
+      {"build_max_vertices_0",
+       none,
+       "build ct.nrrd -o o.mlfeh --max-vertices 0",
+       1,
+       "--max-vertices",
+       {"o.mlfeh"}},
+      {"convert_iso_nan", none, "convert ct.nrrd --iso nan -o o.glb", 1, "--iso", {"o.glb"}},
+      {"convert_simplify_inf",
+       none,
+       "convert ct.nrrd --iso 2.5 --simplify inf -o o.glb",
+       1,
+       "--simplify",
+       {"o.glb"}},
+      {"compare_psnr_nan", none, "compare h.mlfeh h.mlfeh --psnr nan", 2, "--psnr", {}},
+
+      // An iso-value outside the data's range gave an empty asset and exit 0.
+      {"convert_iso_outside_range",
+       none,
+       "convert ct.nrrd --iso 80,150 -o o.glb",
+       2,
+       "ct\\.nrrd: --iso 80 is outside the data's range .* \\.\\. 5\\.4288",
+       {"o.glb"}},
+      {"iso_hierarchy_outside_range",
+       none,
+       "iso h.mlfeh --iso 1000 -o o.ply",
+       2,
+       "outside the data's range",
+       {"o.ply"}},
+
+      // An output that is an input, or two outputs on one path: refused before any work.
+      {"convert_report_is_the_input",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.glb --report ct.nrrd",
+       1,
+       "ct.nrrd is also an input",
+       {"o.glb"}},
+      {"convert_output_is_the_input_via_symlink",
+       [](const std::string& d) { fs::create_symlink("ct.nrrd", d + "/link.ply"); },
+       "convert ct.nrrd --iso 2.5 -o link.ply",
+       1,
+       "is also an input",
+       {}},
+      {"convert_two_outputs_one_path",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.glb --hierarchy x --report x",
+       1,
+       "two outputs on one path",
+       {"o.glb", "x"}},
+      {"build_report_is_the_output",
+       none,
+       "build ct.nrrd -o o.mlfeh --report ./o.mlfeh",
+       1,
+       "two outputs on one path",
+       {"o.mlfeh"}},
+      {"export_output_is_the_input", none, "export h.mlfeh -o h.mlfeh", 1, "is also an input", {}},
+      {"render_png_is_the_exr", none, "render h.mlfeh -o x.exr --png x.exr", 1, "two outputs", {"x.exr"}},
+      {"compare_report_is_an_input",
+       none,
+       "compare h.mlfeh h.mlfeh --report h.mlfeh",
+       2,
+       "is also an input",
+       {}},
+
+      // A full disk (here: a file size limit) while writing: exit 2, no file under the final name.
+      {"full_disk_convert_ply",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.ply",
+       2,
+       "o\\.ply: .*(write|File too large)",
+       {"o.ply"},
+       400,
+       4096},
+      {"full_disk_convert_obj",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.obj",
+       2,
+       "o\\.obj",
+       {"o.obj"},
+       400,
+       4096},
+      {"full_disk_convert_stl",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.stl",
+       2,
+       "o\\.stl",
+       {"o.stl"},
+       400,
+       4096},
+      {"full_disk_convert_off",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.off",
+       2,
+       "o\\.off",
+       {"o.off"},
+       400,
+       4096},
+      {"full_disk_convert_glb",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.glb",
+       2,
+       "o\\.glb",
+       {"o.glb"},
+       400,
+       4096},
+      {"full_disk_export_nii_gz",
+       none,
+       "export h.mlfeh -o x.nii.gz",
+       2,
+       "x\\.nii\\.gz",
+       {"x.nii.gz"},
+       400,
+       4096},
+      {"full_disk_export_nii", none, "export h.mlfeh -o x.nii", 2, "x\\.nii", {"x.nii"}, 400, 4096},
+      {"full_disk_export_vdb", none, "export h.mlfeh -o x.vdb", 2, "x\\.vdb", {"x.vdb"}, 400, 4096},
+      {"full_disk_export_nrrd", none, "export h.mlfeh -o x.nrrd", 2, "x\\.nrrd", {"x.nrrd"}, 400, 4096},
+      {"full_disk_export_raw",
+       none,
+       "export h.mlfeh -o x.raw",
+       2,
+       "x\\.raw",
+       {"x.raw", "x.raw.json"},
+       400,
+       4096},
+      {"full_disk_export_vtu", none, "export h.mlfeh -o x.vtu", 2, "x\\.vtu", {"x.vtu"}, 400, 4096},
+      {"full_disk_export_msh", none, "export h.mlfeh -o x.msh", 2, "x\\.msh", {"x.msh"}, 400, 4096},
+      {"full_disk_render_exr",
+       none,
+       "render h.mlfeh -o x.exr --size 64x64",
+       2,
+       "x\\.exr",
+       {"x.exr"},
+       400,
+       4096},
+      {"full_disk_build_mlfeh", none, "build ct.nrrd -o o.mlfeh", 2, "o\\.mlfeh", {"o.mlfeh"}, 400, 4096},
+      // The first output fits, a later one does not: neither appears.
+      {"full_disk_second_output",
+       none,
+       // The hierarchy (3.2 KB) is written first and fits; the asset (19 KB) does not.
+       "convert ct.nrrd --iso 2.5 --max-vertices 300 --no-draco --simplify 0 -o o.glb --hierarchy o.mlfeh",
+       2,
+       "o\\.glb: write failed",
+       {"o.glb", "o.mlfeh"},
+       400,
+       10000},
+
+      // NIfTI NaN/Inf follow the readers' rule (an error unless --nan-as).
+      {"nifti_nan",
+       [](const std::string& d) { write_bytes(d + "/nan.nii", nifti_file(352, NAN)); },
+       "info nan.nii",
+       2,
+       "nan\\.nii: .*NaN",
+       {}},
+      {"nifti_inf",
+       [](const std::string& d) { write_bytes(d + "/inf.nii", nifti_file(352, INFINITY)); },
+       "build inf.nii -o o.mlfeh",
+       2,
+       "inf\\.nii: .*NaN or infinite",
+       {"o.mlfeh"}},
+      {"nifti_vox_offset_huge",
+       [](const std::string& d) { write_bytes(d + "/v.nii", nifti_file(1e12f, 1)); },
+       "info v.nii",
+       2,
+       "v\\.nii: .*offset",
+       {}},
+      {"nifti_vox_offset_negative",
+       [](const std::string& d) { write_bytes(d + "/v.nii", nifti_file(-1000, 1)); },
+       "info v.nii",
+       2,
+       "v\\.nii: .*vox_offset",
+       {}},
+      {"nifti_vox_offset_inside_header",
+       [](const std::string& d) { write_bytes(d + "/v.nii", nifti_file(100, 1)); },
+       "info v.nii",
+       2,
+       "v\\.nii: .*vox_offset",
+       {}},
+
+      // Other readers' rows.
+      {"png_without_iend",
+       [](const std::string& d) {
+         const std::string png = read_bytes(test_data_path("small_16bit.png"));
+         write_bytes(d + "/cut.png", png.substr(0, png.size() - 12));
+       },
+       "info cut.png",
+       2,
+       "cut\\.png: .*IEND",
+       {}},
+      {"vtu_cut_closing_tag",
+       [](const std::string& d) {
+         const std::string vtu = read_bytes(test_data_path("small_tets_raw.vtu"));
+         write_bytes(d + "/cut.vtu", vtu.substr(0, vtu.rfind("</VTKFile>") + 5));
+       },
+       "build cut.vtu -o o.mlfeh",
+       2,
+       "cut\\.vtu: truncated",
+       {"o.mlfeh"}},
+      {"nrrd_spacing_nan",
+       [](const std::string& d) {
+         write_bytes(d + "/s.nrrd",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nspacings: nan 1 1\n"
+                     "encoding: raw\n\n" +
+                         std::string(64, '\1'));
+       },
+       "info s.nrrd",
+       2,
+       "s\\.nrrd: .*spacings",
+       {}},
+      // 1024^3 float32 claimed by a few hundred bytes of gzip: refused before Teem allocates 4 GiB.
+      {"gzip_nrrd_claims_4_gib",
+       [](const std::string& d) { write_bytes(d + "/huge.nrrd", gzip_nrrd("1024 1024 1024", 300000)); },
+       "info huge.nrrd",
+       2,
+       "huge\\.nrrd: truncated",
+       {},
+       120},
+      {"gzip_nrrd_over_max_memory",
+       [](const std::string& d) { write_bytes(d + "/big.nrrd", gzip_nrrd("256 256 256", 1 << 20)); },
+       "convert big.nrrd --iso 0.5 -o o.glb --max-memory 100M",
+       2,
+       "big\\.nrrd: needs .* bytes",
+       {"o.glb"},
+       120},
+
+      // compare on garbage: unreadable (2), never "equal" or "different".
+      {"compare_random_stl",
+       [](const std::string& d) {
+         write_bytes(d + "/a.stl", random_bytes(5000, 1));
+         write_bytes(d + "/b.stl", random_bytes(5000, 2));
+       },
+       "compare a.stl b.stl",
+       2,
+       "[ab]\\.stl: not an STL file",
+       {}},
+      {"compare_random_obj",
+       [](const std::string& d) {
+         write_bytes(d + "/a.obj", random_bytes(5000, 3));
+         write_bytes(d + "/b.obj", random_bytes(5000, 4));
+       },
+       "compare a.obj b.obj",
+       2,
+       "[ab]\\.obj: not an OBJ file",
+       {}},
+      {"compare_glb_length_20",
+       [](const std::string& d) {
+         std::string glb = read_bytes(mlfe::test::golden_path("ct_skull_iso2.5_3000.glb"));
+         write_bytes(d + "/good.glb", glb);
+         put<std::uint32_t>(glb, 8, 20);
+         write_bytes(d + "/bad.glb", glb);
+       },
+       "compare good.glb bad.glb",
+       2,
+       "bad\\.glb: GLB header says 20 bytes",
+       {}},
+      {"compare_glb_length_huge",
+       [](const std::string& d) {
+         std::string glb = read_bytes(mlfe::test::golden_path("ct_skull_iso2.5_3000.glb"));
+         write_bytes(d + "/good.glb", glb);
+         put<std::uint32_t>(glb, 8, 0x7fffffff);
+         write_bytes(d + "/bad.glb", glb);
+       },
+       "compare good.glb bad.glb",
+       2,
+       "bad\\.glb: GLB header says 2147483647 bytes",
+       {}},
+      {"compare_glb_with_random_glb",
+       [](const std::string& d) {
+         copy_in(mlfe::test::golden_path("ct_skull_iso2.5_3000.glb"), d, "good.glb");
+         write_bytes(d + "/rand.glb", random_bytes(5000, 5));
+       },
+       "compare good.glb rand.glb",
+       2,
+       "rand\\.glb",
+       {}},
+      {"compare_exr_with_random_exr",
+       [](const std::string& d) {
+         copy_in(test_data_path("small_render.exr"), d, "good.exr");
+         write_bytes(d + "/rand.exr", random_bytes(5000, 6));
+       },
+       "compare good.exr rand.exr",
+       2,
+       "rand\\.exr",
+       {}},
+      {"compare_png_with_random_png",
+       [](const std::string& d) {
+         copy_in(test_data_path("small_16bit.png"), d, "good.png");
+         write_bytes(d + "/rand.png", random_bytes(5000, 7));
+       },
+       "compare good.png rand.png",
+       2,
+       "rand\\.png",
+       {}},
+
+      // Command-line spelling.
+      {"unknown_command_suggestion", none, "conver ct.nrrd", 1, "did you mean convert\\?", {}},
+      {"unknown_option_suggestion",
+       none,
+       "convert ct.nrrd --iso 2.5 -o o.glb --simplfy 0.2",
+       1,
+       "did you mean --simplify\\?",
+       {"o.glb"}},
+      {"threads_after_subcommand", none, "info ct.nrrd --threads 1", 0, "^$", {}},
+  };
+  return cases;
+}
+
+class Battery : public ::testing::TestWithParam<Case> {};
+
+TEST_P(Battery, ExitStatusMessageNoOutputBoundedMemory) {
+  const Case& c = GetParam();
+  const std::string d = scratch_dir("battery/" + c.name);
+  standard_inputs(d);
+  c.make(d);
+  const std::string ct = read_bytes(d + "/ct.nrrd");
+  const ChildRun r = run_in(d, c.args, c.fsize_limit);
+  EXPECT_EQ(r.signal, 0) << "crashed: mlfe " << c.args;
+  EXPECT_EQ(r.status, c.status) << "mlfe " << c.args << "\nstderr: " << r.err << "\nstdout: " << r.out;
+  EXPECT_TRUE(std::regex_search(r.err, std::regex(c.message)))
+      << "stderr of mlfe " << c.args << " lacks /" << c.message << "/: " << r.err;
+  if (c.status != 0) {
+    const auto lines = std::count(r.err.begin(), r.err.end(), '\n');
+    EXPECT_GE(lines, 1) << r.err;
+  }
+  for (const auto& f : c.absent)
+    EXPECT_FALSE(fs::exists(fs::symlink_status(d + "/" + f))) << f << " was left";
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().filename().string().rfind(".tmp-", 0), std::string::npos) << e.path() << " was left";
+  EXPECT_EQ(read_bytes(d + "/ct.nrrd"), ct) << "the input was changed";
+  EXPECT_LE(r.peak_mb, c.max_peak_mb) << "peak resident memory of mlfe " << c.args;
+}
+
+INSTANTIATE_TEST_SUITE_P(Contract, Battery, ::testing::ValuesIn(battery()),
+                         [](const ::testing::TestParamInfo<Case>& i) { return i.param.name; });
+
+// The write path's guarantees beyond "no partial output".
+
+TEST(OutputPath, SymlinkIsFollowedAndModeKept) {
+  const std::string d = scratch_dir("battery/symlink");
+  standard_inputs(d);
+  write_bytes(d + "/real.ply", "old");
+  chmod((d + "/real.ply").c_str(), 0600);
+  fs::create_symlink("real.ply", d + "/link.ply");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o link.ply --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_TRUE(fs::is_symlink(d + "/link.ply"));
+  EXPECT_NE(read_bytes(d + "/real.ply"), "old");
+  EXPECT_EQ(read_bytes(d + "/real.ply").rfind("ply\n", 0), 0u);
+  struct stat st {};
+  ASSERT_EQ(stat((d + "/real.ply").c_str(), &st), 0);
+  EXPECT_EQ(st.st_mode & 0777, 0600u);
+}
+
+TEST(OutputPath, OutputThatIsAFolderOrDeviceIsRefused) {
+  const std::string d = scratch_dir("battery/device");
+  standard_inputs(d);
+  fs::create_symlink("/dev/null", d + "/null.ply");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o null.ply --quiet");
+  EXPECT_EQ(r.status, 2) << r.err;
+  EXPECT_NE(r.err.find("not a regular file"), std::string::npos) << r.err;
+}
+
+TEST(OutputPath, TemporariesOfKilledRunsAreRemovedNextTime) {
+  const std::string d = scratch_dir("battery/leftovers");
+  standard_inputs(d);
+  // A pid that surely no longer runs: a child that has exited and been reaped.
+  const pid_t dead = fork();
+  if (dead == 0) _exit(0);
+  waitpid(dead, nullptr, 0);
+  const std::string stale = d + "/.tmp-mlfe-" + std::to_string(dead) + "-o.glb";
+  const std::string live = d + "/.tmp-mlfe-" + std::to_string(getpid()) + "-other.glb";
+  write_bytes(stale, "partial");
+  write_bytes(live, "being written");
+  const ChildRun r = run_in(d, "convert ct.nrrd --iso 2.5 -o o.ply --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(fs::exists(live)) << "a running writer's temporary was removed";
+  fs::remove(live);
+}
+
+// Every tetrahedron of a written .vtu has positive volume (VTK's convention). The file is read
+// here from mlfe's own layout (raw appended Float64 points, Int64 connectivity, UInt64 sizes),
+// because refine's .vtu has no point values for read_tet_mesh.
+double min_signed_volume(const std::string& vtu) {
+  const std::string f = read_bytes(vtu);
+  const auto block = [&](const std::string& name) {
+    const std::size_t at = f.find("Name=\"" + name + "\"");
+    const std::size_t off = f.find("offset=\"", at);
+    const std::uint64_t offset = std::stoull(f.substr(off + 8));
+    const std::size_t data = f.find('_', f.find("<AppendedData")) + 1 + offset;
+    std::uint64_t bytes = 0;
+    std::memcpy(&bytes, f.data() + data, 8);
+    return std::string(f.data() + data + 8, bytes);
+  };
+  const std::string pts = block("Points"), conn = block("connectivity");
+  std::vector<double> p(pts.size() / 8);
+  std::memcpy(p.data(), pts.data(), pts.size());
+  std::vector<std::int64_t> c(conn.size() / 8);
+  std::memcpy(c.data(), conn.data(), conn.size());
+  EXPECT_GT(c.size(), 0u) << vtu;
+  double lo = 1e300;
+  for (std::size_t t = 0; t + 3 < c.size(); t += 4) {
+    const double* a = &p[3 * c[t]];
+    double d[3][3];
+    for (int k = 0; k < 3; ++k)
+      for (int r = 0; r < 3; ++r) d[k][r] = p[3 * c[t + k + 1] + r] - a[r];
+    lo = std::min(lo, d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                          d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                          d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]));
+  }
+  return lo;
+}
+
+TEST(VtuOrientation, ExportAndRefineWritePositiveTetrahedra) {
+  const std::string d = scratch_dir("battery/vtu");
+  standard_inputs(d);
+  ASSERT_EQ(run_in(d, "export h.mlfeh -o x.vtu").status, 0);
+  EXPECT_GT(min_signed_volume(d + "/x.vtu"), 0);
+  ASSERT_EQ(run_in(d, "refine --dim 3 --box 0,0,0,2,1,1 --toward point --at 0.3,0.4,0.5 --levels 5 -o r.vtu")
+                .status,
+            0);
+  EXPECT_GT(min_signed_volume(d + "/r.vtu"), 0);
+}
+
+TEST(CompareEncoding, DracoGlbEqualsItsNoDracoTwin) {
+  const std::string d = scratch_dir("battery/twins");
+  standard_inputs(d);
+  ASSERT_EQ(run_in(d, "convert ct.nrrd --iso 2.5 -o draco.glb --quiet").status, 0);
+  ASSERT_EQ(run_in(d, "convert ct.nrrd --iso 2.5 -o plain.glb --no-draco --quiet").status, 0);
+  // Draco rounds each coordinate to its tolerance (voxel/10 by default, 0.39 mm here), so
+  // the copies agree within sqrt(3) times that (the README's rule): 0.68 mm.
+  const ChildRun r = run_in(d, "compare plain.glb draco.glb --tolerance 7e-4");
+  EXPECT_EQ(r.status, 0) << r.out << r.err;
+}
+
+TEST(NiftiNan, NanAsReplacesThemAsForOtherReaders) {
+  const std::string d = scratch_dir("battery/nifti_nan_as");
+  write_bytes(d + "/nan.nii", nifti_file(352, NAN));
+  const ChildRun r = run_in(d, "info nan.nii --nan-as 7");
+  EXPECT_EQ(r.status, 0) << r.err;
+  EXPECT_NE((r.out + r.err).find("replaced by 7"), std::string::npos) << r.out << r.err;
+}
+
+}  // namespace
