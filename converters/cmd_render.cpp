@@ -121,6 +121,10 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
       lo_l[a] = std::min(lo_l[a], q[a]);
       hi_l[a] = std::max(hi_l[a], q[a]);
     }
+  if (b.get<3>().on_lattice) {  // T0's cube is padded: the volume is the data's box
+    lo_l = {0, 0, 0};
+    hi_l = b.get<3>().data_extent;
+  }
   const std::array<double, 3> mid_l{0.5 * (lo_l[0] + hi_l[0]), 0.5 * (lo_l[1] + hi_l[1]),
                                     0.5 * (lo_l[2] + hi_l[2])};
   const auto center = tr.local_to_physical(mid_l);
@@ -143,7 +147,9 @@ std::vector<std::string> render_outputs(const std::string& out, const RenderPara
 
   std::unique_ptr<TetRenderMesh> mesh;
   if (!p.reference) {
-    mesh = std::make_unique<TetRenderMesh>(hier, b.get<3>().values, p.level);
+    const Approximation<3>& a3 = b.get<3>();
+    mesh =
+        std::make_unique<TetRenderMesh>(hier, a3.values, p.level, a3.on_lattice ? &a3.data_extent : nullptr);
     if (!quiet)
       std::fprintf(
           stderr, "mlfe render: %zu tetrahedra on level %d, renderer adds %.1f MB (%.0f bytes/tetrahedron)\n",

@@ -349,6 +349,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       o.normals_toward_higher = p.normals_toward_higher;
       o.level = at;
       o.min_component = p.min_component;
+      o.clip = a3.on_lattice;
+      o.clip_to = a3.data_extent;
       if (field) {
         o.snap_to = &*field;
         o.snap_distance = p.snap * smallest_spacing(b.transform, dim);

@@ -73,6 +73,55 @@ Vector solve_system(const Hierarchy<D>& h, const SparseMatrix& m, const Vector& 
   return x;
 }
 
+// f at x, read from the sample itself when x is a sample's position (interpolation would add
+// rounding of the order of 1e-16 and break exactness at the samples).
+double sample_or_value(const ScalarGrid& g, const Field& f, const std::array<double, 3>& x) {
+  std::int64_t idx[3] = {0, 0, 0};
+  for (int a = 0; a < g.dim; ++a) {
+    const double t = x[a] / g.transform.spacing[a];
+    const double r = std::nearbyint(t);
+    if (!(std::fabs(t - r) < 1e-6) || r < 0 || r > double(g.dims[a] - 1)) return f.value(x);
+    idx[a] = static_cast<std::int64_t>(r);
+  }
+  return g.at(idx[0], idx[1], idx[2]);
+}
+
+std::vector<double> to_std(const Vector& x) { return std::vector<double>(x.data(), x.data() + x.size()); }
+
+// Values of the vertices that no sample sees (padding, sample_lattice.h): they change u at no
+// sample, so they get the value their parents predict (a zero surplus, nothing to store), T0's
+// the field's value there (clamped to the data).
+template <int D>
+void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<ElemId>& leaves,
+                 const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
+                 std::vector<double>& x) {
+  std::vector<std::uint8_t> seen(h.vertex_count(), 0);
+  for (std::size_t i = 0; i < leaves.size(); ++i) {
+    const auto& in = integrals[index == IntegralIndex::kLeafOrder ? i : leaves[i].value];
+    const auto& c = h.cell(leaves[i]);
+    for (int a = 0; a <= D; ++a)
+      if (in.mass_at(a, a) > 0) seen[c[a].value] = 1;
+  }
+  for (std::size_t v = 0; v < x.size(); ++v) {
+    if (seen[v]) continue;
+    const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+    if (p[0].valid()) {
+      x[v] = 0.5 * (x[p[0].value] + x[p[1].value]);
+    } else {
+      std::array<double, 3> q{0, 0, 0};
+      for (int a = 0; a < D; ++a) q[a] = h.point(VertexId(static_cast<std::uint32_t>(v)))[a];
+      x[v] = f.value(q);
+    }
+  }
+}
+
+template <int D>
+std::array<std::array<double, D>, D + 1> corners_of(const Hierarchy<D>& h, ElemId e) {
+  std::array<std::array<double, D>, D + 1> p;
+  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
+  return p;
+}
+
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
 // allows at the current ratio of leaves to vertices (0: no limit). *by_memory tells which binds.
 template <int D>
@@ -127,7 +176,8 @@ std::vector<ElemId> refine_within(Hierarchy<D>& h, const std::vector<ElemId>& ma
 // reason when a budget ended it, else "".
 template <int D>
 std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
-                                   Clock::time_point t0, Approximation<D>& out) {
+                                   Clock::time_point t0, Approximation<D>& out,
+                                   const SampleLattice* lattice) {
   std::vector<double>& fv = out.data_values;  // the interpolant's nodal values
   double vertices_per_mark = 2.0;
   // refine() keeps the old elements first: a pass checks only the elements from `fresh` on.
@@ -142,6 +192,7 @@ std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const Approx
           for (std::size_t i = r.begin(); i != r.end(); ++i) {
             const ElemId e(static_cast<std::uint32_t>(i));
             if (!h.is_leaf(e)) continue;
+            if (lattice && outside_data<D>(corners_of(h, e), *lattice)) continue;  // padding
             bool candidate = false;
             const bool mark = surface_gap_mark(h, e, fv, f, opts, opts.surface_tolerance, &candidate);
             decision[i - fresh] = std::uint8_t((candidate ? 1 : 0) | (mark ? 2 : 0));
@@ -194,37 +245,53 @@ std::size_t estimated_memory_bytes(int dim, std::size_t vertices, std::size_t le
 template <int D>
 std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field& f,
                                              const ApproximationOptions& opts,
-                                             const std::vector<double>& warm, IterationStats* stats) {
+                                             const std::vector<double>& warm, IterationStats* stats,
+                                             const SampleLattice* lattice) {
   const double gw = gradient_weight<D>(f, opts);
   const double qedge = default_quadrature_edge(f, opts);
   const auto leaves = h.leaves();
-  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1);
-  const SparseMatrix m = assemble_matrix(h, leaves, gw);
+  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1, lattice);
+  const SparseMatrix m = assemble_matrix(h, leaves, gw, &integrals);
   const Vector rhs = assemble_load(h, leaves, integrals, gw);
   Vector start = Vector::Zero(rhs.size());
   if (warm.size() == h.vertex_count())
     for (std::size_t i = 0; i < warm.size(); ++i) start[i] = warm[i];
   IterationStats local;
-  const Vector x = solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local);
-  return std::vector<double>(x.data(), x.data() + x.size());
+  std::vector<double> x = to_std(solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local));
+  if (lattice) fill_unseen(h, f, leaves, integrals, IntegralIndex::kLeafOrder, x);
+  return x;
 }
 
 template <int D>
-Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
+Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in) {
   if (f.dim() != D)
     throw Error("approximate<" + std::to_string(D) + ">: the field is " + std::to_string(f.dim()) + "D");
   const auto t0 = Clock::now();
   Approximation<D> out;
+  ApproximationOptions opts = opts_in;
+  // The samples' lattice (sample_lattice.h): T0 is a cube 2^L samples wide, level L's vertices
+  // are the samples and nothing is refined below them.
+  const ScalarGrid* grid = f.samples();
+  out.on_lattice = opts.lattice && grid != nullptr;
+  const SampleLattice* lattice = nullptr;
   typename Hierarchy<D>::Point lo, hi;
   const auto ext = f.extent();
+  out.data_extent = ext;
+  if (out.on_lattice) {
+    out.lattice = sample_lattice(*grid);
+    lattice = &out.lattice;
+    opts.max_level = std::min(opts.max_level, out.lattice.level);
+  }
+  const auto box_ext = out.on_lattice ? out.lattice.box_extent() : ext;
   for (int a = 0; a < D; ++a) {
     lo[a] = 0;
-    hi[a] = ext[a];
+    hi[a] = box_ext[a];
   }
   out.hierarchy = Hierarchy<D>::box(lo, hi);
   Hierarchy<D>& h = out.hierarchy;
   out.domain_measure = 1;
   for (int a = 0; a < D; ++a) out.domain_measure *= ext[a];
+  if (out.on_lattice) out.domain_measure = double(out.lattice.samples()) * out.lattice.sample_weight;
   const auto range = f.range();
   out.value_min = range[0];
   out.value_max = range[1];
@@ -234,8 +301,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
 
   // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
   // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
+  // On the lattice: where T0's cube is cut into cubes 16 samples wide, padding left alone.
   int start_level = opts.start_level;
-  if (start_level < 0) {
+  if (start_level < 0 && out.on_lattice) {
+    start_level = std::max(0, out.lattice.level - 4);
+  } else if (start_level < 0) {
     double longest = 0;
     for (int a = 0; a < D; ++a) longest += ext[a] * ext[a];
     longest = std::sqrt(longest);
@@ -245,13 +315,21 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       ++start_level;
     }
   }
+  start_level = std::min(start_level, opts.max_level);
   for (int l = 0; l < start_level; ++l) {
     if (opts.max_vertices && h.vertex_count() * (1 << D) > opts.max_vertices) break;
-    h.refine_uniform();
+    if (!out.on_lattice) {
+      h.refine_uniform();
+      continue;
+    }
+    std::vector<ElemId> inside;
+    for (ElemId e : h.leaves())
+      if (!outside_data<D>(corners_of(h, e), out.lattice)) inside.push_back(e);
+    h.refine(std::move(inside));
   }
   const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
   std::string surface_stop;
-  if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out);
+  if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out, lattice);
   if (surface_driven && !opts.solve) {
     out.values = out.data_values;
     out.stop_reason = surface_stop.empty() ? "surfaces within tolerance (u not solved)" : surface_stop;
@@ -278,7 +356,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
       std::vector<ElemId> todo;
       for (ElemId e : leaves)
         if (!have[e.value]) todo.push_back(e);
-      const auto fresh = compute_element_integrals(h, todo, f, qedge, opts.h1);
+      const auto fresh = compute_element_integrals(h, todo, f, qedge, opts.h1, lattice);
       for (std::size_t i = 0; i < todo.size(); ++i) {
         cache[todo[i].value] = fresh[i];
         have[todo[i].value] = 1;
@@ -287,7 +365,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    const SparseMatrix m = assemble_matrix(h, leaves, gw);
+    const SparseMatrix m = assemble_matrix(h, leaves, gw, &cache, kById);
     const Vector rhs = assemble_load(h, leaves, cache, gw, kById);
     st.assembly_seconds = since(ta);
 
@@ -299,8 +377,12 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     else
       prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
     Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-    const Vector x = solve_system(h, m, rhs, start, opts, gw, st);
+    Vector x = solve_system(h, m, rhs, start, opts, gw, st);
     values.assign(x.data(), x.data() + x.size());
+    if (lattice) {
+      fill_unseen(h, f, leaves, cache, kById, values);
+      x = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+    }
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
@@ -319,7 +401,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts) {
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     std::size_t surface_marks = 0;
     std::vector<Mark> marked =
-        mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks);
+        mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks, lattice);
     std::string stop;
     if (marked.empty())
       stop = target_met           ? "target RMS error reached"
@@ -415,12 +497,13 @@ template <int D>
 void sample_at_vertices(const Hierarchy<D>& h, const Field& f, std::vector<double>& values) {
   const std::size_t from = std::min(values.size(), h.vertex_count());
   values.resize(h.vertex_count());
+  const ScalarGrid* grid = f.samples();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(from, values.size(), 4096),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t v = r.begin(); v != r.end(); ++v) {
                         std::array<double, 3> x{0, 0, 0};
                         for (int a = 0; a < D; ++a) x[a] = h.points()[v][a];
-                        values[v] = f.value(x);
+                        values[v] = grid ? sample_or_value(*grid, f, x) : f.value(x);
                       }
                     });
 }
@@ -431,9 +514,11 @@ template void sample_at_vertices<3>(const Hierarchy<3>&, const Field&, std::vect
 template Approximation<3> approximate<3>(const Field&, const ApproximationOptions&);
 template std::vector<double> solve_best_approximation<2>(const Hierarchy<2>&, const Field&,
                                                          const ApproximationOptions&,
-                                                         const std::vector<double>&, IterationStats*);
+                                                         const std::vector<double>&, IterationStats*,
+                                                         const SampleLattice*);
 template std::vector<double> solve_best_approximation<3>(const Hierarchy<3>&, const Field&,
                                                          const ApproximationOptions&,
-                                                         const std::vector<double>&, IterationStats*);
+                                                         const std::vector<double>&, IterationStats*,
+                                                         const SampleLattice*);
 
 }  // namespace mlfe

@@ -2,6 +2,7 @@
 #include <mlfe/core/check.h>
 #include <mlfe/core/fe_assembly.h>
 #include <mlfe/core/p1_element.h>
+#include <mlfe/core/sample_lattice.h>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -15,6 +16,14 @@
 namespace mlfe {
 
 namespace {
+// Position of the diagonal entry of row v (every row holds its diagonal).
+std::size_t slot_diag(const std::vector<std::pair<int, double>>& row, std::size_t v) {
+  for (std::size_t k = 0; k < row.size(); ++k)
+    if (row[k].first == int(v)) return k;
+  MLFE_CHECK_MSG(false, "matrix row without its diagonal");
+  return 0;
+}
+
 template <int D>
 std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, ElemId e) {
   std::array<std::array<double, D>, D + 1> p;
@@ -27,19 +36,23 @@ std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, E
 template <int D>
 std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
                                                            const std::vector<ElemId>& elems, const Field& f,
-                                                           double max_sub_edge, bool gradients) {
+                                                           double max_sub_edge, bool gradients,
+                                                           const SampleLattice* lattice) {
   std::vector<ElementIntegrals<D>> out(elems.size());
+  const ScalarGrid* grid = lattice ? f.samples() : nullptr;
+  MLFE_CHECK(!lattice || grid);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, elems.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i)
-          out[i] = integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
+          out[i] = grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, gradients)
+                        : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
       });
   return out;
 }
 
 template <int D>
-SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                             double gradient_weight) {
+SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                             const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index) {
   // Row by row from a vertex → incident-element table instead of (D+1)² triplets per element:
   // 16 bytes per element instead of 256, and every row is summed by one thread in element
   // order, so the values do not depend on the thread count.
@@ -61,7 +74,14 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
   // reads it without going through the hierarchy: the corners, and for the pure mass matrix
   // only |T|, with a gradient term the (D+1)² entries.
   constexpr int kLocal = (D + 1) * (D + 1);
-  const bool with_grad = gradient_weight != 0;
+  // Least squares at the samples: the element matrices are the sampled ones.
+  const bool sampled =
+      integrals && !leaves.empty() &&
+      (index == IntegralIndex::kLeafOrder ? (*integrals)[0] : (*integrals)[leaves[0].value]).sampled;
+  auto sampled_at = [&](std::size_t i) -> const ElementIntegrals<D>& {
+    return index == IntegralIndex::kLeafOrder ? (*integrals)[i] : (*integrals)[leaves[i].value];
+  };
+  const bool with_grad = gradient_weight != 0 || sampled;
   std::vector<double> local(with_grad ? ne * kLocal : ne);
   std::vector<std::array<std::uint32_t, D + 1>> corners(ne);
   tbb::parallel_for(
@@ -73,10 +93,18 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
             local[i] = P1Element<D>::measure_of(element_points(h, leaves[i]));
             continue;
           }
+          if (sampled && gradient_weight == 0) {
+            const auto& in = sampled_at(i);
+            MLFE_CHECK(in.sampled);
+            for (int a = 0; a <= D; ++a)
+              for (int b = 0; b <= D; ++b) local[i * kLocal + a * (D + 1) + b] = in.mass_at(a, b);
+            continue;
+          }
           const P1Element<D> el(element_points(h, leaves[i]));
           for (int a = 0; a <= D; ++a)
             for (int b = 0; b <= D; ++b)
-              local[i * kLocal + a * (D + 1) + b] = el.mass(a, b) + gradient_weight * el.stiffness(a, b);
+              local[i * kLocal + a * (D + 1) + b] = (sampled ? sampled_at(i).mass_at(a, b) : el.mass(a, b)) +
+                                                    gradient_weight * el.stiffness(a, b);
         }
       });
   // Rows in blocks, one pass: a per-thread slot array maps a column to its place in the
@@ -118,6 +146,11 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
               }
             }
             for (const auto& e : row) slot[e.first] = kNone;
+            // A vertex no sample sees (only padding around it, see sample_lattice.h) does not
+            // change u at any sample: it gets an identity row, and the caller its value.
+            if (sampled && row[slot_diag(row, v)].second == 0) {
+              for (auto& e : row) e.second = e.first == int(v) ? 1.0 : 0.0;
+            }
             std::sort(row.begin(), row.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
             for (const auto& e : row) {
               blk.cols.push_back(e.first);
@@ -199,48 +232,51 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
                                    double gradient_weight, IntegralIndex index) {
   const IntegralAccess<D> integrals(integrals_in, leaves, index, h.element_count());
   std::vector<double> err(leaves.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                        const auto& c = h.cell(leaves[i]);
-                        const auto& in = integrals[i];
-                        const auto pts = element_points(h, leaves[i]);
-                        // The gradients (a 3×3 inverse) only for the H1 term.
-                        const double measure = P1Element<D>::measure_of(pts);
-                        double uu[D + 1];
-                        for (int a = 0; a <= D; ++a) uu[a] = u[c[a].value];
-                        double cross = 0, quad = 0;
-                        for (int a = 0; a <= D; ++a) {
-                          cross += uu[a] * in.fphi[a];
-                          for (int b = 0; b <= D; ++b)
-                            quad += uu[a] * uu[b] * P1Element<D>::mass_of(measure, a, b);
-                        }
-                        // ∫(f-u)² = ∫f² - 2∫fu + ∫u²; cancellation can leave a tiny negative.
-                        double e = in.f2 - 2 * cross + quad;
-                        if (gradient_weight != 0) {
-                          const P1Element<D> el(pts);
-                          double gu[D] = {};
-                          for (int a = 0; a <= D; ++a)
-                            for (int k = 0; k < D; ++k) gu[k] += uu[a] * el.grad[a][k];
-                          double g = in.grad2;
-                          for (int k = 0; k < D; ++k)
-                            g += -2 * gu[k] * in.grad[k] + gu[k] * gu[k] * el.measure;
-                          e += gradient_weight * std::max(g, 0.0);
-                        }
-                        err[i] = std::max(e, 0.0);
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, leaves.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const auto& c = h.cell(leaves[i]);
+          const auto& in = integrals[i];
+          const auto pts = element_points(h, leaves[i]);
+          // The gradients (a 3×3 inverse) only for the H1 term.
+          const double measure = P1Element<D>::measure_of(pts);
+          double uu[D + 1];
+          for (int a = 0; a <= D; ++a) uu[a] = u[c[a].value];
+          double cross = 0, quad = 0;
+          for (int a = 0; a <= D; ++a) {
+            cross += uu[a] * in.fphi[a];
+            for (int b = 0; b <= D; ++b)
+              quad += uu[a] * uu[b] * (in.sampled ? in.mass_at(a, b) : P1Element<D>::mass_of(measure, a, b));
+          }
+          // ∫(f-u)² = ∫f² - 2∫fu + ∫u²; cancellation can leave a tiny negative.
+          double e = in.f2 - 2 * cross + quad;
+          if (gradient_weight != 0) {
+            const P1Element<D> el(pts);
+            double gu[D] = {};
+            for (int a = 0; a <= D; ++a)
+              for (int k = 0; k < D; ++k) gu[k] += uu[a] * el.grad[a][k];
+            double g = in.grad2;
+            for (int k = 0; k < D; ++k) g += -2 * gu[k] * in.grad[k] + gu[k] * gu[k] * el.measure;
+            e += gradient_weight * std::max(g, 0.0);
+          }
+          err[i] = std::max(e, 0.0);
+        }
+      });
   return err;
 }
 
 template std::vector<ElementIntegrals<2>> compute_element_integrals<2>(const Hierarchy<2>&,
                                                                        const std::vector<ElemId>&,
-                                                                       const Field&, double, bool);
+                                                                       const Field&, double, bool,
+                                                                       const SampleLattice*);
 template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hierarchy<3>&,
                                                                        const std::vector<ElemId>&,
-                                                                       const Field&, double, bool);
-template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double);
-template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double);
+                                                                       const Field&, double, bool,
+                                                                       const SampleLattice*);
+template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double,
+                                         const std::vector<ElementIntegrals<2>>*, IntegralIndex);
+template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,
+                                         const std::vector<ElementIntegrals<3>>*, IntegralIndex);
 template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                  const std::vector<ElementIntegrals<2>>&, double, IntegralIndex);
 template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,

@@ -182,6 +182,76 @@ Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector
   return d;
 }
 
+// Sutherland–Hodgman against the planes x_a = hi_a of the box [0, hi] (the surface never
+// leaves the lower faces: T0 starts at 0). Cut points are keyed by their surface edge and the
+// plane, computed from the lower vertex id, so neighbours share them bit for bit; vertices
+// no triangle uses any more are dropped, the others keep their order.
+void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad) {
+  double scale = 0;
+  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(hi[a]));
+  const double eps = 1e-9 * scale;
+  auto inside = [&](const V3& p, int a) { return p[a] <= hi[a] + eps; };
+  bool any_out = false;
+  for (const V3& p : local)
+    for (int a = 0; a < 3; ++a) any_out |= !inside(p, a);
+  if (!any_out) return;
+  std::unordered_map<std::uint64_t, std::uint32_t> cuts;  // (edge, plane) -> vertex
+  auto cut_point = [&](std::uint32_t i, std::uint32_t j, int a) {
+    if (i > j) std::swap(i, j);
+    const std::uint64_t exact = (std::uint64_t(i) << 34) | (std::uint64_t(j) << 2) | std::uint64_t(a);
+    auto it = cuts.find(exact);
+    if (it != cuts.end()) return it->second;
+    const V3 pi = local[i], pj = local[j];
+    const double t = (hi[a] - pi[a]) / (pj[a] - pi[a]);
+    V3 p, g;
+    for (int k = 0; k < 3; ++k) {
+      p[k] = pi[k] + t * (pj[k] - pi[k]);
+      g[k] = grad[i][k] + t * (grad[j][k] - grad[i][k]);
+    }
+    p[a] = hi[a];
+    const auto id = static_cast<std::uint32_t>(local.size());
+    local.push_back(p);
+    grad.push_back(g);
+    cuts.emplace(exact, id);
+    return id;
+  };
+  std::vector<std::array<std::uint32_t, 3>> kept;
+  std::vector<std::uint32_t> poly, next;
+  for (const auto& t : mesh.triangles) {
+    poly.assign(t.begin(), t.end());
+    for (int a = 0; a < 3 && !poly.empty(); ++a) {
+      next.clear();
+      for (std::size_t k = 0; k < poly.size(); ++k) {
+        const std::uint32_t p = poly[k], q = poly[(k + 1) % poly.size()];
+        const bool pin = inside(local[p], a), qin = inside(local[q], a);
+        if (pin) next.push_back(p);
+        if (pin != qin) next.push_back(cut_point(p, q, a));
+      }
+      poly.swap(next);
+    }
+    for (std::size_t k = 1; k + 1 < poly.size(); ++k)
+      if (poly[0] != poly[k] && poly[k] != poly[k + 1] && poly[0] != poly[k + 1])
+        kept.push_back({poly[0], poly[k], poly[k + 1]});
+  }
+  // Compact: used vertices in their order.
+  std::vector<std::uint32_t> remap(local.size(), ~0u);
+  for (const auto& t : kept)
+    for (auto i : t) remap[i] = 0;
+  std::uint32_t n = 0;
+  std::vector<V3> nl, ng;
+  for (std::size_t i = 0; i < local.size(); ++i)
+    if (remap[i] == 0) {
+      remap[i] = n++;
+      nl.push_back(local[i]);
+      ng.push_back(grad[i]);
+    }
+  for (auto& t : kept)
+    for (auto& i : t) i = remap[i];
+  mesh.triangles = std::move(kept);
+  local = std::move(nl);
+  grad = std::move(ng);
+}
+
 template <int D>
 P1Element<D> element_of(const Hierarchy<D>& h, ElemId e) {
   std::array<std::array<double, D>, D + 1> p;
@@ -452,6 +522,7 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
     grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
                (1 - ov.t) * ga[2] + ov.t * gb[2]};
   }
+  if (opts.clip) clip_to_box(opts.clip_to, mesh, local, grad);
   if (opts.snap_to && opts.snap_distance > 0)
     snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);
   if (opts.min_component > 0 || opts.dropped) {

@@ -1,6 +1,7 @@
 // Marking for the adaptive approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see marking.h.
 #include <mlfe/core/marking.h>
 #include <mlfe/core/p1_element.h>
+#include <mlfe/core/sample_lattice.h>
 #include <mlfe/core/surface_estimator.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -87,7 +88,7 @@ template <int D, typename Values>
 bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, const Field& f,
                       const ApproximationOptions& opts, double tolerance_voxels, bool* candidate) {
   const double size = element_size(h, e), voxel = f.voxel_size();
-  if (h.level(e) >= opts.max_level || size <= voxel) return false;
+  if (!refinable(h, e, opts.max_level) || size <= voxel) return false;
   std::array<double, D + 1> c;
   double cmin = 1e300, cmax = -1e300;
   for (int i = 0; i <= D; ++i) {
@@ -111,7 +112,8 @@ template <int D>
 std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                               const std::vector<double>& err, const std::vector<ElementIntegrals<D>>& cache,
                               const Vector& u, const Field& f, const ApproximationOptions& opts,
-                              bool surface_driven, bool target_met, std::size_t* surface_marks) {
+                              bool surface_driven, bool target_met, std::size_t* surface_marks,
+                              const SampleLattice* lattice) {
   // Once the RMS target is met only the iso-aware rule (if any) still marks.
   const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
   const double thr2 = opts.threshold * opts.threshold;
@@ -121,8 +123,14 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
       tbb::blocked_range<std::size_t>(0, leaves.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
           const ElemId e = leaves[i];
-          if (h.level(e) >= opts.max_level) continue;
-          const double density = err[i] / h.measure(e);  // mean square error on T
+          if (!refinable(h, e, opts.max_level)) continue;
+          // Padding holds no sample and is never refined (sample_lattice.h).
+          if (lattice && outside_data<D>(corner_points(h, e), *lattice)) continue;
+          // Mean square error on T: over its samples on the lattice.
+          const auto& in = cache[e.value];
+          const double density = in.sampled
+                                     ? err[i] / (lattice->sample_weight * std::max<double>(in.points, 1))
+                                     : err[i] / h.measure(e);
           bool mark = false;
           if (opts.threshold > 0) mark |= density > thr2;
           // Equidistribution: if no element's mean square error exceeds tau²,
@@ -171,11 +179,11 @@ std::size_t rank_and_select(std::vector<Mark>& marks, std::size_t cap, std::size
 template std::vector<Mark> mark_leaves<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                           const std::vector<double>&, const std::vector<ElementIntegrals<2>>&,
                                           const Vector&, const Field&, const ApproximationOptions&, bool,
-                                          bool, std::size_t*);
+                                          bool, std::size_t*, const SampleLattice*);
 template std::vector<Mark> mark_leaves<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                           const std::vector<double>&, const std::vector<ElementIntegrals<3>>&,
                                           const Vector&, const Field&, const ApproximationOptions&, bool,
-                                          bool, std::size_t*);
+                                          bool, std::size_t*, const SampleLattice*);
 template bool surface_gap_mark<2, Vector>(const Hierarchy<2>&, ElemId, const Vector&, const Field&,
                                           const ApproximationOptions&, double, bool*);
 template bool surface_gap_mark<3, Vector>(const Hierarchy<3>&, ElemId, const Vector&, const Field&,

@@ -366,7 +366,9 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 
 // ---------------------------------------------------------------- render mesh
 
-TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level) : h_(h) {
+TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
+                             const std::array<double, 3>* clip_to)
+    : h_(h) {
   if (values.size() != h.vertex_count())
     throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
                 std::to_string(h.vertex_count()) + " vertices");
@@ -445,6 +447,8 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
         lo_box_[a] = std::min(lo_box_[a], h.point(v)[a]);
         hi_box_[a] = std::max(hi_box_[a], h.point(v)[a]);
       }
+  if (clip_to)
+    for (int a = 0; a < 3; ++a) hi_box_[a] = std::min(hi_box_[a], (*clip_to)[a]);
   diag_ = std::sqrt(dot(sub(hi_box_, lo_box_), sub(hi_box_, lo_box_)));
   // 5. the range grid: about one cell per 8 rendered elements (at most 64 along the longest
   // axis), each with the union of the ranges of the elements whose (padded) bounding boxes

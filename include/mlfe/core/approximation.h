@@ -14,6 +14,7 @@
 #pragma once
 #include <mlfe/core/field.h>
 #include <mlfe/core/hierarchy.h>
+#include <mlfe/core/sample_lattice.h>
 
 #include <cstddef>
 #include <functional>
@@ -86,6 +87,10 @@ struct ApproximationOptions {
   /// Refinement stops before the estimated memory of the approximation (hierarchy, integrals,
   /// matrix, solver vectors: estimated_memory_bytes()) would exceed this; 0: no limit.
   std::size_t max_memory_bytes = 0;
+  /// For fields with samples (Field::samples()): T0 on the samples' lattice and least squares
+  /// at the samples (sample_lattice.h). false keeps the paper's box over the extent and the
+  /// continuous L2 norm (always the case for fields without samples).
+  bool lattice = true;
   Preconditioner preconditioner = Preconditioner::kBpx;
   double cg_tolerance = 1e-9;   ///< relative residual
   int direct_solve_max = 1000;  ///< direct (LDLT) solve while vertices ≤ this (T0 and the first
@@ -101,8 +106,13 @@ struct Approximation {
   std::vector<SurfacePassStats> surface_passes;
   std::vector<IterationStats> iterations;
   std::vector<double> leaf_errors;  ///< E_T per leaf (h.leaves() order) of the final u
-  double domain_measure = 0;
+  double domain_measure = 0;        ///< |Ω|, or samples × voxel volume on the lattice
   double value_min = 0, value_max = 0;
+  /// Whether T0 and the errors are on the samples' lattice; then `lattice` describes it, the
+  /// hierarchy's box is T0's padded cube and `data_extent` the data's box (outputs clip to it).
+  bool on_lattice = false;
+  SampleLattice lattice;
+  std::array<double, 3> data_extent{0, 0, 0};
   std::string stop_reason;
   bool memory_limited = false;  ///< refinement stopped at max_memory_bytes
   /// Surface-driven builds: f at every vertex (the nodal values of f's interpolant, which the
@@ -130,8 +140,8 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts);
 template <int D>
 std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field& f,
                                              const ApproximationOptions& opts,
-                                             const std::vector<double>& warm,
-                                             IterationStats* stats = nullptr);
+                                             const std::vector<double>& warm, IterationStats* stats = nullptr,
+                                             const SampleLattice* lattice = nullptr);
 
 extern template Approximation<2> approximate<2>(const Field&, const ApproximationOptions&);
 extern template void sample_at_vertices<2>(const Hierarchy<2>&, const Field&, std::vector<double>&);

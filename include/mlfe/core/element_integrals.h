@@ -19,6 +19,8 @@
 #include <mlfe/core/field.h>
 
 #include <array>
+#include <cstdint>
+#include <utility>
 
 namespace mlfe {
 
@@ -29,7 +31,16 @@ struct ElementIntegrals {
   std::array<double, D> grad{};      ///< ∫_T ∇f        (only with gradients requested)
   double grad2 = 0;                  ///< ∫_T |∇f|²     (only with gradients requested)
   float fmin = 0, fmax = 0;          ///< range of f at the quadrature points
-  std::uint32_t points = 0;          ///< quadrature points used
+  std::uint32_t points = 0;          ///< quadrature points used (samples owned, when sampled)
+  /// Least squares at the samples (sample_lattice.h): `mass` holds Σ w λ_i λ_j (upper triangle,
+  /// row major) and replaces the exact P1 mass matrix of the element in the system and in E_T.
+  bool sampled = false;
+  std::array<double, (D + 1) * (D + 2) / 2> mass{};
+  /// Entry (i, j) of `mass` (either order).
+  double mass_at(int i, int j) const {
+    if (i > j) std::swap(i, j);
+    return mass[static_cast<std::size_t>(i * (D + 1) - i * (i - 1) / 2 + (j - i))];
+  }
 };
 
 /// Integrals over the simplex with vertices p (local frame, units of the field's spacing).

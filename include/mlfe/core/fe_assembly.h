@@ -10,26 +10,33 @@
 #include <mlfe/core/element_integrals.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
+#include <mlfe/core/sample_lattice.h>
 
 #include <vector>
 
 namespace mlfe {
 
-/// Resolving integrals of f for each element of `elems` (see element_integrals.h).
-template <int D>
-std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
-                                                           const std::vector<ElemId>& elems, const Field& f,
-                                                           double max_sub_edge, bool gradients);
-
-/// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()).
-template <int D>
-SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                             double gradient_weight);
-
 /// How `integrals` lines up with `leaves`: integrals[i] belongs to leaves[i] (kLeafOrder), or
 /// integrals is a per-element cache and integrals[leaves[i].value] belongs to leaves[i]
 /// (kElementId; saves gathering a copy of a cache that already exists). Sizes are CHECKed.
 enum class IntegralIndex { kLeafOrder, kElementId };
+
+/// Integrals of f for each element of `elems`: with a lattice (f must then have samples()), the
+/// least-squares sums over the samples each element owns (sample_lattice.h); without, the
+/// resolving quadrature of element_integrals.h.
+template <int D>
+std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
+                                                           const std::vector<ElemId>& elems, const Field& f,
+                                                           double max_sub_edge, bool gradients,
+                                                           const SampleLattice* lattice = nullptr);
+
+/// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()). With
+/// sampled `integrals` (least squares at the samples), M is their sampled mass, and a vertex
+/// that no sample sees gets an identity row (it changes u at no sample).
+template <int D>
+SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                             const std::vector<ElementIntegrals<D>>* integrals = nullptr,
+                             IntegralIndex index = IntegralIndex::kLeafOrder);
 
 /// Load vector F_j = (f, φ_j) + gradient_weight (∇f, ∇φ_j).
 template <int D>

@@ -17,6 +17,7 @@
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/core/triangle_mesh.h>
 
+#include <array>
 #include <vector>
 
 namespace mlfe {
@@ -35,6 +36,12 @@ struct IsoOptions {
   /// domain's diagonal is cut to it).
   const Field* snap_to = nullptr;
   double snap_distance = 0;
+  /// When set, the surface is clipped to the box [0, clip_to] of the local frame: a hierarchy
+  /// on the samples' lattice (sample_lattice.h) covers a padded cube, and only the data's box
+  /// is the data. Triangles wholly outside are dropped, those across a face cut along it (the
+  /// cut points welded: one per cut surface edge and face).
+  bool clip = false;
+  std::array<double, 3> clip_to{0, 0, 0};
   /// Drops the connected parts of the surface (triangles joined through shared vertices) whose
   /// vertices lie in fewer than this many voxel cells of the transform's sample lattice (a
   /// speck of noise around one sample touches up to 8); 0 keeps every part.

@@ -33,7 +33,8 @@ template <int D>
 std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                               const std::vector<double>& err, const std::vector<ElementIntegrals<D>>& cache,
                               const Vector& u, const Field& f, const ApproximationOptions& opts,
-                              bool surface_driven, bool target_met, std::size_t* surface_marks);
+                              bool surface_driven, bool target_met, std::size_t* surface_marks,
+                              const SampleLattice* lattice = nullptr);
 
 /// Ranks the marks (surface marks first, then larger error, ties by id: a strict order) so that
 /// the first `cap` are the worst, sorted, and returns how many of them to refine: all `cap`, or
@@ -48,6 +49,13 @@ std::size_t rank_and_select(std::vector<Mark>& marks, std::size_t cap, std::size
 /// linear function's are more than tolerance_voxels apart inside e (down to two-voxel
 /// elements), or the linear function misses a piece of surface altogether (down to one voxel).
 /// *candidate is set when e can hold a surface at all (the data's range brackets an iso-value).
+/// Whether leaf e may still be red-refined without passing max_level: a green leaf refines its
+/// parent, whose red children are one level below the parent.
+template <int D>
+bool refinable(const Hierarchy<D>& h, ElemId e, int max_level) {
+  return h.kind(e) == ElemKind::kGreen ? h.level(e) <= max_level : h.level(e) < max_level;
+}
+
 template <int D, typename Values>
 bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, const Field& f,
                       const ApproximationOptions& opts, double tolerance_voxels, bool* candidate = nullptr);

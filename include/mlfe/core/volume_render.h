@@ -99,7 +99,10 @@ class TetRenderMesh {
  public:
   /// values: u at every vertex of h (size checked); level −1 or ≥ h.max_level() is the leaf
   /// triangulation, smaller levels use the hierarchical basis (surpluses above k dropped).
-  TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level = -1);
+  /// With `clip_to` (a hierarchy on the samples' lattice, sample_lattice.h), rays are clipped to
+  /// the data's box [0, clip_to] instead of T0's padded cube.
+  TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level = -1,
+                const std::array<double, 3>* clip_to = nullptr);
 
   std::size_t size() const { return elems_.size(); }
   int level() const { return level_; }

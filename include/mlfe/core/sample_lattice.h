@@ -1,0 +1,75 @@
+// The samples' lattice: T0 and the refinement rules put the vertices of level L exactly on the
+// samples of a grid, and the approximation is fitted to the samples themselves.
+//
+// Grosso, Lürig & Ertl (IEEE Vis 1997) start from a box as 6 tetrahedra and measure errors
+// against f in the continuous L2 norm. For sampled data the box over the extent puts no
+// vertex of any level on a sample (level k's vertices are extent / 2^k apart), so features
+// of one sample are invisible to every level and refinement goes on below the sample spacing.
+// Here T0 is a cube W = 2^L samples wide on every axis (index space; W·spacing in the local
+// frame), padded beyond the data's last sample where the data is shorter than W:
+//
+//      index 0                      n-1        W
+//        +-----+-----+-----+-----+---.-+-----+      level 0: one cube, 6 Kuhn tetrahedra
+//        |                           .       |      level k: vertices W/2^k samples apart
+//        |        data               .  pad  |      level L: the vertices are the samples;
+//        |    (samples 0..n-1)       .       |               nothing is refined below it
+//        +-----+-----+-----+-----+---.-+-----+
+//        '-- W = 2^L >= max(n_a - 1) --------'
+//
+// Red refinement (Bey) of Kuhn tetrahedra bisects edges between lattice points, so the
+// vertices of level k are the lattice points with indices divisible by 2^(L-k). Elements that
+// hold no sample (wholly in the padding) are never refined; the outputs clip to the data box.
+//
+// The approximation is the least-squares fit at the samples (the discrete L2 norm over the
+// samples, each weighted by the voxel volume so the figures keep the units of ∫(f − u)²):
+//     u = argmin Σ_s w (f_s − u(x_s))²,   M_ij = Σ_s w φ_i(x_s) φ_j(x_s),   F_i = Σ_s w f_s φ_i(x_s).
+// On a leaf of level L the only samples are its corners, so the finest level interpolates
+// the data exactly and refinement ends there; errors, RMS, PSNR and maximum error are those
+// at the samples. Each sample belongs to exactly one leaf: the one that contains the sample
+// pushed an infinitesimal step along (±1, ±ε, ±ε²) (inward on the data's upper faces), decided
+// in exact integer arithmetic, so no sample is counted twice or missed.
+#pragma once
+#include <mlfe/core/element_integrals.h>
+#include <mlfe/core/scalar_grid.h>
+
+#include <array>
+#include <cstdint>
+
+namespace mlfe {
+
+struct SampleLattice {
+  int dim = 3;
+  std::array<std::int64_t, 3> dims{1, 1, 1};  ///< samples per axis (1 on unused axes)
+  std::array<double, 3> spacing{1, 1, 1};
+  int level = 0;             ///< L: level whose vertices are the samples
+  std::int64_t width = 1;    ///< W = 2^L samples: T0's cube edge in index space
+  double sample_weight = 1;  ///< w: the voxel volume (area in 2D)
+
+  /// Upper corner of the data box in the local frame: (n − 1)·spacing.
+  std::array<double, 3> data_extent() const;
+  /// Upper corner of T0's box: W·spacing (0 on unused axes).
+  std::array<double, 3> box_extent() const;
+  /// Number of samples.
+  std::int64_t samples() const { return dims[0] * dims[1] * dims[2]; }
+};
+
+/// The lattice of a 2D or 3D grid: L is the smallest level with 2^L ≥ n_a − 1 on every axis.
+/// Throws mlfe::Error for grids with fewer than 2 samples on an axis of their dimension or
+/// more than 2^24 samples along one.
+SampleLattice sample_lattice(const ScalarGrid& grid);
+
+/// Least-squares integrals of the samples an element owns (see above): f2 = Σ w f², fphi[j] =
+/// Σ w f λ_j, mass = Σ w λ_i λ_j (upper triangle, row major), points = samples owned, fmin/fmax
+/// over them; with `gradients`, grad and grad2 from the field's gradient at the samples. The
+/// corners p (local frame) must be lattice points (CHECKed).
+template <int D>
+ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
+                                     const SampleLattice& lattice, const ScalarGrid& grid, const Field& f,
+                                     bool gradients);
+
+/// Whether the simplex with corners p (local frame) lies wholly outside the data box's
+/// interior: it owns no sample and is never refined.
+template <int D>
+bool outside_data(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lattice);
+
+}  // namespace mlfe
