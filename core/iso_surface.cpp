@@ -191,6 +191,10 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
   for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(hi[a]));
   const double eps = 1e-9 * scale;
   auto inside = [&](const V3& p, int a) { return p[a] <= hi[a] + eps; };
+  // On the lattice, surface vertices often lie on a face already (cut edges in it): an edge
+  // from such a vertex leaves the box there, and a cut point would be a second vertex at its
+  // position (a duplicate, and degenerate triangles around it).
+  auto on_face = [&](const V3& p, int a) { return std::abs(p[a] - hi[a]) <= eps; };
   bool any_out = false;
   for (const V3& p : local)
     for (int a = 0; a < 3; ++a) any_out |= !inside(p, a);
@@ -225,7 +229,7 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
         const std::uint32_t p = poly[k], q = poly[(k + 1) % poly.size()];
         const bool pin = inside(local[p], a), qin = inside(local[q], a);
         if (pin) next.push_back(p);
-        if (pin != qin) next.push_back(cut_point(p, q, a));
+        if (pin != qin && !on_face(local[p], a) && !on_face(local[q], a)) next.push_back(cut_point(p, q, a));
       }
       poly.swap(next);
     }
