@@ -379,7 +379,10 @@ double smallest_spacing(const GridTransform& t, int dim) {
 }  // namespace
 
 const char* to_string(Simplifier s) {
-  return s == Simplifier::kFast ? "fast" : s == Simplifier::kBounded ? "bounded" : "auto";
+  return s == Simplifier::kFast      ? "fast"
+         : s == Simplifier::kBounded ? "bounded"
+         : s == Simplifier::kMeshopt ? "meshopt"
+                                     : "auto";
 }
 const char* to_string(VertexPlacement p) {
   return p == VertexPlacement::kInput ? "input" : p == VertexPlacement::kOptimal ? "optimal" : "auto";
@@ -425,6 +428,7 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       IsoOptions o;
       o.normals_toward_higher = p.normals_toward_higher;
       o.level = at;
+      o.min_component = p.min_component;
       o.clip = a3.on_lattice;
       o.clip_to = a3.data_extent;
       if (field) {
@@ -437,7 +441,11 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       GltfSurface s;
       s.iso_value = isos[i];
       s.name = fmt::format("iso {}", isos[i]);
-      s.mesh = x.extract(isos[i], b.transform, options(level));
+      Dropped dropped;
+      IsoOptions o = options(level);
+      o.dropped = &dropped;
+      s.mesh = x.extract(isos[i], b.transform, o);
+      out.dropped.push_back(dropped);
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
         s.lods.push_back(x.extract(isos[i], b.transform, options(level - 2 * k)));
       // Surfaces that enclose others are translucent so the inner ones stay visible: with
@@ -468,16 +476,21 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
-    // auto: the verified simplifier while it takes about a second or two (~10 µs per
-    // triangle), meshoptimizer beyond; decided per surface from its size alone, so the bytes do
-    // not depend on the thread count.
+    // auto: the verified bound while it takes about a second or two (~10 µs per triangle),
+    // the estimated one beyond; decided per surface from its size alone, so the bytes do not
+    // depend on the thread count. Both keep the topology: the asset stays one manifold.
     constexpr std::size_t kBoundedUpTo = 200000;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      const bool bounded = p.simplifier == Simplifier::kBounded ||
-                           (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
-      m = bounded ? simplify_within(m, so) : simplify_fast(m, so.tolerance);
+      if (p.simplifier == Simplifier::kMeshopt) {
+        m = simplify_fast(m, so.tolerance);
+        return;
+      }
+      SimplifyOptions o = so;
+      o.verify_bound = p.simplifier == Simplifier::kBounded ||
+                       (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
+      m = simplify_within(m, o);
     });
   }
   if (p.decimate > 0)
@@ -511,10 +524,26 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   nlohmann::json summary;
   nlohmann::json per = nlohmann::json::array();
   std::size_t total = 0;
-  for (const auto& s : surfaces) {
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    const GltfSurface& s = surfaces[i];
+    const MeshTopology topo = mesh_topology(s.mesh);
     per.push_back({{"iso", s.iso_value},
                    {"triangles", s.mesh.triangles.size()},
-                   {"vertices", s.mesh.positions.size()}});
+                   {"vertices", s.mesh.positions.size()},
+                   {"topology",
+                    {{"duplicate_vertices", topo.duplicate_vertices},
+                     {"degenerate_triangles", topo.degenerate_triangles},
+                     {"boundary_edges", topo.boundary_edges},
+                     {"non_manifold_edges", topo.non_manifold_edges},
+                     {"non_manifold_vertices", topo.non_manifold_vertices},
+                     {"inconsistent_edges", topo.inconsistent_edges}}}});
+    if (i < extracted.dropped.size()) {
+      const Dropped& d = extracted.dropped[i];
+      per.back()["parts"] = {{"kept", d.kept_parts},
+                             {"dropped", d.parts},
+                             {"dropped_triangles", d.triangles},
+                             {"min_component_voxels", p.min_component}};
+    }
     total += s.mesh.triangles.size();
   }
   if (ext == ".glb" || ext == ".gltf") {
@@ -529,7 +558,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
     o.extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
     if (p.simplify > 0) o.extras["simplifier"] = to_string(p.simplifier);
-    if (p.simplify > 0 && p.simplifier != Simplifier::kFast)
+    if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
       o.extras["placement"] = to_string(extracted.placement);
     o.extras["normals"] = to_string(extracted.normals);
     write_gltf(out, surfaces, o);

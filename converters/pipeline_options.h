@@ -64,6 +64,7 @@ struct AssetParams {
   double simplify = 0.3;
   std::string simplifier = "auto";  ///< "auto", "fast", "bounded"
   double snap = 1.0;
+  std::size_t min_component = 0;
   bool normals_toward_higher = false;
   std::string normals = "auto";    ///< "auto", "gradient", "surface"
   std::string placement = "auto";  ///< "auto", "input", "optimal"
@@ -72,7 +73,8 @@ struct AssetParams {
 };
 
 /// Adds --iso, --tolerance, --no-draco, --quantize, --lod, --decimate, --simplify,
-/// --simplifier, --placement, --snap, --normals-toward-higher, --normals, --z-scale, --level.
+/// --simplifier, --placement, --snap, --min-component, --normals-toward-higher, --normals, --z-scale,
+/// --level.
 void add_asset_options(CLI::App* cmd, AssetParams& p);
 
 /// The typed options of `p`; throws mlfe::Error on bad --iso text.

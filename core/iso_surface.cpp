@@ -120,6 +120,68 @@ void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3
   }
 }
 
+// Drops the connected parts of `mesh` whose vertices (local frame) lie in fewer than
+// `min_cells` voxel cells, and the vertices only they used (from `local` and `grad` too).
+// Parts and order are a function of the mesh alone.
+Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad,
+                         const std::array<double, 3>& spacing, std::size_t min_cells) {
+  Dropped d;
+  const std::size_t nv = local.size();
+  // 1. Parts: union-find over the vertices of every triangle.
+  std::vector<std::uint32_t> parent(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
+  auto find = [&](std::uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (const auto& t : mesh.triangles)
+    for (int k = 1; k < 3; ++k) {
+      const std::uint32_t a = find(t[0]), b = find(t[k]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  // 2. Size of a part: the distinct voxel cells its vertices lie in.
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> cells(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    std::uint64_t key = 0;
+    for (int k = 0; k < 3; ++k)
+      key = (key << 21) | (std::uint64_t(std::max(0.0, std::floor(local[v][k] / spacing[k]))) & 0x1fffff);
+    cells[v] = {find(v), key};
+  }
+  std::sort(cells.begin(), cells.end());
+  std::vector<std::uint32_t> size(nv, 0);
+  for (std::size_t i = 0; i < nv; ++i)
+    if (i == 0 || cells[i] != cells[i - 1]) ++size[cells[i].first];
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (parent[v] == v && size[v] > 0) (size[v] < min_cells ? d.parts : d.kept_parts) += 1;
+  if (d.parts == 0) return d;
+  // 3. Keep the triangles of big parts and the vertices they use, in order.
+  std::vector<std::uint32_t> remap(nv, ~0u);
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    if (size[find(t[0])] < min_cells) {
+      ++d.triangles;
+      continue;
+    }
+    tris.push_back(t);
+    for (auto v : t) remap[v] = 0;
+  }
+  std::uint32_t next = 0;
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (remap[v] == 0) {
+      remap[v] = next;
+      local[next] = local[v];
+      grad[next] = grad[v];
+      ++next;
+    }
+  local.resize(next);
+  grad.resize(next);
+  for (auto& t : tris)
+    for (auto& v : t) v = remap[v];
+  mesh.triangles = std::move(tris);
+  return d;
+}
+
 // Sutherland–Hodgman against the planes x_a = hi_a of the box [0, hi] (the surface never
 // leaves the lower faces: T0 starts at 0). Cut points are keyed by their surface edge and the
 // plane, computed from the lower vertex id, so neighbours share them bit for bit; vertices
@@ -129,6 +191,10 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
   for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(hi[a]));
   const double eps = 1e-9 * scale;
   auto inside = [&](const V3& p, int a) { return p[a] <= hi[a] + eps; };
+  // On the lattice, surface vertices often lie on a face already (cut edges in it): an edge
+  // from such a vertex leaves the box there, and a cut point would be a second vertex at its
+  // position (a duplicate, and degenerate triangles around it).
+  auto on_face = [&](const V3& p, int a) { return std::abs(p[a] - hi[a]) <= eps; };
   bool any_out = false;
   for (const V3& p : local)
     for (int a = 0; a < 3; ++a) any_out |= !inside(p, a);
@@ -163,7 +229,7 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
         const std::uint32_t p = poly[k], q = poly[(k + 1) % poly.size()];
         const bool pin = inside(local[p], a), qin = inside(local[q], a);
         if (pin) next.push_back(p);
-        if (pin != qin) next.push_back(cut_point(p, q, a));
+        if (pin != qin && !on_face(local[p], a) && !on_face(local[q], a)) next.push_back(cut_point(p, q, a));
       }
       poly.swap(next);
     }
@@ -463,6 +529,10 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   if (opts.clip) clip_to_box(opts.clip_to, mesh, local, grad);
   if (opts.snap_to && opts.snap_distance > 0)
     snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);
+  if (opts.min_component > 0 || opts.dropped) {
+    const Dropped d = drop_small_parts(mesh, local, grad, transform.spacing, opts.min_component);
+    if (opts.dropped) *opts.dropped = d;
+  }
 
   // 5. Physical positions and normals.
   const double sign = opts.normals_toward_higher ? 1.0 : -1.0;

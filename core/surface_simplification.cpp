@@ -76,6 +76,8 @@ struct Quadric {
   void add(const Quadric& o) {
     for (int i = 0; i < 10; ++i) q[i] += o.q[i];
   }
+  // The summed plane weights (the planes' normals are unit vectors).
+  double weight() const { return q[0] + q[4] + q[7]; }
   double eval(const Vec3& p) const {
     const double x = p.x(), y = p.y(), z = p.z();
     return q[0] * x * x + 2 * q[1] * x * y + 2 * q[2] * x * z + 2 * q[3] * x + q[4] * y * y +
@@ -182,9 +184,10 @@ class Simplifier {
     build_vertex_faces();
     if (optimal_) input_vf_ = vf_;
     // Every input vertex is a point to keep within the bound, attached to its first face
-    // (distance 0). Vertices no triangle uses are not part of the surface.
+    // (distance 0). Vertices no triangle uses are not part of the surface. An estimated bound
+    // attaches none, so no collapse checks or moves points.
     owner_.assign(nv, kNone);
-    for (Index v = 0; v < nv; ++v)
+    for (Index v = 0; v < nv && opts.verify_bound; ++v)
       if (vf_.size(v) > 0) owner_[v] = *vf_.begin(v);
     // Stars that are not a single fan (non-manifold edges or vertices) never change.
     // Boundary vertices stay boundary vertices (collapses keep the topology, flips only take
@@ -418,7 +421,10 @@ class Simplifier {
           const Vec3 nf_old = normal_of(faces_[f]), ng_old = normal_of(fg);
           if (!keeps_shape(nf, nullptr, {nf_old, ng_old}) || !keeps_shape(ng, nullptr, {nf_old, ng_old}))
             continue;
-          bool bound = true;
+          // The surface moves most at the old edge's midpoint, onto the new edge; an estimated
+          // bound takes that distance, a verified one the points' below.
+          bool bound =
+              opts_.verify_bound || segment_distance2(0.5 * (pos_[a] + pos_[b]), pos_[c], pos_[d]) <= tol2_;
           for (Index face : {f, g})
             for (const Index* p = fp_.begin(face); p != fp_.end(face) && bound; ++p)
               bound = std::min(distance2(*p, nf), distance2(*p, ng)) <= tol2_;
@@ -554,7 +560,10 @@ class Simplifier {
       if (locked_[x.v]) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
       const Vec3 p = place(v0, x.v, boundary0);
-      each(eval_sum(quadric_[v0], quadric_[x.v], p) + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(), x.v);
+      const double cost = eval_sum(quadric_[v0], quadric_[x.v], p);
+      // The estimated bound: the merged planes' mean squared distance.
+      if (!opts_.verify_bound && cost > tol2_ * (quadric_[v0].weight() + quadric_[x.v].weight())) continue;
+      each(cost + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(), x.v);
     }
     return boundary0;
   }
@@ -726,7 +735,7 @@ class Simplifier {
           for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
             if (!within(*p, *g, m, s.targets)) return false;
     // Last: when the quadric minimum is off the surface this scans every candidate triangle.
-    if (moves && !near_input(m.p, v0, v1)) return false;
+    if (moves && opts_.verify_bound && !near_input(m.p, v0, v1)) return false;
     return true;
   }
 

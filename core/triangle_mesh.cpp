@@ -1,10 +1,14 @@
-// Area-weighted vertex normals of an indexed triangle mesh.
+// Area-weighted vertex normals of an indexed triangle mesh, and its topology counted.
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/triangle_mesh.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <tuple>
 #include <vector>
 
 namespace mlfe {
@@ -32,6 +36,162 @@ void compute_area_weighted_normals(TriangleMesh& mesh) {
     else
       mesh.normals[i] = {0.0f, 0.0f, 1.0f};
   }
+}
+
+namespace {
+
+// Edge and fan checks of triangles without repeated corners (indices < nv): adds to the edge and
+// vertex counts of `r` and, when `bad` is given, marks the vertices where the surface is not an
+// oriented 2-manifold. `on_box(a, b)` tells whether a boundary edge lies on the box.
+template <class OnBox>
+void check_edges_and_fans(const std::vector<std::array<std::uint32_t, 3>>& tris, std::size_t nv,
+                          MeshTopology& r, std::vector<std::uint8_t>* bad, OnBox&& on_box) {
+  if (bad) bad->assign(nv, 0);
+  auto mark = [&](std::uint32_t v) {
+    if (bad) (*bad)[v] = 1;
+  };
+  // 1. Edges: every directed triangle edge, sorted by its undirected key.
+  struct HalfEdge {
+    std::uint32_t lo, hi;
+    std::uint32_t tri;
+    bool forward;  // lo -> hi in its triangle
+  };
+  std::vector<HalfEdge> edges;
+  edges.reserve(tris.size() * 3);
+  for (std::uint32_t i = 0; i < tris.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = tris[i][k], b = tris[i][(k + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), i, a < b});
+    }
+  std::sort(edges.begin(), edges.end(), [](const HalfEdge& x, const HalfEdge& y) {
+    return std::tie(x.lo, x.hi, x.tri) < std::tie(y.lo, y.hi, y.tri);
+  });
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j].lo == edges[i].lo && edges[j].hi == edges[i].hi) ++j;
+    const std::size_t n = j - i;
+    bool ok = true;
+    if (n == 1) {
+      ++r.boundary_edges;
+      if (!on_box(edges[i].lo, edges[i].hi)) ++r.boundary_edges_off_box;
+    } else if (n == 2) {
+      ok = edges[i].forward != edges[i + 1].forward;
+      r.inconsistent_edges += !ok;
+    } else {
+      ok = false;
+      ++r.non_manifold_edges;
+    }
+    if (!ok) {
+      mark(edges[i].lo);
+      mark(edges[i].hi);
+    }
+    i = j;
+  }
+
+  // 2. Vertices: the triangles around a vertex must form one fan, i.e. one component when
+  // triangles that share an edge through the vertex are joined.
+  std::vector<std::uint32_t> start(nv + 1, 0);
+  for (const auto& t : tris)
+    for (auto v : t) ++start[v + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<std::uint32_t> around(start.back());
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t i = 0; i < tris.size(); ++i)
+      for (auto v : tris[i]) around[fill[v]++] = i;
+  }
+  std::vector<std::uint32_t> parent;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> spokes;  // (other end, local triangle)
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const std::uint32_t n = start[v + 1] - start[v];
+    if (n < 2) continue;
+    parent.resize(n);
+    std::iota(parent.begin(), parent.end(), 0u);
+    auto find = [&](std::uint32_t x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    spokes.clear();
+    for (std::uint32_t k = 0; k < n; ++k)
+      for (auto w : tris[around[start[v] + k]])
+        if (w != v) spokes.push_back({w, k});
+    std::sort(spokes.begin(), spokes.end());
+    std::uint32_t components = n;
+    for (std::size_t i = 1; i < spokes.size(); ++i)
+      if (spokes[i].first == spokes[i - 1].first) {
+        const std::uint32_t a = find(spokes[i].second), b = find(spokes[i - 1].second);
+        if (a != b) {
+          parent[a] = b;
+          --components;
+        }
+      }
+    if (components > 1) {
+      ++r.non_manifold_vertices;
+      mark(v);
+    }
+  }
+}
+
+}  // namespace
+
+MeshTopology mesh_topology(const TriangleMesh& mesh, const std::array<double, 3>* box_min,
+                           const std::array<double, 3>* box_max, double box_tolerance) {
+  MeshTopology r;
+  const std::size_t nv = mesh.positions.size();
+  for (const auto& t : mesh.triangles)
+    for (auto v : t)
+      if (v >= nv)
+        throw Error("topology: a triangle refers to a vertex beyond the " + std::to_string(nv) +
+                    " positions");
+
+  // Weld by exact position: the first vertex at a position stands for all of them.
+  std::vector<std::uint32_t> order(nv), weld(nv);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return std::tie(mesh.positions[a], a) < std::tie(mesh.positions[b], b);
+  });
+  for (std::size_t i = 0; i < nv; ++i) {
+    const std::uint32_t v = order[i];
+    const bool same = i > 0 && mesh.positions[order[i - 1]] == mesh.positions[v];
+    weld[v] = same ? weld[order[i - 1]] : v;
+    r.duplicate_vertices += same;
+  }
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    const std::array<std::uint32_t, 3> w{weld[t[0]], weld[t[1]], weld[t[2]]};
+    if (w[0] == w[1] || w[1] == w[2] || w[0] == w[2])
+      ++r.degenerate_triangles;
+    else
+      tris.push_back(w);
+  }
+  check_edges_and_fans(tris, nv, r, nullptr, [&](std::uint32_t a, std::uint32_t b) {
+    if (!box_min || !box_max) return true;
+    for (int k = 0; k < 3; ++k)
+      for (const double plane : {(*box_min)[k], (*box_max)[k]})
+        if (std::abs(mesh.positions[a][k] - plane) <= box_tolerance &&
+            std::abs(mesh.positions[b][k] - plane) <= box_tolerance)
+          return true;
+    return false;
+  });
+  return r;
+}
+
+std::vector<std::uint8_t> non_manifold_vertices(const std::vector<std::array<std::uint32_t, 3>>& triangles,
+                                                std::size_t vertex_count) {
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(triangles.size());
+  for (const auto& t : triangles) {
+    for (auto v : t)
+      if (v >= vertex_count)
+        throw Error("topology: a triangle refers to a vertex beyond the " + std::to_string(vertex_count) +
+                    " vertices");
+    if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) tris.push_back(t);
+  }
+  MeshTopology r;
+  std::vector<std::uint8_t> bad;
+  check_edges_and_fans(tris, vertex_count, r, &bad, [](std::uint32_t, std::uint32_t) { return true; });
+  return bad;
 }
 
 }  // namespace mlfe

@@ -147,10 +147,13 @@ AssetOptions asset_options(Options& kw) {
   kw.get("simplify", o.simplify);
   std::string simplifier = "auto", normals = "auto", placement = "auto";
   kw.get("simplifier", simplifier);
-  o.simplifier = choice<Simplifier>(
-      simplifier, "simplifier",
-      {{"auto", Simplifier::kAuto}, {"fast", Simplifier::kFast}, {"bounded", Simplifier::kBounded}});
+  o.simplifier = choice<Simplifier>(simplifier, "simplifier",
+                                    {{"auto", Simplifier::kAuto},
+                                     {"fast", Simplifier::kFast},
+                                     {"bounded", Simplifier::kBounded},
+                                     {"meshopt", Simplifier::kMeshopt}});
   kw.get("snap", o.snap);
+  kw.get("min_component", o.min_component);
   kw.get("normals_toward_higher", o.normals_toward_higher);
   kw.get("normals", normals);
   o.normals = choice<Normals>(
@@ -445,6 +448,6 @@ PYBIND11_MODULE(mlfe, m) {
         "Volume (file, .vtu/.msh mesh or array) in, asset out (.glb .gltf .drc .ply .obj .stl .off),\n"
         "as `mlfe convert`. Returns the\n"
         "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
-        "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap,\n"
+        "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap, min_component,\n"
         "normals_toward_higher, normals, placement, z_scale, level.");
 }

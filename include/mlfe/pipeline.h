@@ -5,6 +5,7 @@
 // mlfe::Error with a one-line message; nothing is printed (progress goes to the callbacks).
 #pragma once
 #include <mlfe/core/approximation.h>
+#include <mlfe/core/iso_surface.h>
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/core/tet_mesh_field.h>
 #include <mlfe/core/triangle_mesh.h>
@@ -176,7 +177,7 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
 /// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
 nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b);
 
-enum class Simplifier { kAuto, kFast, kBounded };
+enum class Simplifier { kAuto, kFast, kBounded, kMeshopt };
 enum class VertexPlacement { kAuto, kInput, kOptimal };
 enum class Normals { kAuto, kGradient, kSurface };
 
@@ -195,10 +196,15 @@ struct AssetOptions {
   /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
   /// compact (bench/convert_bench.py).
   double simplify = 0.3;
-  /// kBounded: simplify_within, error verified; kFast: meshoptimizer, error estimated; kAuto:
+  /// kBounded: simplify_within, error verified; kFast: the same collapses and topology checks
+  /// with the error estimated from the quadrics (SimplifyOptions::verify_bound false);
+  /// kMeshopt: meshoptimizer (simplify_fast), error estimated, topology repaired; kAuto:
   /// bounded for surfaces of up to 200 000 extracted triangles, fast above.
   Simplifier simplifier = Simplifier::kAuto;
   double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
+  /// Drop connected parts of a 3D surface whose vertices lie in fewer than this many voxel
+  /// cells (0: keep every part of the data's surface); Surfaces::dropped counts them.
+  std::size_t min_component = 0;
   bool normals_toward_higher = false;
   /// kGradient: the paper's normals (volume-weighted tetrahedron gradients of u, interpolated
   /// along the cut edge), kept through simplification; kSurface: area-weighted normals of the
@@ -221,6 +227,7 @@ struct Surfaces {
   std::vector<GltfSurface> surfaces;  ///< one per iso-value, ascending (3D), or the height field
   std::vector<double> iso_values;     ///< ascending (empty in 2D)
   bool snapped = false;               ///< vertices were moved onto the volume's own surface
+  std::vector<Dropped> dropped;       ///< per surface: what AssetOptions::min_component dropped
   VertexPlacement placement = VertexPlacement::kOptimal;  ///< kInput or kOptimal
   Normals normals = Normals::kGradient;                   ///< kGradient or kSurface
   double extract_seconds = 0, simplify_seconds = 0;       ///< extraction (and snapping); the rest

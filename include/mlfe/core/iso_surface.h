@@ -42,6 +42,19 @@ struct IsoOptions {
   /// cut points welded: one per cut surface edge and face).
   bool clip = false;
   std::array<double, 3> clip_to{0, 0, 0};
+  /// Drops the connected parts of the surface (triangles joined through shared vertices) whose
+  /// vertices lie in fewer than this many voxel cells of the transform's sample lattice (a
+  /// speck of noise around one sample touches up to 8); 0 keeps every part.
+  std::size_t min_component = 0;
+  /// When set, receives what min_component dropped.
+  struct Dropped* dropped = nullptr;
+};
+
+/// What IsoOptions::min_component dropped from one extraction.
+struct Dropped {
+  std::size_t parts = 0;       ///< connected parts dropped
+  std::size_t triangles = 0;   ///< their triangles
+  std::size_t kept_parts = 0;  ///< connected parts kept
 };
 
 class IsoExtractor {

@@ -3,6 +3,7 @@
 // (physical millimetres unless a writer converts), normals unit length (or empty).
 #pragma once
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -21,5 +22,39 @@ struct TriangleMesh {
 /// triangles have no area). Replaces `mesh.normals`. Throws mlfe::Error for
 /// triangle indices out of range.
 void compute_area_weighted_normals(TriangleMesh& mesh);
+
+/// What makes an indexed triangle mesh one welded, manifold surface, counted (for tests and
+/// reports). Vertices are first welded by exact position, since a writer or viewer sees a seam
+/// wherever two vertices share a position but not their triangles.
+struct MeshTopology {
+  std::size_t duplicate_vertices = 0;     ///< vertices at the exact position of an earlier one
+  std::size_t degenerate_triangles = 0;   ///< triangles with two corners at one position
+  std::size_t boundary_edges = 0;         ///< welded edges in exactly one triangle
+  std::size_t non_manifold_edges = 0;     ///< welded edges in three or more triangles
+  std::size_t non_manifold_vertices = 0;  ///< welded vertices whose triangles are not one fan
+  /// Welded edges in two triangles that traverse it in the same direction (orientation flips).
+  std::size_t inconsistent_edges = 0;
+  /// Boundary edges that do not lie on the faces of the box given to mesh_topology.
+  std::size_t boundary_edges_off_box = 0;
+
+  bool welded_manifold() const {
+    return duplicate_vertices == 0 && degenerate_triangles == 0 && non_manifold_edges == 0 &&
+           non_manifold_vertices == 0 && inconsistent_edges == 0;
+  }
+};
+
+/// Counts the MeshTopology figures of `mesh`. With box_min/box_max (mesh units), a boundary edge
+/// whose two ends lie within box_tolerance of one common face of the box counts as on the box
+/// (a surface cut by the volume's faces); every other one counts in boundary_edges_off_box.
+/// Throws mlfe::Error for triangle indices out of range.
+MeshTopology mesh_topology(const TriangleMesh& mesh, const std::array<double, 3>* box_min = nullptr,
+                           const std::array<double, 3>* box_max = nullptr, double box_tolerance = 0);
+
+/// By index (no welding): 1 for every vertex where `triangles` is not an oriented 2-manifold
+/// (an end of an edge in three or more triangles, or in two that traverse it the same way; a
+/// vertex whose triangles form more than one fan), 0 elsewhere; triangles with a repeated
+/// index are ignored. Throws mlfe::Error for an index >= vertex_count.
+std::vector<std::uint8_t> non_manifold_vertices(const std::vector<std::array<std::uint32_t, 3>>& triangles,
+                                                std::size_t vertex_count);
 
 }  // namespace mlfe

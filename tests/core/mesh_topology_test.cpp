@@ -1,0 +1,93 @@
+// mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone.
+#include <gtest/gtest.h>
+#include <mlfe/core/triangle_mesh.h>
+
+#include <array>
+#include <vector>
+
+namespace mlfe {
+namespace {
+
+// The closed surface of a tetrahedron, outward.
+TriangleMesh tetrahedron(float dx = 0) {
+  TriangleMesh m;
+  m.positions = {{dx, 0, 0}, {dx + 1, 0, 0}, {dx, 1, 0}, {dx, 0, 1}};
+  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  return m;
+}
+
+void append(TriangleMesh& a, const TriangleMesh& b) {
+  const auto base = static_cast<std::uint32_t>(a.positions.size());
+  a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
+  for (auto t : b.triangles) a.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
+TEST(MeshTopology, ClosedTetrahedronIsWeldedAndManifold) {
+  const MeshTopology t = mesh_topology(tetrahedron());
+  EXPECT_TRUE(t.welded_manifold());
+  EXPECT_EQ(t.boundary_edges, 0u);
+}
+
+TEST(MeshTopology, CountsDuplicatesAndSeesTheWeldedSurface) {
+  TriangleMesh m = tetrahedron();
+  // Vertex 3 split in two: one triangle uses the copy. By position it is still closed.
+  m.positions.push_back(m.positions[3]);
+  m.triangles[3] = {1, 2, 4};
+  const MeshTopology t = mesh_topology(m);
+  EXPECT_EQ(t.duplicate_vertices, 1u);
+  EXPECT_EQ(t.boundary_edges, 0u);
+  EXPECT_EQ(t.non_manifold_edges, 0u);
+  EXPECT_FALSE(t.welded_manifold());
+  // By index the split is a seam: its two edges are open and the mesh is manifold.
+  const auto bad = non_manifold_vertices(m.triangles, m.positions.size());
+  EXPECT_EQ(bad, std::vector<std::uint8_t>(5, 0));
+}
+
+TEST(MeshTopology, FinsAndPinchesAreNonManifold) {
+  // A third triangle on edge 0-1 of the tetrahedron.
+  TriangleMesh fin = tetrahedron();
+  fin.positions.push_back({0.5f, -1, 0});
+  fin.triangles.push_back({0, 4, 1});
+  const MeshTopology f = mesh_topology(fin);
+  EXPECT_EQ(f.non_manifold_edges, 1u);
+  EXPECT_EQ(f.boundary_edges, 2u);
+  auto bad = non_manifold_vertices(fin.triangles, fin.positions.size());
+  EXPECT_TRUE(bad[0] && bad[1] && !bad[2] && !bad[3] && !bad[4]);
+
+  // Two tetrahedra touching at one vertex (welded by position): a pinched vertex.
+  TriangleMesh pinch = tetrahedron();
+  TriangleMesh other = tetrahedron(-1);  // its vertex 1 is at the first one's vertex 0
+  append(pinch, other);
+  const MeshTopology p = mesh_topology(pinch);
+  EXPECT_EQ(p.duplicate_vertices, 1u);
+  EXPECT_EQ(p.non_manifold_vertices, 1u);
+  EXPECT_EQ(p.non_manifold_edges, 0u);
+}
+
+TEST(MeshTopology, FlippedTriangleIsAnInconsistentOrientation) {
+  TriangleMesh m = tetrahedron();
+  std::swap(m.triangles[0][1], m.triangles[0][2]);
+  const MeshTopology t = mesh_topology(m);
+  EXPECT_EQ(t.inconsistent_edges, 3u);
+  EXPECT_EQ(t.boundary_edges, 0u);
+}
+
+TEST(MeshTopology, BoundaryEdgesOffTheBoxAreCounted) {
+  // A square on the face z = 0 of the box [0, 1]^3, and a smaller one inside the box.
+  TriangleMesh face;
+  face.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  face.triangles = {{0, 1, 2}, {0, 2, 3}};
+  const std::array<double, 3> lo{0, 0, 0}, hi{1, 1, 1};
+  EXPECT_EQ(mesh_topology(face, &lo, &hi, 1e-6).boundary_edges_off_box, 0u);
+  TriangleMesh inside = face;
+  for (auto& p : inside.positions) p = {0.25f + 0.5f * p[0], 0.25f + 0.5f * p[1], 0.5f};
+  const MeshTopology t = mesh_topology(inside, &lo, &hi, 1e-6);
+  EXPECT_EQ(t.boundary_edges, 4u);
+  EXPECT_EQ(t.boundary_edges_off_box, 4u);
+  // One end on a face is not enough: the edge must lie on it.
+  inside.positions[0] = {0, 0.25f, 0.5f};
+  EXPECT_EQ(mesh_topology(inside, &lo, &hi, 1e-6).boundary_edges_off_box, 4u);
+}
+
+}  // namespace
+}  // namespace mlfe
