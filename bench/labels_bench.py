@@ -79,6 +79,14 @@ r = vtkNIFTIImageReader() if ".nii" in path else vtkNrrdReader()
 r.SetFileName(path)
 r.Update()
 img = r.GetOutput()
+if ".nii" in path and r.GetQFac() < 0:
+    # VTK reverses the slices of a qfac = -1 NIfTI; back to the file's voxel order.
+    from vtkmodules.vtkImagingCore import vtkImageFlip
+    flip = vtkImageFlip()
+    flip.SetInputData(img)
+    flip.SetFilteredAxis(2)
+    flip.Update()
+    img = flip.GetOutput()
 # Index space: the distances are in voxels and mlfe's meshes are mapped back to indices.
 img.SetSpacing(1, 1, 1)
 img.SetOrigin(0, 0, 0)

@@ -206,7 +206,7 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   summary["triangles"] = total;
   summary["extracted_interface_triangles"] = extracted_triangles;
   summary["interface_triangles"] = x.triangles.size();
-  summary["interfaces_kept_as_extracted"] = kept_as_extracted;
+  summary["interface_pieces_kept_as_extracted"] = kept_as_extracted;
   summary["islands_removed"] = removed_json;
   summary["islands_removed_voxels"] = removed.voxels;
   summary["label_table"] = table.source;

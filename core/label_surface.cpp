@@ -91,6 +91,14 @@ std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::s
   return n;
 }
 
+// The signed volume enclosed by triangles given in piece-local indices.
+double enclosed_volume(const std::vector<std::array<std::uint32_t, 3>>& tris,
+                       const std::vector<std::uint32_t>& global, const std::vector<V3>& pos) {
+  double v = 0;
+  for (const auto& t : tris) v += dot(pos[global[t[0]]], cross(pos[global[t[1]]], pos[global[t[2]]])) / 6.0;
+  return v;
+}
+
 // Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
 // lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
 // bits of the other two), so neighbouring tetrahedra find the same vertex.
@@ -215,6 +223,123 @@ class Extractor {
   std::unordered_map<std::uint64_t, std::uint32_t> edges_, faces_;
   LabelInterfaces out_;
 };
+
+// The edges of the complex, sorted, each marked when it lies on a junction curve: where its
+// triangles are not exactly two of the same interface (three or more labels meet there).
+std::vector<std::pair<std::uint64_t, bool>> classified_edges(const LabelInterfaces& x) {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> edges;
+  edges.reserve(x.triangles.size() * 3);
+  for (std::size_t t = 0; t < x.triangles.size(); ++t) {
+    const std::uint32_t pair = std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1];
+    for (int c = 0; c < 3; ++c)
+      edges.emplace_back(edge_key(x.triangles[t][c], x.triangles[t][(c + 1) % 3]), pair);
+  }
+  std::sort(edges.begin(), edges.end());
+  std::vector<std::pair<std::uint64_t, bool>> unique;
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    bool same = true;
+    for (; j < edges.size() && edges[j].first == edges[i].first; ++j)
+      same &= edges[j].second == edges[i].second;
+    unique.emplace_back(edges[i].first, !(same && j - i == 2));
+    i = j;
+  }
+  return unique;
+}
+
+double segment_distance(const V3& p, const V3& a, const V3& b) {
+  const V3 ab = sub(b, a), ap = sub(p, a);
+  const double l2 = dot(ab, ab);
+  const double t = l2 > 0 ? std::clamp(dot(ap, ab) / l2, 0.0, 1.0) : 0.0;
+  const V3 d{ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]};
+  return std::sqrt(dot(d, d));
+}
+
+// Douglas-Peucker on chain[first..last]: marks the vertices to keep.
+void keep_far(const std::vector<std::uint32_t>& chain, std::size_t first, std::size_t last,
+              const std::vector<V3>& pos, double tolerance, std::vector<char>& keep) {
+  if (last <= first + 1) return;
+  double worst = -1;
+  std::size_t at = first;
+  for (std::size_t i = first + 1; i < last; ++i) {
+    const double d = segment_distance(pos[chain[i]], pos[chain[first]], pos[chain[last]]);
+    if (d > worst) worst = d, at = i;
+  }
+  if (worst <= tolerance) return;
+  keep[at] = 1;
+  keep_far(chain, first, at, pos, tolerance, keep);
+  keep_far(chain, at, last, pos, tolerance, keep);
+}
+
+// Simplifies the junction curves along themselves: per curve between meeting points (or per
+// closed loop), Douglas-Peucker within `tolerance`, and every dropped curve vertex merged into
+// the nearest kept one along its curve (the previous on ties). Merging vertices maps each
+// label's surface onto a surface with the same boundary (none), so closed stays closed;
+// triangles that lose a corner go. Returns the map old vertex -> vertex.
+std::vector<std::uint32_t> simplify_junction_curves(const LabelInterfaces& x, double tolerance) {
+  const std::size_t nv = x.positions.size();
+  std::vector<std::uint32_t> to(nv);
+  std::iota(to.begin(), to.end(), 0u);
+  // The curves' adjacency (CSR): degree 2 inside a curve, other degrees where curves meet.
+  std::vector<std::uint32_t> degree(nv, 0), start(nv + 1, 0), nbr;
+  const auto edges = classified_edges(x);
+  for (const auto& [e, junction] : edges)
+    if (junction) ++start[(e >> 32) + 1], ++start[(e & 0xffffffffu) + 1];
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  nbr.resize(start[nv]);
+  for (const auto& [e, junction] : edges) {
+    if (!junction) continue;
+    const std::uint32_t a = std::uint32_t(e >> 32), b = std::uint32_t(e & 0xffffffffu);
+    nbr[start[a] + degree[a]++] = b;
+    nbr[start[b] + degree[b]++] = a;
+  }
+  std::vector<char> done(nv, 0);
+  std::vector<std::uint32_t> chain;
+  std::vector<char> keep;
+  auto simplify_chain = [&]() {
+    keep.assign(chain.size(), 0);
+    keep.front() = keep.back() = 1;
+    keep_far(chain, 0, chain.size() - 1, x.positions, tolerance, keep);
+    std::size_t prev = 0;
+    for (std::size_t i = 1; i < chain.size(); ++i) {
+      if (!keep[i]) continue;
+      for (std::size_t j = prev + 1; j < i; ++j) to[chain[j]] = chain[j - prev <= i - j ? prev : i];
+      prev = i;
+    }
+  };
+  // Walks from `from` through `first` along curve vertices until a meeting point or `stop`.
+  auto walk = [&](std::uint32_t from, std::uint32_t first, std::uint32_t stop) {
+    chain.assign(1, from);
+    std::uint32_t prev = from, cur = first;
+    while (degree[cur] == 2 && cur != stop && !done[cur]) {
+      done[cur] = 1;
+      chain.push_back(cur);
+      const std::uint32_t n = nbr[start[cur]] == prev ? nbr[start[cur] + 1] : nbr[start[cur]];
+      prev = cur;
+      cur = n;
+    }
+    chain.push_back(cur);
+  };
+  // Step 1: curves between meeting points (vertices where other than two curve edges meet).
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    if (degree[v] == 0 || degree[v] == 2) continue;
+    for (std::uint32_t n = start[v]; n < start[v + 1]; ++n) {
+      const std::uint32_t w = nbr[n];
+      if (done[w] || degree[w] != 2) continue;
+      walk(v, w, v);
+      simplify_chain();
+    }
+  }
+  // Step 2: closed loops, anchored at their first vertex.
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    if (degree[v] != 2 || done[v]) continue;
+    done[v] = 1;
+    walk(v, nbr[start[v]], v);
+    if (chain.back() != v) continue;  // not a loop after all (a meeting point was reached)
+    simplify_chain();
+  }
+  return to;
+}
 
 }  // namespace
 
@@ -348,26 +473,8 @@ LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<K
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& o) {
   if (o.iterations <= 0 || x.triangles.empty()) return;
   const std::size_t nv = x.positions.size();
-  // Step 1: edges with the label pairs of their triangles. An edge is on a junction curve
-  // where its triangles are not exactly two of the same interface.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> edges;
-  edges.reserve(x.triangles.size() * 3);
-  for (std::size_t t = 0; t < x.triangles.size(); ++t) {
-    const std::uint32_t pair = std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1];
-    for (int c = 0; c < 3; ++c)
-      edges.emplace_back(edge_key(x.triangles[t][c], x.triangles[t][(c + 1) % 3]), pair);
-  }
-  std::sort(edges.begin(), edges.end());
-  std::vector<std::pair<std::uint64_t, bool>> unique;  // edge, junction
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i;
-    bool same = true;
-    for (; j < edges.size() && edges[j].first == edges[i].first; ++j)
-      same &= edges[j].second == edges[i].second;
-    unique.emplace_back(edges[i].first, !(same && j - i == 2));
-    i = j;
-  }
-  edges = {};
+  // Step 1: the edges, junction curves marked.
+  const std::vector<std::pair<std::uint64_t, bool>> unique = classified_edges(x);
   // Step 2: each vertex's smoothing neighbours: all of them inside an interface, the two along
   // its curve on a junction, none where curves meet.
   std::vector<std::uint32_t> junction_degree(nv, 0);
@@ -430,7 +537,22 @@ std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance) {
   if (!(tolerance > 0) || !std::isfinite(tolerance))
     throw Error("simplification tolerance must be positive and finite (got " + std::to_string(tolerance) +
                 ")");
-  // Step 1: the interfaces: triangles grouped by label pair, in pair order.
+  // Step 1: the junction curves simplified along themselves, so the interfaces' borders do not
+  // stay at the extraction's resolution.
+  {
+    const std::vector<std::uint32_t> to = simplify_junction_curves(x, tolerance);
+    std::size_t kept = 0;
+    for (std::size_t t = 0; t < x.triangles.size(); ++t) {
+      auto tri = x.triangles[t];
+      for (auto& v : tri) v = to[v];
+      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
+      x.triangles[kept] = tri;
+      x.labels[kept++] = x.labels[t];
+    }
+    x.triangles.resize(kept);
+    x.labels.resize(kept);
+  }
+  // Step 2: the interfaces: triangles grouped by label pair, in pair order.
   std::vector<std::uint32_t> order(x.triangles.size());
   std::iota(order.begin(), order.end(), 0u);
   auto pair_of = [&](std::uint32_t t) { return std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1]; };
@@ -441,45 +563,92 @@ std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance) {
     if (i == order.size() || pair_of(order[i]) != pair_of(order[i - 1])) first.push_back(i);
   const std::size_t n_iface = first.size() - 1;
   std::vector<std::vector<std::array<std::uint32_t, 3>>> result(n_iface);
-  std::vector<char> kept_as_is(n_iface, 0);
-  // Step 2: each interface on its own, junction curves (its border) locked.
+  std::vector<std::size_t> kept_as_is(n_iface, 0);
+  // Step 3: each connected piece of each interface on its own, junction curves (its border)
+  // locked. Pieces one by one, so the guard below falls back for a piece, not an interface.
   tbb::parallel_for(std::size_t(0), n_iface, [&](std::size_t f) {
-    std::vector<std::array<std::uint32_t, 3>> in;
-    for (std::size_t i = first[f]; i < first[f + 1]; ++i) in.push_back(x.triangles[order[i]]);
+    std::vector<std::array<std::uint32_t, 3>> all;
+    for (std::size_t i = first[f]; i < first[f + 1]; ++i) all.push_back(x.triangles[order[i]]);
     std::vector<std::uint32_t> global, local;
     std::unordered_map<std::uint32_t, std::uint32_t> slot;
-    for (const auto& t : in)
+    for (const auto& t : all)
       for (auto v : t) {
         auto [it, added] = slot.try_emplace(v, std::uint32_t(global.size()));
         if (added) global.push_back(v);
         local.push_back(it->second);
       }
-    std::vector<float> lp(global.size() * 3);
-    for (std::size_t i = 0; i < global.size(); ++i)
-      for (int c = 0; c < 3; ++c) lp[3 * i + c] = float(x.positions[global[i]][c]);
-    const float scale = meshopt_simplifyScale(lp.data(), global.size(), sizeof(float) * 3);
-    std::vector<unsigned> kept(local.size());
-    kept.resize(meshopt_simplify(kept.data(), local.data(), local.size(), lp.data(), global.size(),
-                                 sizeof(float) * 3, 0, scale > 0 ? float(tolerance / scale) : 0.0f,
-                                 meshopt_SimplifyLockBorder, nullptr));
-    std::vector<std::array<std::uint32_t, 3>> out(kept.size() / 3);
-    for (std::size_t t = 0; t < out.size(); ++t)
-      out[t] = {global[kept[3 * t]], global[kept[3 * t + 1]], global[kept[3 * t + 2]]};
-    // Step 3: the guard: the same boundary (junction curves) and the same pieces, or the
-    // interface as extracted.
-    std::vector<std::array<std::uint32_t, 3>> in_local(in.size()), out_local(out.size());
-    for (std::size_t t = 0; t < in.size(); ++t)
-      in_local[t] = {local[3 * t], local[3 * t + 1], local[3 * t + 2]};
-    for (std::size_t t = 0; t < out.size(); ++t)
-      out_local[t] = {kept[3 * t], kept[3 * t + 1], kept[3 * t + 2]};
-    if (boundary_chain(in_local) != boundary_chain(out_local) ||
-        pieces(in_local, global.size()) != pieces(out_local, global.size())) {
-      out = std::move(in);
-      kept_as_is[f] = 1;
+    UnionFind uf(global.size());
+    for (std::size_t t = 0; t < all.size(); ++t) {
+      uf.unite(local[3 * t], local[3 * t + 1]);
+      uf.unite(local[3 * t + 1], local[3 * t + 2]);
     }
-    result[f] = std::move(out);
+    // Triangles per piece (by the piece's lowest local vertex), pieces in order of appearance.
+    std::unordered_map<std::uint32_t, std::size_t> piece_of;
+    std::vector<std::vector<std::uint32_t>> piece_tris;
+    for (std::size_t t = 0; t < all.size(); ++t) {
+      auto [it, added] = piece_of.try_emplace(uf.find(local[3 * t]), piece_tris.size());
+      if (added) piece_tris.emplace_back();
+      piece_tris[it->second].push_back(std::uint32_t(t));
+    }
+    std::vector<std::array<std::uint32_t, 3>>& out = result[f];
+    std::vector<float> lp;
+    for (const auto& piece : piece_tris) {
+      // Local numbering of the piece: meshoptimizer allocates per vertex it is given.
+      std::vector<std::uint32_t> pglobal, plocal;
+      std::unordered_map<std::uint32_t, std::uint32_t> pslot;
+      for (auto t : piece)
+        for (int c = 0; c < 3; ++c) {
+          auto [it, added] = pslot.try_emplace(all[t][c], std::uint32_t(pglobal.size()));
+          if (added) pglobal.push_back(all[t][c]);
+          plocal.push_back(it->second);
+        }
+      std::vector<std::array<std::uint32_t, 3>> in_local(piece.size());
+      for (std::size_t t = 0; t < piece.size(); ++t)
+        in_local[t] = {plocal[3 * t], plocal[3 * t + 1], plocal[3 * t + 2]};
+      const auto border = boundary_chain(in_local);
+      // meshoptimizer locks the vertices it sees on a border, but where a junction curve passes
+      // a non-manifold spot of the piece it may see none. So every vertex of the piece's
+      // border gets a tiny dangling triangle with two extra vertices, which gives it two open
+      // edge pairs: locked. The extra triangles are dropped after.
+      const std::uint32_t n_real = std::uint32_t(pglobal.size());
+      std::vector<char> on_border(n_real, 0);
+      for (const auto& [e, net] : border) on_border[e >> 32] = on_border[e & 0xffffffffu] = 1;
+      std::vector<unsigned> indices(plocal.begin(), plocal.end());
+      lp.resize(n_real * 3);
+      for (std::size_t i = 0; i < n_real; ++i)
+        for (int c = 0; c < 3; ++c) lp[3 * i + c] = float(x.positions[pglobal[i]][c]);
+      const float scale = meshopt_simplifyScale(lp.data(), n_real, sizeof(float) * 3);
+      for (std::uint32_t v = 0; v < n_real; ++v) {
+        if (!on_border[v]) continue;
+        const std::uint32_t d = std::uint32_t(lp.size() / 3);
+        for (int k = 0; k < 2; ++k)
+          for (int c = 0; c < 3; ++c) lp.push_back(lp[3 * v + c] + (c == k ? 1e-3f : 0.0f));
+        indices.insert(indices.end(), {v, d, d + 1});
+      }
+      std::vector<unsigned> kept(indices.size());
+      kept.resize(meshopt_simplify(kept.data(), indices.data(), indices.size(), lp.data(), lp.size() / 3,
+                                   sizeof(float) * 3, 0, scale > 0 ? float(tolerance / scale) : 0.0f,
+                                   meshopt_SimplifyLockBorder, nullptr));
+      // Step 4: the guard: the piece keeps its boundary (junction curves), so every label's
+      // surface stays closed; a closed piece (an island's whole surface) keeps at least a
+      // tetrahedron's worth of triangles and half its volume. Else it stays as it came.
+      std::vector<std::array<std::uint32_t, 3>> out_local;
+      for (std::size_t t = 0; t + 2 < kept.size(); t += 3)
+        if (kept[t] < n_real && kept[t + 1] < n_real && kept[t + 2] < n_real)
+          out_local.push_back({kept[t], kept[t + 1], kept[t + 2]});
+      bool ok = !out_local.empty() && border == boundary_chain(out_local);
+      if (ok && border.empty()) {
+        const double before = enclosed_volume(in_local, pglobal, x.positions),
+                     after = enclosed_volume(out_local, pglobal, x.positions);
+        ok =
+            out_local.size() >= 4 && std::abs(after) >= 0.5 * std::abs(before) && (after > 0) == (before > 0);
+      }
+      if (!ok) ++kept_as_is[f];
+      for (const auto& t : ok ? out_local : in_local)
+        out.push_back({pglobal[t[0]], pglobal[t[1]], pglobal[t[2]]});
+    }
   });
-  // Step 4: the complex again, interface by interface, unused vertices dropped.
+  // Step 5: the complex again, interface by interface, unused vertices dropped.
   std::vector<std::array<std::uint16_t, 2>> labels;
   std::vector<std::array<std::uint32_t, 3>> tris;
   for (std::size_t f = 0; f < n_iface; ++f)
@@ -500,7 +669,7 @@ std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance) {
   x.positions = std::move(positions);
   x.triangles = std::move(tris);
   x.labels = std::move(labels);
-  return std::size_t(std::count(kept_as_is.begin(), kept_as_is.end(), 1));
+  return std::accumulate(kept_as_is.begin(), kept_as_is.end(), std::size_t(0));
 }
 
 TriangleMesh label_surface(const LabelInterfaces& x, std::uint16_t label, const GridTransform& tr) {

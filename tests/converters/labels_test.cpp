@@ -179,6 +179,21 @@ TEST(LabelsCommand, PickedLabelsMinComponentAndSingleMeshFormats) {
   EXPECT_FALSE(fs::exists(scratch() + "/two.ply"));
 }
 
+TEST(LabelsCommand, CompareMatchesStructuresByName) {
+  const std::string in = write_phantom("compare");
+  const std::string all = scratch() + "/all.glb", some = scratch() + "/some.glb";
+  ASSERT_EQ(run_mlfe("convert " + in + " --labels -o " + all + " --quiet").status, 0);
+  ASSERT_EQ(run_mlfe("convert " + in + " --labels 1,3,7 -o " + some + " --quiet").status, 0);
+  EXPECT_EQ(run_mlfe("compare " + all + " " + all).status, 0);
+  // Structures missing from ACTUAL are named; the others are matched by name, not position.
+  const auto r = run_mlfe("compare " + all + " " + some + " --report " + scratch() + "/cmp.json");
+  EXPECT_EQ(r.status, 1);
+  EXPECT_NE(r.out.find("node 'core' primitive 0 of EXPECTED is not in ACTUAL"), std::string::npos) << r.out;
+  const json rep = json::parse(slurp(scratch() + "/cmp.json"));
+  EXPECT_EQ(rep["figures"]["primitives_matched_by"], "node name");
+  EXPECT_EQ(rep["figures"]["primitives"].size(), 3u);
+}
+
 TEST(LabelsCommand, SameBytesWithOneAndTwoThreads) {
   const std::string in = write_phantom("threads");
   ASSERT_EQ(run_mlfe("--threads 1 convert " + in + " --labels -o " + scratch() + "/t1.glb").status, 0);

@@ -121,13 +121,18 @@ struct LabelSmoothingOptions {
 /// Jacobi updates: the same result for any thread count.
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& options);
 
-/// Simplifies every interface (the triangles of one label pair) with meshoptimizer's
-/// meshopt_simplify at `tolerance` voxels (its own estimate), its junction curves locked, so
-/// interfaces stay shared and every label's surface stays closed (collapses onto interior
-/// vertices of one interface never change the boundary of another). An interface whose result
-/// would not keep its boundary or its count of connected pieces (a small island collapsing
-/// away) is kept as extracted. Unused vertices are dropped. Parallel over interfaces; the same
-/// result for any thread count. Returns the number of interfaces kept as extracted.
+/// Simplifies the complex at `tolerance` voxels in two steps that keep interfaces shared and
+/// every label's surface closed. First the junction curves (where three or more labels meet)
+/// along themselves: Douglas-Peucker within the tolerance, each dropped curve vertex merged into
+/// the nearest kept one along its curve (merging vertices never opens a closed surface). Then
+/// every connected piece of every interface (the triangles of one label pair) with
+/// meshoptimizer's meshopt_simplify (its own error estimate) and its junction curves locked, so
+/// collapses onto interior vertices of one interface never change the boundary of another. A
+/// piece whose result would not keep its boundary (so every surface stays closed), or a closed
+/// piece (an island's surface) that would keep fewer than 4 triangles or less than half its
+/// volume, is kept as it came. Unused vertices are dropped. Parallel over
+/// interfaces; the same result for any thread count. Returns the number of pieces kept as they
+/// came.
 std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
 
 /// The closed surface of `label`: its triangles from the complex, oriented outward (normals
