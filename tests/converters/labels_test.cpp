@@ -119,10 +119,9 @@ TEST(LabelsCommand, PhantomGivesNamedClosedStructuresSharingTheirInterfaces) {
     const std::string node = a.structure["nodes"][p.node]["name"];
     names.push_back(node);
     mesh[node] = welded(p.mesh_data);
-    EXPECT_EQ(a.structure["nodes"][p.node]["extras"]["label"].get<int>(),
-              std::map<std::string, int>{
-                  {"shell", 1}, {"core", 2}, {"left box", 3}, {"label_5", 5}, {"right box", 7}}
-                  .at(node));
+    const std::map<std::string, int> label_of{
+        {"shell", 1}, {"core", 2}, {"left box", 3}, {"label_5", 5}, {"right box", 7}};
+    EXPECT_EQ(a.structure["nodes"][p.node]["extras"]["label"].get<int>(), label_of.at(node));
   }
   EXPECT_EQ(names, (std::vector<std::string>{"shell", "core", "left box", "label_5", "right box"}));
   // Colours: the table's sRGB red is linear red.
