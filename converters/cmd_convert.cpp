@@ -65,6 +65,39 @@ void run_convert(const ConvertState& s, const char* command) {
       std::printf("%s\n", f.c_str());
 }
 
+void run_convert_labels(const ConvertState& s) {
+  if (!s.asset.iso.empty()) throw CLI::ValidationError("--labels", "--labels and --iso exclude each other");
+  if (!s.hierarchy.empty() || !s.render.empty())
+    throw CLI::ValidationError("--labels", "--labels writes surfaces only (no --hierarchy or --render yet)");
+  check_output_path(s.output, kAssetExtensions);
+  if (!s.report.empty()) check_output_path(s.report, {});
+  const LabelOptions o = label_options(s.labels, s.asset);
+  const ScalarGrid grid = read_volume(s.input, s.read);
+  const nlohmann::json summary = convert_labels(grid, s.output, o);
+  if (!s.report.empty()) {
+    nlohmann::json r = {{"input", s.input}, {"dims", grid.dims}, {"asset", summary}};
+    r["peak_rss_mb"] = peak_rss_mb();
+    write_json(s.report, r);
+  }
+  if (!s.params.quiet) {
+    std::size_t islands = 0;
+    for (const auto& [l, n] : summary["islands_removed"].items()) islands += n.get<std::size_t>();
+    std::size_t pieces = 0, open = 0;
+    for (const auto& st : summary["structures"]) {
+      pieces += st["pieces"].get<std::size_t>();
+      open += !st["closed"].get<bool>();
+    }
+    std::fprintf(stderr,
+                 "mlfe convert: %zu structures (%zu pieces%s), %zu islands removed by --min-component%s\n",
+                 summary["structure_count"].get<std::size_t>(), pieces,
+                 open ? ", SOME NOT CLOSED" : ", all closed", islands,
+                 summary["label_table"].get<std::string>().empty()
+                     ? ", no label table (label_N names)"
+                     : (", table " + summary["label_table"].get<std::string>()).c_str());
+  }
+  print_written(s, summary, "convert");
+}
+
 namespace {
 
 void add_convert_command(CLI::App& app) {
@@ -76,9 +109,13 @@ void add_convert_command(CLI::App& app) {
   cmd->add_option("--render", state->render,
                   "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
   add_convert_options(cmd, *state);
+  add_label_options(cmd, state->labels);
   cmd->callback([state] {
     apply_memory_budget(state->read, state->params);
-    run_convert(*state, "convert");
+    if (state->labels.labels->count() > 0)
+      run_convert_labels(*state);
+    else
+      run_convert(*state, "convert");
   });
 }
 

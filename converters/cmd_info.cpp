@@ -2,7 +2,9 @@
 // anything; for a hierarchy file (.mlfeh), its levels, counts, error figures and bytes per
 // section.
 #include <fmt/format.h>
+#include <mlfe/core/label_surface.h>
 #include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/label_table.h>
 #include <mlfe/formats/vdb_reader.h>
 #include <mlfe/formats/volume_reader.h>
 
@@ -25,7 +27,26 @@ struct InfoArgs {
   std::string file;
   VolumeReadOptions read;
   bool json = false;
+  bool labels = false;      ///< list the labels of a label map
+  std::string label_table;  ///< names from this table (default: the one beside the volume)
 };
+
+// The labels of a label map: value, name, voxels and volume in mm³, ascending. Throws
+// mlfe::Error for values that are not labels (label_grid).
+nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
+  const LabelGrid lg = label_grid(g);
+  const std::string path = !table_path.empty() ? table_path : find_label_table(g.source);
+  LabelTable table;
+  if (!path.empty()) table = read_label_table(path);
+  const double voxel_mm3 = g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2];
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& [l, n] : label_counts(lg))
+    rows.push_back({{"label", l},
+                    {"name", l == 0 && !table.entries.count(0) ? std::string("background") : table.name(l)},
+                    {"voxels", n},
+                    {"volume_mm3", double(n) * voxel_mm3}});
+  return {{"table", table.source}, {"rows", rows}};
+}
 
 // Per level k: vertices of level k, elements of level k, leaves of level k.
 template <int D>
@@ -155,6 +176,11 @@ void run_info(const InfoArgs& a) {
     j["read_seconds"] = seconds;
     j["notes"] = g.notes;
     if (!grids.empty()) j["grids"] = grids;
+    if (a.labels) {
+      const auto l = label_rows(g, a.label_table);
+      j["labels"] = l["rows"];
+      j["label_table"] = l["table"];
+    }
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
@@ -173,6 +199,15 @@ void run_info(const InfoArgs& a) {
   fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", memory, memory / 1048576.0,
              seconds);
   for (const auto& name : grids) fmt::print("grid:      {}\n", name);
+  if (a.labels) {
+    const auto l = label_rows(g, a.label_table);
+    fmt::print("labels:    {} (table: {})\n", l["rows"].size(),
+               l["table"].get<std::string>().empty() ? "none" : l["table"].get<std::string>());
+    fmt::print("{:>8} {:>12} {:>14}  {}\n", "label", "voxels", "mm3", "name");
+    for (const auto& r : l["rows"])
+      fmt::print("{:>8} {:>12} {:>14.2f}  {}\n", r["label"].get<int>(), r["voxels"].get<std::size_t>(),
+                 r["volume_mm3"].get<double>(), r["name"].get<std::string>());
+  }
   if (!g.notes.empty()) {
     std::string notes = g.notes;
     std::size_t start = 0;
@@ -197,6 +232,9 @@ void add_info_command(CLI::App& app) {
       ->check(CLI::ExistingFile);
   add_volume_read_options(cmd, args->read);
   cmd->add_flag("--json", args->json, "print JSON instead of text");
+  cmd->add_flag("--labels", args->labels, "a label map: list its labels with voxel counts, mm3 and names");
+  cmd->add_option("--label-table", args->label_table,
+                  "with --labels: names from this table (default: the one beside the volume)");
   cmd->callback([args] { run_info(*args); });
 }
 

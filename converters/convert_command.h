@@ -16,6 +16,7 @@ struct ConvertState {
   AssetParams asset;
   VolumeReadOptions read;
   std::string render;  ///< convert --render: also a ray-cast image (.exr) with the default view
+  LabelParams labels;  ///< convert --labels: a label map, one surface per structure
 };
 
 /// Adds -o, --report and the asset, build and volume reading options.
@@ -24,6 +25,9 @@ void add_convert_options(CLI::App* cmd, ConvertState& s);
 /// Volume in, asset (and --hierarchy, --report, --render) out; `command` names the
 /// subcommand in messages.
 void run_convert(const ConvertState& s, const char* command);
+
+/// convert --labels: a label map in, one surface per structure out (convert_labels).
+void run_convert_labels(const ConvertState& s);
 
 /// The closing lines of convert and iso: the asset summary on stderr (unless quiet), then
 /// the written files on stdout.

@@ -251,4 +251,35 @@ AssetOptions asset_options(const AssetParams& p) {
   return o;
 }
 
+void add_label_options(CLI::App* cmd, LabelParams& p) {
+  p.labels = cmd->add_option("--labels", p.list,
+                             "label map: one closed surface per structure (all but 0, or a list like 3,7-9); "
+                             "put it after the input")
+                 ->expected(0, 1);
+  cmd->add_option("--label-table", p.table,
+                  "names and colours: MRIcron .txt/.lut, ITK-SNAP, FreeSurfer LUT, Slicer .ctbl, JSON "
+                  "(default: the file beside the volume with its stem)");
+  cmd->add_option(
+      "--min-component", p.min_component,
+      "with --labels: pieces of fewer voxels take their surroundings' label (default 0: keep all)");
+  cmd->add_option("--smooth-iterations", p.smooth, "with --labels: Taubin smoothing passes (default 20)");
+  cmd->add_option("--max-offset", p.max_offset,
+                  "with --labels: no vertex moves further from the voxels' interface, voxels (default 0.5)");
+}
+
+LabelOptions label_options(const LabelParams& p, const AssetParams& asset) {
+  LabelOptions o;
+  if (!p.list.empty()) o.labels = parse_label_list(p.list);
+  o.table = p.table;
+  o.min_component = p.min_component;
+  o.smoothing_iterations = p.smooth;
+  o.max_offset = p.max_offset;
+  o.simplify = asset.simplify;
+  o.tolerance = asset.tolerance;
+  o.draco = !asset.no_draco;
+  o.quantize = asset.quantize;
+  o.warn = [](const std::string& w) { std::fprintf(stderr, "mlfe: warning: %s\n", w.c_str()); };
+  return o;
+}
+
 }  // namespace mlfe::cli

@@ -80,4 +80,21 @@ void add_asset_options(CLI::App* cmd, AssetParams& p);
 /// The typed options of `p`; throws mlfe::Error on bad --iso text.
 AssetOptions asset_options(const AssetParams& p);
 
+/// `mlfe convert --labels`: a label map to one surface per structure (convert_labels).
+struct LabelParams {
+  CLI::Option* labels = nullptr;  ///< --labels [LIST]; given when count() > 0
+  std::string list;               ///< "3,7-9"; empty: every label present
+  std::string table;              ///< --label-table FILE
+  std::size_t min_component = 0;  ///< --min-component VOXELS
+  int smooth = 20;                ///< --smooth-iterations
+  double max_offset = 0.5;        ///< --max-offset (voxels)
+};
+
+/// Adds --labels [LIST], --label-table, --min-component, --smooth-iterations and --max-offset.
+void add_label_options(CLI::App* cmd, LabelParams& p);
+
+/// The typed options of `p` and the asset options they share (--simplify, --tolerance,
+/// --no-draco, --quantize), warnings on stderr; throws mlfe::Error on a bad label list.
+LabelOptions label_options(const LabelParams& p, const AssetParams& asset);
+
 }  // namespace mlfe::cli

@@ -244,14 +244,66 @@ CompareResult compare_gltf(const std::string& expected, const std::string& actua
   r.kind = "gltf";
   // Step 1: the scene graph, names, materials, extensions and extras.
   add_json_differences(e.structure, a.structure, "structure", options, r);
-  // Step 2: the geometry of each primitive, matched in node order.
+  // Step 2: the geometry of each primitive, matched by node name (and primitive index) when
+  // every node with a mesh has a distinct name in both files (structures of a label map may
+  // come in another order or be missing), else in node order.
   if (e.primitives.size() != a.primitives.size())
     r.differences.push_back({"primitives", fmt::format("{} triangle primitives in EXPECTED, {} in ACTUAL",
                                                        e.primitives.size(), a.primitives.size())});
+  auto keys = [](const GltfAsset& g) {
+    std::vector<std::string> k;
+    for (const auto& p : g.primitives) {
+      const auto& node = g.structure["nodes"][p.node];
+      const std::string name =
+          node.contains("name") && node["name"].is_string() ? node["name"].get<std::string>() : "";
+      k.push_back(name.empty() ? std::string() : fmt::format("'{}' primitive {}", name, p.primitive));
+    }
+    return k;
+  };
+  const std::vector<std::string> ek = keys(e), ak = keys(a);
+  auto distinct = [](std::vector<std::string> k) {
+    std::sort(k.begin(), k.end());
+    return std::adjacent_find(k.begin(), k.end()) == k.end() && (k.empty() || !k.front().empty());
+  };
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  // Label maps (nodes with a "label" extra) are matched by name even when a structure is
+  // missing on one side; other assets only when both hold the same names.
+  auto label_map = [](const GltfAsset& g) {
+    for (const auto& p : g.primitives) {
+      const auto& node = g.structure["nodes"][p.node];
+      if (!node.contains("extras") || !node["extras"].contains("label")) return false;
+    }
+    return !g.primitives.empty();
+  };
+  auto sorted = [](std::vector<std::string> k) {
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  const bool by_name =
+      distinct(ek) && distinct(ak) && (sorted(ek) == sorted(ak) || (label_map(e) && label_map(a)));
+  if (by_name) {
+    std::map<std::string, std::size_t> in_actual;
+    for (std::size_t i = 0; i < ak.size(); ++i) in_actual[ak[i]] = i;
+    for (std::size_t i = 0; i < ek.size(); ++i) {
+      const auto it = in_actual.find(ek[i]);
+      if (it == in_actual.end()) {
+        r.differences.push_back({"primitives", "node " + ek[i] + " of EXPECTED is not in ACTUAL"});
+        continue;
+      }
+      pairs.emplace_back(i, it->second);
+      in_actual.erase(it);
+    }
+    for (const auto& [k, i] : in_actual)
+      r.differences.push_back({"primitives", "node " + k + " of ACTUAL is not in EXPECTED"});
+  } else {
+    for (std::size_t i = 0; i < std::min(e.primitives.size(), a.primitives.size()); ++i)
+      pairs.emplace_back(i, i);
+  }
+  r.report["primitives_matched_by"] = by_name ? "node name" : "node order";
   nlohmann::json prims = nlohmann::json::array();
-  for (std::size_t i = 0; i < std::min(e.primitives.size(), a.primitives.size()); ++i) {
+  for (const auto& [i, j] : pairs) {
     CompareResult m =
-        compare_meshes(e.primitives[i].mesh_data, a.primitives[i].mesh_data, options, e.primitives[i].label);
+        compare_meshes(e.primitives[i].mesh_data, a.primitives[j].mesh_data, options, e.primitives[i].label);
     m.report["label"] = e.primitives[i].label;
     prims.push_back(m.report);
     for (auto& d : m.differences) r.differences.push_back(std::move(d));

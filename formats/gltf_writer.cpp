@@ -312,7 +312,8 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   std::vector<std::vector<Level>> levels(surfaces.size());
   for (std::size_t s = 0; s < surfaces.size(); ++s) {
     const GltfSurface& surface = surfaces[s];
-    const std::string node_name = fmt::format("iso {}", surface.iso_value);
+    const std::string node_name =
+        surface.node_name.empty() ? fmt::format("iso {}", surface.iso_value) : surface.node_name;
     const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
     levels[s].push_back(convert(surface.mesh, m, path));
     levels[s].back().node_name = node_name;
@@ -412,7 +413,10 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
       tinygltf::Node node;
       node.name = level.node_name;
       tinygltf::Value::Object extras;
-      extras["iso_value"] = tinygltf::Value(surfaces[s].iso_value);
+      if (surfaces[s].node_extras.is_object())
+        extras = to_value(surfaces[s].node_extras).Get<tinygltf::Value::Object>();
+      else
+        extras["iso_value"] = tinygltf::Value(surfaces[s].iso_value);
       extras["lod"] = tinygltf::Value(level.lod);
       extras["triangles"] =
           tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));

@@ -20,7 +20,7 @@ TARGETS=("$@")
 # attribute list first, but OpenEXR's typed attributes (chlist) can run past their declared
 # size, so a corrupt file can still make it ask. Outside ASan that is an allocation that fails
 # or a read that fails, reported as bad input (exit 2).
-if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh hierarchy gltf); fi
+if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh hierarchy gltf label_table); fi
 
 command -v clang++ >/dev/null || { echo "run_fuzzers: clang++ not found (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 
@@ -47,6 +47,7 @@ seed_patterns() {
     draco) echo "*.drc" ;;
     gltf) echo "*.glb" ;;
     exr) echo "*.exr" ;;
+    label_table) echo "*.txt *.ctbl *.json *.lut" ;;
   esac
 }
 
@@ -63,7 +64,7 @@ for t in "${TARGETS[@]}"; do
   corpus="$BUILD/corpus/$t"
   artifacts="$BUILD/artifacts/$t/"
   mkdir -p "$corpus" "$artifacts"
-  for dir in "$ROOT/samples" "$ROOT/tests/data" "$ROOT/tests/golden" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$SHARED"; do
+  for dir in "$ROOT/samples" "$ROOT/tests/data" "$ROOT/tests/golden" "$ROOT/tests/data/fuzz_regressions" "$ROOT/tests/data/fuzz_regressions_draco" "$ROOT/tests/data/labels" "$SHARED"; do
     [ -d "$dir" ] || continue
     for pat in $(seed_patterns "$t"); do
       for f in "$dir"/$pat; do

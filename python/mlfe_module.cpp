@@ -297,11 +297,60 @@ PyBuilt build_py(const py::object& volume, const py::object& iso, const py::obje
   return out;
 }
 
+// convert(..., labels=True or [3, 7] or "3,7-9", label_table=..., min_component=...): a label map
+// in, one surface per structure out (convert_labels), as `mlfe convert --labels`.
+py::object convert_labels_py(const py::object& volume, const py::object& out, const py::object& iso,
+                             const py::object& spacing, const py::object& origin, const py::object& direction,
+                             const std::string& space, const py::object& hierarchy, const py::object& report,
+                             const py::object& picked, Options& kw) {
+  if (!iso.is_none()) throw Error("labels and iso exclude each other");
+  if (!hierarchy.is_none()) throw Error("labels writes surfaces only (no hierarchy yet)");
+  LabelOptions o;
+  if (py::isinstance<py::str>(picked))
+    o.labels = parse_label_list(picked.cast<std::string>());
+  else if (!py::isinstance<py::bool_>(picked))
+    for (auto l : picked.cast<std::vector<long long>>()) {
+      if (l < 0 || l > 65535) throw Error("labels: " + std::to_string(l) + " is not a label 0..65535");
+      o.labels.push_back(static_cast<std::uint16_t>(l));
+    }
+  auto fspath = py::module_::import("os").attr("fspath");
+  if (kw.has("label_table")) o.table = py::str(fspath(kw.take("label_table")));
+  kw.get("min_component", o.min_component);
+  kw.get("smooth_iterations", o.smoothing_iterations);
+  kw.get("max_offset", o.max_offset);
+  kw.get("simplify", o.simplify);
+  kw.get("tolerance", o.tolerance);
+  kw.get("draco", o.draco);
+  kw.get("quantize", o.quantize);
+  kw.finish();
+  const std::string out_path = py::str(fspath(out));
+  check_output_path(out_path, kAssetExtensions);
+  auto grid = grid_from(volume, spacing, origin, direction, space);
+  // Warnings (absent labels) are collected without the GIL and raised as Python warnings.
+  std::vector<std::string> warnings;
+  o.warn = [&warnings](const std::string& w) { warnings.push_back(w); };
+  nlohmann::json summary;
+  {
+    py::gil_scoped_release release;
+    summary =
+        convert_labels(*grid, out_path, o, {{"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}});
+  }
+  for (const auto& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
+  if (!report.is_none()) write_json(py::str(fspath(report)), {{"asset", summary}});
+  return to_python(summary);
+}
+
 py::object convert_py(const py::object& volume, const py::object& out, const py::object& iso,
                       const py::object& spacing, const py::object& origin, const py::object& direction,
                       const std::string& space, const py::object& hierarchy, const py::object& report,
                       const py::kwargs& kwargs) {
   Options kw(kwargs);
+  if (kw.has("labels")) {
+    py::object picked = kw.take("labels");
+    if (!(py::isinstance<py::bool_>(picked) && !picked.cast<bool>()))
+      return convert_labels_py(volume, out, iso, spacing, origin, direction, space, hierarchy, report, picked,
+                               kw);
+  }
   ConvertOptions c;
   c.build = build_options(kw);
   c.asset = asset_options(kw);
@@ -449,5 +498,8 @@ PYBIND11_MODULE(mlfe, m) {
         "as `mlfe convert`. Returns the\n"
         "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
         "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap, min_component,\n"
-        "normals_toward_higher, normals, placement, z_scale, level.");
+        "normals_toward_higher, normals, placement, z_scale, level.\n"
+        "labels=True (or a list of labels, or '3,7-9'): the volume is a label map; one closed,\n"
+        "named, coloured surface per structure (as `mlfe convert --labels`), with label_table,\n"
+        "min_component, smooth_iterations, max_offset, simplify, tolerance, draco, quantize.");
 }

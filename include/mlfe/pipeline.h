@@ -15,6 +15,7 @@
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -282,6 +283,42 @@ ConvertResult convert(const TetMesh& mesh, const std::string& out, const Convert
 /// (.vtu, .msh; read_tet_mesh with tet_mesh_read_options(read)).
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read = {});
+
+/// Options of convert_labels (`mlfe convert --labels`): a label map in, one closed, named,
+/// coloured surface per structure out (core/label_surface.h).
+struct LabelOptions {
+  /// The structures to write; empty: every label present except the background 0. Labels not
+  /// picked count as background, so the picked ones stay closed where they touched them.
+  std::vector<std::uint16_t> labels;
+  /// Label table (formats/label_table.h); empty: the table beside the volume with its stem
+  /// (find_label_table on the grid's source), else label_N names and the fixed palette.
+  std::string table;
+  /// 6-connected pieces of a label with fewer voxels take their surroundings' label (0: keep
+  /// every island).
+  std::size_t min_component = 0;
+  int smoothing_iterations = 20;  ///< Taubin λ|μ pairs (0: the extracted interfaces)
+  double max_offset = 0.5;        ///< voxels: no vertex moves further from the extracted interface
+  double simplify = 0.3;          ///< voxels, meshoptimizer's estimate per interface (0: none)
+  bool draco = true;
+  bool quantize = false;
+  double tolerance = 0;  ///< mm for Draco/quantization; 0: a tenth of the smallest voxel spacing
+  /// Called with each warning (table labels absent from the volume, picked labels absent).
+  std::function<void(const std::string&)> warn;
+};
+
+/// Parses a label list "3,7-9" (ascending ranges, 0..65535); throws mlfe::Error on bad text.
+std::vector<std::uint16_t> parse_label_list(const std::string& text);
+
+/// A label map in, structures out: labels checked (integers 0..65535, else mlfe::Error before
+/// any output), small pieces relabelled (min_component), multi-material marching tetrahedra on
+/// the Kuhn triangulation of the samples, smoothing and simplification of the shared interface
+/// complex, then one surface per structure, named and coloured from the table. .glb/.gltf: one
+/// mesh and node per structure (node extras: label, voxels, volume_mm3); the single-mesh
+/// formats (.drc .ply .obj .stl .off) need exactly one structure. Returns the summary (per
+/// structure: label, name, voxels, volume_mm3, triangles, vertices, pieces, closed), written
+/// atomically to `out`; `provenance` goes into the glTF's asset extras.
+nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, const LabelOptions& options,
+                              const nlohmann::json& provenance = nlohmann::json::object());
 
 /// Writes JSON atomically.
 void write_json(const std::string& path, const nlohmann::json& j);

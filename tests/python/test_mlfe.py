@@ -157,6 +157,27 @@ class PythonModuleTest(unittest.TestCase):
         mlfe.convert(SKULL, f, iso=[2.5])
         self.assertEqual(ply_counts(a), ply_counts(f))
 
+    def test_labels_match_the_command_line(self):
+        """A label map with labels=True and a table: the command line's bytes, names, counts."""
+        atlas = os.path.join(SOURCE, "tests", "data", "labels", "atlas_jhu_wm_labels_1mm.nii.gz")
+        table = os.path.join(SOURCE, "tests", "data", "labels", "atlas_jhu_wm_labels_1mm.txt")
+        out = os.path.join(self.dir, "py.glb")
+        s = mlfe.convert(atlas, out, labels=[3, 4, 5], label_table=table)
+        self.assertEqual(s["structure_count"], 3)
+        self.assertEqual([x["name"] for x in s["structures"]],
+                         ["Genu_of_corpus_callosum", "Body_of_corpus_callosum", "Splenium_of_corpus_callosum"])
+        self.assertTrue(all(x["closed"] for x in s["structures"]))
+        cli, rep = os.path.join(self.dir, "cli.glb"), os.path.join(self.dir, "cli.json")
+        subprocess.run([BINARY, "convert", atlas, "--labels", "3-5", "--label-table", table, "-o", cli,
+                        "--report", rep, "--quiet"], check=True)
+        with open(rep) as f:
+            self.assertEqual(json.load(f)["asset"]["structures"], s["structures"])
+        ok, report = validate(out)
+        self.assertTrue(ok, report)
+        with self.assertRaises(mlfe.Error):
+            mlfe.convert(np.full((4, 4, 4), 2.5, np.float32), os.path.join(self.dir, "bad.glb"), labels=True)
+        self.assertFalse(os.path.exists(os.path.join(self.dir, "bad.glb")))
+
     def test_bad_input_raises_with_the_message(self):
         out = os.path.join(self.dir, "bad.glb")
         cases = [

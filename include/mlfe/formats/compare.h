@@ -2,8 +2,9 @@
 // tests in C++ suites. Decodes both files and compares what they mean, not their bytes:
 //
 //   meshes      .glb/.gltf (with or without Draco), .drc, .ply/.obj/.stl/.off: per primitive
-//               (glTF, matched in node order) or per file — vertex and triangle counts, bounding
-//               box, symmetric Hausdorff and mean distance by fixed-seed sampling, angle between
+//               (glTF, matched by node name or in node order) or per file — vertex and
+//               triangle counts, bounding box, symmetric Hausdorff and mean distance by
+//               fixed-seed sampling, angle between
 //               the normals at matched points, handedness (signed volume), scale (units);
 //               glTF also the structure: scene graph, names, materials, extensions, extras.
 //   images      .exr, .png: size, channel names and types, header attributes, per channel max

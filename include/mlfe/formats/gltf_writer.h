@@ -20,6 +20,10 @@ struct GltfSurface {
   TriangleMesh mesh;  ///< physical millimetres in GltfOptions::space; normals optional
   std::array<float, 4> color{0.8f, 0.8f, 0.8f, 1.0f};  ///< linear RGBA in [0,1]; alpha < 1 => BLEND
   std::vector<TriangleMesh> lods;  ///< coarser levels, finest first; written as extra nodes
+  std::string node_name;           ///< empty gives "iso <iso_value>"
+  /// Node extras (an object, e.g. a structure's label value) written instead of iso_value;
+  /// null: {"iso_value": iso_value}. lod and triangles are added either way.
+  nlohmann::json node_extras;
 };
 
 struct GltfOptions {
@@ -36,7 +40,8 @@ struct GltfOptions {
 /// Positions are converted with physical_to_gltf_matrix(options.space); normals are rotated,
 /// renormalized and computed from the triangles when a surface has none. Surfaces without
 /// triangles become nodes without a mesh; triangles with two equal corners are dropped.
-/// Node names are "iso <iso_value>" (node extras: iso_value, lod, triangles). LOD k (from 1)
+/// Node names are "iso <iso_value>" (node extras: iso_value, lod, triangles) unless a surface
+/// names its node (GltfSurface::node_name, node_extras). LOD k (from 1)
 /// is a node "iso <v> lod <k>" referenced by MSFT_lod (optional extension) from the surface
 /// node and kept out of the scene, so viewers without LOD support show only the full surface.
 /// Draco: every primitive is compressed on one scene-wide quantization grid (crack-free between

@@ -1,0 +1,235 @@
+// Label phantoms with exact answers: every structure present, closed and oriented outward;
+// touching structures share every interface vertex; no phantom structure between two labels;
+// small islands kept; the same output whatever the thread count.
+#include <gtest/gtest.h>
+#include <mlfe/core/error.h>
+#include <mlfe/core/label_surface.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <functional>
+#include <set>
+
+namespace mlfe {
+namespace {
+
+LabelGrid phantom(int n, const std::function<std::uint16_t(int, int, int)>& f) {
+  LabelGrid g;
+  g.dims = {n, n, n};
+  g.labels.resize(std::size_t(n) * n * n);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) g.labels[std::size_t(i + n * (j + n * k))] = f(i, j, k);
+  return g;
+}
+
+// Nested spheres (1 around 2), two touching boxes (3 beside 7), a one-voxel island (5) in 1.
+LabelGrid atlas_phantom() {
+  return phantom(28, [](int i, int j, int k) -> std::uint16_t {
+    const double r = std::sqrt((i - 9.0) * (i - 9.0) + (j - 9.0) * (j - 9.0) + (k - 9.0) * (k - 9.0));
+    if (i == 3 && j == 9 && k == 9) return 5;
+    if (r < 3.5) return 2;
+    if (r < 7.5) return 1;
+    if (i >= 18 && i < 22 && j >= 17 && j < 25 && k >= 17 && k < 25) return 3;
+    if (i >= 22 && i < 26 && j >= 17 && j < 25 && k >= 17 && k < 25) return 7;
+    return 0;
+  });
+}
+
+double signed_volume(const TriangleMesh& m) {
+  double v = 0;
+  for (const auto& t : m.triangles) {
+    const auto &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
+    v += (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+          a[2] * (b[0] * c[1] - b[1] * c[0])) /
+         6.0;
+  }
+  return v;
+}
+
+LabelInterfaces complex_of(const LabelGrid& g) { return extract_label_interfaces(g, mixed_kuhn_tets(g)); }
+
+// `extracted`: the volume is also near the voxel count (smoothing shrinks single voxels).
+void expect_structures_closed(const LabelInterfaces& x, const LabelGrid& g, bool extracted = true) {
+  const auto counts = label_counts(g);
+  for (auto l : labels_with_surfaces(x)) {
+    const TriangleMesh m = label_surface(x, l, g.transform);
+    EXPECT_EQ(unmatched_edges(m), 0u) << "label " << l;
+    // Outward: a positive volume, near the label's voxel count (midpoint surfaces cut the
+    // corners of the voxel boundary).
+    const double v = signed_volume(m);
+    EXPECT_GT(v, 0.0) << "label " << l;
+    if (!extracted) continue;
+    EXPECT_LT(v, 1.05 * double(counts.at(l))) << "label " << l;
+    EXPECT_GT(v, 0.1 * double(counts.at(l))) << "label " << l;
+  }
+}
+
+TEST(LabelSurface, ExtractionGivesEveryStructureClosedAndOrientedOutward) {
+  const LabelGrid g = atlas_phantom();
+  const LabelInterfaces x = complex_of(g);
+  EXPECT_EQ(labels_with_surfaces(x), (std::vector<std::uint16_t>{1, 2, 3, 5, 7}));
+  expect_structures_closed(x, g);
+  // The island and each box are one piece each, the sphere shell 1 holds two boundaries (its
+  // outside and the sphere 2 inside) and the island's.
+  EXPECT_EQ(connected_pieces(label_surface(x, 5, g.transform)), 1u);
+  EXPECT_EQ(connected_pieces(label_surface(x, 1, g.transform)), 3u);
+  EXPECT_EQ(connected_pieces(label_surface(x, 3, g.transform)), 1u);
+}
+
+TEST(LabelSurface, NoPhantomStructureBetweenLabels3And7) {
+  const LabelGrid g = phantom(10, [](int i, int, int) -> std::uint16_t { return i < 5 ? 3 : 7; });
+  const LabelInterfaces x = complex_of(g);
+  EXPECT_EQ(labels_with_surfaces(x), (std::vector<std::uint16_t>{3, 7}));
+  for (const auto& l : x.labels)
+    EXPECT_TRUE((l == std::array<std::uint16_t, 2>{0, 3}) || (l == std::array<std::uint16_t, 2>{0, 7}) ||
+                (l == std::array<std::uint16_t, 2>{3, 7}));
+  // The 3|7 interface is the plane halfway between the samples 4 and 5, except where it meets
+  // the background outside the box (tetrahedra with three labels, centroids between 4 and 5).
+  std::size_t on_plane = 0;
+  for (std::size_t t = 0; t < x.triangles.size(); ++t)
+    if (x.labels[t] == std::array<std::uint16_t, 2>{3, 7})
+      for (auto v : x.triangles[t]) {
+        const auto& p = x.positions[v];
+        EXPECT_GT(p[0], 4.0);
+        EXPECT_LT(p[0], 5.0);
+        if (p[1] >= 0 && p[1] <= 9 && p[2] >= 0 && p[2] <= 9) {
+          EXPECT_DOUBLE_EQ(p[0], 4.5);
+          ++on_plane;
+        }
+      }
+  EXPECT_GT(on_plane, 0u);
+  expect_structures_closed(x, g);
+}
+
+// Every vertex of the triangles between a and b is a vertex of both structures' surfaces.
+void expect_shared_interface(const LabelInterfaces& x, std::uint16_t a, std::uint16_t b,
+                             const GridTransform& t) {
+  const TriangleMesh ma = label_surface(x, a, t), mb = label_surface(x, b, t);
+  std::set<std::array<float, 3>> pa(ma.positions.begin(), ma.positions.end()),
+      pb(mb.positions.begin(), mb.positions.end());
+  std::size_t interface_vertices = 0;
+  for (std::size_t i = 0; i < x.triangles.size(); ++i) {
+    if (x.labels[i] != std::array<std::uint16_t, 2>{a, b}) continue;
+    for (auto v : x.triangles[i]) {
+      const auto q = t.index_to_physical(x.positions[v][0], x.positions[v][1], x.positions[v][2]);
+      const std::array<float, 3> p{float(q[0]), float(q[1]), float(q[2])};
+      EXPECT_TRUE(pa.count(p) && pb.count(p));
+      ++interface_vertices;
+    }
+  }
+  EXPECT_GT(interface_vertices, 0u);
+  // And the interface's triangles appear in both, reversed.
+  std::set<std::array<std::array<float, 3>, 3>> fa;
+  for (const auto& tri : ma.triangles)
+    fa.insert({ma.positions[tri[0]], ma.positions[tri[1]], ma.positions[tri[2]]});
+  std::size_t shared = 0;
+  for (const auto& tri : mb.triangles)
+    for (int r = 0; r < 3; ++r)
+      shared +=
+          fa.count({mb.positions[tri[r]], mb.positions[tri[(r + 2) % 3]], mb.positions[tri[(r + 1) % 3]]});
+  EXPECT_GT(shared, 0u);
+}
+
+TEST(LabelSurface, SmoothedAndSimplifiedStructuresStayClosedSharedAndBounded) {
+  LabelGrid g = atlas_phantom();
+  g.transform.spacing = {0.5, 0.5, 0.8};
+  g.transform.direction = {-1, 0, 0, 0, -1, 0, 0, 0, 1};  // LPS-like flips: orientation must follow
+  LabelInterfaces x = complex_of(g);
+  const LabelInterfaces extracted = x;
+  LabelSmoothingOptions so;
+  so.max_offset = 0.5;
+  smooth_label_interfaces(x, so);
+  for (std::size_t v = 0; v < x.positions.size(); ++v) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) d2 += std::pow(x.positions[v][c] - extracted.positions[v][c], 2);
+    ASSERT_LE(std::sqrt(d2), 0.5 + 1e-12);
+  }
+  // Smoothing moved the staircase: some vertex moved.
+  EXPECT_NE(x.positions, extracted.positions);
+  expect_structures_closed(x, g, false);
+  expect_shared_interface(x, 1, 2, g.transform);
+  expect_shared_interface(x, 3, 7, g.transform);
+  const std::size_t before = x.triangles.size();
+  simplify_label_interfaces(x, 0.3);
+  EXPECT_LT(x.triangles.size(), before);
+  EXPECT_EQ(labels_with_surfaces(x), (std::vector<std::uint16_t>{1, 2, 3, 5, 7}));
+  expect_structures_closed(x, g, false);
+  expect_shared_interface(x, 1, 2, g.transform);
+  expect_shared_interface(x, 3, 7, g.transform);
+  expect_shared_interface(x, 1, 5, g.transform);
+  EXPECT_EQ(connected_pieces(label_surface(x, 5, g.transform)), 1u);
+}
+
+TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
+  auto run = [](int threads) {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+    const LabelGrid g = atlas_phantom();
+    LabelInterfaces x = complex_of(g);
+    smooth_label_interfaces(x, {});
+    simplify_label_interfaces(x, 0.3);
+    return x;
+  };
+  const LabelInterfaces a = run(1), b = run(2);
+  EXPECT_EQ(a.positions, b.positions);
+  EXPECT_EQ(a.triangles, b.triangles);
+  EXPECT_EQ(a.labels, b.labels);
+}
+
+TEST(LabelSurface, MixedTetsAreExactlyThoseWithMoreThanOneLabel) {
+  const LabelGrid g =
+      phantom(4, [](int i, int j, int k) -> std::uint16_t { return i == 1 && j == 2 && k == 1 ? 4 : 9; });
+  static const int corner[6][4] = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7},
+                                   {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}};
+  // Brute force over the padded lattice, in lattice order.
+  std::vector<std::array<int, 4>> expected;
+  for (int k = -1; k < 4; ++k)
+    for (int j = -1; j < 4; ++j)
+      for (int i = -1; i < 4; ++i)
+        for (int o = 0; o < 6; ++o) {
+          std::set<std::uint16_t> l;
+          for (int s = 0; s < 4; ++s) {
+            const int b = corner[o][s];
+            l.insert(g.at(i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1)));
+          }
+          if (l.size() > 1) expected.push_back({i, j, k, o});
+        }
+  std::vector<std::array<int, 4>> got;
+  for (const auto& t : mixed_kuhn_tets(g)) got.push_back({t.i, t.j, t.k, t.order});
+  EXPECT_EQ(got, expected);
+  // Not every cube: the cube at (2, 0, 2) is all 9s.
+  EXPECT_LT(got.size(), std::size_t(5 * 5 * 5 * 6));
+}
+
+TEST(LabelSurface, SmallComponentsAreRelabelledToTheirSurroundings) {
+  LabelGrid g = atlas_phantom();
+  const ComponentRemoval r = remove_small_components(g, 2);
+  EXPECT_EQ(r.removed.size(), 1u);
+  EXPECT_EQ(r.removed.at(5), 1u);
+  EXPECT_EQ(r.voxels, 1u);
+  EXPECT_EQ(g.at(3, 9, 9), 1);
+  EXPECT_EQ(labels_with_surfaces(complex_of(g)), (std::vector<std::uint16_t>{1, 2, 3, 7}));
+}
+
+TEST(LabelSurface, NonIntegerNegativeAndTooLargeLabelsAreBadInput) {
+  ScalarGrid s;
+  s.dims = {2, 1, 1};
+  s.source = "labels.nii";
+  s.values = {1, 2.5f};
+  EXPECT_THROW(label_grid(s), Error);
+  s.values = {1, -1};
+  EXPECT_THROW(label_grid(s), Error);
+  s.values = {1, 65536};
+  EXPECT_THROW(label_grid(s), Error);
+  s.values = {0, 65535};
+  EXPECT_EQ(label_grid(s).labels, (std::vector<std::uint16_t>{0, 65535}));
+  try {
+    s.values = {1, 2.5f};
+    label_grid(s);
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("(1, 0, 0)"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace mlfe
