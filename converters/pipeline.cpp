@@ -477,19 +477,20 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     // auto: the verified bound while it takes about a second or two (~10 µs per triangle),
-    // the estimated one beyond; decided per surface from its size alone, so the bytes do not
-    // depend on the thread count. Both keep the topology: the asset stays one manifold.
+    // meshoptimizer beyond (seconds for millions of triangles; the topology-preserving
+    // collapses of `fast` take minutes on a full head, bench/RESULTS.md); decided per surface
+    // from its size alone, so the bytes do not depend on the thread count.
     constexpr std::size_t kBoundedUpTo = 200000;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      if (p.simplifier == Simplifier::kMeshopt) {
+      if (p.simplifier == Simplifier::kMeshopt ||
+          (p.simplifier == Simplifier::kAuto && m.triangles.size() > kBoundedUpTo)) {
         m = simplify_fast(m, so.tolerance);
         return;
       }
       SimplifyOptions o = so;
-      o.verify_bound = p.simplifier == Simplifier::kBounded ||
-                       (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
+      o.verify_bound = p.simplifier != Simplifier::kFast;
       m = simplify_within(m, o);
     });
   }
