@@ -207,7 +207,8 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
     znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
     if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
     std::vector<char> data(bytes);
-    const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) == 0;
+    // fseek returns 0, gzseek the new offset; both -1 on failure.
+    const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) >= 0;
     const std::size_t got = positioned ? znzread(data.data(), 1, data.size(), fp) : 0;
     znzclose(fp);
     if (got != bytes) fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
