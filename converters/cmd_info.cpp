@@ -2,6 +2,7 @@
 // anything; for a hierarchy file (.mlfeh), its levels, counts, error figures and bytes per
 // section.
 #include <fmt/format.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/label_table.h>
@@ -35,9 +36,17 @@ struct InfoArgs {
 // mlfe::Error for values that are not labels (label_grid).
 nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
   const LabelGrid lg = label_grid(g);
-  const std::string path = !table_path.empty() ? table_path : find_label_table(g.source);
   LabelTable table;
-  if (!path.empty()) table = read_label_table(path);
+  if (!table_path.empty()) {
+    table = read_label_table(table_path);
+  } else if (const std::string found = find_label_table(g.source); !found.empty()) {
+    // Beside the volume, only a file that parses as a table is one (not an earlier report).
+    try {
+      table = read_label_table(found);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "mlfe: warning: %s (found beside the volume; not used)\n", e.what());
+    }
+  }
   const double voxel_mm3 = g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2];
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& [l, n] : label_counts(lg))

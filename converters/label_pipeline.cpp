@@ -80,9 +80,18 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
 
   // Step 1: the labels (bad values fail here, before any output) and the table.
   LabelGrid g = label_grid(grid);
-  const std::string table_path = !o.table.empty() ? o.table : find_label_table(grid.source);
+  // A table named with --label-table must parse; a file that merely sits beside the volume with
+  // its stem (a report.json of an earlier run, say) is used only when it is a table.
   LabelTable table;
-  if (!table_path.empty()) table = read_label_table(table_path);
+  if (!o.table.empty()) {
+    table = read_label_table(o.table);
+  } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
+    try {
+      table = read_label_table(found);
+    } catch (const Error& e) {
+      warn(std::string(e.what()) + " (found beside the volume; not used)");
+    }
+  }
   const auto present = label_counts(g);
   {
     std::vector<std::uint16_t> absent;

@@ -291,8 +291,9 @@ struct LabelOptions {
   /// The structures to write; empty: every label present except the background 0. Labels not
   /// picked count as background, so the picked ones stay closed where they touched them.
   std::vector<std::uint16_t> labels;
-  /// Label table (formats/label_table.h); empty: the table beside the volume with its stem
-  /// (find_label_table on the grid's source), else label_N names and the fixed palette.
+  /// Label table (formats/label_table.h); must parse. Empty: the file beside the volume with its
+  /// stem (find_label_table on the grid's source) when it parses as a table (else a warning),
+  /// else label_N names and the fixed palette.
   std::string table;
   /// 6-connected pieces of a label with fewer voxels take their surroundings' label (0: keep
   /// every island).
