@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/test_meshes.h"
 #include "tests/test_paths.h"
 
 namespace fs = std::filesystem;
