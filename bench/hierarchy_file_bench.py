@@ -117,6 +117,8 @@ def main():
     ap.add_argument("--fullhead", default="/work/data/fullhead.nii.gz")
     ap.add_argument("--share", default="", help="quantization shares to try at the middle E, e.g. 0.25,0.75")
     ap.add_argument("--only", default="", help="comma-separated input names (CT, MRI, HEAD)")
+    ap.add_argument("--bounds", default="", help="E values to run instead of the defaults (as in the table: "
+                    "data units for integer inputs, fractions of the range for float ones), e.g. 2,8")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     if args.max_error:
@@ -187,6 +189,8 @@ def max_error_main(args):
         peak = float(vox.max()) - float(vox.min())
         integer = vox.dtype.kind in "iu"
         # Integer data: E in data units; float data: E as a fraction of the value range.
+        if args.bounds:
+            es = [float(x) for x in args.bounds.split(",")]
         bounds = [0] + [e if integer else e * peak for e in es]
         raw = os.path.join(args.out, name + ".raw")
         vox.tofile(raw)

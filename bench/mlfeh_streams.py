@@ -48,21 +48,42 @@ def compressed(cmd, data):
     return len(subprocess.run(cmd, input=data, check=True, capture_output=True).stdout)
 
 
+def values(p, pos, count, coding):
+    """The codes of `count` vertices from pos: one stream (coding 1), or for the integer coding
+    (3) seven context streams after their u32 lengths, concatenated here."""
+    if coding != 3:
+        return varints(p, pos, count)[0]
+    lengths = struct.unpack_from("<7I", p, pos)
+    pos += 28
+    out = []
+    for n in lengths:
+        end = pos + n
+        while pos < end:
+            z, pos = varints(p, pos, 1)
+            out += z
+        pos = end
+    assert len(out) == count
+    return out
+
+
 def analyse(path):
     data = open(path, "rb").read()
     per_level, marks, file_bytes = [], [], 0
     dim = struct.unpack_from("<I", data, 12)[0]
+    coding = 0
     for tag, nbytes, p in sections(data):
         file_bytes += nbytes
-        if tag == "MESH":
+        if tag == "HEAD":
+            coding = struct.unpack_from("<I", p, 20)[0]
+        elif tag == "MESH":
             nv0, ne0 = struct.unpack_from("<II", p, 0)
             pos = 8 + nv0 * 8 * dim + ne0 * 4 * (dim + 1)
-            per_level.append(varints(p, pos, nv0)[0])
+            per_level.append(values(p, pos, nv0, coding))
         elif tag == "LEVL":
             _k, n, m = struct.unpack_from("<III", p, 0)
             nb = (n + 7) // 8
             marks.append(p[12:12 + nb])
-            per_level.append(varints(p, 12 + nb, m)[0])
+            per_level.append(values(p, 12 + nb, m, coding))
     codes = [z for lv in per_level for z in lv]
     stream = bytearray()
     for z in codes:

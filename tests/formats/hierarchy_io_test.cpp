@@ -154,9 +154,10 @@ TEST(HierarchyFileRead, NamesAnUnsupportedVersion) {
   const fs::path p = temp_file("version.mlfeh");
   write_hierarchy<2>(p.string(), h, {}, sample_info());
   Bytes b = read_bytes(p);
-  b[8] = 3;
+  b[8] = 4;
   write_bytes(p, b);
-  EXPECT_EQ(read_error(p), p.string() + ": unsupported hierarchy file version 3 (this mlfe reads 1 and 2)");
+  EXPECT_EQ(read_error(p),
+            p.string() + ": unsupported hierarchy file version 4 (this mlfe reads 1, 2 and 3)");
 }
 
 TEST(HierarchyFileRead, RejectsHugeCountsAgainstTheFileSizeBeforeAllocating) {

@@ -83,7 +83,7 @@ TEST(HierarchyFileV3, TheLatticeAndTheSampleBoundReadBack) {
   HierarchyFileInfo info = lattice_info();
   info.sample_error_bound = 0.25;
   const auto p = temp_file("lattice.mlfeh");
-  write_hierarchy(p.string(), h, random_integers(h.vertex_count(), 2), info, v3_options(0.1, false));
+  write_hierarchy(p.string(), h, random_integers(h.vertex_count(), 2), info, v3_options(0.25, false));
   const HierarchyFile f = read_hierarchy(p.string());
   EXPECT_EQ(f.version, 3);
   EXPECT_TRUE(f.on_lattice);
@@ -91,7 +91,7 @@ TEST(HierarchyFileV3, TheLatticeAndTheSampleBoundReadBack) {
   EXPECT_EQ(f.data_dims, (std::array<std::int64_t, 3>{5, 3, 7}));
   EXPECT_EQ(f.sample_error_bound, 0.25);
   EXPECT_FALSE(f.integer_values);
-  EXPECT_EQ(f.value_bound, 0.1);
+  EXPECT_EQ(f.value_bound, 0.25);
   // Off the lattice, a v3 file says so.
   HierarchyFileInfo plain;
   plain.value_max = 1;
