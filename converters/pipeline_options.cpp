@@ -101,7 +101,8 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->capture_default_str();
   cmd->add_option("--min-component", p.min_component,
                   "drop connected parts of a surface whose vertices lie in fewer than this many voxels "
-                  "(0: keep every part; the report counts what was dropped)")
+                  "(with --labels: pieces of fewer voxels take their surroundings' label; 0: keep every "
+                  "part; the report counts what was dropped)")
       ->capture_default_str();
   cmd->add_flag("--normals-toward-higher", p.normals_toward_higher, "normals point toward higher values");
   cmd->add_option("--normals", p.normals,
@@ -259,9 +260,6 @@ void add_label_options(CLI::App* cmd, LabelParams& p) {
   cmd->add_option("--label-table", p.table,
                   "names and colours: MRIcron .txt/.lut, ITK-SNAP, FreeSurfer LUT, Slicer .ctbl, JSON "
                   "(default: the file beside the volume with its stem)");
-  cmd->add_option(
-      "--min-component", p.min_component,
-      "with --labels: pieces of fewer voxels take their surroundings' label (default 0: keep all)");
   cmd->add_option("--smooth-iterations", p.smooth, "with --labels: Taubin smoothing passes (default 20)");
   cmd->add_option("--max-offset", p.max_offset,
                   "with --labels: no vertex moves further from the voxels' interface, voxels (default 0.5)");
@@ -271,7 +269,7 @@ LabelOptions label_options(const LabelParams& p, const AssetParams& asset) {
   LabelOptions o;
   if (!p.list.empty()) o.labels = parse_label_list(p.list);
   o.table = p.table;
-  o.min_component = p.min_component;
+  o.min_component = asset.min_component;  // one --min-component for iso-surfaces and labels
   o.smoothing_iterations = p.smooth;
   o.max_offset = p.max_offset;
   o.simplify = asset.simplify;

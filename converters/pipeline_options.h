@@ -18,10 +18,10 @@ struct BuildParams {
   std::size_t max_vertices = 0;
   int max_level = 20;
   int start_level = -1;
-  std::string norm = "l2";             ///< "l2" or "h1"
+  std::string norm = "l2";              ///< "l2" or "h1"
   std::string preconditioner = "auto";  ///< "auto", "bpx", "jacobi", "none"
-  double surface_tolerance = 0.5;      ///< voxels, for iso-aware refinement
-  bool check_against_u = false;        ///< surface-driven: refine where u misses the data's surfaces
+  double surface_tolerance = 0.5;       ///< voxels, for iso-aware refinement
+  bool check_against_u = false;         ///< surface-driven: refine where u misses the data's surfaces
   /// Memory budget of the build: "50%" of the machine's RAM (default), or bytes with an
   /// optional K/M/G suffix; "0": none. Refinement stops at it with a message.
   std::string max_memory = "50%";
@@ -85,12 +85,12 @@ struct LabelParams {
   CLI::Option* labels = nullptr;  ///< --labels [LIST]; given when count() > 0
   std::string list;               ///< "3,7-9"; empty: every label present
   std::string table;              ///< --label-table FILE
-  std::size_t min_component = 0;  ///< --min-component VOXELS
   int smooth = 20;                ///< --smooth-iterations
   double max_offset = 0.5;        ///< --max-offset (voxels)
 };
 
-/// Adds --labels [LIST], --label-table, --min-component, --smooth-iterations and --max-offset.
+/// Adds --labels [LIST], --label-table, --smooth-iterations and --max-offset (--min-component is
+/// the asset option's).
 void add_label_options(CLI::App* cmd, LabelParams& p);
 
 /// The typed options of `p` and the asset options they share (--simplify, --tolerance,
