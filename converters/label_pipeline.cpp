@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
+#include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
@@ -219,7 +220,7 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   summary["islands_removed"] = removed_json;
   summary["islands_removed_voxels"] = removed.voxels;
   summary["label_table"] = table.source;
-  summary["bytes"] = std::filesystem::file_size(out);
+  summary["bytes"] = written_file_size(out);
   summary["tolerance_mm"] = tol;
   summary["seconds"] = seconds_since(t0);
   summary["stage_seconds"] = {{"labels", prepare_s},

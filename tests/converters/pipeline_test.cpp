@@ -135,7 +135,7 @@ TEST(Pipeline, BadInputThrowsBeforeWriting) {
   expect_error([&] { convert(kSkull, scratch() + "/x.xyz", o); }, "unknown output type '.xyz'");
   ConvertOptions bad = o;
   bad.build.max_level = 41;
-  expect_error([&] { convert(kSkull, out, bad); }, "max_level");
+  expect_error([&] { convert(kSkull, out, bad); }, "--max-level");
   bad = o;
   bad.build.rms = RmsTarget{-1, true};
   expect_error([&] { convert(kSkull, out, bad); }, "--rms");

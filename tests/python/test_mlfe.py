@@ -188,7 +188,7 @@ class PythonModuleTest(unittest.TestCase):
             (lambda: mlfe.convert(SKULL, out, iso=[1], simplfy=0.2), "unknown option 'simplfy'"),
             (lambda: mlfe.convert(SKULL, os.path.join(self.dir, "x.xyz"), iso=[1]), "unknown output type"),
             (lambda: mlfe.convert(np.full((4, 4, 4), np.nan, np.float32), out, iso=[1]), "NaN"),
-            (lambda: mlfe.build(SKULL, max_level=99), "max_level"),
+            (lambda: mlfe.build(SKULL, max_level=99), "max-level"),
             (lambda: mlfe.build(np.zeros((3, 3, 3, 3), np.float32)), "2D or 3D"),
             (lambda: mlfe.build(np.zeros((4, 4, 4), np.float32), spacing=(1, 0, 1)), "spacing"),
         ]
