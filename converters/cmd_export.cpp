@@ -42,13 +42,8 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
     if (f.on_lattice) {
       conformed = h_in;
       if (values) conformed_values = *values;
-      SampleLattice lat;
-      lat.dim = D;
-      lat.dims = f.data_dims;
-      lat.spacing = f.transform.spacing;
-      lat.level = f.lattice_level;
-      lat.width = std::int64_t(1) << f.lattice_level;
-      leaves = leaves_in_data(conformed, conformed_values, lat);
+      leaves = leaves_in_data(conformed, conformed_values,
+                              sample_lattice(D, f.data_dims, f.transform.spacing, f.lattice_level));
       hp = &conformed;
       if (values) values = &conformed_values;
     } else {

@@ -220,17 +220,8 @@ template <int D>
 void set_lattice(const HierarchyFileInfo& info, Approximation<D>& a) {
   a.on_lattice = info.on_lattice;
   if (!info.on_lattice) return;
-  SampleLattice& lat = a.lattice;
-  lat.dim = D;
-  lat.dims = info.data_dims;
-  lat.level = info.lattice_level;
-  lat.width = std::int64_t(1) << info.lattice_level;
-  lat.sample_weight = 1;
-  for (int k = 0; k < 3; ++k) {
-    lat.spacing[k] = info.transform.spacing[k];
-    if (k < D) lat.sample_weight *= lat.spacing[k];
-  }
-  a.data_extent = lat.data_extent();
+  a.lattice = sample_lattice(D, info.data_dims, info.transform.spacing, info.lattice_level);
+  a.data_extent = a.lattice.data_extent();
 }
 
 template void set_lattice_info<2>(const Approximation<2>&, HierarchyFileInfo&);

@@ -128,6 +128,22 @@ SampleLattice sample_lattice(const ScalarGrid& grid) {
   return lat;
 }
 
+SampleLattice sample_lattice(int dim, const std::array<std::int64_t, 3>& dims,
+                             const std::array<double, 3>& spacing, int level) {
+  MLFE_CHECK((dim == 2 || dim == 3) && level >= 0 && level < 62);
+  SampleLattice lat;
+  lat.dim = dim;
+  lat.dims = dims;
+  lat.level = level;
+  lat.width = std::int64_t(1) << level;
+  lat.sample_weight = 1;
+  for (int a = 0; a < 3; ++a) {
+    lat.spacing[a] = spacing[a];
+    if (a < dim) lat.sample_weight *= spacing[a];
+  }
+  return lat;
+}
+
 template <int D>
 bool outside_data(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat) {
   const auto ext = lat.data_extent();

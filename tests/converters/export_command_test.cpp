@@ -127,12 +127,7 @@ Exported exported(const HierarchyFile& f) {
   std::vector<double> values = f.values;
   std::vector<ElemId> leaves = h.leaves();
   if (f.on_lattice) {
-    SampleLattice lat;
-    lat.dims = f.data_dims;
-    lat.spacing = f.transform.spacing;
-    lat.level = f.lattice_level;
-    lat.width = std::int64_t(1) << f.lattice_level;
-    leaves = leaves_in_data(h, values, lat);
+    leaves = leaves_in_data(h, values, sample_lattice(3, f.data_dims, f.transform.spacing, f.lattice_level));
   }
   std::vector<char> used(h.vertex_count(), 0);
   int max_level = 0;

@@ -126,7 +126,9 @@ TEST(MaxErrorCommand, EverySampleWithinTheBound) {
   for (double e : {1.0, 3.0}) {
     const double worst = round_trip_max_error(u8, e, "u8b_" + std::to_string(int(e)));
     EXPECT_LE(worst, e);
-    if (e == 3.0) EXPECT_GT(worst, 0);
+    if (e == 3.0) {
+      EXPECT_GT(worst, 0);
+    }
   }
 }
 

@@ -60,6 +60,11 @@ struct SampleLattice {
 /// more than 2^24 samples along one.
 SampleLattice sample_lattice(const ScalarGrid& grid);
 
+/// The lattice of a stored hierarchy: level L on the samples of a dim-D grid with these dims and
+/// spacing (as a version 3 file records them, validated by its reader).
+SampleLattice sample_lattice(int dim, const std::array<std::int64_t, 3>& dims,
+                             const std::array<double, 3>& spacing, int level);
+
 /// Least-squares integrals of the samples an element owns (see above): f2 = Σ w f², fphi[j] =
 /// Σ w f λ_j, mass = Σ w λ_i λ_j (upper triangle, row major), points = samples owned, fmin/fmax
 /// over them; with `gradients`, grad and grad2 from the field's gradient at the samples. The
