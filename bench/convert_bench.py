@@ -24,6 +24,7 @@ Uses /usr/bin/python3 with python3-vtk9, python3-scipy (scripts/install_bench_de
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -62,6 +63,47 @@ def physical_to_index(ply, out_ply, meta):
     return poly
 
 
+def gltfpack_row(W, fe, n_mc, t_fe):
+    """Flying edges + gltfpack 1.3 (npm; meshoptimizer 1.x's simplifier) at 10 %: the surface is
+    handed over as OBJ (as users do), `-si 0.1 -noq` (no quantization, so distances are the
+    simplifier's), and read back from the .glb for the distances."""
+    pts, tris = ib.tri_arrays(fe)
+    obj = W("fe.obj")
+    with open(obj, "w") as f:
+        f.write("".join("v %.6f %.6f %.6f\n" % tuple(p) for p in pts))
+        f.write("".join("f %d %d %d\n" % tuple(t + 1) for t in tris))
+    glb = W("gltfpack.glb")
+    _, wall, rss = timed(["gltfpack", "-i", obj, "-o", glb, "-si", "0.1", "-noq"])
+    r = vtk.vtkGLTFReader()
+    r.SetFileName(glb)
+    r.Update()
+    it = r.GetOutput().NewIterator()
+    it.InitTraversal()
+    app = vtk.vtkAppendPolyData()
+    while not it.IsDoneWithTraversal():
+        app.AddInputData(it.GetCurrentDataObject())
+        it.GoToNextItem()
+    app.Update()
+    tri = vtk.vtkTriangleFilter()
+    tri.SetInputData(app.GetOutput())
+    tri.Update()
+    ply = W("fe_gltfpack10.ply")
+    ib.write_ply(tri.GetOutput(), ply)
+    return dict(method="flying edges + gltfpack 1.3 -si 0.1", triangles=tri.GetOutput().GetNumberOfPolys(),
+                seconds=t_fe + wall, detail=f"gltfpack {wall:.2f} (OBJ parse included)", peak_mb=rss, ply=ply,
+                peer="gltfpack")
+
+
+def topology(poly):
+    """(non-manifold edges, boundary edges) of a surface, vertices welded by position."""
+    pts, tris = ib.tri_arrays(poly)
+    _, ids = np.unique(pts, axis=0, return_inverse=True)
+    t = ids.reshape(-1)[tris]
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return int((counts > 2).sum()), int((counts == 1).sum())
+
+
 def glb_sizes(m2g, ply, spacing):
     j, _ = ib.run_json([m2g, ply, ply[:-4] + ".glb", "--scale", ",".join(str(x) for x in spacing), "--drc",
                         ply[:-4] + ".drc"])
@@ -94,6 +136,7 @@ def main():
     ap.add_argument("--tolerances", default="0.3,0.6", help="extra mlfe runs with --simplify S (voxels)")
     ap.add_argument("--samples", type=int, default=60000)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--no-gltfpack", action="store_true", help="skip flying edges + gltfpack (npm gltfpack 1.3)")
     ap.add_argument("--no-quadric", action="store_true", help="skip MC + quadric decimation (slow on big volumes)")
     ap.add_argument("cases", nargs="+", help="VOL:ISO")
     args = ap.parse_args()
@@ -134,6 +177,15 @@ def main():
             rows.append(dict(method=f"flying edges + meshopt_simplify to {pct}%", triangles=j["triangles"],
                              seconds=t_fe + j["simplify_seconds"], detail=f"meshopt {j['simplify_seconds']:.2f}",
                              peak_mb=rss, ply=ply, peer="femo"))
+        if shutil.which("gltfpack") and not args.no_gltfpack:
+            rows.append(gltfpack_row(W, fe, n_mc, t_fe))
+        # The surface the lattice's finest level gives (Kuhn marching tetrahedra on every voxel
+        # cube, unsimplified): what an asset extracted at the samples starts from.
+        ply = W("kuhn.ply")
+        out, wall, rss = timed([tools, "kuhn", path, f"{iso:g}", ply])
+        j = json.loads(out.strip().splitlines()[-1])
+        rows.append(dict(method="Kuhn marching tetrahedra, every voxel (finest level)", triangles=j["triangles"],
+                         seconds=j["seconds"], detail="unsimplified", peak_mb=rss, ply=ply))
         ply = W("vdb.ply")
         out, wall, rss = timed([tools, "--threads", str(ib.THREADS), "vdb", path, f"{iso:g}", "0.5", ply])
         j = json.loads(out.strip().splitlines()[-1])
@@ -164,6 +216,7 @@ def main():
             ib.log("   distances:", r["method"])
             poly = fe if r["ply"] == W("fe.ply") else ib.read_ply(r["ply"])
             r["mean_vox"], r["hausdorff_vox"] = (0.0, 0.0) if poly is fe else ib.distances(ref, poly, rng, args.samples)
+            r["nm_edges"], r["boundary_edges"] = topology(poly)
             r["glb"], r["drc"], r["glb_write_seconds"] = glb_sizes(m2g, r["ply"], meta["spacing"])
             # A user's flying edges + meshoptimizer pipeline also reads the volume and writes
             # the asset: its end-to-end time is comparable with mlfe convert's (the command).
@@ -185,13 +238,13 @@ def print_table(name, iso, meta, voxels, rows):
     n_mc = rows[1]["triangles"]
     print(f"\n### {name}, iso {iso:g} ({'x'.join(map(str, meta['dims']))} = {voxels / 1e6:.1f} M voxels, spacing "
           f"{', '.join(f'{s:.4g}' for s in meta['spacing'])} mm)\n")
-    print("| method | triangles | % of MC | seconds | peak MiB | mean vox | Hausdorff vox | .glb B (normals) | .drc B (positions) | notes |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    print("| method | triangles | % of MC | seconds | peak MiB | mean vox | Hausdorff vox | non-manifold / boundary edges | .glb B (normals) | .drc B (positions) | notes |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for r in rows:
         peak = f"{r['peak_mb']:.0f}" if "peak_mb" in r else "in-process"
         glb = f"{r['glb']}" + (f" (CLI {r['cli_glb']})" if "cli_glb" in r else "")
         print(f"| {r['method']} | {r['triangles']} | {100.0 * r['triangles'] / n_mc:.1f} | {r['seconds']:.2f} | {peak} | "
-              f"{r['mean_vox']:.3f} | {r['hausdorff_vox']:.2f} | {glb} | {r['drc']} | {r.get('detail', '')} |")
+              f"{r['mean_vox']:.3f} | {r['hausdorff_vox']:.2f} | {r.get('nm_edges', '')} / {r.get('boundary_edges', '')} | {glb} | {r['drc']} | {r.get('detail', '')} |")
     by = {r["method"]: r for r in rows}
     mcqd = by.get("MC + quadric decimation to 10%")
     femo = by.get("flying edges + meshopt_simplify to 10%")

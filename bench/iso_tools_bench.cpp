@@ -37,6 +37,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -263,6 +264,82 @@ int main(int argc, char** argv) {
              {"simplify_seconds", t_simplify},
              {"relative_error", err},
              {"absolute_error", err * meshopt_simplifyScale(&in.positions[0][0], in.positions.size(), 12)},
+             {"vertices", m.positions.size()},
+             {"triangles", m.triangles.size()}};
+    } else if (mode == "kuhn" && args.size() == 4) {
+      // kuhn VOL ISO OUT.ply: marching tetrahedra on the Kuhn triangulation of every voxel cube
+      // (the finest level of the samples' lattice), index coordinates, welded.
+      const ScalarGrid g = read_volume(args[1]);
+      const double iso = std::atof(args[2].c_str());
+      const auto t0 = Clock::now();
+      TriangleMesh m;
+      std::map<std::pair<std::int64_t, std::int64_t>, unsigned> welded;
+      static const int kPaths[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+      for (std::int64_t k = 0; k + 1 < g.dims[2]; ++k)
+        for (std::int64_t j = 0; j + 1 < g.dims[1]; ++j)
+          for (std::int64_t i = 0; i + 1 < g.dims[0]; ++i)
+            for (const auto& path : kPaths) {
+              std::array<std::array<std::int64_t, 3>, 4> c;
+              c[0] = {i, j, k};
+              for (int s = 0; s < 3; ++s) {
+                c[s + 1] = c[s];
+                ++c[s + 1][path[s]];
+              }
+              std::array<double, 4> v;
+              int inside = 0;
+              for (int q = 0; q < 4; ++q) {
+                v[q] = g.at(c[q][0], c[q][1], c[q][2]) - iso;
+                inside += v[q] > 0;
+              }
+              if (inside == 0 || inside == 4) continue;
+              // Welded: one vertex per cut lattice edge (keyed by its two samples).
+              auto cut = [&](int a, int b) {
+                auto lin = [&](int q) { return c[q][0] + g.dims[0] * (c[q][1] + g.dims[1] * c[q][2]); };
+                const std::int64_t la = lin(a), lb = lin(b);
+                const auto key = std::make_pair(std::min(la, lb), std::max(la, lb));
+                const auto found = welded.find(key);
+                if (found != welded.end()) return found->second;
+                const double t = v[a] / (v[a] - v[b]);
+                std::array<float, 3> p;
+                for (int x = 0; x < 3; ++x) p[x] = float(c[a][x] + t * double(c[b][x] - c[a][x]));
+                m.positions.push_back(p);
+                welded.emplace(key, unsigned(m.positions.size() - 1));
+                return unsigned(m.positions.size() - 1);
+              };
+              std::vector<int> in, out;
+              for (int q = 0; q < 4; ++q) (v[q] > 0 ? in : out).push_back(q);
+              if (in.size() == 1 || out.size() == 1) {
+                const auto& one = in.size() == 1 ? in : out;
+                const auto& rest = in.size() == 1 ? out : in;
+                m.triangles.push_back({cut(one[0], rest[0]), cut(one[0], rest[1]), cut(one[0], rest[2])});
+              } else {
+                const unsigned a = cut(in[0], out[0]), b = cut(in[0], out[1]), cc = cut(in[1], out[1]),
+                               d = cut(in[1], out[0]);
+                m.triangles.push_back({a, b, cc});
+                m.triangles.push_back({a, cc, d});
+              }
+            }
+      const double secs = since(t0);
+      write_mesh_file(args[3], m);
+      out = {{"method", "kuhn marching tetrahedra"}, {"seconds", secs}, {"triangles", m.triangles.size()}};
+    } else if (mode == "simplify" && args.size() >= 4) {
+      // simplify IN.ply TOLERANCE OUT.ply [MIN_TRIANGLES [optimal|input [verify|estimate]]]
+      const TriangleMesh in = read_mesh_file(args[1]);
+      SimplifyOptions so;
+      so.tolerance = std::atof(args[2].c_str());
+      if (args.size() > 4) so.min_triangles = std::strtoull(args[4].c_str(), nullptr, 10);
+      so.placement = args.size() > 5 && args[5] == "input" ? Placement::kInputVertex : Placement::kOptimal;
+      so.verify_bound = args.size() > 6 && args[6] == "verify";
+      const auto t0 = Clock::now();
+      SimplifyStats st;
+      const TriangleMesh m = simplify_within(in, so, &st);
+      const double t_simplify = since(t0);
+      write_mesh_file(args[3], m);
+      out = {{"method", "simplify_within"},
+             {"simplify_seconds", t_simplify},
+             {"passes", st.passes},
+             {"collapses", st.collapses},
+             {"flips", st.flips},
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()}};
     } else {

@@ -8,6 +8,7 @@
 #   libzfp-dev         optional: ZFP compressed-array comparison (skipped if unavailable)
 #   python3-zfpy       ZFP fixed-accuracy rate-distortion beside the hierarchy file (bench/hierarchy_file_bench.py)
 #   zstd               zstd -19 of the raw input (bench/hierarchy_file_bench.py)
+# and from npm: gltfpack 1.3 (bench/convert_bench.py's meshoptimizer 1.x peer).
 # Idempotent: checks every package with dpkg-query and runs apt-get update/install only when
 # something is missing. Build dependencies of mlfe itself: scripts/install_deps.sh.
 set -euo pipefail
@@ -23,6 +24,17 @@ missing=()
 for p in "${REQUIRED[@]}"; do is_installed "$p" || missing+=("$p"); done
 missing_opt=()
 for p in "${OPTIONAL[@]}"; do is_installed "$p" || missing_opt+=("$p"); done
+
+# gltfpack 1.3 (npm; meshoptimizer 1.x's simplifier), the asset peer of bench/convert_bench.py.
+if ! command -v gltfpack >/dev/null 2>&1; then
+  if command -v npm >/dev/null 2>&1; then
+    echo "mlfe bench: installing gltfpack@1.3 from npm" >&2
+    npm install -g --no-audit --no-fund --silent gltfpack@1.3 >/dev/null 2>&1 \
+      || echo "mlfe bench: warning: npm install gltfpack failed; convert_bench skips it" >&2
+  else
+    echo "mlfe bench: warning: no npm (scripts/install_deps.sh installs it); convert_bench skips gltfpack" >&2
+  fi
+fi
 
 if [ "${#missing[@]}" -eq 0 ] && [ "${#missing_opt[@]}" -eq 0 ]; then
   echo "mlfe bench: all benchmark dependencies are installed" >&2
