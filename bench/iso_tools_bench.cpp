@@ -308,6 +308,8 @@ int main(int argc, char** argv) {
               };
               std::vector<int> in, out;
               for (int q = 0; q < 4; ++q) (v[q] > 0 ? in : out).push_back(q);
+              // Oriented toward lower values (from an inside corner to an outside one).
+              const std::size_t first = m.triangles.size();
               if (in.size() == 1 || out.size() == 1) {
                 const auto& one = in.size() == 1 ? in : out;
                 const auto& rest = in.size() == 1 ? out : in;
@@ -317,6 +319,19 @@ int main(int argc, char** argv) {
                                d = cut(in[1], out[0]);
                 m.triangles.push_back({a, b, cc});
                 m.triangles.push_back({a, cc, d});
+              }
+              for (std::size_t t = first; t < m.triangles.size(); ++t) {
+                auto& tri = m.triangles[t];
+                const auto& p0 = m.positions[tri[0]];
+                const auto& p1 = m.positions[tri[1]];
+                const auto& p2 = m.positions[tri[2]];
+                const double e1[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+                const double e2[3] = {p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]};
+                const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                     e1[0] * e2[1] - e1[1] * e2[0]};
+                double dot = 0;
+                for (int x = 0; x < 3; ++x) dot += n[x] * double(c[in[0]][x] - c[out[0]][x]);
+                if (dot > 0) std::swap(tri[1], tri[2]);
               }
             }
       const double secs = since(t0);
