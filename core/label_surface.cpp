@@ -13,10 +13,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <iterator>
 #include <limits>
-#include <cmath>
 #include <numeric>
 #include <string>
 #include <unordered_map>
@@ -257,14 +257,12 @@ class ComplexDecimator {
   void run() {
     classify();
     init_quadrics();
-    // Every edge once, in lattice-independent order (by its vertex pair).
-    std::vector<std::uint64_t> edges;
-    edges.reserve(x_.triangles.size() * 3);
-    for (const auto& t : x_.triangles)
-      for (int c = 0; c < 3; ++c) edges.push_back(edge_key(t[c], t[(c + 1) % 3]));
-    std::sort(edges.begin(), edges.end());
-    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-    for (auto e : edges) push(std::uint32_t(e >> 32), std::uint32_t(e & 0xffffffffu));
+    // Every edge once, from its lower vertex, in vertex order.
+    for (std::uint32_t v = 0; v < x_.positions.size(); ++v) {
+      neighbours(v, nv_);
+      for (auto w : nv_)
+        if (w > v) push(v, w);
+    }
     // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
     // candidates, most of them stale, costs more than the collapses). Within a bucket the last
     // pushed goes first; all sequential, so the order is the same on every run.
@@ -274,12 +272,11 @@ class ComplexDecimator {
       if (lowest_ == kBuckets) break;
       const Candidate c = buckets_[lowest_].back();
       buckets_[lowest_].pop_back();
-      if (!alive_[c.from] || !alive_[c.to] || stamp_[c.from] != c.stamp_from || stamp_[c.to] != c.stamp_to)
-        continue;
-      // The same plan as when pushed: neither end has changed since.
+      if (!alive_[c.a] || !alive_[c.b]) continue;
       std::uint32_t from = 0, to = 0;
       V3 p{};
-      plan(c.from, c.to, from, to, p);
+      const double cost = plan(c.a, c.b, from, to, p);
+      if (!(cost <= tol2_) || bucket_of(cost) != lowest_) continue;
       if (collapsible(from, to, p)) collapse(from, to, p);
     }
     compact();
@@ -295,14 +292,16 @@ class ComplexDecimator {
       c += q.c, w += q.w;
     }
     double eval(const V3& p) const {
-      const double ap0 = a[0] * p[0] + a[1] * p[1] + a[2] * p[2], ap1 = a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
+      const double ap0 = a[0] * p[0] + a[1] * p[1] + a[2] * p[2],
+                   ap1 = a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
                    ap2 = a[2] * p[0] + a[4] * p[1] + a[5] * p[2];
       return p[0] * ap0 + p[1] * ap1 + p[2] * ap2 - 2 * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) + c;
     }
   };
-  // A planned collapse of `from` into `to`, valid while neither end changes (their stamps).
+  // A queued edge. Every change to an end queues its edges again, so an entry whose edge now
+  // plans into another bucket (or not at all) is stale and skipped: the fresh entry is elsewhere.
   struct Candidate {
-    std::uint32_t from, to, stamp_from, stamp_to;
+    std::uint32_t a, b;
   };
   static constexpr std::size_t kBuckets = 2048;
 
@@ -312,17 +311,28 @@ class ComplexDecimator {
     const std::size_t nv = x_.positions.size();
     kind_.assign(nv, kInterior);
     alive_.assign(nv, 1);
-    stamp_.assign(nv, 0);
     tris_of_.assign(nv, {});
     for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
       for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
     tri_alive_.assign(x_.triangles.size(), 1);
-    std::vector<std::uint32_t> junction_degree(nv, 0);
-    for (const auto& [e, junction] : classified_edges(x_))
-      if (junction) ++junction_degree[e >> 32], ++junction_degree[e & 0xffffffffu];
+    // Per vertex its junction edges, counted from its own triangles (a global edge list would
+    // cost more memory than the collapse itself).
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> around;
     for (std::uint32_t v = 0; v < nv; ++v) {
-      if (junction_degree[v] == 2) kind_[v] = kCurve;
-      if (junction_degree[v] != 0 && junction_degree[v] != 2) kind_[v] = kFixed;
+      around.clear();
+      for (auto t : tris_of_[v])
+        for (auto w : x_.triangles[t])
+          if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
+      std::sort(around.begin(), around.end());
+      int junction_degree = 0;
+      for (std::size_t i = 0; i < around.size();) {
+        std::size_t j = i;
+        while (j < around.size() && around[j].first == around[i].first) ++j;
+        junction_degree += !(j - i == 2 && around[i].second == around[i + 1].second);
+        i = j;
+      }
+      if (junction_degree == 2) kind_[v] = kCurve;
+      if (junction_degree != 0 && junction_degree != 2) kind_[v] = kFixed;
       if (kind_[v] == kInterior && !one_fan(v)) kind_[v] = kFixed;
     }
   }
@@ -395,19 +405,23 @@ class ComplexDecimator {
                 q.a[2] * d[0] + q.a[4] * d[1] + q.a[5] * d[2]};
     const double dad = dot(d, ad);
     double t = 0.5;
-    if (dad > 1e-18) t = std::clamp(((q.b[0] * d[0] + q.b[1] * d[1] + q.b[2] * d[2]) - dot(a, ad)) / dad, 0.0, 1.0);
+    if (dad > 1e-18)
+      t = std::clamp(((q.b[0] * d[0] + q.b[1] * d[1] + q.b[2] * d[2]) - dot(a, ad)) / dad, 0.0, 1.0);
     return {a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]};
   }
 
   // The least of q over space when well conditioned and near the edge, else on the segment.
   static V3 best_point(const Quadric& q, const V3& a, const V3& b) {
     const double* m = q.a;
-    const double c00 = m[3] * m[5] - m[4] * m[4], c01 = m[2] * m[4] - m[1] * m[5], c02 = m[1] * m[4] - m[2] * m[3];
+    const double c00 = m[3] * m[5] - m[4] * m[4], c01 = m[2] * m[4] - m[1] * m[5],
+                 c02 = m[1] * m[4] - m[2] * m[3];
     const double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
     const double scale = m[0] + m[3] + m[5];
     if (scale > 0 && std::abs(det) > 1e-3 * scale * scale * scale) {
-      const double c11 = m[0] * m[5] - m[2] * m[2], c12 = m[1] * m[2] - m[0] * m[4], c22 = m[0] * m[3] - m[1] * m[1];
-      const V3 p{(c00 * q.b[0] + c01 * q.b[1] + c02 * q.b[2]) / det, (c01 * q.b[0] + c11 * q.b[1] + c12 * q.b[2]) / det,
+      const double c11 = m[0] * m[5] - m[2] * m[2], c12 = m[1] * m[2] - m[0] * m[4],
+                   c22 = m[0] * m[3] - m[1] * m[1];
+      const V3 p{(c00 * q.b[0] + c01 * q.b[1] + c02 * q.b[2]) / det,
+                 (c01 * q.b[0] + c11 * q.b[1] + c12 * q.b[2]) / det,
                  (c02 * q.b[0] + c12 * q.b[1] + c22 * q.b[2]) / det};
       const V3 mid{(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2}, ab = sub(b, a), pm = sub(p, mid);
       if (dot(pm, pm) <= dot(ab, ab)) return p;
@@ -450,10 +464,13 @@ class ComplexDecimator {
     V3 p{};
     const double cost = plan(a, b, from, to, p);
     if (!(cost <= tol2_)) return;
-    const std::size_t bucket =
-        std::min(kBuckets - 1, std::size_t(std::sqrt(cost / tol2_) * double(kBuckets)));
-    buckets_[bucket].push_back({from, to, stamp_[from], stamp_[to]});
+    const std::size_t bucket = bucket_of(cost);
+    buckets_[bucket].push_back({a, b});
     lowest_ = std::min(lowest_, bucket);
+  }
+
+  std::size_t bucket_of(double cost) const {
+    return std::min(kBuckets - 1, std::size_t(std::sqrt(cost / tol2_) * double(kBuckets)));
   }
 
   void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
@@ -534,7 +551,6 @@ class ComplexDecimator {
     alive_[u] = 0;
     x_.positions[v] = p;
     q_[v].add(q_[u]);
-    ++stamp_[v];
     neighbours(v, nv_);
     const std::vector<std::uint32_t> around = nv_;
     for (auto w : around) push(v, w);
@@ -566,7 +582,6 @@ class ComplexDecimator {
   const double tol2_;
   std::vector<Kind> kind_;
   std::vector<char> alive_, tri_alive_;
-  std::vector<std::uint32_t> stamp_;
   std::vector<std::vector<std::uint32_t>> tris_of_;
   std::vector<Quadric> q_;
   std::vector<std::vector<Candidate>> buckets_ = std::vector<std::vector<Candidate>>(kBuckets);

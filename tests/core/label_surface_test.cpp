@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
+#include <mlfe/core/mesh_distance.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
@@ -159,6 +160,36 @@ TEST(LabelSurface, SmoothedAndSimplifiedStructuresStayClosedSharedAndBounded) {
   expect_shared_interface(x, 3, 7, g.transform);
   expect_shared_interface(x, 1, 5, g.transform);
   EXPECT_EQ(connected_pieces(label_surface(x, 5, g.transform)), 1u);
+}
+
+// The quadric collapse merges far (optimal placement lets a smooth sphere take few triangles)
+// and every structure stays near its smoothed surface, closed, shared and with its island.
+TEST(LabelSurface, QuadricCollapseMergesFarAndStaysNearTheSmoothedSurface) {
+  const LabelGrid g = atlas_phantom();
+  LabelInterfaces x = complex_of(g);
+  smooth_label_interfaces(x, {});
+  const LabelInterfaces smoothed = x;
+  const std::size_t removed = simplify_label_interfaces(x, 0.34);
+  EXPECT_EQ(removed, smoothed.positions.size() - x.positions.size());
+  EXPECT_LT(x.triangles.size() * 4, smoothed.triangles.size());
+  EXPECT_EQ(labels_with_surfaces(x), labels_with_surfaces(smoothed));
+  expect_structures_closed(x, g, false);
+  expect_shared_interface(x, 1, 2, g.transform);
+  expect_shared_interface(x, 3, 7, g.transform);
+  SurfaceSamplingOptions so;
+  so.area_samples = 5000;
+  for (auto l : labels_with_surfaces(x)) {
+    const MeshDistance d =
+        mesh_distance(label_surface(smoothed, l, g.transform), label_surface(x, l, g.transform), so);
+    EXPECT_LT(d.mean(), 0.2) << "label " << l;
+    EXPECT_LT(d.hausdorff(), 1.0) << "label " << l;
+  }
+  // A larger tolerance merges more; none of it opens a surface.
+  LabelInterfaces coarse = smoothed;
+  simplify_label_interfaces(coarse, 1.0);
+  EXPECT_LT(coarse.triangles.size(), x.triangles.size());
+  expect_structures_closed(coarse, g, false);
+  EXPECT_THROW(simplify_label_interfaces(coarse, 0.0), Error);
 }
 
 TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
