@@ -8,6 +8,7 @@
 
 #include "converters/commands.h"
 #include "converters/convert_command.h"
+#include "converters/label_hierarchy.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
 
@@ -71,8 +72,19 @@ void run_convert_labels(const ConvertState& s) {
     throw CLI::ValidationError("--labels", "--labels writes surfaces only (no --hierarchy or --render yet)");
   check_output_path(s.output, kAssetExtensions);
   if (!s.report.empty()) check_output_path(s.report, {});
-  const LabelOptions o = label_options(s.labels, s.asset);
-  const ScalarGrid grid = read_volume(s.input, s.read);
+  LabelOptions o = label_options(s.labels, s.asset);
+  ScalarGrid grid;
+  if (is_hierarchy_file(s.input)) {
+    // A label hierarchy (mlfe build --labels): the same labels at the samples, its stored table.
+    const HierarchyFile f = read_hierarchy(s.input);
+    grid = read_stored_label_map(f, s.input).grid;
+    if (!f.metadata["labels"].value("labels", nlohmann::json::array()).empty()) {
+      o.table_json = f.metadata["labels"].dump();
+      o.table_json_source = s.input + " (stored)";
+    }
+  } else {
+    grid = read_volume(s.input, s.read);
+  }
   const nlohmann::json summary = convert_labels(grid, s.output, o);
   if (!s.report.empty()) {
     nlohmann::json r = {{"input", s.input}, {"dims", grid.dims}, {"asset", summary}};

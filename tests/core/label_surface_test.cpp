@@ -37,7 +37,7 @@ LabelGrid atlas_phantom() {
   });
 }
 
-double signed_volume(const TriangleMesh& m) {
+double outward_volume(const TriangleMesh& m) {
   double v = 0;
   for (const auto& t : m.triangles) {
     const auto &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
@@ -58,7 +58,7 @@ void expect_structures_closed(const LabelInterfaces& x, const LabelGrid& g, bool
     EXPECT_EQ(unmatched_edges(m), 0u) << "label " << l;
     // Outward: a positive volume, near the label's voxel count (midpoint surfaces cut the
     // corners of the voxel boundary).
-    const double v = signed_volume(m);
+    const double v = outward_volume(m);
     EXPECT_GT(v, 0.0) << "label " << l;
     if (!extracted) continue;
     EXPECT_LT(v, 1.05 * double(counts.at(l))) << "label " << l;
