@@ -263,6 +263,7 @@ void run_mesh_build(const BuildState& s) {
 }
 
 void run_volume_build(const BuildState& s, const ScalarGrid& grid, const nlohmann::json& meta);
+void run_label_build(const BuildState& s, const ScalarGrid& grid, nlohmann::json meta);
 
 void run_build(const BuildState& s) {
   check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--report", s.report}});
@@ -287,14 +288,18 @@ void run_build(const BuildState& s) {
     // barycentric coordinates at non-integer spacings).
     if (s.max_error >= 0 || s.psnr > 0)
       throw Error("build: --labels stores the labels exactly (no --max-error, no --psnr)");
-    meta["labels"] = label_metadata(s, grid);
-    BuildState exact = s;
-    exact.labels = false;
-    exact.max_error = kLabelSampleBound;
-    exact.quantization_share = 0;
-    return run_volume_build(exact, grid, meta);
+    return run_label_build(s, grid, meta);
   }
   run_volume_build(s, grid, meta);
+}
+
+void run_label_build(const BuildState& s, const ScalarGrid& grid, nlohmann::json meta) {
+  meta["labels"] = label_metadata(s, grid);
+  BuildState exact = s;
+  exact.labels = false;
+  exact.max_error = kLabelSampleBound;
+  exact.quantization_share = 0;
+  run_volume_build(exact, grid, meta);
 }
 
 void run_volume_build(const BuildState& s, const ScalarGrid& grid, const nlohmann::json& meta) {
@@ -356,6 +361,17 @@ void add_build_command(CLI::App& app) {
 }
 
 }  // namespace
+
+void write_label_hierarchy(const ScalarGrid& grid, const std::string& input, const std::string& output,
+                           const std::string& label_table, const BuildParams& params) {
+  BuildState s;
+  s.input = input;
+  s.output = output;
+  s.params = params;
+  s.labels = true;
+  s.label_table = label_table;
+  run_label_build(s, grid, {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}});
+}
 
 MLFE_REGISTER_COMMAND(30, add_build_command);
 

@@ -314,6 +314,13 @@ TEST(LabelsCommand, HierarchyStoresLabelsAndTableAndExportsRegions) {
   ASSERT_EQ(r.status, 0) << r.err;
   const json vi = json::parse(r.out);
   EXPECT_EQ(hi["labels"], vi["labels"]);  // values, names (the stored table), voxels, mm3
+  // convert --labels --hierarchy writes the same label map beside the surfaces.
+  r = run_mlfe("convert " + in + " --labels --hierarchy " + scratch() + "/conv.mlfeh -o " + scratch() +
+               "/conv.glb --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run_mlfe("info " + scratch() + "/conv.mlfeh --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["labels"], vi["labels"]);
   // The same surfaces from the file as from the volume.
   ASSERT_EQ(run_mlfe("convert " + h + " --labels -o " + scratch() + "/from_h.glb --quiet").status, 0);
   ASSERT_EQ(run_mlfe("convert " + in + " --labels -o " + scratch() + "/from_v.glb --quiet").status, 0);
