@@ -15,6 +15,7 @@
 #include <optional>
 
 #include "converters/commands.h"
+#include "converters/label_hierarchy.h"
 #include "converters/pipeline_options.h"
 #include "converters/volume_options.h"
 
@@ -29,8 +30,27 @@ struct BuildState {
   double max_error = -1;
   /// Share of max_error spent on quantizing the values; the rest bounds the interpolation.
   double quantization_share = 0.5;
-  double psnr = 0;  ///< quantization error alone at this PSNR (dB over the value range)
+  double psnr = 0;          ///< quantization error alone at this PSNR (dB over the value range)
+  bool labels = false;      ///< --labels: a label map, stored losslessly with its table
+  std::string label_table;  ///< --label-table (default: the table beside the volume)
 };
+
+// --labels: the labels checked (label_grid: bad input before any output) and the table to
+// store (label_hierarchy.h): the named one, else the one beside the volume when it parses.
+nlohmann::json label_metadata(const BuildState& s, const ScalarGrid& grid) {
+  const LabelGrid lg = label_grid(grid);
+  LabelTable table;
+  if (!s.label_table.empty()) {
+    table = read_label_table(s.label_table);
+  } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
+    try {
+      table = read_label_table(found);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "mlfe: warning: %s (found beside the volume; not used)\n", e.what());
+    }
+  }
+  return stored_label_table(table, label_counts(lg));
+}
 
 // How --max-error E is split: the build refines until every sample is within `tolerance` of
 // the interpolant of the samples at the vertices, and the values are quantized within
@@ -242,6 +262,9 @@ void run_mesh_build(const BuildState& s) {
   report_and_print(s, b, fig, r, double(mesh.points.size()), "point");
 }
 
+void run_volume_build(const BuildState& s, const ScalarGrid& grid, const nlohmann::json& meta);
+void run_label_build(const BuildState& s, const ScalarGrid& grid, nlohmann::json meta);
+
 void run_build(const BuildState& s) {
   check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--report", s.report}});
   check_output_path(s.output, {".mlfeh"});
@@ -250,12 +273,36 @@ void run_build(const BuildState& s) {
   if (!(s.quantization_share >= 0 && s.quantization_share < 1))
     throw Error("build: --quantization-share must be in [0, 1)");
   if (!detect_tet_mesh_format(s.input).empty()) {
+    if (s.labels) throw Error(s.input + ": --labels needs a volume (a label map), not a mesh");
     if (s.max_error >= 0)
       throw Error(s.input +
                   ": --max-error bounds the error at a volume's samples; for a mesh use --rms or --psnr");
     return run_mesh_build(s);
   }
   const ScalarGrid grid = read_volume(s.input, s.read);
+  nlohmann::json meta = {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}};
+  if (s.labels) {
+    // A label map is stored exactly: integer values at bound 0 (integer surpluses), leaves
+    // refined until every sample is within a quarter of a label step of the interpolant (so
+    // rounding the decoded samples gives the labels; 0 would fail on the last bits of the
+    // barycentric coordinates at non-integer spacings).
+    if (s.max_error >= 0 || s.psnr > 0)
+      throw Error("build: --labels stores the labels exactly (no --max-error, no --psnr)");
+    return run_label_build(s, grid, meta);
+  }
+  run_volume_build(s, grid, meta);
+}
+
+void run_label_build(const BuildState& s, const ScalarGrid& grid, nlohmann::json meta) {
+  meta["labels"] = label_metadata(s, grid);
+  BuildState exact = s;
+  exact.labels = false;
+  exact.max_error = kLabelSampleBound;
+  exact.quantization_share = 0;
+  run_volume_build(exact, grid, meta);
+}
+
+void run_volume_build(const BuildState& s, const ScalarGrid& grid, const nlohmann::json& meta) {
   std::optional<ErrorSplit> split;
   Built b;
   if (s.max_error >= 0) {
@@ -268,7 +315,6 @@ void run_build(const BuildState& s) {
     b = build_from_grid(grid, s.params, {});
   }
   const double range = b.value_max - b.value_min;
-  const nlohmann::json meta = {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}};
   const ErrorSplit* sp = split ? &*split : nullptr;
   FileFigures fig = b.dim() == 2 ? write_file(s, b, b.get<2>(), on_grid<2>(grid, s.input, range), meta, sp)
                                  : write_file(s, b, b.get<3>(), on_grid<3>(grid, s.input, range), meta, sp);
@@ -300,15 +346,32 @@ void add_build_command(CLI::App& app) {
   cmd->add_option("--psnr", state->psnr,
                   "value quantization error alone at this PSNR (dB over the value range)")
       ->check(CLI::PositiveNumber);
+  cmd->add_flag("--labels", state->labels,
+                "a label map: stored exactly (refined where labels meet) with its label table");
+  cmd->add_option("--label-table", state->label_table,
+                  "with --labels: names and colours to store (default: the table beside the volume)");
   add_build_options(cmd, state->params);
   add_volume_read_options(cmd, state->read);
   cmd->callback([state] {
     apply_memory_budget(state->read, state->params);
+    if (!state->label_table.empty() && !state->labels)
+      throw CLI::ValidationError("--label-table", "needs --labels");
     run_build(*state);
   });
 }
 
 }  // namespace
+
+void write_label_hierarchy(const ScalarGrid& grid, const std::string& input, const std::string& output,
+                           const std::string& label_table, const BuildParams& params) {
+  BuildState s;
+  s.input = input;
+  s.output = output;
+  s.params = params;
+  s.labels = true;
+  s.label_table = label_table;
+  run_label_build(s, grid, {{"dims", grid.dims}, {"source_type", scalar_type_name(grid.source_type)}});
+}
 
 MLFE_REGISTER_COMMAND(30, add_build_command);
 

@@ -8,6 +8,7 @@
 
 #include "converters/commands.h"
 #include "converters/convert_command.h"
+#include "converters/label_hierarchy.h"
 #include "converters/render_command.h"
 #include "converters/volume_options.h"
 
@@ -67,13 +68,31 @@ void run_convert(const ConvertState& s, const char* command) {
 
 void run_convert_labels(const ConvertState& s) {
   if (!s.asset.iso.empty()) throw CLI::ValidationError("--labels", "--labels and --iso exclude each other");
-  if (!s.hierarchy.empty() || !s.render.empty())
-    throw CLI::ValidationError("--labels", "--labels writes surfaces only (no --hierarchy or --render yet)");
+  if (!s.render.empty()) throw CLI::ValidationError("--labels", "--labels writes no image (no --render)");
   check_output_path(s.output, kAssetExtensions);
+  if (!s.hierarchy.empty()) {
+    if (is_hierarchy_file(s.input))
+      throw CLI::ValidationError("--hierarchy", s.input + " is a hierarchy already (no --hierarchy)");
+    check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--hierarchy", s.hierarchy}});
+    check_output_path(s.hierarchy, {".mlfeh"});
+  }
   if (!s.report.empty()) check_output_path(s.report, {});
-  const LabelOptions o = label_options(s.labels, s.asset);
-  const ScalarGrid grid = read_volume(s.input, s.read);
+  LabelOptions o = label_options(s.labels, s.asset);
+  ScalarGrid grid;
+  if (is_hierarchy_file(s.input)) {
+    // A label hierarchy (mlfe build --labels): the same labels at the samples, its stored table.
+    const HierarchyFile f = read_hierarchy(s.input);
+    grid = read_stored_label_map(f, s.input).grid;
+    if (!f.metadata["labels"].value("labels", nlohmann::json::array()).empty()) {
+      o.table_json = f.metadata["labels"].dump();
+      o.table_json_source = s.input + " (stored)";
+    }
+  } else {
+    grid = read_volume(s.input, s.read);
+  }
   const nlohmann::json summary = convert_labels(grid, s.output, o);
+  // --hierarchy: the labels stored exactly with their table, as mlfe build --labels writes them.
+  if (!s.hierarchy.empty()) write_label_hierarchy(grid, s.input, s.hierarchy, s.labels.table, s.params);
   if (!s.report.empty()) {
     nlohmann::json r = {{"input", s.input}, {"dims", grid.dims}, {"asset", summary}};
     r["peak_rss_mb"] = peak_rss_mb();

@@ -18,6 +18,7 @@
 #include <string>
 
 #include "converters/commands.h"
+#include "converters/label_hierarchy.h"
 #include "converters/volume_options.h"
 
 namespace mlfe::cli {
@@ -50,10 +51,21 @@ void export_hierarchy(const ExportState& s, const HierarchyFile& f, const Hierar
       leaves = h_in.leaves();
     }
     const Hierarchy<D>& h = *hp;
+    // A label hierarchy (mlfe build --labels): each leaf in the region of its label
+    // (label_hierarchy.h: the majority of its corners), named from the stored table.
+    ElementRegions regions;
+    const bool labelled = D == 3 && is_label_hierarchy(f) && values;
+    if (labelled) {
+      const LabelTable table = read_stored_label_map(f, s.input).table;
+      regions.label = leaf_labels(h, leaves, *values);
+      for (std::uint16_t l : regions.label)
+        if (!regions.names.count(l))
+          regions.names[l] = l == 0 && !table.entries.count(0) ? "background" : table.name(l);
+    }
     if (ext == ".vtu")
-      write_vtu(s.output, h, leaves, values, &f.transform);
+      write_vtu(s.output, h, leaves, values, &f.transform, labelled ? &regions : nullptr);
     else
-      write_msh(s.output, h, leaves, values, &f.transform);
+      write_msh(s.output, h, leaves, values, &f.transform, labelled ? &regions : nullptr);
     std::fprintf(stderr, "mlfe export: %zu elements, %zu vertices, level %d\n", leaves.size(),
                  h.vertex_count(), h.max_level());
     return;

@@ -19,6 +19,7 @@
 #include <variant>
 
 #include "converters/commands.h"
+#include "converters/label_hierarchy.h"
 #include "converters/volume_options.h"
 
 namespace mlfe::cli {
@@ -34,8 +35,19 @@ struct InfoArgs {
 
 // The labels of a label map: value, name, voxels and volume in mm³, ascending. Throws
 // mlfe::Error for values that are not labels (label_grid).
-nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
+nlohmann::json label_rows(const ScalarGrid& g, const LabelTable& table) {
   const LabelGrid lg = label_grid(g);
+  const double voxel_mm3 = g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2];
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& [l, n] : label_counts(lg))
+    rows.push_back({{"label", l},
+                    {"name", l == 0 && !table.entries.count(0) ? std::string("background") : table.name(l)},
+                    {"voxels", n},
+                    {"volume_mm3", double(n) * voxel_mm3}});
+  return {{"table", table.source}, {"rows", rows}};
+}
+
+nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
   LabelTable table;
   if (!table_path.empty()) {
     table = read_label_table(table_path);
@@ -47,14 +59,16 @@ nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
       std::fprintf(stderr, "mlfe: warning: %s (found beside the volume; not used)\n", e.what());
     }
   }
-  const double voxel_mm3 = g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2];
-  nlohmann::json rows = nlohmann::json::array();
-  for (const auto& [l, n] : label_counts(lg))
-    rows.push_back({{"label", l},
-                    {"name", l == 0 && !table.entries.count(0) ? std::string("background") : table.name(l)},
-                    {"voxels", n},
-                    {"volume_mm3", double(n) * voxel_mm3}});
-  return {{"table", table.source}, {"rows", rows}};
+  return label_rows(g, table);
+}
+
+void print_label_rows(const nlohmann::json& l) {
+  fmt::print("labels:    {} (table: {})\n", l["rows"].size(),
+             l["table"].get<std::string>().empty() ? "none" : l["table"].get<std::string>());
+  fmt::print("{:>8} {:>12} {:>14}  {}\n", "label", "voxels", "mm3", "name");
+  for (const auto& r : l["rows"])
+    fmt::print("{:>8} {:>12} {:>14.2f}  {}\n", r["label"].get<int>(), r["voxels"].get<std::size_t>(),
+               r["volume_mm3"].get<double>(), r["name"].get<std::string>());
 }
 
 // Per level k: vertices of level k, elements of level k, leaves of level k.
@@ -78,6 +92,16 @@ void run_hierarchy_info(const InfoArgs& a) {
   const std::size_t ne = std::visit([](const auto& h) { return h.element_count(); }, f.hierarchy);
   const std::size_t nl = std::visit([](const auto& h) { return h.leaves().size(); }, f.hierarchy);
   const auto num = [](double x) { return std::isnan(x) ? nlohmann::json(nullptr) : nlohmann::json(x); };
+  // A label map (mlfe build --labels): its labels decoded at the samples, named from the stored
+  // table (or --label-table).
+  nlohmann::json labels;
+  if (is_label_hierarchy(f)) {
+    StoredLabelMap m = read_stored_label_map(f, a.file);
+    if (!a.label_table.empty()) m.table = read_label_table(a.label_table);
+    labels = label_rows(m.grid, m.table);
+  } else if (a.labels) {
+    throw Error(a.file + ": not a label map (no stored label table; build it with mlfe build --labels)");
+  }
   if (a.json) {
     nlohmann::json j;
     j["file"] = a.file;
@@ -115,6 +139,10 @@ void run_hierarchy_info(const InfoArgs& a) {
     for (const auto& s : f.sections)
       j["sections"].push_back({{"name", s.name}, {"file_bytes", s.file_bytes}, {"raw_bytes", s.raw_bytes}});
     j["read_seconds"] = seconds;
+    if (!labels.is_null()) {
+      j["labels"] = labels["rows"];
+      j["label_table"] = labels["table"];
+    }
     std::printf("%s\n", j.dump(2).c_str());
     return;
   }
@@ -151,12 +179,17 @@ void run_hierarchy_info(const InfoArgs& a) {
   fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7],
              d[8]);
   fmt::print("space:     {}\n", f.space.empty() ? "(not given)" : f.space);
-  if (!f.metadata.empty()) fmt::print("metadata:  {}\n", f.metadata.dump());
+  if (!f.metadata.empty()) {
+    nlohmann::json shown = f.metadata;  // the stored label table is listed below, not here
+    if (!labels.is_null()) shown.erase("labels");
+    fmt::print("metadata:  {}\n", shown.dump());
+  }
   fmt::print("{:>7} {:>12} {:>12} {:>12}\n", "level", "vertices", "elements", "leaves");
   for (std::size_t k = 0; k < counts.size(); ++k)
     fmt::print("{:>7} {:>12} {:>12} {:>12}\n", k, counts[k][0], counts[k][1], counts[k][2]);
   fmt::print("{:<10} {:>12} {:>12}\n", "section", "file bytes", "raw bytes");
   for (const auto& s : f.sections) fmt::print("{:<10} {:>12} {:>12}\n", s.name, s.file_bytes, s.raw_bytes);
+  if (!labels.is_null()) print_label_rows(labels);
 }
 
 void run_info(const InfoArgs& a) {
@@ -208,15 +241,7 @@ void run_info(const InfoArgs& a) {
   fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", memory, memory / 1048576.0,
              seconds);
   for (const auto& name : grids) fmt::print("grid:      {}\n", name);
-  if (a.labels) {
-    const auto l = label_rows(g, a.label_table);
-    fmt::print("labels:    {} (table: {})\n", l["rows"].size(),
-               l["table"].get<std::string>().empty() ? "none" : l["table"].get<std::string>());
-    fmt::print("{:>8} {:>12} {:>14}  {}\n", "label", "voxels", "mm3", "name");
-    for (const auto& r : l["rows"])
-      fmt::print("{:>8} {:>12} {:>14.2f}  {}\n", r["label"].get<int>(), r["voxels"].get<std::size_t>(),
-                 r["volume_mm3"].get<double>(), r["name"].get<std::string>());
-  }
+  if (a.labels) print_label_rows(label_rows(g, a.label_table));
   if (!g.notes.empty()) {
     std::string notes = g.notes;
     std::size_t start = 0;

@@ -86,6 +86,9 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   LabelTable table;
   if (!o.table.empty()) {
     table = read_label_table(o.table);
+  } else if (!o.table_json.empty()) {
+    table = parse_label_table(o.table_json, o.table_json_source + ".json");
+    table.source = o.table_json_source;
   } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
     try {
       table = read_label_table(found);
@@ -140,8 +143,8 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   smooth_label_interfaces(x, so);
   const double smooth_s = seconds_since(t2);
   const auto t3 = std::chrono::steady_clock::now();
-  std::size_t kept_as_extracted = 0;
-  if (o.simplify > 0) kept_as_extracted = simplify_label_interfaces(x, o.simplify);
+  std::size_t vertices_removed = 0;
+  if (o.simplify > 0) vertices_removed = simplify_label_interfaces(x, o.simplify);
   const double simplify_s = seconds_since(t3);
 
   // Step 4: one surface per structure.
@@ -216,7 +219,7 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   summary["triangles"] = total;
   summary["extracted_interface_triangles"] = extracted_triangles;
   summary["interface_triangles"] = x.triangles.size();
-  summary["interface_pieces_kept_as_extracted"] = kept_as_extracted;
+  summary["simplify_vertices_removed"] = vertices_removed;
   summary["islands_removed"] = removed_json;
   summary["islands_removed_voxels"] = removed.voxels;
   summary["label_table"] = table.source;

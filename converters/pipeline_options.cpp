@@ -75,7 +75,8 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option(
          "--simplify", p.simplify,
          "simplify every surface while it stays within this many voxels of the extracted one (0: the raw "
-         "extraction)")
+         "extraction; with --labels: the RMS distance to the smoothed interfaces each merge may reach, "
+         "default 0.34)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option(
@@ -263,6 +264,8 @@ void add_label_options(CLI::App* cmd, LabelParams& p) {
   cmd->add_option("--smooth-iterations", p.smooth, "with --labels: Taubin smoothing passes (default 20)");
   cmd->add_option("--max-offset", p.max_offset,
                   "with --labels: no vertex moves further from the voxels' interface, voxels (default 0.5)");
+  // --simplify is the asset options' (added before); with --labels its default is LabelOptions'.
+  p.simplify = cmd->get_option_no_throw("--simplify");
 }
 
 LabelOptions label_options(const LabelParams& p, const AssetParams& asset) {
@@ -272,7 +275,7 @@ LabelOptions label_options(const LabelParams& p, const AssetParams& asset) {
   o.min_component = asset.min_component;  // one --min-component for iso-surfaces and labels
   o.smoothing_iterations = p.smooth;
   o.max_offset = p.max_offset;
-  o.simplify = asset.simplify;
+  if (p.simplify == nullptr || p.simplify->count() > 0) o.simplify = asset.simplify;
   o.tolerance = asset.tolerance;
   o.draco = !asset.no_draco;
   o.quantize = asset.quantize;

@@ -87,6 +87,8 @@ struct LabelParams {
   std::string table;              ///< --label-table FILE
   int smooth = 20;                ///< --smooth-iterations
   double max_offset = 0.5;        ///< --max-offset (voxels)
+  /// The asset options' --simplify: given, it overrides the label default (LabelOptions).
+  CLI::Option* simplify = nullptr;
 };
 
 /// Adds --labels [LIST], --label-table, --smooth-iterations and --max-offset (--min-component is

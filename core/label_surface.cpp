@@ -2,10 +2,10 @@
 // through edge midpoints and face and tetrahedron centroids, as in the multi-material
 // extensions of marching tetrahedra: Bloomenthal & Ferguson 1995, "Polygonization of
 // non-manifold implicit surfaces"; Wu & Sullivan 2003, "Multiple material marching cubes"), Taubin's λ|μ
-// smoothing (SIGGRAPH 1995) restricted to the interface complex, and per-interface
-// simplification with meshoptimizer (Kapoulkine; Garland & Heckbert 1997 quadrics).
+// smoothing (SIGGRAPH 1995) restricted to the interface complex, and Garland & Heckbert's
+// quadric edge collapse ("Surface simplification using quadric error metrics", SIGGRAPH 1997)
+// over the whole complex, with the merged vertex at the quadric's least point.
 // See label_surface.h for the contracts and why the partition is the right one for categories.
-#include <meshoptimizer.h>
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
@@ -14,6 +14,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <iterator>
+#include <limits>
 #include <numeric>
 #include <string>
 #include <unordered_map>
@@ -89,14 +92,6 @@ std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::s
   std::size_t n = 0;
   for (std::uint32_t v = 0; v < vertex_count; ++v) n += used[v] && uf.find(v) == v;
   return n;
-}
-
-// The signed volume enclosed by triangles given in piece-local indices.
-double enclosed_volume(const std::vector<std::array<std::uint32_t, 3>>& tris,
-                       const std::vector<std::uint32_t>& global, const std::vector<V3>& pos) {
-  double v = 0;
-  for (const auto& t : tris) v += dot(pos[global[t[0]]], cross(pos[global[t[1]]], pos[global[t[2]]])) / 6.0;
-  return v;
 }
 
 // Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
@@ -247,99 +242,352 @@ std::vector<std::pair<std::uint64_t, bool>> classified_edges(const LabelInterfac
   return unique;
 }
 
-double segment_distance(const V3& p, const V3& a, const V3& b) {
-  const V3 ab = sub(b, a), ap = sub(p, a);
-  const double l2 = dot(ab, ab);
-  const double t = l2 > 0 ? std::clamp(dot(ap, ab) / l2, 0.0, 1.0) : 0.0;
-  const V3 d{ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2]};
-  return std::sqrt(dot(d, d));
-}
+// Garland & Heckbert's quadric edge collapse (SIGGRAPH 1997) over the whole interface complex
+// at once, with the optimal placement of the merged vertex, constrained so the complex stays a
+// partition: a vertex inside one interface merges with a neighbour inside the same interface
+// (placed where the summed quadric is least) or moves onto a junction-curve neighbour (which
+// stays put); a vertex on a junction curve merges only with its neighbours along that curve
+// (placed on the segment between them where the quadric is least); where curves meet, and at
+// vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
+// label's closed surface onto a closed surface, so closed stays closed and shared stays shared.
+class ComplexDecimator {
+ public:
+  ComplexDecimator(LabelInterfaces& x, double tolerance) : x_(x), tol2_(tolerance * tolerance) {}
 
-// Douglas-Peucker on chain[first..last]: marks the vertices to keep.
-void keep_far(const std::vector<std::uint32_t>& chain, std::size_t first, std::size_t last,
-              const std::vector<V3>& pos, double tolerance, std::vector<char>& keep) {
-  if (last <= first + 1) return;
-  double worst = -1;
-  std::size_t at = first;
-  for (std::size_t i = first + 1; i < last; ++i) {
-    const double d = segment_distance(pos[chain[i]], pos[chain[first]], pos[chain[last]]);
-    if (d > worst) worst = d, at = i;
+  void run() {
+    classify();
+    init_quadrics();
+    // Every edge once, from its lower vertex, in vertex order.
+    for (std::uint32_t v = 0; v < x_.positions.size(); ++v) {
+      neighbours(v, nv_);
+      for (auto w : nv_)
+        if (w > v) push(v, w);
+    }
+    // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
+    // candidates, most of them stale, costs more than the collapses). Within a bucket the last
+    // pushed goes first; all sequential, so the order is the same on every run.
+    lowest_ = 0;
+    for (;;) {
+      while (lowest_ < kBuckets && buckets_[lowest_].empty()) ++lowest_;
+      if (lowest_ == kBuckets) break;
+      const Candidate c = buckets_[lowest_].back();
+      buckets_[lowest_].pop_back();
+      if (!alive_[c.a] || !alive_[c.b]) continue;
+      std::uint32_t from = 0, to = 0;
+      V3 p{};
+      const double cost = plan(c.a, c.b, from, to, p);
+      if (!(cost <= tol2_) || bucket_of(cost) != lowest_) continue;
+      if (collapsible(from, to, p)) collapse(from, to, p);
+    }
+    compact();
   }
-  if (worst <= tolerance) return;
-  keep[at] = 1;
-  keep_far(chain, first, at, pos, tolerance, keep);
-  keep_far(chain, at, last, pos, tolerance, keep);
-}
 
-// Simplifies the junction curves along themselves: per curve between meeting points (or per
-// closed loop), Douglas-Peucker within `tolerance`, and every dropped curve vertex merged into
-// the nearest kept one along its curve (the previous on ties). Merging vertices maps each
-// label's surface onto a surface with the same boundary (none), so closed stays closed;
-// triangles that lose a corner go. Returns the map old vertex -> vertex.
-std::vector<std::uint32_t> simplify_junction_curves(const LabelInterfaces& x, double tolerance) {
-  const std::size_t nv = x.positions.size();
-  std::vector<std::uint32_t> to(nv);
-  std::iota(to.begin(), to.end(), 0u);
-  // The curves' adjacency (CSR): degree 2 inside a curve, other degrees where curves meet.
-  std::vector<std::uint32_t> degree(nv, 0), start(nv + 1, 0), nbr;
-  const auto edges = classified_edges(x);
-  for (const auto& [e, junction] : edges)
-    if (junction) ++start[(e >> 32) + 1], ++start[(e & 0xffffffffu) + 1];
-  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-  nbr.resize(start[nv]);
-  for (const auto& [e, junction] : edges) {
-    if (!junction) continue;
-    const std::uint32_t a = std::uint32_t(e >> 32), b = std::uint32_t(e & 0xffffffffu);
-    nbr[start[a] + degree[a]++] = b;
-    nbr[start[b] + degree[b]++] = a;
-  }
-  std::vector<char> done(nv, 0);
-  std::vector<std::uint32_t> chain;
-  std::vector<char> keep;
-  auto simplify_chain = [&]() {
-    keep.assign(chain.size(), 0);
-    keep.front() = keep.back() = 1;
-    keep_far(chain, 0, chain.size() - 1, x.positions, tolerance, keep);
-    std::size_t prev = 0;
-    for (std::size_t i = 1; i < chain.size(); ++i) {
-      if (!keep[i]) continue;
-      for (std::size_t j = prev + 1; j < i; ++j) to[chain[j]] = chain[j - prev <= i - j ? prev : i];
-      prev = i;
+ private:
+  enum Kind : std::uint8_t { kInterior, kCurve, kFixed };
+  struct Quadric {
+    double a[6]{}, b[3]{}, c = 0, w = 0;  // p^T A p - 2 b^T p + c, A = {xx xy xz yy yz zz}
+    void add(const Quadric& q) {
+      for (int i = 0; i < 6; ++i) a[i] += q.a[i];
+      for (int i = 0; i < 3; ++i) b[i] += q.b[i];
+      c += q.c, w += q.w;
+    }
+    double eval(const V3& p) const {
+      const double ap0 = a[0] * p[0] + a[1] * p[1] + a[2] * p[2],
+                   ap1 = a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
+                   ap2 = a[2] * p[0] + a[4] * p[1] + a[5] * p[2];
+      return p[0] * ap0 + p[1] * ap1 + p[2] * ap2 - 2 * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) + c;
     }
   };
-  // Walks from `from` through `first` along curve vertices until a meeting point or `stop`.
-  auto walk = [&](std::uint32_t from, std::uint32_t first, std::uint32_t stop) {
-    chain.assign(1, from);
-    std::uint32_t prev = from, cur = first;
-    while (degree[cur] == 2 && cur != stop && !done[cur]) {
-      done[cur] = 1;
-      chain.push_back(cur);
-      const std::uint32_t n = nbr[start[cur]] == prev ? nbr[start[cur] + 1] : nbr[start[cur]];
-      prev = cur;
-      cur = n;
-    }
-    chain.push_back(cur);
+  // A queued edge. Every change to an end queues its edges again, so an entry whose edge now
+  // plans into another bucket (or not at all) is stale and skipped: the fresh entry is elsewhere.
+  struct Candidate {
+    std::uint32_t a, b;
   };
-  // Step 1: curves between meeting points (vertices where other than two curve edges meet).
-  for (std::uint32_t v = 0; v < nv; ++v) {
-    if (degree[v] == 0 || degree[v] == 2) continue;
-    for (std::uint32_t n = start[v]; n < start[v + 1]; ++n) {
-      const std::uint32_t w = nbr[n];
-      if (done[w] || degree[w] != 2) continue;
-      walk(v, w, v);
-      simplify_chain();
+  static constexpr std::size_t kBuckets = 2048;
+
+  // Kinds: interior (no junction edge), curve (two junction edges), fixed (other counts, or a
+  // vertex whose triangles do not form one closed fan: a non-manifold point of an interface).
+  void classify() {
+    const std::size_t nv = x_.positions.size();
+    kind_.assign(nv, kInterior);
+    alive_.assign(nv, 1);
+    tris_of_.assign(nv, {});
+    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
+      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
+    tri_alive_.assign(x_.triangles.size(), 1);
+    // Per vertex its junction edges, counted from its own triangles (a global edge list would
+    // cost more memory than the collapse itself).
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> around;
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      around.clear();
+      for (auto t : tris_of_[v])
+        for (auto w : x_.triangles[t])
+          if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
+      std::sort(around.begin(), around.end());
+      int junction_degree = 0;
+      for (std::size_t i = 0; i < around.size();) {
+        std::size_t j = i;
+        while (j < around.size() && around[j].first == around[i].first) ++j;
+        junction_degree += !(j - i == 2 && around[i].second == around[i + 1].second);
+        i = j;
+      }
+      if (junction_degree == 2) kind_[v] = kCurve;
+      if (junction_degree != 0 && junction_degree != 2) kind_[v] = kFixed;
+      if (kind_[v] == kInterior && !one_fan(v)) kind_[v] = kFixed;
     }
   }
-  // Step 2: closed loops, anchored at their first vertex.
-  for (std::uint32_t v = 0; v < nv; ++v) {
-    if (degree[v] != 2 || done[v]) continue;
-    done[v] = 1;
-    walk(v, nbr[start[v]], v);
-    if (chain.back() != v) continue;  // not a loop after all (a meeting point was reached)
-    simplify_chain();
+
+  // Whether the triangles around an interior vertex form one closed fan: the edges opposite v
+  // form one cycle.
+  bool one_fan(std::uint32_t v) const {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> link;
+    for (auto t : tris_of_[v]) {
+      const auto& tri = x_.triangles[t];
+      const int c = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+      link.emplace_back(tri[(c + 1) % 3], tri[(c + 2) % 3]);
+    }
+    if (link.size() < 3) return false;
+    // Follow the oriented cycle from the first edge; it must use every edge once.
+    std::size_t steps = 0;
+    std::uint32_t at = link[0].second;
+    while (at != link[0].first) {
+      std::size_t found = 0, next = 0;
+      for (std::size_t i = 0; i < link.size(); ++i)
+        if (link[i].first == at) ++found, next = i;
+      if (found != 1 || ++steps > link.size()) return false;
+      at = link[next].second;
+    }
+    return steps + 1 == link.size();
   }
-  return to;
-}
+
+  void init_quadrics() {
+    q_.assign(x_.positions.size(), Quadric{});
+    for (const auto& t : x_.triangles) {
+      const V3 &p0 = x_.positions[t[0]], &p1 = x_.positions[t[1]], &p2 = x_.positions[t[2]];
+      V3 n = cross(sub(p1, p0), sub(p2, p0));
+      const double len = std::sqrt(dot(n, n));
+      if (!(len > 0)) continue;
+      const double area = len / 2;
+      for (auto& c : n) c /= len;
+      const double d = -dot(n, p0);
+      // area * (n.p + d)^2
+      Quadric q;
+      q.a[0] = area * n[0] * n[0], q.a[1] = area * n[0] * n[1], q.a[2] = area * n[0] * n[2];
+      q.a[3] = area * n[1] * n[1], q.a[4] = area * n[1] * n[2], q.a[5] = area * n[2] * n[2];
+      for (int c = 0; c < 3; ++c) q.b[c] = -area * d * n[c];
+      q.c = area * d * d;
+      q.w = area;
+      for (auto v : t) q_[v].add(q);
+    }
+  }
+
+  // The triangles on edge {a, b} and whether it lies on a junction curve (not exactly two
+  // triangles of one interface).
+  bool junction_edge(std::uint32_t a, std::uint32_t b) const {
+    int n = 0;
+    std::uint32_t pair = 0;
+    bool same = true;
+    for (auto t : tris_of_[a]) {
+      if (!tri_alive_[t]) continue;
+      const auto& tri = x_.triangles[t];
+      if (tri[0] != b && tri[1] != b && tri[2] != b) continue;
+      const std::uint32_t p = std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1];
+      if (n++ == 0) pair = p;
+      same &= p == pair;
+    }
+    return !(same && n == 2);
+  }
+
+  // The least of q on the segment a..b.
+  static V3 best_on_segment(const Quadric& q, const V3& a, const V3& b) {
+    const V3 d = sub(b, a);
+    const V3 ad{q.a[0] * d[0] + q.a[1] * d[1] + q.a[2] * d[2], q.a[1] * d[0] + q.a[3] * d[1] + q.a[4] * d[2],
+                q.a[2] * d[0] + q.a[4] * d[1] + q.a[5] * d[2]};
+    const double dad = dot(d, ad);
+    double t = 0.5;
+    if (dad > 1e-18)
+      t = std::clamp(((q.b[0] * d[0] + q.b[1] * d[1] + q.b[2] * d[2]) - dot(a, ad)) / dad, 0.0, 1.0);
+    return {a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]};
+  }
+
+  // The least of q over space when well conditioned and near the edge, else on the segment.
+  static V3 best_point(const Quadric& q, const V3& a, const V3& b) {
+    const double* m = q.a;
+    const double c00 = m[3] * m[5] - m[4] * m[4], c01 = m[2] * m[4] - m[1] * m[5],
+                 c02 = m[1] * m[4] - m[2] * m[3];
+    const double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    const double scale = m[0] + m[3] + m[5];
+    if (scale > 0 && std::abs(det) > 1e-3 * scale * scale * scale) {
+      const double c11 = m[0] * m[5] - m[2] * m[2], c12 = m[1] * m[2] - m[0] * m[4],
+                   c22 = m[0] * m[3] - m[1] * m[1];
+      const V3 p{(c00 * q.b[0] + c01 * q.b[1] + c02 * q.b[2]) / det,
+                 (c01 * q.b[0] + c11 * q.b[1] + c12 * q.b[2]) / det,
+                 (c02 * q.b[0] + c12 * q.b[1] + c22 * q.b[2]) / det};
+      const V3 mid{(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2}, ab = sub(b, a), pm = sub(p, mid);
+      if (dot(pm, pm) <= dot(ab, ab)) return p;
+    }
+    return best_on_segment(q, a, b);
+  }
+
+  // The allowed collapse of edge {a, b} (which end goes, where the other moves) and its cost:
+  // the summed quadric per unit area (a mean squared distance to the merged planes) at the
+  // placement. Infinite when the edge may not collapse.
+  double plan(std::uint32_t a, std::uint32_t b, std::uint32_t& from, std::uint32_t& to, V3& p) const {
+    constexpr double kNever = std::numeric_limits<double>::infinity();
+    const Kind ka = kind_[a], kb = kind_[b];
+    if (ka == kFixed && kb == kFixed) return kNever;
+    Quadric q = q_[a];
+    q.add(q_[b]);
+    if (ka == kInterior && kb == kInterior) {
+      p = best_point(q, x_.positions[a], x_.positions[b]);
+      from = std::max(a, b), to = std::min(a, b);
+    } else if (ka == kInterior || kb == kInterior) {
+      from = ka == kInterior ? a : b, to = ka == kInterior ? b : a;
+      p = x_.positions[to];
+    } else {
+      // Both on curves (or one where curves meet): only along a junction curve.
+      if (!junction_edge(a, b)) return kNever;
+      if (ka == kCurve && kb == kCurve) {
+        p = best_on_segment(q, x_.positions[a], x_.positions[b]);
+        from = std::max(a, b), to = std::min(a, b);
+      } else {
+        from = ka == kCurve ? a : b, to = ka == kCurve ? b : a;
+        p = x_.positions[to];
+      }
+    }
+    return q.w > 0 ? std::max(0.0, q.eval(p)) / q.w : 0.0;
+  }
+
+  // Queues the collapse of edge {a, b} when it is allowed and within the tolerance.
+  void push(std::uint32_t a, std::uint32_t b) {
+    std::uint32_t from = 0, to = 0;
+    V3 p{};
+    const double cost = plan(a, b, from, to, p);
+    if (!(cost <= tol2_)) return;
+    const std::size_t bucket = bucket_of(cost);
+    buckets_[bucket].push_back({a, b});
+    lowest_ = std::min(lowest_, bucket);
+  }
+
+  std::size_t bucket_of(double cost) const {
+    return std::min(kBuckets - 1, std::size_t(std::sqrt(cost / tol2_) * double(kBuckets)));
+  }
+
+  void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
+    out.clear();
+    for (auto t : tris_of_[v])
+      if (tri_alive_[t])
+        for (auto w : x_.triangles[t])
+          if (w != v) out.push_back(w);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+
+  // Topology (the link condition: the common neighbours of the two ends are exactly the apexes
+  // of the triangles on the edge; no closed piece below a tetrahedron; a junction curve keeps at
+  // least three vertices per loop) and geometry (no triangle flips or degenerates).
+  bool collapsible(std::uint32_t u, std::uint32_t v, const V3& p) {
+    neighbours(u, nu_);
+    neighbours(v, nv_);
+    if (nu_.size() <= 3 && nv_.size() <= 3) return false;
+    common_.clear();
+    std::set_intersection(nu_.begin(), nu_.end(), nv_.begin(), nv_.end(), std::back_inserter(common_));
+    apex_.clear();
+    for (auto t : tris_of_[u]) {
+      if (!tri_alive_[t]) continue;
+      const auto& tri = x_.triangles[t];
+      if (tri[0] != v && tri[1] != v && tri[2] != v) continue;
+      for (auto w : tri)
+        if (w != u && w != v) apex_.push_back(w);
+    }
+    if (apex_.empty()) return false;
+    std::sort(apex_.begin(), apex_.end());
+    apex_.erase(std::unique(apex_.begin(), apex_.end()), apex_.end());
+    if (apex_ != common_) return false;
+    if (kind_[u] == kCurve && kind_[v] != kInterior) {
+      // The other curve neighbours of u and v must differ (else a loop of three closes up).
+      for (auto w : common_)
+        if (kind_[w] != kInterior && junction_edge(u, w) && junction_edge(v, w)) return false;
+    }
+    return !flips(u, v, p) && !flips(v, u, p);
+  }
+
+  // Whether moving `v` to `p` (with `other` merged into it) flips or flattens a triangle of v
+  // that survives.
+  bool flips(std::uint32_t v, std::uint32_t other, const V3& p) const {
+    for (auto t : tris_of_[v]) {
+      if (!tri_alive_[t]) continue;
+      const auto& tri = x_.triangles[t];
+      if (tri[0] == other || tri[1] == other || tri[2] == other) continue;
+      V3 before[3], after[3];
+      for (int k = 0; k < 3; ++k) before[k] = after[k] = x_.positions[tri[k]];
+      for (int k = 0; k < 3; ++k)
+        if (tri[k] == v) after[k] = p;
+      const V3 n0 = cross(sub(before[1], before[0]), sub(before[2], before[0]));
+      const V3 n1 = cross(sub(after[1], after[0]), sub(after[2], after[0]));
+      const double l0 = dot(n0, n0), l1 = dot(n1, n1);
+      if (!(l1 > 1e-12)) return true;
+      if (dot(n0, n1) < kMinCos * std::sqrt(l0 * l1)) return true;
+    }
+    return false;
+  }
+
+  void collapse(std::uint32_t u, std::uint32_t v, const V3& p) {
+    for (auto t : tris_of_[u]) {
+      if (!tri_alive_[t]) continue;
+      auto& tri = x_.triangles[t];
+      if (tri[0] == v || tri[1] == v || tri[2] == v) {
+        tri_alive_[t] = 0;
+        continue;
+      }
+      for (auto& w : tri)
+        if (w == u) w = v;
+      tris_of_[v].push_back(t);
+    }
+    tris_of_[u].clear();
+    tris_of_[u].shrink_to_fit();
+    auto& tv = tris_of_[v];
+    tv.erase(std::remove_if(tv.begin(), tv.end(), [&](std::uint32_t t) { return !tri_alive_[t]; }), tv.end());
+    alive_[u] = 0;
+    x_.positions[v] = p;
+    q_[v].add(q_[u]);
+    neighbours(v, nv_);
+    const std::vector<std::uint32_t> around = nv_;
+    for (auto w : around) push(v, w);
+  }
+
+  // Drops dead triangles and unused vertices; vertices numbered in first use.
+  void compact() {
+    std::vector<std::array<std::uint32_t, 3>> tris;
+    std::vector<std::array<std::uint16_t, 2>> labels;
+    for (std::size_t t = 0; t < x_.triangles.size(); ++t)
+      if (tri_alive_[t]) tris.push_back(x_.triangles[t]), labels.push_back(x_.labels[t]);
+    std::vector<std::uint32_t> remap(x_.positions.size(), ~0u);
+    std::vector<V3> positions;
+    for (auto& t : tris)
+      for (auto& v : t) {
+        if (remap[v] == ~0u) {
+          remap[v] = std::uint32_t(positions.size());
+          positions.push_back(x_.positions[v]);
+        }
+        v = remap[v];
+      }
+    x_.positions = std::move(positions);
+    x_.triangles = std::move(tris);
+    x_.labels = std::move(labels);
+  }
+
+  static constexpr double kMinCos = 0.2;
+  LabelInterfaces& x_;
+  const double tol2_;
+  std::vector<Kind> kind_;
+  std::vector<char> alive_, tri_alive_;
+  std::vector<std::vector<std::uint32_t>> tris_of_;
+  std::vector<Quadric> q_;
+  std::vector<std::vector<Candidate>> buckets_ = std::vector<std::vector<Candidate>>(kBuckets);
+  std::size_t lowest_ = 0;
+  std::vector<std::uint32_t> nu_, nv_, common_, apex_;
+};
 
 }  // namespace
 
@@ -537,139 +785,9 @@ std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance) {
   if (!(tolerance > 0) || !std::isfinite(tolerance))
     throw Error("simplification tolerance must be positive and finite (got " + std::to_string(tolerance) +
                 ")");
-  // Step 1: the junction curves simplified along themselves, so the interfaces' borders do not
-  // stay at the extraction's resolution.
-  {
-    const std::vector<std::uint32_t> to = simplify_junction_curves(x, tolerance);
-    std::size_t kept = 0;
-    for (std::size_t t = 0; t < x.triangles.size(); ++t) {
-      auto tri = x.triangles[t];
-      for (auto& v : tri) v = to[v];
-      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
-      x.triangles[kept] = tri;
-      x.labels[kept++] = x.labels[t];
-    }
-    x.triangles.resize(kept);
-    x.labels.resize(kept);
-  }
-  // Step 2: the interfaces: triangles grouped by label pair, in pair order.
-  std::vector<std::uint32_t> order(x.triangles.size());
-  std::iota(order.begin(), order.end(), 0u);
-  auto pair_of = [&](std::uint32_t t) { return std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1]; };
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return pair_of(a) < pair_of(b); });
-  std::vector<std::size_t> first{0};
-  for (std::size_t i = 1; i <= order.size(); ++i)
-    if (i == order.size() || pair_of(order[i]) != pair_of(order[i - 1])) first.push_back(i);
-  const std::size_t n_iface = first.size() - 1;
-  std::vector<std::vector<std::array<std::uint32_t, 3>>> result(n_iface);
-  std::vector<std::size_t> kept_as_is(n_iface, 0);
-  // Step 3: each connected piece of each interface on its own, junction curves (its border)
-  // locked. Pieces one by one, so the guard below falls back for a piece, not an interface.
-  tbb::parallel_for(std::size_t(0), n_iface, [&](std::size_t f) {
-    std::vector<std::array<std::uint32_t, 3>> all;
-    for (std::size_t i = first[f]; i < first[f + 1]; ++i) all.push_back(x.triangles[order[i]]);
-    std::vector<std::uint32_t> global, local;
-    std::unordered_map<std::uint32_t, std::uint32_t> slot;
-    for (const auto& t : all)
-      for (auto v : t) {
-        auto [it, added] = slot.try_emplace(v, std::uint32_t(global.size()));
-        if (added) global.push_back(v);
-        local.push_back(it->second);
-      }
-    UnionFind uf(global.size());
-    for (std::size_t t = 0; t < all.size(); ++t) {
-      uf.unite(local[3 * t], local[3 * t + 1]);
-      uf.unite(local[3 * t + 1], local[3 * t + 2]);
-    }
-    // Triangles per piece (by the piece's lowest local vertex), pieces in order of appearance.
-    std::unordered_map<std::uint32_t, std::size_t> piece_of;
-    std::vector<std::vector<std::uint32_t>> piece_tris;
-    for (std::size_t t = 0; t < all.size(); ++t) {
-      auto [it, added] = piece_of.try_emplace(uf.find(local[3 * t]), piece_tris.size());
-      if (added) piece_tris.emplace_back();
-      piece_tris[it->second].push_back(std::uint32_t(t));
-    }
-    std::vector<std::array<std::uint32_t, 3>>& out = result[f];
-    std::vector<float> lp;
-    for (const auto& piece : piece_tris) {
-      // Local numbering of the piece: meshoptimizer allocates per vertex it is given.
-      std::vector<std::uint32_t> pglobal, plocal;
-      std::unordered_map<std::uint32_t, std::uint32_t> pslot;
-      for (auto t : piece)
-        for (int c = 0; c < 3; ++c) {
-          auto [it, added] = pslot.try_emplace(all[t][c], std::uint32_t(pglobal.size()));
-          if (added) pglobal.push_back(all[t][c]);
-          plocal.push_back(it->second);
-        }
-      std::vector<std::array<std::uint32_t, 3>> in_local(piece.size());
-      for (std::size_t t = 0; t < piece.size(); ++t)
-        in_local[t] = {plocal[3 * t], plocal[3 * t + 1], plocal[3 * t + 2]};
-      const auto border = boundary_chain(in_local);
-      // meshoptimizer locks the vertices it sees on a border, but where a junction curve passes
-      // a non-manifold spot of the piece it may see none. So every vertex of the piece's
-      // border gets a tiny dangling triangle with two extra vertices, which gives it two open
-      // edge pairs: locked. The extra triangles are dropped after.
-      const std::uint32_t n_real = std::uint32_t(pglobal.size());
-      std::vector<char> on_border(n_real, 0);
-      for (const auto& [e, net] : border) on_border[e >> 32] = on_border[e & 0xffffffffu] = 1;
-      std::vector<unsigned> indices(plocal.begin(), plocal.end());
-      lp.resize(n_real * 3);
-      for (std::size_t i = 0; i < n_real; ++i)
-        for (int c = 0; c < 3; ++c) lp[3 * i + c] = float(x.positions[pglobal[i]][c]);
-      const float scale = meshopt_simplifyScale(lp.data(), n_real, sizeof(float) * 3);
-      for (std::uint32_t v = 0; v < n_real; ++v) {
-        if (!on_border[v]) continue;
-        const std::uint32_t d = std::uint32_t(lp.size() / 3);
-        for (int k = 0; k < 2; ++k)
-          for (int c = 0; c < 3; ++c) lp.push_back(lp[3 * v + c] + (c == k ? 1e-3f : 0.0f));
-        indices.insert(indices.end(), {v, d, d + 1});
-      }
-      std::vector<unsigned> kept(indices.size());
-      kept.resize(meshopt_simplify(kept.data(), indices.data(), indices.size(), lp.data(), lp.size() / 3,
-                                   sizeof(float) * 3, 0, scale > 0 ? float(tolerance / scale) : 0.0f,
-                                   meshopt_SimplifyLockBorder, nullptr));
-      // Step 4: the guard: the piece keeps its boundary (junction curves), so every label's
-      // surface stays closed; a closed piece (an island's whole surface) keeps at least a
-      // tetrahedron's worth of triangles and half its volume. Else it stays as it came.
-      std::vector<std::array<std::uint32_t, 3>> out_local;
-      for (std::size_t t = 0; t + 2 < kept.size(); t += 3)
-        if (kept[t] < n_real && kept[t + 1] < n_real && kept[t + 2] < n_real)
-          out_local.push_back({kept[t], kept[t + 1], kept[t + 2]});
-      bool ok = !out_local.empty() && border == boundary_chain(out_local);
-      if (ok && border.empty()) {
-        const double before = enclosed_volume(in_local, pglobal, x.positions),
-                     after = enclosed_volume(out_local, pglobal, x.positions);
-        ok =
-            out_local.size() >= 4 && std::abs(after) >= 0.5 * std::abs(before) && (after > 0) == (before > 0);
-      }
-      if (!ok) ++kept_as_is[f];
-      for (const auto& t : ok ? out_local : in_local)
-        out.push_back({pglobal[t[0]], pglobal[t[1]], pglobal[t[2]]});
-    }
-  });
-  // Step 5: the complex again, interface by interface, unused vertices dropped.
-  std::vector<std::array<std::uint16_t, 2>> labels;
-  std::vector<std::array<std::uint32_t, 3>> tris;
-  for (std::size_t f = 0; f < n_iface; ++f)
-    for (const auto& t : result[f]) {
-      tris.push_back(t);
-      labels.push_back(x.labels[order[first[f]]]);
-    }
-  std::vector<std::uint32_t> remap(x.positions.size(), ~0u);
-  std::vector<V3> positions;
-  for (auto& t : tris)
-    for (auto& v : t) {
-      if (remap[v] == ~0u) {
-        remap[v] = std::uint32_t(positions.size());
-        positions.push_back(x.positions[v]);
-      }
-      v = remap[v];
-    }
-  x.positions = std::move(positions);
-  x.triangles = std::move(tris);
-  x.labels = std::move(labels);
-  return std::accumulate(kept_as_is.begin(), kept_as_is.end(), std::size_t(0));
+  const std::size_t before = x.positions.size();
+  ComplexDecimator(x, tolerance).run();
+  return before - x.positions.size();
 }
 
 TriangleMesh label_surface(const LabelInterfaces& x, std::uint16_t label, const GridTransform& tr) {

@@ -30,7 +30,8 @@ Block block(const std::string& head, const std::vector<T>& v) {
 
 template <int D>
 void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector<ElemId>& elems,
-               const std::vector<double>* point_values, const GridTransform* transform) {
+               const std::vector<double>* point_values, const GridTransform* transform,
+               const ElementRegions* regions) {
   const std::size_t nv_all = h.vertex_count();
   if (point_values && point_values->size() != nv_all)
     throw Error(path + ": " + std::to_string(point_values->size()) + " point values for " +
@@ -38,6 +39,9 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
   for (ElemId e : elems)
     if (!e.valid() || e.value >= h.element_count())
       throw Error(path + ": element id " + std::to_string(e.value) + " out of range");
+  if (regions && regions->label.size() != elems.size())
+    throw Error(path + ": " + std::to_string(regions->label.size()) + " region labels for " +
+                std::to_string(elems.size()) + " elements");
 
   // Compact the used vertices in VertexId order: deterministic and independent of elems' order.
   constexpr std::uint32_t kUnused = ~std::uint32_t(0);
@@ -84,6 +88,9 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
     kinds.push_back(static_cast<std::uint8_t>(h.kind(e)));
   }
 
+  // Regions: the cell array `label` (VTK has no region names; they go with the label table).
+  std::vector<std::int32_t> labels;
+  if (regions) labels.assign(regions->label.begin(), regions->label.end());
   std::vector<Block> point_data, cell_data, pts, cells;
   if (point_values)
     point_data.push_back(
@@ -92,6 +99,9 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
       block(R"(<DataArray type="UInt8" Name="level" NumberOfComponents="1" format="appended")", levels));
   cell_data.push_back(
       block(R"(<DataArray type="UInt8" Name="kind" NumberOfComponents="1" format="appended")", kinds));
+  if (regions)
+    cell_data.push_back(
+        block(R"(<DataArray type="Int32" Name="label" NumberOfComponents="1" format="appended")", labels));
   pts.push_back(
       block(R"(<DataArray type="Float64" Name="Points" NumberOfComponents="3" format="appended")", points));
   cells.push_back(block(R"(<DataArray type="Int64" Name="connectivity" format="appended")", connectivity));
@@ -137,8 +147,8 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
 }
 
 template void write_vtu<2>(const std::string&, const Hierarchy<2>&, const std::vector<ElemId>&,
-                           const std::vector<double>*, const GridTransform*);
+                           const std::vector<double>*, const GridTransform*, const ElementRegions*);
 template void write_vtu<3>(const std::string&, const Hierarchy<3>&, const std::vector<ElemId>&,
-                           const std::vector<double>*, const GridTransform*);
+                           const std::vector<double>*, const GridTransform*, const ElementRegions*);
 
 }  // namespace mlfe

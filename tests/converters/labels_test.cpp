@@ -232,6 +232,140 @@ TEST(LabelsCommand, InfoListsLabelsWithVoxelsAndVolumes) {
   EXPECT_EQ(j["labels"][4]["name"], "label_5");
 }
 
+// Per physical group of a Gmsh 4.1 file as mlfe writes it (one node block, one element block
+// per entity, one physical tag per entity): name -> total tetrahedron volume and count.
+std::map<std::string, std::pair<double, std::size_t>> msh_region_volumes(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::map<int, std::string> physical_name;
+  std::map<int, int> entity_physical;
+  std::vector<std::array<double, 3>> xyz;
+  std::map<std::string, std::pair<double, std::size_t>> out;
+  while (std::getline(in, line)) {
+    if (line == "$PhysicalNames") {
+      int n;
+      in >> n;
+      for (int i = 0; i < n; ++i) {
+        int dim, tag;
+        std::string name;
+        in >> dim >> tag;
+        std::getline(in >> std::ws, name);
+        physical_name[tag] = name.substr(1, name.size() - 2);
+      }
+    } else if (line == "$Entities") {
+      std::size_t np, nc, ns, nv;
+      in >> np >> nc >> ns >> nv;
+      for (std::size_t e = 0; e < nv; ++e) {
+        int tag, nphys, phys, nbound;
+        double box[6];
+        in >> tag;
+        for (double& b : box) in >> b;
+        in >> nphys >> phys >> nbound;
+        entity_physical[tag] = phys;
+      }
+    } else if (line == "$Nodes") {
+      std::size_t blocks, n, lo, hi, dim, ent, param, count;
+      in >> blocks >> n >> lo >> hi >> dim >> ent >> param >> count;
+      std::size_t tag;
+      for (std::size_t i = 0; i < count; ++i) in >> tag;
+      xyz.resize(count);
+      for (auto& p : xyz) in >> p[0] >> p[1] >> p[2];
+    } else if (line == "$Elements") {
+      std::size_t blocks, n, lo, hi;
+      in >> blocks >> n >> lo >> hi;
+      for (std::size_t b = 0; b < blocks; ++b) {
+        std::size_t dim, ent, type, count;
+        in >> dim >> ent >> type >> count;
+        auto& [volume, elements] = out[physical_name[entity_physical[int(ent)]]];
+        for (std::size_t i = 0; i < count; ++i) {
+          std::size_t tag, v[4];
+          in >> tag >> v[0] >> v[1] >> v[2] >> v[3];
+          double d[3][3];
+          for (int k = 0; k < 3; ++k)
+            for (int r = 0; r < 3; ++r) d[k][r] = xyz[v[k + 1] - 1][r] - xyz[v[0] - 1][r];
+          volume += (d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
+                     d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
+                     d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0])) /
+                    6.0;
+          ++elements;
+        }
+      }
+    }
+  }
+  return out;
+}
+
+// mlfe build --labels stores the labels (exactly) and the table; info lists them as from the
+// volume, convert from the file gives the volume's surfaces, export gives regions whose volumes
+// are the labels' voxel volumes to within the lattice cells where labels meet.
+TEST(LabelsCommand, HierarchyStoresLabelsAndTableAndExportsRegions) {
+  const std::string in = write_phantom("hier"), h = scratch() + "/hier.mlfeh";
+  auto r = run_mlfe("build " + in + " --labels -o " + h + " --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run_mlfe("--threads 2 build " + in + " --labels -o " + scratch() + "/hier2.mlfeh --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(slurp(h), slurp(scratch() + "/hier2.mlfeh"));
+  // Refined only where labels meet: far fewer leaves than the 6 Kuhn tetrahedra per voxel.
+  r = run_mlfe("info " + h + " --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const json hi = json::parse(r.out);
+  EXPECT_LT(hi["leaves"].get<std::size_t>(), 6u * 27 * 27 * 27 / 2);
+  r = run_mlfe("info " + in + " --labels --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const json vi = json::parse(r.out);
+  EXPECT_EQ(hi["labels"], vi["labels"]);  // values, names (the stored table), voxels, mm3
+  // convert --labels --hierarchy writes the same label map beside the surfaces.
+  r = run_mlfe("convert " + in + " --labels --hierarchy " + scratch() + "/conv.mlfeh -o " + scratch() +
+               "/conv.glb --quiet");
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = run_mlfe("info " + scratch() + "/conv.mlfeh --json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(json::parse(r.out)["labels"], vi["labels"]);
+  // The same surfaces from the file as from the volume.
+  ASSERT_EQ(run_mlfe("convert " + h + " --labels -o " + scratch() + "/from_h.glb --quiet").status, 0);
+  ASSERT_EQ(run_mlfe("convert " + in + " --labels -o " + scratch() + "/from_v.glb --quiet").status, 0);
+  const GltfAsset a = read_gltf(scratch() + "/from_h.glb"), b = read_gltf(scratch() + "/from_v.glb");
+  ASSERT_EQ(a.primitives.size(), b.primitives.size());
+  for (std::size_t p = 0; p < a.primitives.size(); ++p) {
+    EXPECT_EQ(a.primitives[p].mesh_data.positions, b.primitives[p].mesh_data.positions);
+    EXPECT_EQ(a.primitives[p].mesh_data.triangles, b.primitives[p].mesh_data.triangles);
+    EXPECT_EQ(a.structure["nodes"][a.primitives[p].node]["name"],
+              b.structure["nodes"][b.primitives[p].node]["name"]);
+  }
+  // Regions: named groups; volumes near the voxel volumes; all of them fill the data box.
+  r = run_mlfe("export " + h + " -o " + scratch() + "/hier.msh");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const auto regions = msh_region_volumes(scratch() + "/hier.msh");
+  double total = 0;
+  for (const auto& [name, v] : regions) total += v.first;
+  EXPECT_NEAR(total, 27 * 0.8 * 27 * 0.8 * 27 * 1.0, 1e-6);
+  const double voxel = 0.8 * 0.8 * 1.0;
+  for (const auto& row : vi["labels"]) {
+    const std::string name = row["name"];
+    const double expected = row["voxels"].get<double>() * voxel;
+    // The island is thinner than a cell; the background's voxels at the box's faces are cut by
+    // it (the total above accounts for the box).
+    if (row["voxels"].get<int>() < 100 || row["label"].get<int>() == 0) continue;
+    ASSERT_TRUE(regions.count(name)) << name;
+    EXPECT_NEAR(regions.at(name).first / expected, 1.0, 0.1) << name;
+  }
+  r = run_mlfe("export " + h + " -o " + scratch() + "/hier.vtu");
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string vtu = slurp(scratch() + "/hier.vtu");
+  EXPECT_NE(vtu.find(R"(Name="label")"), std::string::npos);
+  // Bad input: values that are not labels; a hierarchy without labels.
+  const std::string bad = write_phantom("hier_bad", 2.5f);
+  r = run_mlfe("build " + bad + " --labels -o " + scratch() + "/bad.mlfeh");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_FALSE(fs::exists(scratch() + "/bad.mlfeh"));
+  ASSERT_EQ(run_mlfe("build " + in + " --max-error 0.5 -o " + scratch() + "/plain.mlfeh --quiet").status, 0);
+  r = run_mlfe("convert " + scratch() + "/plain.mlfeh --labels -o " + scratch() + "/plain.glb");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("not a label map"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(scratch() + "/plain.glb"));
+}
+
 TEST(LabelsCommand, JhuAtlasConvertsWithItsNamesAndColours) {
   const std::string in = test::test_data_path("labels/atlas_jhu_wm_labels_1mm.nii.gz");
   const std::string glb = scratch() + "/jhu.glb", report = scratch() + "/jhu.report.json";

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
+#include <mlfe/core/mesh_distance.h>
 #include <tbb/global_control.h>
 
 #include <cmath>
@@ -36,7 +37,7 @@ LabelGrid atlas_phantom() {
   });
 }
 
-double signed_volume(const TriangleMesh& m) {
+double outward_volume(const TriangleMesh& m) {
   double v = 0;
   for (const auto& t : m.triangles) {
     const auto &a = m.positions[t[0]], &b = m.positions[t[1]], &c = m.positions[t[2]];
@@ -57,7 +58,7 @@ void expect_structures_closed(const LabelInterfaces& x, const LabelGrid& g, bool
     EXPECT_EQ(unmatched_edges(m), 0u) << "label " << l;
     // Outward: a positive volume, near the label's voxel count (midpoint surfaces cut the
     // corners of the voxel boundary).
-    const double v = signed_volume(m);
+    const double v = outward_volume(m);
     EXPECT_GT(v, 0.0) << "label " << l;
     if (!extracted) continue;
     EXPECT_LT(v, 1.05 * double(counts.at(l))) << "label " << l;
@@ -159,6 +160,36 @@ TEST(LabelSurface, SmoothedAndSimplifiedStructuresStayClosedSharedAndBounded) {
   expect_shared_interface(x, 3, 7, g.transform);
   expect_shared_interface(x, 1, 5, g.transform);
   EXPECT_EQ(connected_pieces(label_surface(x, 5, g.transform)), 1u);
+}
+
+// The quadric collapse merges far (optimal placement lets a smooth sphere take few triangles)
+// and every structure stays near its smoothed surface, closed, shared and with its island.
+TEST(LabelSurface, QuadricCollapseMergesFarAndStaysNearTheSmoothedSurface) {
+  const LabelGrid g = atlas_phantom();
+  LabelInterfaces x = complex_of(g);
+  smooth_label_interfaces(x, {});
+  const LabelInterfaces smoothed = x;
+  const std::size_t removed = simplify_label_interfaces(x, 0.34);
+  EXPECT_EQ(removed, smoothed.positions.size() - x.positions.size());
+  EXPECT_LT(x.triangles.size() * 4, smoothed.triangles.size());
+  EXPECT_EQ(labels_with_surfaces(x), labels_with_surfaces(smoothed));
+  expect_structures_closed(x, g, false);
+  expect_shared_interface(x, 1, 2, g.transform);
+  expect_shared_interface(x, 3, 7, g.transform);
+  SurfaceSamplingOptions so;
+  so.area_samples = 5000;
+  for (auto l : labels_with_surfaces(x)) {
+    const MeshDistance d =
+        mesh_distance(label_surface(smoothed, l, g.transform), label_surface(x, l, g.transform), so);
+    EXPECT_LT(d.mean(), 0.2) << "label " << l;
+    EXPECT_LT(d.hausdorff(), 1.0) << "label " << l;
+  }
+  // A larger tolerance merges more; none of it opens a surface.
+  LabelInterfaces coarse = smoothed;
+  simplify_label_interfaces(coarse, 1.0);
+  EXPECT_LT(coarse.triangles.size(), x.triangles.size());
+  expect_structures_closed(coarse, g, false);
+  EXPECT_THROW(simplify_label_interfaces(coarse, 0.0), Error);
 }
 
 TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {

@@ -121,18 +121,20 @@ struct LabelSmoothingOptions {
 /// Jacobi updates: the same result for any thread count.
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& options);
 
-/// Simplifies the complex at `tolerance` voxels in two steps that keep interfaces shared and
-/// every label's surface closed. First the junction curves (where three or more labels meet)
-/// along themselves: Douglas-Peucker within the tolerance, each dropped curve vertex merged into
-/// the nearest kept one along its curve (merging vertices never opens a closed surface). Then
-/// every connected piece of every interface (the triangles of one label pair) with
-/// meshoptimizer's meshopt_simplify (its own error estimate) and its junction curves locked, so
-/// collapses onto interior vertices of one interface never change the boundary of another. A
-/// piece whose result would not keep its boundary (so every surface stays closed), or a closed
-/// piece (an island's surface) that would keep fewer than 4 triangles or less than half its
-/// volume, is kept as it came. Unused vertices are dropped. Parallel over
-/// interfaces; the same result for any thread count. Returns the number of pieces kept as they
-/// came.
+/// Simplifies the complex by quadric edge collapse (Garland & Heckbert 1997) over all its
+/// interfaces at once, cheapest merge first, each merged vertex placed where the summed
+/// quadrics (area-weighted planes of the triangles it absorbed) are least. A merge is made only
+/// when that RMS distance to the absorbed planes stays within `tolerance` voxels. Constraints
+/// keep the complex a partition: a vertex inside one interface merges with a neighbour in the
+/// same interface or moves onto a junction-curve neighbour; a vertex on a junction curve (where
+/// three or more labels meet) merges only along its curve, placed on the segment; where curves
+/// meet, and at non-manifold points of an interface, vertices stay. Merging vertices never
+/// opens a closed surface; the link condition (the ends' common neighbours are exactly the
+/// edge's apexes), a no-flip test on every moved triangle, at least a tetrahedron per closed
+/// piece and three vertices per junction loop keep every label's surface closed, consistently
+/// oriented and its islands present, and the interfaces shared. Sequential, so the same result
+/// for any thread count. Returns the number of vertices removed. Throws mlfe::Error unless
+/// `tolerance` is positive and finite.
 std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
 
 /// The closed surface of `label`: its triangles from the complex, oriented outward (normals

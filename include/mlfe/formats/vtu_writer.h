@@ -11,6 +11,7 @@
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/ids.h>
 #include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/element_regions.h>
 
 #include <string>
 #include <vector>
@@ -21,15 +22,17 @@ namespace mlfe {
 /// atomically. Only the vertices the elements use are written, in increasing VertexId order,
 /// so the bytes depend only on the arguments. `point_values` (may be null) holds one value per
 /// vertex of h (size vertex_count); `transform` (may be null) maps local coordinates to
-/// physical ones: p = transform->local_to_physical(local). Throws mlfe::Error ("<path>: ...")
+/// physical ones: p = transform->local_to_physical(local). `regions` (may be null) adds the
+/// cell array `label` (Int32, one per element of `elems`). Throws mlfe::Error ("<path>: ...")
 /// for an element id out of range, a wrong number of values, or a file that cannot be written.
 template <int D>
 void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector<ElemId>& elems,
-               const std::vector<double>* point_values, const GridTransform* transform);
+               const std::vector<double>* point_values, const GridTransform* transform,
+               const ElementRegions* regions = nullptr);
 
 extern template void write_vtu<2>(const std::string&, const Hierarchy<2>&, const std::vector<ElemId>&,
-                                  const std::vector<double>*, const GridTransform*);
+                                  const std::vector<double>*, const GridTransform*, const ElementRegions*);
 extern template void write_vtu<3>(const std::string&, const Hierarchy<3>&, const std::vector<ElemId>&,
-                                  const std::vector<double>*, const GridTransform*);
+                                  const std::vector<double>*, const GridTransform*, const ElementRegions*);
 
 }  // namespace mlfe
