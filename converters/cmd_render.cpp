@@ -245,7 +245,8 @@ void run_render(const RenderState& s) {
   std::optional<ScalarGrid> grid;
   Built b;
   if (is_hierarchy_file(s.input)) {
-    b = built_from_file(s.input);
+    // --level K reads the file's prefix up to level K only (docs/mlfeh-v3.md).
+    b = built_from_file(s.input, s.render.level);
   } else {
     grid = read_volume(s.input, s.read);
     if (grid->dim != 3) throw Error(s.input + ": rendering needs a 3D volume");
