@@ -58,13 +58,15 @@ def psnr(helper, a, b):
 
 
 def level_vertices(mlfe, h):
-    """Vertices of T_k per level k, from `mlfe info` (its level table)."""
+    """Vertices of T_k per level k: `mlfe info` lists the vertices each level adds, T_k has
+    those of levels 0..k."""
     out = subprocess.run([mlfe, "info", h], capture_output=True, text=True, check=True).stdout
-    rows = {}
+    rows, total = {}, 0
     for line in out.splitlines():
         m = re.match(r"\s+(\d+)\s+(\d+)\s+(\d+)\s+(\d+)\s*$", line)
         if m:
-            rows[int(m.group(1))] = int(m.group(2))
+            total += int(m.group(2))
+            rows[int(m.group(1))] = total
     return rows
 
 

@@ -39,7 +39,9 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
   cmd->add_option("--target", p.target, "point looked at, x,y,z (default: the volume's centre)");
   cmd->add_option("--up", p.up, "up direction x,y,z (default 0,0,1)");
   cmd->add_option("--size", p.size, "image size WxH")->capture_default_str();
-  cmd->add_option("--level", p.level, "render the approximation on this hierarchy level (-1: finest)");
+  cmd->add_option(
+      "--level", p.level,
+      "render the approximation on this hierarchy level (-1: finest); a .mlfeh file is read only up to it");
   cmd->add_flag("--reference", p.reference, "ray-cast the original voxels instead (volume input)");
   cmd->add_option(
          "--integration", p.integration,
