@@ -39,7 +39,9 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
   cmd->add_option("--target", p.target, "point looked at, x,y,z (default: the volume's centre)");
   cmd->add_option("--up", p.up, "up direction x,y,z (default 0,0,1)");
   cmd->add_option("--size", p.size, "image size WxH")->capture_default_str();
-  cmd->add_option("--level", p.level, "render the approximation on this hierarchy level (-1: finest)");
+  cmd->add_option(
+      "--level", p.level,
+      "render the approximation on this hierarchy level (-1: finest); a .mlfeh file is read only up to it");
   cmd->add_flag("--reference", p.reference, "ray-cast the original voxels instead (volume input)");
   cmd->add_option(
          "--integration", p.integration,
@@ -245,7 +247,8 @@ void run_render(const RenderState& s) {
   std::optional<ScalarGrid> grid;
   Built b;
   if (is_hierarchy_file(s.input)) {
-    b = built_from_file(s.input);
+    // --level K reads the file's prefix up to level K only (docs/mlfeh-v3.md).
+    b = built_from_file(s.input, s.render.level);
   } else {
     grid = read_volume(s.input, s.read);
     if (grid->dim != 3) throw Error(s.input + ": rendering needs a 3D volume");

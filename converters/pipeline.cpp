@@ -229,8 +229,8 @@ template void set_lattice_info<3>(const Approximation<3>&, HierarchyFileInfo&);
 template void set_lattice<2>(const HierarchyFileInfo&, Approximation<2>&);
 template void set_lattice<3>(const HierarchyFileInfo&, Approximation<3>&);
 
-Built built_from_file(const std::string& path) {
-  HierarchyFile hf = read_hierarchy(path);
+Built built_from_file(const std::string& path, int max_level) {
+  HierarchyFile hf = read_hierarchy(path, max_level);
   Built b;
   b.transform = hf.transform;
   b.space = hf.space;

@@ -6,6 +6,7 @@
 #include <mlfe/core/error.h>
 #include <mlfe/core/field.h>
 #include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/huge_pages.h>
 #include <mlfe/core/volume_render.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -146,50 +147,69 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
   return std::min({1.0 - l1 - l2 - l3, l1, l2, l3});
 }
 
-// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, but with each face
-// packed into one 64-bit key (three 21-bit vertex ids) and sorted in parallel: several times
-// faster on a million tetrahedra. Larger meshes use the hierarchy's own. Each neighbour comes
-// as 4 × its index + the local index of the shared face in it (StepRecord::next).
-std::vector<std::array<std::uint32_t, 4>> face_adjacency(const Hierarchy<3>& h,
-                                                         const std::vector<ElemId>& elems) {
+// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, written straight
+// into the step records' `next` (4 × neighbour index + the local index of the shared face in
+// it). Faces are bucketed by their lowest vertex id (a counting sort, linear and parallel:
+// several times faster than comparison-sorting all faces on a million tetrahedra), then
+// matched within each bucket (a few dozen faces) by their other two vertex ids. Within a bucket
+// the faces are put in (key, slot) order before matching, so the result does not depend on the
+// order the threads filled it in.
+void face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems,
+                    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
-  std::vector<std::array<std::uint32_t, 4>> nb(elems.size(), {kNo, kNo, kNo, kNo});
-  if (h.vertex_count() >= (std::size_t(1) << 21) || elems.size() >= (std::size_t(1) << 29)) {
-    const auto plain = h.face_neighbors(elems);
-    for (std::size_t i = 0; i < elems.size(); ++i)
-      for (int f = 0; f < 4; ++f) {
-        const std::int32_t j = plain[i][f];
-        if (j < 0) continue;
-        const auto& back = plain[std::size_t(j)];
-        const int g = int(std::find(back.begin(), back.end(), std::int32_t(i)) - back.begin());
-        MLFE_CHECK(g < 4);
-        nb[i][f] = 4 * std::uint32_t(j) + std::uint32_t(g);
-      }
-    return nb;
-  }
+  const std::size_t nv = h.vertex_count();
   struct Face {
-    std::uint64_t key;
-    std::uint32_t slot;  // 4 * element index + local face
-    bool operator<(const Face& o) const { return key != o.key ? key < o.key : slot < o.slot; }
+    std::uint32_t v1, v2;  // the face's two higher vertex ids
+    std::uint32_t slot;    // 4 * element index + local face
   };
-  std::vector<Face> faces(elems.size() * 4);
-  tbb::parallel_for(std::size_t(0), elems.size(), [&](std::size_t i) {
+  const auto face_of = [&](std::size_t i, int f, std::uint32_t& low) {
     const auto& c = h.cell(elems[i]);
+    std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
+    std::sort(v, v + 3);
+    low = v[0];
+    return std::array<std::uint32_t, 2>{v[1], v[2]};
+  };
+  // 1. faces per lowest vertex, then bucket offsets; 2. faces into their buckets (sequential:
+  // atomic counters shared by the threads measured slower).
+  std::vector<std::uint32_t> start(nv + 1, 0);
+  for (std::size_t i = 0; i < elems.size(); ++i)
     for (int f = 0; f < 4; ++f) {
-      std::uint64_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
-      std::sort(v, v + 3);
-      faces[4 * i + f] = {(v[0] << 42) | (v[1] << 21) | v[2], std::uint32_t(4 * i + f)};
+      std::uint32_t low;
+      face_of(i, f, low);
+      ++start[low + 1];
+    }
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+  std::unique_ptr<Face[]> faces(new Face[elems.size() * 4]);
+  advise_huge_pages(faces.get(), elems.size() * 4 * sizeof(Face));
+  for (std::size_t i = 0; i < elems.size(); ++i)
+    for (int f = 0; f < 4; ++f) {
+      std::uint32_t low;
+      const auto key = face_of(i, f, low);
+      faces[fill[low]++] = {key[0], key[1], std::uint32_t(4 * i + f)};
+    }
+  // 3. per bucket: equal keys are the two sides of one face.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
+    for (std::size_t v = range.begin(); v != range.end(); ++v) {
+      Face* first = faces.get() + start[v];
+      Face* last = faces.get() + start[v + 1];
+      std::sort(first, last, [](const Face& x, const Face& y) {
+        return x.v1 != y.v1 ? x.v1 < y.v1 : x.v2 != y.v2 ? x.v2 < y.v2 : x.slot < y.slot;
+      });
+      for (Face* q = first; q != last; ++q) {
+        const bool shared = q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2;
+        const std::uint32_t a = q->slot;
+        if (!shared) {
+          records[a / 4].next[a % 4] = kNo;
+          continue;
+        }
+        const std::uint32_t b = q[1].slot;
+        records[a / 4].next[a % 4] = b;
+        records[b / 4].next[b % 4] = a;
+        ++q;
+      }
     }
   });
-  tbb::parallel_sort(faces.begin(), faces.end());
-  for (std::size_t i = 0; i + 1 < faces.size(); ++i) {
-    if (faces[i].key != faces[i + 1].key) continue;
-    const std::uint32_t a = faces[i].slot, b = faces[i + 1].slot;
-    nb[a / 4][a % 4] = b;
-    nb[b / 4][b % 4] = a;
-    ++i;
-  }
-  return nb;
 }
 
 // Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
@@ -388,14 +408,23 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     throw Error("render: " + std::to_string(elems_.size()) +
                 " tetrahedra exceed the renderer's limit of 2^30");
   morton_order(h, elems_);
-  const auto nb = face_adjacency(h, elems_);
-  records_.resize(elems_.size());
+  for (auto* a : {&lo_, &hi_}) {
+    a->reserve(h.element_count());
+    advise_huge_pages(*a);
+  }
+  render_of_.reserve(h.element_count());
+  advise_huge_pages(render_of_);
+  render_of_.assign(h.element_count(), kNone);
+  lo_.assign(h.element_count(), std::numeric_limits<float>::infinity());
+  hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
+  records_.resize(elems_.size());  // not initialised: every field is set below
+  advise_huge_pages(records_);
+  face_adjacency(h, elems_, records_);
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
     Vec3 p[4];
     for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
     StepRecord& R = records_[r];
-    for (int f = 0; f < 4; ++f) R.next[f] = nb[r][f];
     Vec3 g{0, 0, 0};
     for (int i = 0; i < 4; ++i) {
       // The face's vertices in id order, so both elements sharing it compute the same normal.
@@ -413,30 +442,25 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
     const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
     R.b = (*u_)[c[0].value] - dot(gf, p[0]);
+    const std::uint32_t e = elems_[r].value;
+    render_of_[e] = std::uint32_t(r);
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (VertexId v : c) {
+      lo = std::min(lo, (*u_)[v.value]);
+      hi = std::max(hi, (*u_)[v.value]);
+    }
+    lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
+    hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
   });
-  render_of_.assign(h.element_count(), kNone);
-  for (std::size_t r = 0; r < elems_.size(); ++r) render_of_[elems_[r].value] = std::uint32_t(r);
-  // 3. ranges: rendered elements from their vertices, coarser ones as the union of their
-  // children (children have larger ids than their parent, so one backward sweep).
-  lo_.assign(h.element_count(), std::numeric_limits<float>::infinity());
-  hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
+  // 3. ranges: rendered elements from their vertices (set with the records above), coarser
+  // ones as the union of their children (children have larger ids than their parent, so one
+  // backward sweep).
   for (std::size_t i = h.element_count(); i-- > 0;) {
     const ElemId e(static_cast<std::uint32_t>(i));
-    if (h.level(e) > level_) continue;
-    if (render_of_[i] != kNone) {
-      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-      for (VertexId v : h.cell(e)) {
-        lo = std::min(lo, (*u_)[v.value]);
-        hi = std::max(hi, (*u_)[v.value]);
-      }
-      lo_[i] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
-      hi_[i] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
-    }
     const ElemId p = h.parent(e);
-    if (p.valid()) {
-      lo_[p.value] = std::min(lo_[p.value], lo_[i]);
-      hi_[p.value] = std::max(hi_[p.value], hi_[i]);
-    }
+    if (!p.valid() || h.level(e) > level_) continue;
+    lo_[p.value] = std::min(lo_[p.value], lo_[i]);
+    hi_[p.value] = std::max(hi_[p.value], hi_[i]);
   }
   // 4. the domain box (T0 spans it).
   lo_box_.fill(std::numeric_limits<double>::infinity());

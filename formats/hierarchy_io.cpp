@@ -1,5 +1,6 @@
 // .mlfeh reader and writer; the format is specified in hierarchy_io.h.
 #include <mlfe/core/error.h>
+#include <mlfe/core/huge_pages.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
@@ -31,6 +32,9 @@ constexpr std::uint64_t kMaxRatio = 1024, kRatioSlack = 4096;
 // v2 sections: zstd's own limit (a 4-byte RLE block per 128 KiB block), since a level whose
 // marks are all set and whose surpluses all round to 0 compresses far beyond 1024:1.
 constexpr std::uint64_t kMaxSectionRatio = 32768;
+// Elements or vertices per file byte the reader reserves for at most before the counts are
+// verified (measured files hold about 11 elements per byte).
+constexpr std::uint64_t kMaxReserveFactor = 256;
 
 using Bytes = std::vector<std::uint8_t>;
 
@@ -599,6 +603,7 @@ class SectionReader {
     return out;
   }
   bool at_end() const { return pos_ == size_; }
+  std::uint64_t file_size() const { return size_; }
 
  private:
   void read(std::uint8_t* p, std::size_t n) {
@@ -687,6 +692,32 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
   typename Hierarchy<D>::Arrays a;
   a.points = c.get_array<typename Hierarchy<D>::Point>(nv0, "T0 points");
   a.cells = c.get_array<typename Hierarchy<D>::Cell>(ne0, "T0 cells");
+  // The rebuild's arrays at their final size from the start (from_arrays keeps the capacity):
+  // grown level by level, refine() would copy them at every level. The header's counts are
+  // not trusted yet, so the reservation is bounded by what the file's size can describe.
+  {
+    const std::uint64_t cap = std::uint64_t(kMaxReserveFactor) * r.file_size() + 4096;
+    const auto nv = static_cast<std::size_t>(std::min<std::uint64_t>(head.nv, cap));
+    const auto ne = static_cast<std::size_t>(std::min<std::uint64_t>(head.ne, cap));
+    a.points.reserve(nv);
+    a.vertex_parents.reserve(nv);
+    a.vertex_level.reserve(nv);
+    a.cells.reserve(ne);
+    a.parent.reserve(ne);
+    a.first_child.reserve(ne);
+    a.num_children.reserve(ne);
+    a.level.reserve(ne);
+    a.kind.reserve(ne);
+    advise_huge_pages(a.points);
+    advise_huge_pages(a.vertex_parents);
+    advise_huge_pages(a.vertex_level);
+    advise_huge_pages(a.cells);
+    advise_huge_pages(a.parent);
+    advise_huge_pages(a.first_child);
+    advise_huge_pages(a.num_children);
+    advise_huge_pages(a.level);
+    advise_huge_pages(a.kind);
+  }
   a.vertex_parents.assign(nv0, {VertexId::invalid(), VertexId::invalid()});
   a.vertex_level.assign(nv0, 0);
   a.parent.assign(ne0, ElemId::invalid());

@@ -160,8 +160,9 @@ FieldInput mesh_input(const TetMeshField& f, const TetMesh& mesh);
 /// build() on a tetrahedral mesh's P1 interpolant (TetMeshField).
 Built build(const TetMesh& mesh, const BuildOptions& options, const std::vector<double>& iso_values = {});
 
-/// Loads a hierarchy file as a Built (values required).
-Built built_from_file(const std::string& path);
+/// Loads a hierarchy file as a Built (values required). With max_level ≥ 0, only T_max_level
+/// and its values (read_hierarchy: a v2/v3 file is read up to that level's section only).
+Built built_from_file(const std::string& path, int max_level = -1);
 
 /// The lattice fields of a hierarchy file (HierarchyFileInfo::on_lattice, lattice_level,
 /// data_dims) from an approximation, and back: the approximation's on_lattice, lattice and

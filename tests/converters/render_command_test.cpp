@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -54,6 +55,50 @@ TEST(Render, HierarchyToExrAndPngSameBytesWithOneAndTwoThreads) {
   const std::string c = scratch() + "/c.exr";
   ASSERT_EQ(run("render " + kSmall + " -o " + c + " --level 1" + opts).status, 0);
   EXPECT_NE(bytes(a), bytes(c));
+}
+
+// Bytes of a v2/v3 hierarchy file up to the end of its LEVL k section (docs/mlfeh-v3.md:
+// 16-byte preamble, then sections of a 28-byte header with the stored size at offset 8).
+std::string prefix_up_to_level(const std::string& file, int k) {
+  std::size_t pos = 16;
+  for (int section = 0; section < 2 + k; ++section) {  // HEAD, MESH, LEVL 1..k
+    std::uint64_t stored = 0;
+    std::memcpy(&stored, file.data() + pos + 8, 8);
+    pos += 28 + stored;
+    EXPECT_LE(pos, file.size());
+  }
+  return file.substr(0, pos);
+}
+
+TEST(Render, LevelReadsOnlyTheFilesPrefix) {
+  // A v3 file, and a copy cut right after level 2 under the same name (the EXR records the
+  // file name): --level 2 renders both to the same bytes, with 1 and 2 threads, so it reads
+  // nothing past level 2. The whole file cannot be read from the cut copy.
+  const std::string full = scratch() + "/h.mlfeh";
+  ASSERT_EQ(run("build " + kSkull + " --max-vertices 3000 -o " + full + " --quiet").status, 0);
+  fs::create_directories(scratch() + "/cut");
+  const std::string cut = scratch() + "/cut/h.mlfeh";
+  const std::string whole = bytes(full);
+  ASSERT_EQ(whole.substr(8, 1), "\x03");
+  const std::string head = prefix_up_to_level(whole, 2);
+  ASSERT_LT(head.size(), whole.size());
+  std::ofstream(cut, std::ios::binary) << head;
+  const std::string opts = " --tf bone --size 48x40 --level 2 --quiet";
+  const std::string a = scratch() + "/level2_full.exr", b = scratch() + "/level2_cut.exr",
+                    c = scratch() + "/level2_cut_1.exr", d = scratch() + "/finest.exr";
+  ASSERT_EQ(run("--threads 2 render " + full + " -o " + a + opts).status, 0);
+  ASSERT_EQ(run("--threads 2 render " + cut + " -o " + b + opts).status, 0);
+  ASSERT_EQ(run("--threads 1 render " + cut + " -o " + c + opts).status, 0);
+  EXPECT_EQ(bytes(a), bytes(b));
+  EXPECT_EQ(bytes(b), bytes(c));
+  ASSERT_EQ(run("render " + full + " -o " + d + " --tf bone --size 48x40 --quiet").status, 0);
+  EXPECT_NE(bytes(a), bytes(d));
+  const RunResult r = run("render " + cut + " -o " + scratch() + "/never.exr --quiet");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("h.mlfeh"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(scratch() + "/never.exr"));
+  // A level beyond the file's is a usage error naming the file's levels.
+  EXPECT_EQ(run("render " + full + " -o " + scratch() + "/never.exr --level 40 --quiet").status, 1);
 }
 
 TEST(Render, VolumeReferenceTurntableAndConvert) {

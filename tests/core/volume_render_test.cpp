@@ -218,37 +218,49 @@ TEST(RenderMesh, SameBytesWithOneAndTwoThreads) {
   EXPECT_EQ(0, std::memcmp(img[0].z.data(), img[1].z.data(), img[0].z.size() * sizeof(float)));
 }
 
-TEST(RenderMesh, CompactAdjacency) {
-  const Blob b;
-  const TetRenderMesh m(b.h, b.u);
-  EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 150.0);
-  // The same neighbours as the hierarchy's own face_neighbors, and shared both ways. The
-  // renderer keeps the leaves in its own (spatial) order: compare through the elements.
-  const auto leaves = b.h.leaves();
-  const auto expected = b.h.face_neighbors(leaves);
+// The renderer's neighbours (StepRecord::next) against the hierarchy's own face_neighbors on
+// T_level of h: the same elements across every face, and the shared face's index in the
+// neighbour pointing back.
+void expect_adjacency_of_face_neighbors(const Hierarchy<3>& h, const std::vector<double>& u, int level) {
+  const TetRenderMesh m(h, u, level);
+  const auto elems = level < 0 || level >= h.max_level() ? h.leaves() : h.level_elements(level);
+  const auto expected = h.face_neighbors(elems);
   ASSERT_EQ(expected.size(), m.size());
-  std::vector<std::int32_t> position(b.h.element_count(), -1);
-  for (std::size_t i = 0; i < leaves.size(); ++i) position[leaves[i].value] = std::int32_t(i);
+  // The renderer keeps the elements in its own (spatial) order: compare through the elements.
+  std::vector<std::int32_t> position(h.element_count(), -1);
+  for (std::size_t i = 0; i < elems.size(); ++i) position[elems[i].value] = std::int32_t(i);
   std::set<std::uint32_t> seen;
   for (std::uint32_t r = 0; r < m.size(); ++r) {
     const std::int32_t i = position[m.element(r).value];
-    ASSERT_GE(i, 0) << "element " << r << " is not a leaf";
-    EXPECT_TRUE(seen.insert(m.element(r).value).second) << "leaf rendered twice";
+    ASSERT_GE(i, 0) << "element " << r << " is not in T_" << level;
+    EXPECT_TRUE(seen.insert(m.element(r).value).second) << "element rendered twice";
     EXPECT_EQ(m.render_index(m.element(r)), std::int32_t(r));
     for (int f = 0; f < 4; ++f) {
       const std::int32_t n = m.neighbors(r)[f], e = expected[std::size_t(i)][f];
       ASSERT_EQ(n < 0, e < 0) << r << " face " << f;
-      if (n >= 0) {
-        EXPECT_EQ(m.element(std::uint32_t(n)), leaves[std::size_t(e)]) << r << " face " << f;
-      }
+      if (n < 0) continue;
+      EXPECT_EQ(m.element(std::uint32_t(n)), elems[std::size_t(e)]) << r << " face " << f;
+      const std::uint32_t next = m.record(r).next[f];
+      EXPECT_EQ(m.record(next >> 2).next[next & 3u], 4 * r + std::uint32_t(f)) << r << " face " << f;
     }
   }
-  for (std::uint32_t r = 0; r < m.size(); ++r)
-    for (std::int32_t n : m.neighbors(r))
-      if (n >= 0) {
-        const auto& back = m.neighbors(std::uint32_t(n));
-        EXPECT_NE(std::find(back.begin(), back.end(), std::int32_t(r)), back.end());
-      }
+}
+
+TEST(RenderMesh, CompactAdjacency) {
+  const Blob b;
+  const TetRenderMesh m(b.h, b.u);
+  EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 150.0);
+  for (int level : {-1, 1, 2, 3}) {
+    SCOPED_TRACE(level);
+    expect_adjacency_of_face_neighbors(b.h, b.u, level);
+  }
+  // Graded (green closures across several levels) and on a lattice.
+  const Hierarchy<3> g = lattice_box();
+  const std::vector<double> ug(g.vertex_count(), 1.0);
+  for (int level : {-1, 2, 3}) {
+    SCOPED_TRACE(level);
+    expect_adjacency_of_face_neighbors(g, ug, level);
+  }
 }
 
 TEST(RenderGrid, MatchesTheMeshOnTrilinearData) {

@@ -36,9 +36,34 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <memory>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace mlfe {
+
+/// An allocator whose value-less construct() default-initialises: resize() of a vector of
+/// trivial records leaves them unwritten (no zeroing pass), so their pages are first touched
+/// by the parallel loop that fills them.
+template <class T>
+struct DefaultInit : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = DefaultInit<U>;
+  };
+  DefaultInit() = default;
+  template <class U>
+  DefaultInit(const DefaultInit<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
 
 /// A pinhole or orthographic camera in the world (physical) frame. Image row 0 is the top;
 /// the ray of pixel (x, y) goes through its centre (x + 0.5, y + 0.5).
@@ -170,7 +195,7 @@ class TetRenderMesh {
   std::vector<double> coarse_values_;
   const std::vector<double>* u_;
   std::vector<ElemId> elems_;
-  std::vector<StepRecord> records_;
+  std::vector<StepRecord, DefaultInit<StepRecord>> records_;
   std::vector<std::uint32_t> render_of_;
   std::vector<float> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;

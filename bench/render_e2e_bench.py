@@ -1,0 +1,161 @@
+#!/usr/bin/python3
+"""render_e2e_bench.py: `mlfe render H.mlfeh` end to end against the grid it came from (#27).
+
+In one run, on one volume VOL and its hierarchies H1, H2, ... (built beforehand with
+`mlfe build VOL -o H --max-vertices N` or the default; not timed here), with 2 threads:
+  * set-up: the wall time of `mlfe render X -o x.exr --size 1x1` (reading, decoding, the level
+    rebuild and the render structures; the one ray costs nothing), X = VOL --reference (the
+    scan read) or H; best of --repeat processes;
+  * end to end: the wall time of the same command at --size (default 500x500), best of
+    --repeat, and per frame: the render time the command reports;
+  * the same for a baseline build of mlfe (--base-build DIR: the commit before the change),
+    so before/after figures come from the same run;
+  * progressive: `mlfe render H --level K` for every level K of the first hierarchy (reads the
+    file's prefix up to level K): end-to-end time, vertices of T_K (from `mlfe info`), PSNR
+    against the reference image (like Table 3 of Grosso, Lürig & Ertl 1997);
+  * VTK 9's vtkFixedPointVolumeRayCastMapper on the voxel grid, same camera (orthographic),
+    size and transfer function (the setup of bench/render_bench.py), sample distance 1 voxel
+    and half a voxel: per-frame time (best after the first render).
+PSNR: RGBA premultiplied against `mlfe render VOL --reference`, peak 1 (render_bench psnr).
+The machine may be shared: compare ratios within one run, not across runs.
+
+usage: bench/render_e2e_bench.py VOL H1.mlfeh [H2.mlfeh ...] [--base-build DIR] [--size WxH]
+       [--repeat N] [--no-vtk] [--no-levels] [--work DIR] [--json OUT]
+"""
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+import render_bench  # noqa: E402  (VTK_CHILD: the VTK side, shared with the older bench)
+
+
+def run_mlfe(mlfe, args, repeat):
+    """Best wall time of `repeat` processes and the render time the best one reported."""
+    best, frame, stats = 1e9, None, ""
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        p = subprocess.run([mlfe, "--threads", "2"] + args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                           text=True)
+        wall = time.perf_counter() - t0
+        if p.returncode != 0:
+            raise RuntimeError("mlfe %s failed: %s" % (" ".join(args), p.stderr[-2000:]))
+        m = re.search(r"in ([0-9.]+) s, (.*) ->", p.stderr)
+        if wall < best:
+            best, frame, stats = wall, float(m.group(1)), m.group(2)
+    return {"wall_s": best, "frame_s": frame, "stats": stats}
+
+
+def psnr(helper, a, b):
+    out = subprocess.run([helper, "psnr", a, b], capture_output=True, text=True, check=True).stdout
+    return json.loads(out)["psnr_db"]
+
+
+def level_vertices(mlfe, h):
+    """Vertices of T_k per level k: `mlfe info` lists the vertices each level adds, T_k has
+    those of levels 0..k."""
+    out = subprocess.run([mlfe, "info", h], capture_output=True, text=True, check=True).stdout
+    rows, total = {}, 0
+    for line in out.splitlines():
+        m = re.match(r"\s+(\d+)\s+(\d+)\s+(\d+)\s+(\d+)\s*$", line)
+        if m:
+            total += int(m.group(2))
+            rows[int(m.group(1))] = total
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("volume")
+    ap.add_argument("hierarchies", nargs="+")
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--base-build", default="")
+    ap.add_argument("--work", default="/tmp/mlfe_render_e2e")
+    ap.add_argument("--size", default="500x500")
+    ap.add_argument("--tf", default="grey")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--no-vtk", action="store_true")
+    ap.add_argument("--no-levels", action="store_true")
+    ap.add_argument("--json", default="")
+    a = ap.parse_args()
+    os.makedirs(a.work, exist_ok=True)
+    mlfe = os.path.join(a.build, "converters", "mlfe")
+    helper = os.path.join(a.build, "bench", "render_bench")
+    builds = [("new", mlfe)]
+    if a.base_build:
+        builds.append(("base", os.path.join(a.base_build, "converters", "mlfe")))
+    w, h = [int(x) for x in a.size.lower().split("x")]
+    view = ["--azimuth", "0", "--elevation", "0", "--tf", a.tf]
+    res = {"volume": a.volume, "size": a.size, "runs": {}}
+
+    def render(tag, binary, src, extra, size):
+        out = os.path.join(a.work, tag + ".exr")
+        r = run_mlfe(binary, ["render", src, "-o", out, "--size", size] + view + extra, a.repeat)
+        r["exr"] = out
+        return r
+
+    ref_setup = render("ref_1x1", mlfe, a.volume, ["--reference"], "1x1")
+    ref = render("ref", mlfe, a.volume, ["--reference"], a.size)
+    res["reference"] = {"setup_s": ref_setup["wall_s"], "end_to_end_s": ref["wall_s"], "frame_s": ref["frame_s"]}
+    print(json.dumps({"reference": res["reference"]}), flush=True)
+    for H in a.hierarchies:
+        name = os.path.basename(H)
+        for bname, binary in builds:
+            s = render("%s_%s_1x1" % (name, bname), binary, H, [], "1x1")
+            e = render("%s_%s" % (name, bname), binary, H, [], a.size)
+            row = {"setup_s": s["wall_s"], "end_to_end_s": e["wall_s"], "frame_s": e["frame_s"],
+                   "psnr_db": psnr(helper, e["exr"], ref["exr"]), "stats": e["stats"]}
+            res["runs"]["%s/%s" % (name, bname)] = row
+            print(json.dumps({name + "/" + bname: row}), flush=True)
+    if not a.no_levels:
+        H = a.hierarchies[0]
+        verts = level_vertices(mlfe, H)
+        res["levels"] = []
+        for k in sorted(verts):
+            e = render("level%d" % k, mlfe, H, ["--level", str(k)], a.size)
+            row = {"level": k, "vertices": verts[k], "end_to_end_s": e["wall_s"], "frame_s": e["frame_s"],
+                   "psnr_db": psnr(helper, e["exr"], ref["exr"])}
+            res["levels"].append(row)
+            print(json.dumps(row), flush=True)
+    if not a.no_vtk:
+        env = dict(os.environ)
+        xvfb = None
+        if "DISPLAY" not in env:
+            xvfb = subprocess.Popen(["Xvfb", ":88", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            time.sleep(1.5)
+            env["DISPLAY"] = ":88"
+        try:
+            prefix = os.path.join(a.work, "vtk")
+            setup = json.loads(subprocess.run([helper, "setup", a.volume, a.hierarchies[0], "0", "0", str(w), str(h),
+                                               a.tf, prefix], capture_output=True, text=True, check=True).stdout)
+            setup_path = prefix + "_setup.json"
+            with open(setup_path, "w") as f:
+                json.dump(setup, f)
+            res["vtk"] = {}
+            for label, dist in (("fixed_1voxel", 1.0 * min(setup["spacing"])),
+                                ("fixed_half_voxel", 0.5 * min(setup["spacing"]))):
+                cfg = dict(kind="fixed", setup=setup_path, size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
+                           sample_distance=dist, png=prefix + "_" + label + ".png")
+                p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
+                                   capture_output=True, text=True, env=dict(env, OMP_NUM_THREADS="2"))
+                res["vtk"][label] = (json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else
+                                     {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
+                print(json.dumps({label: res["vtk"][label]}), flush=True)
+        finally:
+            if xvfb:
+                xvfb.terminate()
+                xvfb.wait()
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(res, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
