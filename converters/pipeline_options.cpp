@@ -3,8 +3,10 @@
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/usage_error.h>
+#include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -119,6 +121,20 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
 
 namespace {
 
+// Ctrl-C: the first one asks the running call to stop at its next progress report (it then
+// throws Cancelled and leaves no output); the handler resets itself, so a second one ends the
+// process at once.
+std::atomic<bool> interrupted{false};
+void on_interrupt(int) { interrupted.store(true); }
+
+void install_interrupt_handler() {
+  struct sigaction sa {};
+  sa.sa_handler = on_interrupt;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESETHAND;
+  sigaction(SIGINT, &sa, nullptr);
+}
+
 // One progress display per process: the bar's state, so status lines can clear it.
 struct Display {
   bool bar_shown = false;
@@ -142,13 +158,14 @@ void status_line(const std::string& text) {
 }
 
 pipeline::Progress progress_display(const std::string& command, bool quiet) {
-  if (quiet) return {};
+  install_interrupt_handler();
+  if (quiet) return [](double, const std::string&) { return !interrupted.load(); };
   display() = Display{};
   if (isatty(fileno(stderr))) {
     return [command](double fraction, const std::string& stage) {
       Display& d = display();
       const int percent = static_cast<int>(std::floor(100 * fraction));
-      if (percent == d.percent && stage == d.stage) return true;
+      if (percent == d.percent && stage == d.stage) return !interrupted.load();
       d.percent = percent;
       d.stage = stage;
       constexpr int kWidth = 30;
@@ -162,18 +179,18 @@ pipeline::Progress progress_display(const std::string& command, bool quiet) {
         d.bar_shown = true;
       }
       std::fflush(stderr);
-      return true;
+      return !interrupted.load();
     };
   }
   return [command](double fraction, const std::string& stage) {
     Display& d = display();
-    if (stage == d.stage) return true;
+    if (stage == d.stage) return !interrupted.load();
     d.stage = stage;
     // The long tail of a command, after its input was read and checked: a bad input still
     // fails with its one-line error (reading, extracting), and the build prints its own table.
     if ((stage == "rendering" || stage == "resampling" || stage == "writing") && fraction < 1)
       std::fprintf(stderr, "%s: %s\n", command.c_str(), stage.c_str());
-    return true;
+    return !interrupted.load();
   };
 }
 

@@ -48,7 +48,9 @@ void print_warnings(const std::vector<std::string>& warnings);
 /// The progress of `command` ("mlfe convert") on stderr, nothing when quiet: on a terminal one
 /// bar redrawn in place ([#####.....] 45% building); otherwise a line when one of the last
 /// stages starts (rendering, resampling, writing), so logs show where the time goes without a
-/// line per percent (the build prints its own table).
+/// line per percent (the build prints its own table). Also installs the Ctrl-C handler: the
+/// first Ctrl-C makes the returned Progress (quiet too) ask the call to stop, which then throws
+/// pipeline::Cancelled with no output written; a second one ends the process.
 pipeline::Progress progress_display(const std::string& command, bool quiet);
 
 /// Prints one line of text on stderr, clearing a progress bar drawn on the terminal first.
