@@ -91,4 +91,20 @@ template std::vector<std::uint16_t> leaf_labels<2>(const Hierarchy<2>&, const st
 template std::vector<std::uint16_t> leaf_labels<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                                    const std::vector<double>&);
 
+nlohmann::json label_metadata(const ScalarGrid& grid, const std::string& label_table,
+                              std::vector<std::string>& warnings) {
+  const LabelGrid lg = label_grid(grid);
+  LabelTable table;
+  if (!label_table.empty()) {
+    table = read_label_table(label_table);
+  } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
+    try {
+      table = read_label_table(found);
+    } catch (const Error& e) {
+      warnings.push_back(std::string(e.what()) + " (found beside the volume; not used)");
+    }
+  }
+  return stored_label_table(table, label_counts(lg));
+}
+
 }  // namespace mlfe::cli

@@ -16,8 +16,6 @@
 #include <string>
 #include <vector>
 
-#include "converters/pipeline_options.h"
-
 namespace mlfe::cli {
 
 /// The error-bounded build of a label map keeps every decoded sample within this of its label
@@ -31,11 +29,11 @@ constexpr double kLabelSampleBound = 0.25;
 nlohmann::json stored_label_table(const LabelTable& table,
                                   const std::map<std::uint16_t, std::size_t>& counts);
 
-/// Writes the label hierarchy of `grid` to `output` as `mlfe build --labels` does (cmd_build.cpp;
-/// `input` for the provenance, the table from `label_table` or beside the volume) and prints
-/// its path; `convert --labels --hierarchy`. Throws mlfe::Error for values that are not labels.
-void write_label_hierarchy(const ScalarGrid& grid, const std::string& input, const std::string& output,
-                           const std::string& label_table, const BuildParams& params);
+/// The label metadata `mlfe build --labels` stores (pipeline::build): the labels of `grid`
+/// checked (label_grid: bad input before any output) and the table from `label_table`, else the
+/// one beside the volume when it parses (a warning appended to `warnings` when it does not).
+nlohmann::json label_metadata(const ScalarGrid& grid, const std::string& label_table,
+                              std::vector<std::string>& warnings);
 
 /// Whether the file's metadata holds a stored label table (written by `mlfe build --labels`).
 bool is_label_hierarchy(const HierarchyFile& f);

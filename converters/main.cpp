@@ -1,5 +1,6 @@
 // mlfe: multilevel finite elements for volume data (Grosso, Lürig & Ertl, IEEE Vis 1997).
-// Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file).
+// Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file), 130
+// interrupted (Ctrl-C; no output written).
 // `compare` follows diff(1) instead: 0 equal, 1 different, 2 bad input or usage error.
 #include <mlfe/core/error.h>
 #include <mlfe/core/usage_error.h>
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "converters/commands.h"
+#include "converters/pipeline_options.h"
 
 namespace mlfe::cli {
 int& thread_option() {
@@ -147,17 +149,20 @@ int main(int argc, char** argv) {
     if (status == 0) return 0;
     suggest(app, argc, argv);
     return usage_status;
+  } catch (const mlfe::pipeline::Cancelled&) {  // Ctrl-C (progress_display): nothing written
+    mlfe::cli::status_line("mlfe: interrupted");
+    return 130;
   } catch (const mlfe::UsageError& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return app.got_subcommand("compare") ? 2 : 1;
   } catch (const mlfe::Error& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return 2;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "mlfe: out of memory\n");
+    mlfe::cli::status_line("mlfe: out of memory");
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return 2;
   }
   return mlfe::cli::command_exit_status();

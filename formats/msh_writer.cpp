@@ -8,6 +8,57 @@
 #include <ostream>
 
 namespace mlfe {
+namespace {
+
+using Box = std::pair<std::array<double, 3>, std::array<double, 3>>;
+
+// The elements' groups: one without regions; with regions one per label present (ascending),
+// each with the box of its elements; element tags 1..m numbered group by group.
+struct MshGroups {
+  std::vector<std::uint16_t> labels;  ///< with regions: the labels present, ascending
+  std::vector<Box> box;
+  std::vector<std::size_t> block_size, element_tag;
+};
+
+template <int D>
+MshGroups msh_groups(const Hierarchy<D>& h, const std::vector<ElemId>& elems, const ElementRegions* regions,
+                     const std::vector<std::array<double, 3>>& xyz, const std::vector<std::uint32_t>& tag,
+                     const Box& all) {
+  MshGroups out;
+  std::vector<std::uint16_t>& groups = out.labels;
+  if (regions) {
+    groups = regions->label;
+    std::sort(groups.begin(), groups.end());
+    groups.erase(std::unique(groups.begin(), groups.end()), groups.end());
+  }
+  const std::size_t n_groups = regions ? groups.size() : 1;
+  out.box.assign(n_groups, all);
+  std::vector<char> box_set(n_groups, 0);
+  out.block_size.assign(n_groups, 0);
+  out.element_tag.assign(elems.size(), 0);
+  const auto group_of = [&](std::size_t i) {
+    return regions ? std::size_t(std::lower_bound(groups.begin(), groups.end(), regions->label[i]) -
+                                 groups.begin())
+                   : std::size_t(0);
+  };
+  for (std::size_t i = 0; i < elems.size(); ++i) {
+    const std::size_t g = group_of(i);
+    ++out.block_size[g];
+    if (!regions) continue;
+    auto& [glo, ghi] = out.box[g];
+    for (VertexId v : h.cell(elems[i])) {
+      const auto& q = xyz[tag[v.value] - 1];
+      if (!box_set[g]) glo = ghi = q, box_set[g] = 1;
+      for (int r = 0; r < 3; ++r) glo[r] = std::min(glo[r], q[r]), ghi[r] = std::max(ghi[r], q[r]);
+    }
+  }
+  std::vector<std::size_t> next(n_groups, 1);
+  for (std::size_t g = 1; g < n_groups; ++g) next[g] = next[g - 1] + out.block_size[g - 1];
+  for (std::size_t i = 0; i < elems.size(); ++i) out.element_tag[i] = next[group_of(i)]++;
+  return out;
+}
+
+}  // namespace
 
 template <int D>
 void write_msh(const std::string& path, const Hierarchy<D>& h, const std::vector<ElemId>& elems,
@@ -44,38 +95,12 @@ void write_msh(const std::string& path, const Hierarchy<D>& h, const std::vector
     for (int i = 0; i < 3; ++i) lo[i] = std::min(lo[i], q[i]), hi[i] = std::max(hi[i], q[i]);
 
   // Step 1b: the regions' groups (labels present, ascending), their boxes, the element tags.
-  std::vector<std::uint16_t> groups;
-  if (regions) {
-    groups = regions->label;
-    std::sort(groups.begin(), groups.end());
-    groups.erase(std::unique(groups.begin(), groups.end()), groups.end());
-  }
+  const MshGroups mg = msh_groups(h, elems, regions, xyz, tag, Box{lo, hi});
+  const std::vector<std::uint16_t>& groups = mg.labels;
+  const auto& group_box = mg.box;
+  const auto& block_size = mg.block_size;
+  const auto& element_tag = mg.element_tag;
   const auto physical_tag = [](std::uint16_t l) { return l == 0 ? 65536 : int(l); };
-  const std::size_t n_groups = regions ? groups.size() : 1;
-  std::vector<std::pair<std::array<double, 3>, std::array<double, 3>>> group_box(n_groups, {lo, hi});
-  std::vector<char> box_set(n_groups, 0);
-  std::vector<std::size_t> block_size(n_groups, 0), element_tag(elems.size(), 0);
-  const auto group_of = [&](std::size_t i) {
-    return regions ? std::size_t(std::lower_bound(groups.begin(), groups.end(), regions->label[i]) -
-                                 groups.begin())
-                   : std::size_t(0);
-  };
-  for (std::size_t i = 0; i < elems.size(); ++i) {
-    const std::size_t g = group_of(i);
-    ++block_size[g];
-    if (!regions) continue;
-    auto& [glo, ghi] = group_box[g];
-    for (VertexId v : h.cell(elems[i])) {
-      const auto& q = xyz[tag[v.value] - 1];
-      if (!box_set[g]) glo = ghi = q, box_set[g] = 1;
-      for (int r = 0; r < 3; ++r) glo[r] = std::min(glo[r], q[r]), ghi[r] = std::max(ghi[r], q[r]);
-    }
-  }
-  {
-    std::vector<std::size_t> next(n_groups, 1);
-    for (std::size_t g = 1; g < n_groups; ++g) next[g] = next[g - 1] + block_size[g - 1];
-    for (std::size_t i = 0; i < elems.size(); ++i) element_tag[i] = next[group_of(i)]++;
-  }
   // An element's node tags, ordered to positive volume in the physical frame.
   const auto oriented = [&](std::size_t i) {
     std::array<std::uint32_t, D + 1> t{};
