@@ -1,10 +1,14 @@
-// The Python module `mlfe`: the pipeline library (converters/pipeline.h) for scripts and
-// notebooks. Volumes are NumPy arrays indexed [i, j, k] (x, y, z; 2D height fields [i, j]);
-// spacing, origin and direction follow the same axes. Arrays handed out (volumes read, surfaces
-// extracted, hierarchy values) are views of the C++ buffers, kept alive by their owner; a volume
-// passed in is copied once into the grid the library samples. The GIL is released while the
+// The extension `mlfe._mlfe`: the pipeline library (include/mlfe/pipeline.h) for the Python
+// package `mlfe` (python/mlfe/__init__.py), which checks and names the keywords, wraps the
+// results in documented classes and is the public interface. Volumes are NumPy arrays indexed [i, j, k] (x,
+// y, z; 2D height fields [i, j]); spacing, origin and direction follow the same axes. Arrays handed out
+// (volumes read, surfaces extracted, hierarchy values) are views of the C++ buffers, kept alive by their
+// owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
 #include <mlfe/core/error.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 #include <pybind11/numpy.h>
@@ -250,27 +254,124 @@ struct PyBuilt {
   std::shared_ptr<const Built> built;
   std::shared_ptr<const ScalarGrid> grid;
   std::string source;  // the input, for reports and provenance
+  // A loaded hierarchy file's error figures and metadata (null for a build).
+  nlohmann::json file_info;
 };
+
+// Extracted surfaces (one per iso-value, or the height field) with what writing them needs.
+struct PyMesh {
+  std::vector<GltfSurface> surfaces;
+  TriangleMesh merged;  // all surfaces in one mesh, as the single-mesh formats store them
+  std::string space;
+  double default_tolerance = 0;  // a tenth of the smallest voxel spacing
+  nlohmann::json extras;         // provenance for glTF
+};
+
+TriangleMesh merge_surfaces(const std::vector<GltfSurface>& surfaces) {
+  TriangleMesh all;
+  for (const auto& s : surfaces) {
+    const auto base = std::uint32_t(all.positions.size());
+    all.positions.insert(all.positions.end(), s.mesh.positions.begin(), s.mesh.positions.end());
+    all.normals.insert(all.normals.end(), s.mesh.normals.begin(), s.mesh.normals.end());
+    for (const auto& t : s.mesh.triangles) all.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  if (all.normals.size() != all.positions.size()) all.normals.clear();
+  return all;
+}
+
+// Writes extracted surfaces by extension as write_assets does: glTF with one node per surface,
+// the other formats one merged mesh.
+void write_mesh(const PyMesh& m, const std::string& path, bool draco, bool quantize, double tolerance) {
+  check_output_path(path, kAssetExtensions);
+  if (!(tolerance >= 0)) throw Error("tolerance: expected a value >= 0");
+  const double tol = tolerance > 0 ? tolerance : m.default_tolerance;
+  const std::string ext = lower_extension(path);
+  if (ext == ".glb" || ext == ".gltf") {
+    GltfOptions o;
+    o.draco = draco;
+    o.quantize = quantize;
+    o.tolerance_mm = tol;
+    o.space = m.space;
+    o.extras = m.extras;
+    o.extras["tolerance_mm"] = tol;
+    write_gltf(path, m.surfaces, o);
+  } else if (ext == ".drc") {
+    DracoOptions o;
+    o.tolerance = tol;
+    write_draco_file(path, m.merged, o);
+  } else {
+    write_mesh_file(path, m.merged);
+  }
+}
+
+// Leaf simplices of `b` as an (m, dim + 1) array of vertex indices.
+py::array_t<std::int64_t> leaf_cells(const Built& b) {
+  return b.visit([](const auto& a) {
+    constexpr int kCorners = std::tuple_size_v<typename std::decay_t<decltype(a.hierarchy)>::Cell>;
+    const auto leaves = a.hierarchy.leaves();
+    py::array_t<std::int64_t> out({py::ssize_t(leaves.size()), py::ssize_t(kCorners)});
+    auto w = out.template mutable_unchecked<2>();
+    for (std::size_t e = 0; e < leaves.size(); ++e)
+      for (int c = 0; c < kCorners; ++c)
+        w(py::ssize_t(e), c) = std::int64_t(a.hierarchy.cell(leaves[e])[c].value);
+    return out;
+  });
+}
+
+// Vertex positions of `b` in the physical frame (millimetres), (n, 3) float64.
+py::array_t<double> physical_positions(const Built& b) {
+  return b.visit([&b](const auto& a) {
+    const auto& pts = a.hierarchy.points();
+    py::array_t<double> out({py::ssize_t(pts.size()), py::ssize_t(3)});
+    auto w = out.template mutable_unchecked<2>();
+    for (std::size_t v = 0; v < pts.size(); ++v) {
+      std::array<double, 3> local{0, 0, 0};
+      for (std::size_t c = 0; c < pts[v].size(); ++c) local[c] = pts[v][c];
+      const auto q = b.transform.local_to_physical(local);
+      for (int c = 0; c < 3; ++c) w(py::ssize_t(v), c) = q[c];
+    }
+    return out;
+  });
+}
+
+py::array_t<std::uint8_t> vertex_levels(const Built& b) {
+  return b.visit([](const auto& a) {
+    const auto& l = a.hierarchy.vertex_level_array();
+    py::array_t<std::uint8_t> out(py::ssize_t(l.size()));
+    if (!l.empty()) std::memcpy(out.mutable_data(), l.data(), l.size());
+    return out;
+  });
+}
+
+// mlfe.load: the hierarchy file as a Built, with the error figures and metadata of its header
+// (read again on its coarsest level only).
+PyBuilt load_py(const py::object& path_like) {
+  const std::string path = py::str(py::module_::import("os").attr("fspath")(path_like));
+  PyBuilt out;
+  out.source = path;
+  HierarchyFile header;
+  {
+    py::gil_scoped_release release;
+    out.built = std::make_shared<const Built>(built_from_file(path));
+    header = read_hierarchy(path, 0);
+  }
+  auto figure = [](double v) { return std::isnan(v) ? nlohmann::json() : nlohmann::json(v); };
+  out.file_info = {{"norm", header.norm},
+                   {"rms", figure(header.rms_error)},
+                   {"max", figure(header.max_error)},
+                   {"psnr_db", figure(header.psnr_db)},
+                   {"sample_error_bound", figure(header.sample_error_bound)},
+                   {"value_bound", header.value_bound},
+                   {"version", header.version},
+                   {"metadata", header.metadata}};
+  return out;
+}
 
 // The path of a .vtu/.msh tetrahedral mesh, or "" for anything else (arrays, volume files).
 std::string tet_mesh_path(const py::object& volume) {
   if (!py::isinstance<py::str>(volume) && !py::hasattr(volume, "__fspath__")) return "";
   const std::string path = py::str(py::module_::import("os").attr("fspath")(volume));
   return detect_tet_mesh_format(path).empty() ? "" : path;
-}
-
-py::tuple mesh_arrays(TriangleMesh&& m) {
-  auto owner = std::make_shared<TriangleMesh>(std::move(m));
-  const auto f3 = py::ssize_t(3 * sizeof(float)), u3 = py::ssize_t(3 * sizeof(std::uint32_t));
-  const auto nv = py::ssize_t(owner->positions.size()), nn = py::ssize_t(owner->normals.size()),
-             nt = py::ssize_t(owner->triangles.size());
-  auto vertices = view<float>(owner, owner->positions.empty() ? nullptr : owner->positions[0].data(), {nv, 3},
-                              {f3, py::ssize_t(sizeof(float))});
-  auto normals = view<float>(owner, owner->normals.empty() ? nullptr : owner->normals[0].data(), {nn, 3},
-                             {f3, py::ssize_t(sizeof(float))});
-  auto indices = view<std::uint32_t>(owner, owner->triangles.empty() ? nullptr : owner->triangles[0].data(),
-                                     {nt, 3}, {u3, py::ssize_t(sizeof(std::uint32_t))});
-  return py::make_tuple(vertices, normals, indices);
 }
 
 PyBuilt build_py(const py::object& volume, const py::object& iso, const py::object& spacing,
@@ -384,49 +485,98 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
 }  // namespace
 }  // namespace mlfe::python
 
-PYBIND11_MODULE(mlfe, m) {
+PYBIND11_MODULE(_mlfe, m) {
   using namespace mlfe;
   using namespace mlfe::python;
   m.doc() =
-      "mlfe: adaptive multilevel finite-element approximation of volume data (hierarchies, "
-      "iso-surfaces, glTF/Draco assets). Arrays are indexed [i, j, k] (x fastest in memory).";
+      "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
+      "arguments.";
   m.attr("__version__") = MLFE_VERSION;
   py::register_exception<Error>(m, "Error", PyExc_ValueError);
 
-  m.def("read_volume", &read_volume_py, py::arg("path"),
-        "Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png).\n"
-        "Returns (values, spacing, origin, info): values a float32 array indexed [i, j, k] (a view,\n"
-        "no copy), spacing and origin per axis, info a dict (direction rows, space, format,\n"
-        "source_type, notes).");
+  m.def("read_volume", &read_volume_py, py::arg("path"));
+  m.def("load", &load_py, py::arg("path"));
 
-  py::class_<PyBuilt>(m, "Hierarchy",
-                      "An adaptive approximation built by mlfe.build(): the hierarchy, u at its "
-                      "vertices and the build's statistics.")
+  py::class_<PyMesh, std::shared_ptr<PyMesh>>(m, "Mesh")
+      .def_property_readonly("vertices",
+                             [](std::shared_ptr<PyMesh> s) {
+                               const auto& p = s->merged.positions;
+                               return view<float>(
+                                   s, p.empty() ? nullptr : p[0].data(), {py::ssize_t(p.size()), 3},
+                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
+                             })
+      .def_property_readonly("normals",
+                             [](std::shared_ptr<PyMesh> s) {
+                               const auto& n = s->merged.normals;
+                               return view<float>(
+                                   s, n.empty() ? nullptr : n[0].data(), {py::ssize_t(n.size()), 3},
+                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
+                             })
+      .def_property_readonly(
+          "triangles",
+          [](std::shared_ptr<PyMesh> s) {
+            const auto& t = s->merged.triangles;
+            return view<std::uint32_t>(
+                s, t.empty() ? nullptr : t[0].data(), {py::ssize_t(t.size()), 3},
+                {py::ssize_t(3 * sizeof(std::uint32_t)), py::ssize_t(sizeof(std::uint32_t))});
+          })
+      .def_property_readonly("iso",
+                             [](const PyMesh& s) {
+                               std::vector<double> v;
+                               for (const auto& x : s.surfaces) v.push_back(x.iso_value);
+                               return v;
+                             })
+      .def_property_readonly("surface_triangles",
+                             [](const PyMesh& s) {
+                               std::vector<std::size_t> v;
+                               for (const auto& x : s.surfaces) v.push_back(x.mesh.triangles.size());
+                               return v;
+                             })
+      .def_property_readonly("space", [](const PyMesh& s) { return s.space; })
+      .def("write",
+           [](const PyMesh& s, const std::string& path, bool draco, bool quantize, double tolerance) {
+             py::gil_scoped_release release;
+             write_mesh(s, path, draco, quantize, tolerance);
+           });
+
+  py::class_<PyBuilt>(m, "Hierarchy")
       .def_property_readonly("dim", [](const PyBuilt& b) { return b.built->dim(); })
       .def_property_readonly("levels", [](const PyBuilt& b) { return b.built->levels(); })
-      .def_property_readonly("vertices", [](const PyBuilt& b) { return b.built->vertices(); })
-      .def_property_readonly("elements", [](const PyBuilt& b) { return b.built->leaves(); })
+      .def_property_readonly("vertex_count", [](const PyBuilt& b) { return b.built->vertices(); })
+      .def_property_readonly("leaf_count", [](const PyBuilt& b) { return b.built->leaves(); })
       .def_property_readonly("stop_reason", [](const PyBuilt& b) { return b.built->stop_reason(); })
       .def_property_readonly("surface_driven", [](const PyBuilt& b) { return b.built->surface_driven; })
       .def_property_readonly("memory_limited", [](const PyBuilt& b) { return b.built->memory_limited(); })
       .def_property_readonly("seconds", [](const PyBuilt& b) { return b.built->seconds; })
+      .def_property_readonly("source", [](const PyBuilt& b) { return b.source; })
+      .def_property_readonly("space", [](const PyBuilt& b) { return b.built->space; })
       .def_property_readonly(
-          "errors",
-          [](const PyBuilt& b) {
-            py::dict d;
-            if (b.built->iterations().empty()) return d;  // u not solved (no output held it)
-            const auto& last = b.built->iterations().back();
-            d["rms"] = last.rms_error;
-            d["rms_percent"] = last.rms_percent;
-            d["l2"] = last.l2_error;
-            d["psnr_db"] = last.psnr_db;
-            return d;
-          },
-          "the final error of u against the data: rms, rms_percent (of the value range), l2, psnr_db")
+          "value_range",
+          [](const PyBuilt& b) { return py::make_tuple(b.built->value_min, b.built->value_max); })
+      .def_property_readonly("transform",
+                             [](const PyBuilt& b) {
+                               const auto& t = b.built->transform;
+                               return py::make_tuple(t.spacing, t.origin, t.direction);
+                             })
+      .def_property_readonly("has_volume", [](const PyBuilt& b) { return bool(b.grid); })
+      .def_property_readonly("file_info", [](const PyBuilt& b) { return to_python(b.file_info); })
+      .def_property_readonly("positions", [](const PyBuilt& b) { return physical_positions(*b.built); })
+      .def_property_readonly("cells", [](const PyBuilt& b) { return leaf_cells(*b.built); })
+      .def_property_readonly("vertex_levels", [](const PyBuilt& b) { return vertex_levels(*b.built); })
+      .def_property_readonly("errors",
+                             [](const PyBuilt& b) {
+                               py::dict d;
+                               if (b.built->iterations().empty()) return d;  // u not solved
+                               const auto& last = b.built->iterations().back();
+                               d["rms"] = last.rms_error;
+                               d["rms_percent"] = last.rms_percent;
+                               d["l2"] = last.l2_error;
+                               d["psnr_db"] = last.psnr_db;
+                               return d;
+                             })
       .def_property_readonly(
           "report",
-          [](const PyBuilt& b) { return to_python(build_report(b.source, b.grid.get(), *b.built)); },
-          "the JSON report of `mlfe build --report` as a dict (per-iteration rows included)")
+          [](const PyBuilt& b) { return to_python(build_report(b.source, b.grid.get(), *b.built)); })
       .def_property_readonly(
           "values",
           [](const PyBuilt& b) {
@@ -434,72 +584,56 @@ PYBIND11_MODULE(mlfe, m) {
             auto a = view<double>(b.built, v.data(), {py::ssize_t(v.size())}, {py::ssize_t(sizeof(double))});
             py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
             return a;
-          },
-          "u at every vertex (a read-only view)")
-      .def(
-          "extract",
-          [](const PyBuilt& b, double iso, const py::kwargs& kwargs) {
-            Options kw(kwargs);
-            AssetOptions o = asset_options(kw);
-            kw.finish();
-            o.iso = {iso};
-            Surfaces s;
-            {
-              py::gil_scoped_release release;
-              s = extract(*b.built, o, b.grid.get());
-            }
-            return mesh_arrays(std::move(s.surfaces.at(0).mesh));
-          },
-          py::arg("iso"),
-          "The iso-surface at `iso` as (vertices float32 (n, 3), normals float32 (n, 3), indices uint32\n"
-          "(m, 3)), physical millimetres; asset options (simplify, snap, normals, ...) as in convert.")
-      .def(
-          "write",
-          [](const PyBuilt& b, const py::object& out, const py::kwargs& kwargs) {
-            Options kw(kwargs);
-            py::object iso = kw.has("iso") ? kw.take("iso") : py::none();
-            AssetOptions o = asset_options(kw);
-            kw.finish();
-            if (!iso.is_none()) o.iso = iso.cast<std::vector<double>>();
-            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
-            const nlohmann::json prov = {{"input", b.source},
-                                         {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
-            nlohmann::json summary;
-            {
-              py::gil_scoped_release release;
-              summary = write_assets(path, *b.built, o, prov, b.grid.get());
-            }
-            return to_python(summary);
-          },
-          py::arg("out"), "Writes the iso-surfaces (iso=[...]) as an asset, by extension, as convert does.")
-      .def(
-          "save",
-          [](const PyBuilt& b, const py::object& out) {
-            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
-            check_output_path(path, {".mlfeh"});
-            py::gil_scoped_release release;
-            write_built(path, *b.built, {{"input", b.source}});
-          },
-          py::arg("out"), "Writes the hierarchy file (.mlfeh).");
+          })
+      .def("extract",
+           [](const PyBuilt& b, const std::vector<double>& iso, const py::kwargs& kwargs) {
+             Options kw(kwargs);
+             AssetOptions o = asset_options(kw);
+             kw.finish();
+             o.iso = iso;
+             auto mesh = std::make_shared<PyMesh>();
+             {
+               py::gil_scoped_release release;
+               Surfaces s = extract(*b.built, o, b.grid.get());
+               mesh->extras = {{"input", b.source},
+                               {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
+                               {"iso_values", s.iso_values},
+                               {"normals", to_string(s.normals)}};
+               mesh->surfaces = std::move(s.surfaces);
+             }
+             mesh->merged = merge_surfaces(mesh->surfaces);
+             mesh->space = b.built->space;
+             const auto& sp = b.built->transform.spacing;
+             mesh->default_tolerance =
+                 (b.built->dim() == 2 ? std::min(sp[0], sp[1]) : std::min({sp[0], sp[1], sp[2]})) / 10.0;
+             return mesh;
+           })
+      .def("write",
+           [](const PyBuilt& b, const std::string& path, const std::vector<double>& iso,
+              const py::kwargs& kwargs) {
+             Options kw(kwargs);
+             AssetOptions o = asset_options(kw);
+             kw.finish();
+             o.iso = iso;
+             const nlohmann::json prov = {{"input", b.source},
+                                          {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
+             nlohmann::json summary;
+             {
+               py::gil_scoped_release release;
+               summary = write_assets(path, *b.built, o, prov, b.grid.get());
+             }
+             return to_python(summary);
+           })
+      .def("save", [](const PyBuilt& b, const std::string& path) {
+        check_output_path(path, {".mlfeh"});
+        py::gil_scoped_release release;
+        write_built(path, *b.built, {{"input", b.source}});
+      });
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
-        py::arg("space") = "",
-        "Builds the adaptive approximation of `volume`: a volume file, a tetrahedral mesh with point\n"
-        "values (.vtu, .msh: its P1 interpolant is the input), or an array indexed [i, j, k].\n"
-        "Options as `mlfe build`: rms ('0.5%' or a number in data units), threshold, max_vertices,\n"
-        "max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,\n"
-        "max_memory ('50%' or bytes). With iso values and no global target, refinement follows\n"
-        "the surfaces.");
+        py::arg("space") = "");
   m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
-        py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
-        "Volume (file, .vtu/.msh mesh or array) in, asset out (.glb .gltf .drc .ply .obj .stl .off),\n"
-        "as `mlfe convert`. Returns the\n"
-        "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
-        "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap, min_component,\n"
-        "normals_toward_higher, normals, placement, z_scale, level.\n"
-        "labels=True (or a list of labels, or '3,7-9'): the volume is a label map; one closed,\n"
-        "named, coloured surface per structure (as `mlfe convert --labels`), with label_table,\n"
-        "min_component, smooth_iterations, max_offset, simplify, tolerance, draco, quantize.");
+        py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none());
 }

@@ -1,0 +1,501 @@
+"""mlfe: adaptive multilevel finite-element approximation of volume data.
+
+Volumes (NIfTI, NRRD, MetaImage, raw, OpenVDB, NumPy arrays) become adaptive tetrahedral
+hierarchies (Grosso, Lürig & Ertl, IEEE Vis 1997), iso-surface assets (glTF + Draco, PLY, OBJ,
+STL, OFF) and ray-cast images, with the same pipeline and options as the ``mlfe`` command line.
+
+Arrays and frames
+-----------------
+A volume is a NumPy array indexed ``[i, j, k]`` (x, y, z; a 2D height field ``[i, j]``) together
+with its frame: the map from voxel indices to physical millimetres. Keep the frame with the
+values: a :class:`Volume` carries both, :func:`read_volume` returns one, and every call accepts
+it as it is. Passing only ``spacing``/``origin`` drops the direction (an oblique or flipped scan
+then lands in the wrong place).
+
+- nibabel: ``mlfe.Volume(img.get_fdata(dtype=np.float32), affine=img.affine)`` (or
+  :meth:`Volume.from_nibabel`). nibabel's affine maps voxel ``(i, j, k)`` to **RAS+**
+  millimetres, which is how the command line reads a NIfTI file's sform/qform, so the result is
+  the command line's on the same file; ``space`` defaults to ``"RAS"`` with ``affine=``.
+- SimpleITK: ``sitk.GetArrayFromImage`` returns the array indexed ``[k, j, i]`` (z first).
+  Transpose it and pass ITK's frame, which is **LPS**:
+  ``mlfe.Volume(arr.transpose(2, 1, 0), spacing=img.GetSpacing(), origin=img.GetOrigin(),
+  direction=np.reshape(img.GetDirection(), (3, 3)), space="LPS")``.
+
+Errors
+------
+Bad input raises :class:`mlfe.Error` (a ``ValueError``) with a one-line message naming the
+keyword or file at fault; no output file is left behind.
+"""
+from __future__ import annotations
+
+import functools
+import math
+import numbers
+import os
+import re
+
+import numpy as np
+
+from . import _mlfe
+from ._mlfe import Error
+
+__version__ = _mlfe.__version__
+
+__all__ = [
+    "Error",
+    "Hierarchy",
+    "Mesh",
+    "Volume",
+    "build",
+    "convert",
+    "load",
+    "read_volume",
+    "__version__",
+]
+
+_SPACES = ("", "RAS", "LPS")
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages: the library shares its checks with the command line, whose messages name flags
+# (--max-level); Python callers see the keyword (max_level) instead.
+_FLAG = re.compile(r"(?<![\w/.-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
+_ISO_EXAMPLE = re.compile(r"e\.g\. --iso ([0-9.,]+)")
+
+
+def _keyword_message(text):
+    text = _ISO_EXAMPLE.sub(lambda m: "e.g. iso=[%s]" % m.group(1).replace(",", ", "), text)
+    return _FLAG.sub(lambda m: m.group(1).replace("-", "_"), text)
+
+
+def _library_call(f):
+    """Runs a call into the extension, rewording command-line flags in its errors."""
+
+    @functools.wraps(f)
+    def wrapper(*args, **kwargs):
+        try:
+            return f(*args, **kwargs)
+        except Error as e:
+            text = str(e)
+            fixed = _keyword_message(text)
+            if fixed == text:
+                raise
+            raise Error(fixed) from None
+
+    return wrapper
+
+
+# ---------------------------------------------------------------------------------------------
+# Argument checks, each naming the keyword.
+def _fspath(value):
+    return os.fspath(value) if isinstance(value, (str, os.PathLike)) else None
+
+
+def _numbers(name, value, lengths, positive=False):
+    """A tuple of finite floats whose length is one of `lengths`."""
+    try:
+        v = [float(x) for x in np.asarray(value, dtype=float).reshape(-1)]
+    except (TypeError, ValueError):
+        raise Error("%s: expected numbers, got %r" % (name, value)) from None
+    if isinstance(value, (str, bytes)) or len(v) not in lengths:
+        want = " or ".join(str(n) for n in lengths)
+        raise Error("%s: expected %s numbers, got %d" % (name, want, len(v)))
+    for x in v:
+        if not math.isfinite(x) or (positive and x <= 0):
+            raise Error("%s: expected finite%s numbers, got %s" % (name, " positive" if positive else "", v))
+    return tuple(v)
+
+
+def _matrix(name, value):
+    try:
+        m = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise Error("%s: expected a 3x3 matrix, got %r" % (name, value)) from None
+    if m.shape != (3, 3):
+        raise Error("%s: expected a 3x3 matrix, got shape %s" % (name, m.shape))
+    if not np.isfinite(m).all():
+        raise Error("%s: non-finite entries" % name)
+    if abs(np.linalg.det(m)) < 1e-12:
+        raise Error("%s: the axes are degenerate (determinant 0)" % name)
+    return m
+
+
+def _space(value):
+    space = "" if value is None else str(value)
+    if space not in _SPACES:
+        raise Error("space: expected 'RAS', 'LPS' or '' (unknown), got %r" % value)
+    return space
+
+
+def _iso_values(iso):
+    """iso=1.5, iso=[1.5, 3], iso=np.array(...): a list of finite floats, or None."""
+    if iso is None:
+        return None
+    if isinstance(iso, (str, bytes, bool)):
+        raise Error("iso: expected a number or a list of numbers, got %r" % (iso,))
+    if isinstance(iso, numbers.Real):
+        values = [float(iso)]
+    else:
+        try:
+            values = [float(x) for x in np.asarray(iso, dtype=float).reshape(-1)]
+        except (TypeError, ValueError):
+            raise Error("iso: expected a number or a list of numbers, got %r" % (iso,)) from None
+    if not values:
+        raise Error("iso: expected at least one value")
+    for v in values:
+        if not math.isfinite(v):
+            raise Error("iso: expected finite numbers, got %s" % values)
+    return values
+
+
+def _affine_frame(affine):
+    """spacing, origin and direction (rows) of a voxel → millimetre affine (4x4 or 3x4)."""
+    try:
+        a = np.array(affine, dtype=float)
+    except (TypeError, ValueError):
+        raise Error("affine: expected a 4x4 matrix, got %r" % (affine,)) from None
+    if a.shape not in ((4, 4), (3, 4)):
+        raise Error("affine: expected a 4x4 (or 3x4) matrix, got shape %s" % (a.shape,))
+    if not np.isfinite(a).all():
+        raise Error("affine: non-finite entries")
+    if a.shape == (4, 4) and not np.allclose(a[3], [0, 0, 0, 1]):
+        raise Error("affine: the last row must be 0 0 0 1, got %s" % a[3].tolist())
+    columns = a[:3, :3]
+    spacing = np.linalg.norm(columns, axis=0)
+    for axis, s in enumerate(spacing):
+        if not s > 0:
+            raise Error("affine: voxel axis %d has a zero step" % axis)
+    direction = columns / spacing
+    if abs(np.linalg.det(direction)) < 1e-12:
+        raise Error("affine: the voxel axes are degenerate (determinant 0)")
+    return tuple(float(s) for s in spacing), tuple(float(o) for o in a[:3, 3]), direction
+
+
+# ---------------------------------------------------------------------------------------------
+class Volume:
+    """Sampled values with their frame: voxel ``(i, j, k)`` lies at
+    ``origin + direction @ (spacing * (i, j, k))`` millimetres, in the anatomical ``space``.
+
+    ``Volume(values, affine=A)`` takes a 4x4 voxel → millimetre affine (nibabel's ``img.affine``,
+    RAS+, so ``space`` defaults to ``"RAS"``); ``Volume(values, spacing=..., origin=...,
+    direction=..., space=...)`` takes ITK's/NRRD's parts (``direction`` rows: column ``a`` is
+    voxel axis ``a``'s unit step). ``values`` is indexed ``[i, j, k]`` (or ``[i, j]`` for a
+    height field); a SimpleITK array ``[k, j, i]`` must be transposed first (see the module
+    documentation). Values are kept as given (no copy); the library copies them once, as
+    float32, when a call reads them.
+    """
+
+    __slots__ = ("values", "spacing", "origin", "direction", "space", "info")
+
+    def __init__(self, values, *, affine=None, spacing=None, origin=None, direction=None, space=None, info=None):
+        self.values = _checked_values("values", values)
+        n = self.values.ndim
+        if affine is not None:
+            if spacing is not None or origin is not None or direction is not None:
+                raise Error("affine: give either affine or spacing/origin/direction, not both")
+            spacing, origin, direction = _affine_frame(affine)
+            space = "RAS" if space is None else space
+            spacing = spacing[:n]
+        self.spacing = _numbers("spacing", (1.0,) * n if spacing is None else spacing, (n,), positive=True)
+        self.origin = _numbers("origin", (0.0,) * n if origin is None else origin, (n, 3))
+        self.direction = np.eye(3) if direction is None else _matrix("direction", direction)
+        self.space = _space(space)
+        self.info = {} if info is None else dict(info)
+
+    @classmethod
+    def from_nibabel(cls, image):
+        """A nibabel image (NIfTI-1/2): its scaled data as float32 and ``image.affine`` (RAS+).
+        nibabel's affine is the sform when its code is set, else the qform, as the command line
+        reads the file; without either, nibabel's fallback affine is used."""
+        data = np.asarray(image.get_fdata(dtype=np.float32))
+        if data.ndim == 4 and data.shape[3] == 1:
+            data = data[..., 0]
+        return cls(data, affine=image.affine, space="RAS")
+
+    @property
+    def shape(self):
+        return self.values.shape
+
+    @property
+    def ndim(self):
+        return self.values.ndim
+
+    @property
+    def affine(self):
+        """The 4x4 voxel ``(i, j, k)`` → millimetre matrix (in ``space``)."""
+        a = np.eye(4)
+        s = np.ones(3)
+        s[: len(self.spacing)] = self.spacing
+        a[:3, :3] = self.direction * s
+        a[: len(self.origin), 3] = self.origin
+        return a
+
+    def _core_args(self):
+        return dict(
+            spacing=list(self.spacing),
+            origin=list(self.origin),
+            direction=self.direction.tolist(),
+            space=self.space,
+        )
+
+    def __repr__(self):
+        return "mlfe.Volume(shape=%s, dtype=%s, spacing=%s, origin=%s, space=%r%s)" % (
+            tuple(self.values.shape),
+            self.values.dtype,
+            tuple(round(s, 6) for s in self.spacing),
+            tuple(round(o, 6) for o in self.origin),
+            self.space,
+            "" if np.allclose(self.direction, np.eye(3)) else ", oblique",
+        )
+
+
+def _checked_values(name, values):
+    a = np.asarray(values)
+    if a.dtype == object or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)
+                                 or a.dtype == bool):
+        raise Error("%s: expected a numeric array, got dtype %s" % (name, a.dtype))
+    if a.ndim not in (2, 3):
+        raise Error("%s: expected a 2D or 3D array, got %d dimensions" % (name, a.ndim))
+    if np.issubdtype(a.dtype, np.floating):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            first = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise Error("%s: %d NaN or infinite values (the first at %s); replace them first" %
+                        (name, int(bad.sum()), first))
+    return a
+
+
+def _volume_args(volume, spacing, origin, direction, affine, space):
+    """The extension's (volume, frame keywords) for a path, a Volume or an array + frame."""
+    path = _fspath(volume)
+    frame_given = [k for k, v in (("spacing", spacing), ("origin", origin), ("direction", direction),
+                                  ("affine", affine), ("space", space)) if v is not None]
+    if path is not None:
+        if frame_given:
+            raise Error("%s: a file brings its own frame (read it with mlfe.read_volume to change it)" %
+                        frame_given[0])
+        return path, {}
+    if isinstance(volume, Volume):
+        if frame_given:
+            raise Error("%s: the Volume brings its own frame (make a new Volume to change it)" % frame_given[0])
+        v = volume
+    else:
+        v = Volume(_checked_values("volume", volume), affine=affine, spacing=spacing, origin=origin,
+                   direction=direction, space=space)
+    return v.values, v._core_args()
+
+
+# ---------------------------------------------------------------------------------------------
+class Mesh:
+    """Extracted iso-surfaces in physical millimetres: ``vertices`` float32 (n, 3), ``normals``
+    float32 (n, 3) (or (0, 3)), ``triangles`` uint32 (m, 3) counter-clockwise seen from the
+    normals' side; all surfaces merged, ``iso`` and ``surface_triangles`` per surface. The
+    arrays are read-only views of the library's buffers."""
+
+    __slots__ = ("_m",)
+
+    def __init__(self, core):
+        self._m = core
+
+    @property
+    def vertices(self):
+        return self._m.vertices
+
+    @property
+    def normals(self):
+        return self._m.normals
+
+    @property
+    def triangles(self):
+        return self._m.triangles
+
+    @property
+    def iso(self):
+        return list(self._m.iso)
+
+    @property
+    def surface_triangles(self):
+        return list(self._m.surface_triangles)
+
+    @property
+    def space(self):
+        return self._m.space
+
+    @_library_call
+    def write(self, path, *, draco=True, quantize=False, tolerance=0.0):
+        """Writes the surfaces by extension: .glb/.gltf (one node per surface; Draco unless
+        ``draco=False``, ``quantize`` for KHR_mesh_quantization), .drc, .ply, .obj, .stl, .off
+        (one merged mesh). ``tolerance``: millimetres for Draco/quantization (0: a tenth of the
+        smallest voxel spacing). Atomic: nothing is left behind on error."""
+        self._m.write(os.fspath(path), bool(draco), bool(quantize), float(tolerance))
+
+    def __len__(self):
+        return len(self._m.triangles)
+
+    def __repr__(self):
+        return "mlfe.Mesh(vertices=%d, triangles=%d, iso=%s)" % (len(self.vertices), len(self.triangles), self.iso)
+
+
+# ---------------------------------------------------------------------------------------------
+class Hierarchy:
+    """An adaptive approximation: the nested tetrahedral (2D: triangular) hierarchy and the
+    function u on its vertices. Made by :func:`build` or :func:`load` (``Hierarchy(path)`` loads
+    a ``.mlfeh`` file too).
+
+    ``positions`` are the vertices in the physical frame (millimetres, float64 (n, 3)),
+    ``tetrahedra`` the leaf cells as vertex indices (int64 (m, 4); 2D: ``cells`` (m, 3)),
+    ``values`` u at every vertex, ``vertex_levels`` the level each vertex appeared on.
+    """
+
+    __slots__ = ("_h",)
+
+    def __init__(self, source):
+        path = _fspath(source)
+        if path is not None:
+            source = _library_call(_mlfe.load)(path)
+        elif not isinstance(source, _mlfe.Hierarchy):
+            raise Error("Hierarchy: expected a .mlfeh path (or use mlfe.build), got %r" % (source,))
+        self._h = source
+
+    dim = property(lambda self: self._h.dim, doc="2 (height field) or 3")
+    levels = property(lambda self: self._h.levels, doc="number of refinement levels (the coarsest is 0)")
+    vertex_count = property(lambda self: self._h.vertex_count)
+    leaf_count = property(lambda self: self._h.leaf_count, doc="leaf cells (tetrahedra in 3D)")
+    space = property(lambda self: self._h.space, doc="'RAS', 'LPS' or '' of the physical frame")
+    value_range = property(lambda self: tuple(self._h.value_range), doc="the source data's (min, max)")
+    stop_reason = property(lambda self: self._h.stop_reason, doc="why refinement stopped (builds)")
+    surface_driven = property(lambda self: self._h.surface_driven)
+    memory_limited = property(lambda self: self._h.memory_limited)
+    seconds = property(lambda self: self._h.seconds)
+    source = property(lambda self: self._h.source, doc="the input file ('array' for arrays)")
+
+    @property
+    def positions(self):
+        """Vertex positions in the physical frame (millimetres), float64 (n, 3)."""
+        return self._h.positions
+
+    @property
+    def cells(self):
+        """Leaf cells as vertex indices: int64 (m, 4) tetrahedra in 3D, (m, 3) triangles in 2D."""
+        return self._h.cells
+
+    @property
+    def tetrahedra(self):
+        """Leaf tetrahedra, int64 (m, 4) (3D hierarchies)."""
+        if self.dim != 3:
+            raise Error("tetrahedra: a 2D hierarchy has triangles (use cells)")
+        return self._h.cells
+
+    @property
+    def values(self):
+        """u at every vertex, float64 (n,) (read-only view)."""
+        return self._h.values
+
+    @property
+    def vertex_levels(self):
+        """The level each vertex was created on, uint8 (n,)."""
+        return self._h.vertex_levels
+
+    @property
+    def frame(self):
+        """(spacing, origin, direction rows) of the local → physical map."""
+        spacing, origin, direction = self._h.transform
+        return tuple(spacing), tuple(origin), np.array(direction).reshape(3, 3)
+
+    @property
+    def errors(self):
+        """The approximation's error against its data. Built here: rms, rms_percent (of the
+        value range), l2, psnr_db (empty when u was not solved: surface-driven builds without a
+        hierarchy output). Loaded: what the file records (norm, rms, max, psnr_db,
+        sample_error_bound; None where unknown)."""
+        if self._h.file_info is not None:
+            info = self._h.file_info
+            return {k: info[k] for k in ("norm", "rms", "max", "psnr_db", "sample_error_bound")}
+        return dict(self._h.errors)
+
+    @property
+    def report(self):
+        """The JSON report of ``mlfe build --report`` as a dict."""
+        return self._h.report
+
+    @property
+    def metadata(self):
+        """A loaded file's metadata (provenance); {} for a build."""
+        info = self._h.file_info
+        return {} if info is None else info.get("metadata", {})
+
+    @_library_call
+    def extract(self, iso=None, **options):
+        """The iso-surfaces at ``iso`` (a number or a list) as a :class:`Mesh`, extracted as
+        ``mlfe iso``/``mlfe convert`` do. Options (the command line's, as keywords): simplify,
+        simplifier, snap, min_component, normals, placement, normals_toward_higher, decimate,
+        z_scale, level. A 2D height field needs no iso."""
+        isos = _iso_values(iso)
+        if isos is None and self.dim == 3:
+            raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
+        return Mesh(self._h.extract(isos or [], **options))
+
+    @_library_call
+    def write(self, path, *, iso=None, **options):
+        """Extracts and writes the surfaces to ``path`` by extension, as ``mlfe iso``; returns
+        the asset summary. Options as :meth:`extract` plus tolerance, draco, quantize, lod."""
+        isos = _iso_values(iso)
+        if isos is None and self.dim == 3:
+            raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
+        return self._h.write(os.fspath(path), isos or [], **options)
+
+    @_library_call
+    def save(self, path):
+        """Writes the hierarchy file (.mlfeh), as ``mlfe build -o``."""
+        self._h.save(os.fspath(path))
+
+    def __repr__(self):
+        return "mlfe.Hierarchy(dim=%d, levels=%d, vertices=%d, %s=%d, source=%r)" % (
+            self.dim, self.levels, self.vertex_count, "tetrahedra" if self.dim == 3 else "triangles",
+            self.leaf_count, self.source)
+
+
+# ---------------------------------------------------------------------------------------------
+@_library_call
+def read_volume(path):
+    """Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png) as a
+    :class:`Volume` in the file's frame: values float32 indexed ``[i, j, k]`` (a view of the
+    library's buffer, no copy); ``info`` holds format, source_type and notes."""
+    values, spacing, origin, info = _mlfe.read_volume(os.fspath(path))
+    n = values.ndim
+    return Volume(values, spacing=spacing[:n], origin=origin, direction=info["direction"], space=info["space"],
+                  info={k: info[k] for k in ("format", "source_type", "notes")})
+
+
+@_library_call
+def load(path):
+    """Loads a hierarchy file (.mlfeh) written by ``mlfe build``/``convert --hierarchy`` or
+    :meth:`Hierarchy.save`."""
+    return Hierarchy(_mlfe.load(os.fspath(path)))
+
+
+@_library_call
+def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None, **options):
+    """Builds the adaptive approximation of ``volume`` as ``mlfe build`` does: a volume file, a
+    tetrahedral mesh with point values (.vtu, .msh), a :class:`Volume`, or an array indexed
+    ``[i, j, k]`` with its frame (``affine=`` or spacing/origin/direction/space; see
+    :class:`Volume`). Options: rms ('0.5%' or a number in data units), threshold, max_vertices,
+    max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,
+    max_memory. With ``iso`` and no global target, refinement follows the surfaces."""
+    values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
+    return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), **frame, **options))
+
+
+@_library_call
+def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
+            hierarchy=None, report=None, **options):
+    """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
+    the asset summary (triangles per surface, bytes). ``volume`` as in :func:`build`; build
+    options as :func:`build`; asset options: tolerance, draco, quantize, lod, decimate,
+    simplify, simplifier, snap, min_component, normals_toward_higher, normals, placement,
+    z_scale, level. ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
+    ``labels=True`` (or a list, or '3,7-9'): the volume is a label map; one closed, named
+    surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
+    values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
+    paths = {k: (None if v is None else os.fspath(v)) for k, v in (("hierarchy", hierarchy), ("report", report))}
+    return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), **frame, **paths, **options)
