@@ -196,6 +196,38 @@ class FrameTest(unittest.TestCase):
         self.assertEqual(len(counts), 1)
 
 
+class StubTest(unittest.TestCase):
+    def test_stubs_cover_the_public_api(self):
+        """The shipped .pyi stubs declare every public name and member of the package, and the
+        public callables have docstrings."""
+        import ast
+        import mlfe.batch
+
+        for module in (mlfe, mlfe.batch):
+            stub = os.path.splitext(module.__file__)[0] + ".pyi"
+            with open(stub) as f:
+                tree = ast.parse(f.read())
+            declared = {}
+            for node in tree.body:
+                if isinstance(node, ast.ClassDef):
+                    declared[node.name] = {n.name if hasattr(n, "name") else n.target.id for n in node.body
+                                           if isinstance(n, (ast.FunctionDef, ast.AnnAssign))}
+                elif isinstance(node, ast.FunctionDef):
+                    declared[node.name] = set()
+                elif isinstance(node, ast.AnnAssign):
+                    declared[node.target.id] = set()
+            for name in module.__all__:
+                with self.subTest(module=module.__name__, name=name):
+                    self.assertIn(name, declared)
+                    obj = getattr(module, name)
+                    if isinstance(obj, type):
+                        members = {m for m in vars(obj) if not m.startswith("_")}
+                        self.assertEqual(members - declared[name], set())
+                    if callable(obj) and name != "Error":
+                        self.assertTrue(obj.__doc__, name)
+        self.assertTrue(os.path.exists(os.path.join(os.path.dirname(mlfe.__file__), "py.typed")))
+
+
 class BatchTest(unittest.TestCase):
     """mlfe.batch on a LocalCluster of 2 workers: five small scans (NIfTI and NRRD), one of them
     broken; the command line's outputs, the failure reported, resuming skips finished scans."""
