@@ -6,6 +6,7 @@
 // owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
 #include <mlfe/core/error.h>
+#include <mlfe/formats/compare.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/openmesh_io.h>
@@ -482,6 +483,36 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   return to_python(r.asset);
 }
 
+CompareOptions compare_options(const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  CompareOptions o;
+  auto optional = [&kw](const char* name, std::optional<double>& out) {
+    if (!kw.has(name)) return;
+    double v = 0;
+    kw.get(name, v);
+    out = v;
+  };
+  optional("tolerance", o.tolerance);
+  optional("mean_tolerance", o.mean_tolerance);
+  optional("image_max", o.image_max);
+  optional("psnr", o.min_psnr);
+  optional("value_max", o.value_max);
+  optional("value_rms", o.value_rms);
+  kw.get("count_tolerance", o.count_tolerance_percent);
+  kw.get("normal_angle", o.normal_angle_deg);
+  kw.get("samples", o.samples);
+  kw.get("number_tolerance", o.number_tolerance);
+  kw.get("ignore", o.ignore);
+  kw.finish();
+  return o;
+}
+
+py::tuple compare_result(const CompareResult& r) {
+  py::list differences;
+  for (const auto& d : r.differences) differences.append(py::make_tuple(d.item, d.reason));
+  return py::make_tuple(r.kind, differences, to_python(r.report), r.summary());
+}
+
 }  // namespace
 }  // namespace mlfe::python
 
@@ -629,6 +660,25 @@ PYBIND11_MODULE(_mlfe, m) {
         py::gil_scoped_release release;
         write_built(path, *b.built, {{"input", b.source}});
       });
+
+  m.def("compare_files", [](const std::string& expected, const std::string& actual, const py::kwargs& kw) {
+    const CompareOptions o = compare_options(kw);
+    CompareResult r;
+    {
+      py::gil_scoped_release release;
+      r = compare_files(expected, actual, o);
+    }
+    return compare_result(r);
+  });
+  m.def("compare_meshes", [](const PyMesh& expected, const PyMesh& actual, const py::kwargs& kw) {
+    const CompareOptions o = compare_options(kw);
+    CompareResult r;
+    {
+      py::gil_scoped_release release;
+      r = compare_meshes(expected.merged, actual.merged, o);
+    }
+    return compare_result(r);
+  });
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),

@@ -42,11 +42,13 @@ from ._mlfe import Error
 __version__ = _mlfe.__version__
 
 __all__ = [
+    "CompareResult",
     "Error",
     "Hierarchy",
     "Mesh",
     "Volume",
     "build",
+    "compare",
     "convert",
     "load",
     "read_volume",
@@ -499,3 +501,75 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
     paths = {k: (None if v is None else os.fspath(v)) for k, v in (("hierarchy", hierarchy), ("report", report))}
     return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), **frame, **paths, **options)
+
+
+# ---------------------------------------------------------------------------------------------
+class CompareResult:
+    """What :func:`compare` found: ``equal`` (also the truth value), ``kind`` ("mesh", "gltf",
+    "image", "volume", "hierarchy" or "mismatch"), ``differences`` as (item, reason) pairs
+    (empty when equal within the tolerances) and ``report``, every measured figure."""
+
+    __slots__ = ("kind", "differences", "report", "_summary")
+
+    def __init__(self, kind, differences, report, summary):
+        self.kind = kind
+        self.differences = [tuple(d) for d in differences]
+        self.report = report
+        self._summary = summary
+
+    @property
+    def equal(self):
+        return not self.differences
+
+    def __bool__(self):
+        return self.equal
+
+    def __str__(self):
+        return self._summary
+
+    def __repr__(self):
+        if self.equal:
+            return "mlfe.CompareResult(kind=%r, equal=True)" % self.kind
+        return "mlfe.CompareResult(kind=%r, equal=False, differences=%d: %s)" % (
+            self.kind, len(self.differences), "; ".join("%s: %s" % d for d in self.differences[:3]))
+
+
+def _count_tolerance(value):
+    if isinstance(value, str):
+        text = value.strip()
+        if not text.endswith("%"):
+            raise Error("count_tolerance: expected a percentage such as '2%%' or a number, got %r" % value)
+        text = text[:-1]
+    else:
+        text = value
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        raise Error("count_tolerance: expected a percentage such as '2%%' or a number, got %r" % (value,)) from None
+    if not (math.isfinite(v) and v >= 0):
+        raise Error("count_tolerance: expected a finite percentage >= 0, got %r" % (value,))
+    return v
+
+
+@_library_call
+def compare(expected, actual, **options):
+    """Compares two outputs by content, as ``mlfe compare EXPECTED ACTUAL``: files (meshes,
+    glTF, EXR/PNG images, volumes, hierarchies; the kind from their contents) or two
+    :class:`Mesh` objects. Returns a :class:`CompareResult`. Options (the command line's):
+    tolerance (meshes: Hausdorff distance in the files' units, glTF metres), mean_tolerance,
+    count_tolerance ('2%' or a number of percent), normal_angle (degrees), samples, image_max,
+    psnr, value_max, value_rms, number_tolerance, ignore (JSON pointers, e.g.
+    ['/asset/extras/tool'])."""
+    if "count_tolerance" in options:
+        options["count_tolerance"] = _count_tolerance(options["count_tolerance"])
+    if "ignore" in options:
+        ignore = options["ignore"]
+        options["ignore"] = [ignore] if isinstance(ignore, str) else list(ignore)
+    if isinstance(expected, Mesh) or isinstance(actual, Mesh):
+        if not (isinstance(expected, Mesh) and isinstance(actual, Mesh)):
+            raise Error("compare: a Mesh is compared with a Mesh (write it to compare with a file)")
+        return CompareResult(*_mlfe.compare_meshes(expected._m, actual._m, **options))
+    for name, value in (("expected", expected), ("actual", actual)):
+        if _fspath(value) is None:
+            raise Error("%s: expected a file path or a Mesh, got %s" % (name, type(value).__name__))
+    return CompareResult(*_mlfe.compare_files(os.fspath(expected), os.fspath(actual), **options))

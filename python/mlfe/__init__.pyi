@@ -130,3 +130,13 @@ def convert(
     report: Optional[PathLike] = ...,
     **options: Any,
 ) -> Dict[str, Any]: ...
+
+class CompareResult:
+    kind: str
+    differences: List[Tuple[str, str]]
+    report: Dict[str, Any]
+    @property
+    def equal(self) -> bool: ...
+    def __bool__(self) -> bool: ...
+
+def compare(expected: Union[PathLike, Mesh], actual: Union[PathLike, Mesh], **options: Any) -> CompareResult: ...

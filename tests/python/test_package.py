@@ -28,14 +28,20 @@ def cli(*args):
     return subprocess.run([BINARY, *args], capture_output=True, text=True)
 
 
-def compare(expected, actual, provenance=False):
-    """`mlfe compare`'s verdict: (equal, output); provenance False ignores the glTF extras that
-    name the tool ("mlfe X (python)") and the input ("array" for arrays), and the hierarchy
-    metadata's tool."""
-    ignore = [] if provenance else ["--ignore", "/asset/extras/tool", "--ignore", "/asset/extras/input",
-                                    "--ignore", "/tool"]
-    r = cli("compare", *ignore, expected, actual)
-    return r.returncode == 0, r.stdout + r.stderr
+IGNORE_PROVENANCE = ["/asset/extras/tool", "/asset/extras/input", "/tool"]
+
+
+def compare(expected, actual):
+    """mlfe.compare's verdict (equal, text), ignoring the provenance that names the tool
+    ("mlfe X (python)") and the input ("array" for arrays) in glTF extras and hierarchy metadata."""
+    r = mlfe.compare(expected, actual, ignore=IGNORE_PROVENANCE)
+    return r.equal, str(r)
+
+
+def cli_compare(expected, actual):
+    """`mlfe compare`'s exit status with the same ignores."""
+    ignore = [a for p in IGNORE_PROVENANCE for a in ("--ignore", p)]
+    return cli("compare", "--quiet", *ignore, expected, actual).returncode
 
 
 def read_ply(path):
@@ -124,7 +130,11 @@ class FrameTest(unittest.TestCase):
         lossy = self.path("lossy.glb")
         mlfe.convert(values, lossy, iso=40, spacing=np.linalg.norm(affine[:3, :3], axis=0), origin=affine[:3, 3],
                      space="RAS")
-        self.assertFalse(compare(cli_glb, lossy)[0])
+        equal, report = compare(cli_glb, lossy)
+        self.assertFalse(equal)
+        self.assertIn("Hausdorff", report)
+        # mlfe.compare is `mlfe compare`: the same verdicts.
+        self.assertEqual((cli_compare(cli_glb, lossy), cli_compare(cli_glb, self.path("volume.glb"))), (1, 0))
         # The Volume's frame is the file's: read_volume of the NIfTI gives the same affine.
         v = mlfe.read_volume(nii)
         np.testing.assert_allclose(v.affine, affine, atol=1e-5)
