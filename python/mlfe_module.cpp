@@ -9,6 +9,7 @@
 #include <mlfe/formats/compare.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
+#include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
@@ -678,6 +679,22 @@ PYBIND11_MODULE(_mlfe, m) {
       r = compare_meshes(expected.merged, actual.merged, o);
     }
     return compare_result(r);
+  });
+
+  m.def("read_image", [](const std::string& path) {
+    std::shared_ptr<Image> img;
+    {
+      py::gil_scoped_release release;
+      img = std::make_shared<Image>(read_image(path));
+    }
+    py::dict channels, types;
+    const auto s = py::ssize_t(sizeof(float));
+    for (const auto& c : img->channels) {
+      channels[py::str(c.name)] =
+          view<float>(img, c.values.data(), {img->height, img->width}, {s * img->width, s});
+      types[py::str(c.name)] = c.type;
+    }
+    return py::make_tuple(img->format, channels, types, img->attributes);
   });
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),

@@ -51,6 +51,7 @@ __all__ = [
     "compare",
     "convert",
     "load",
+    "read_image",
     "read_volume",
     "__version__",
 ]
@@ -573,3 +574,13 @@ def compare(expected, actual, **options):
         if _fspath(value) is None:
             raise Error("%s: expected a file path or a Mesh, got %s" % (name, type(value).__name__))
     return CompareResult(*_mlfe.compare_files(os.fspath(expected), os.fspath(actual), **options))
+
+
+@_library_call
+def read_image(path):
+    """Reads an OpenEXR (as ``mlfe render`` writes: half R, G, B, A premultiplied and float Z)
+    or PNG image: a dict with ``format``, ``channels`` (name → float32 array (height, width),
+    rows from the top; PNG values scaled to [0, 1]), ``types`` (name → "half", "float",
+    "uint8", ...) and ``attributes`` (the EXR header's, as text)."""
+    fmt, channels, types, attributes = _mlfe.read_image(os.fspath(path))
+    return {"format": fmt, "channels": dict(channels), "types": dict(types), "attributes": dict(attributes)}
