@@ -82,64 +82,42 @@ class Options {
   std::map<std::string, py::object> left_;
 };
 
+// Text options through the pipeline's vocabulary (the command line's parse functions), named
+// by their Python keyword; numbers are taken as they are.
 template <class E>
-E choice(const std::string& text, const char* what, std::initializer_list<std::pair<const char*, E>> values) {
-  std::string names;
-  for (const auto& v : values) {
-    if (text == v.first) return v.second;
-    names += (names.empty() ? "" : ", ") + std::string(v.first);
-  }
-  throw Error(std::string(what) + ": '" + text + "' is not one of " + names);
+void get_enum(Options& kw, const char* name, E& out) {
+  std::string text;
+  kw.get(name, text);
+  if (!text.empty()) out = pipeline::parse_enum<E>(text, name);
+}
+
+// A Python object as option text: str as it is, numbers in their shortest exact spelling.
+std::string option_text(const py::object& o) {
+  if (py::isinstance<py::str>(o)) return o.cast<std::string>();
+  if (py::isinstance<py::bool_>(o) || !(py::isinstance<py::int_>(o) || py::isinstance<py::float_>(o)))
+    return std::string(py::str(py::repr(o)));  // fails in the parser with the value shown
+  return py::str(o);
+}
+
+// Numbers as "a,b,c" for the vocabulary's parsers (shortest round-trip spelling).
+std::string fmt_vector(const std::vector<double>& v) {
+  std::string text;
+  for (double x : v) text += (text.empty() ? "" : ",") + std::string(py::str(py::float_(x)));
+  return text;
 }
 
 BuildOptions build_options(Options& kw) {
   BuildOptions o;
-  if (kw.has("rms")) {
-    py::object r = kw.take("rms");
-    if (py::isinstance<py::str>(r)) {
-      std::string t = r.cast<std::string>();
-      RmsTarget target;
-      target.percent_of_range = !t.empty() && t.back() == '%';
-      if (target.percent_of_range) t.pop_back();
-      std::size_t used = 0;
-      try {
-        target.value = std::stod(t, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used == 0 || used != t.size())
-        throw Error("rms: expected e.g. '0.5%' or a number, got '" + t + "'");
-      o.rms = target;
-    } else {
-      o.rms = RmsTarget{r.cast<double>(), false};
-    }
-  }
+  if (kw.has("rms")) o.rms = pipeline::parse_rms(option_text(kw.take("rms")), "rms");
   kw.get("threshold", o.threshold);
   kw.get("max_vertices", o.max_vertices);
   kw.get("max_level", o.max_level);
   kw.get("start_level", o.start_level);
-  std::string norm = "l2", pre = "auto";
-  kw.get("norm", norm);
-  o.norm = choice<Norm>(norm, "norm", {{"l2", Norm::kL2}, {"h1", Norm::kH1}});
-  kw.get("preconditioner", pre);
-  o.preconditioner = choice<Preconditioner>(pre, "preconditioner",
-                                            {{"auto", Preconditioner::kAuto},
-                                             {"bpx", Preconditioner::kBpx},
-                                             {"jacobi", Preconditioner::kJacobi},
-                                             {"none", Preconditioner::kNone}});
+  get_enum(kw, "norm", o.norm);
+  get_enum(kw, "preconditioner", o.preconditioner);
   kw.get("surface_tolerance", o.surface_tolerance);
   kw.get("check_u", o.check_against_u);
-  if (kw.has("max_memory")) {
-    py::object m = kw.take("max_memory");
-    if (py::isinstance<py::str>(m)) {
-      const std::string t = m.cast<std::string>();
-      if (t.empty() || t.back() != '%') throw Error("max_memory: a percentage text ('50%') or bytes (int)");
-      o.max_memory.amount = std::stod(t.substr(0, t.size() - 1));
-    } else {
-      o.max_memory.percent_of_ram = false;
-      o.max_memory.amount = m.cast<double>();
-    }
-  }
+  if (kw.has("max_memory")) o.max_memory = pipeline::parse_memory_budget(option_text(kw.take("max_memory")), "max_memory");
   return o;
 }
 
@@ -151,28 +129,61 @@ AssetOptions asset_options(Options& kw) {
   kw.get("lod", o.lod);
   kw.get("decimate", o.decimate);
   kw.get("simplify", o.simplify);
-  std::string simplifier = "auto", normals = "auto", placement = "auto";
-  kw.get("simplifier", simplifier);
-  o.simplifier = choice<Simplifier>(simplifier, "simplifier",
-                                    {{"auto", Simplifier::kAuto},
-                                     {"fast", Simplifier::kFast},
-                                     {"bounded", Simplifier::kBounded},
-                                     {"meshopt", Simplifier::kMeshopt}});
+  get_enum(kw, "simplifier", o.simplifier);
   kw.get("snap", o.snap);
   kw.get("min_component", o.min_component);
   kw.get("normals_toward_higher", o.normals_toward_higher);
-  kw.get("normals", normals);
-  o.normals = choice<Normals>(
-      normals, "normals",
-      {{"auto", Normals::kAuto}, {"gradient", Normals::kGradient}, {"surface", Normals::kSurface}});
-  kw.get("placement", placement);
-  o.placement = choice<VertexPlacement>(placement, "placement",
-                                        {{"auto", VertexPlacement::kAuto},
-                                         {"input", VertexPlacement::kInput},
-                                         {"optimal", VertexPlacement::kOptimal}});
+  get_enum(kw, "normals", o.normals);
+  get_enum(kw, "placement", o.placement);
   kw.get("z_scale", o.z_scale);
   kw.get("level", o.level);
   return o;
+}
+
+// progress=: a Python callable (fraction, stage) -> None/True to go on, False to cancel, as a
+// pipeline Progress. Reports come on the calling thread while the GIL is released; the
+// callback takes it. Ctrl-C (a pending signal) and an exception raised by the callback cancel
+// the call too; with_progress then raises that exception instead of mlfe.Cancelled.
+struct ProgressState {
+  py::object callback;  // None: only signals are checked
+  std::unique_ptr<py::error_already_set> error;
+};
+
+Progress make_progress(const std::shared_ptr<ProgressState>& state) {
+  return [state](double fraction, const std::string& stage) -> bool {
+    py::gil_scoped_acquire gil;
+    if (state->error) return false;
+    try {
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      if (state->callback.is_none()) return true;
+      const py::object r = state->callback(fraction, stage);
+      return r.is_none() || PyObject_IsTrue(r.ptr()) == 1;
+    } catch (py::error_already_set& e) {
+      state->error = std::make_unique<py::error_already_set>(std::move(e));
+      return false;
+    }
+  };
+}
+
+// Runs work(progress) without the GIL; a cancel caused by Python re-raises its exception.
+template <class F>
+auto with_progress(const py::object& callback, F&& work) {
+  if (!callback.is_none() && !PyCallable_Check(callback.ptr()))
+    throw Error("progress: expected a callable (fraction, stage), got " + std::string(py::str(callback.get_type())));
+  auto state = std::make_shared<ProgressState>();
+  state->callback = callback;
+  const Progress progress = make_progress(state);
+  try {
+    py::gil_scoped_release release;
+    return work(progress);
+  } catch (const Cancelled&) {
+    if (state->error) {
+      py::error_already_set e = std::move(*state->error);
+      state->error.reset();
+      throw e;
+    }
+    throw;
+  }
 }
 
 // A grid from an array indexed [i, j(, k)]: one copy into the library's x-fastest layout.
@@ -378,23 +389,25 @@ std::string tet_mesh_path(const py::object& volume) {
 
 PyBuilt build_py(const py::object& volume, const py::object& iso, const py::object& spacing,
                  const py::object& origin, const py::object& direction, const std::string& space,
-                 const py::kwargs& kwargs) {
+                 const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
-  const BuildOptions options = build_options(kw);
+  BuildOptions options = build_options(kw);
   kw.finish();
   const std::vector<double> isos = iso.is_none() ? std::vector<double>{} : iso.cast<std::vector<double>>();
   PyBuilt out;
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
-    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
-      throw Error("spacing, origin and direction are for arrays; a file brings its own");
-    py::gil_scoped_release release;
-    out.built = std::make_shared<const Built>(build(read_tet_mesh(mesh), options, isos));
+    out.built = with_progress(progress, [&](const Progress& p) {
+      options.fraction_progress = p;
+      return std::make_shared<const Built>(build(read_tet_mesh(mesh), options, isos));
+    });
     out.source = mesh;
     return out;
   }
   auto grid = grid_from(volume, spacing, origin, direction, space);
-  py::gil_scoped_release release;
-  out.built = std::make_shared<const Built>(build(*grid, options, isos));
+  out.built = with_progress(progress, [&](const Progress& p) {
+    options.fraction_progress = p;
+    return std::make_shared<const Built>(build(*grid, options, isos));
+  });
   out.source = grid->source;
   out.grid = std::move(grid);
   return out;
@@ -446,7 +459,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
 py::object convert_py(const py::object& volume, const py::object& out, const py::object& iso,
                       const py::object& spacing, const py::object& origin, const py::object& direction,
                       const std::string& space, const py::object& hierarchy, const py::object& report,
-                      const py::kwargs& kwargs) {
+                      const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
   if (kw.has("labels")) {
     py::object picked = kw.take("labels");
@@ -466,22 +479,106 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
   // Checked before reading or copying the volume.
   check_output_path(out_path, kAssetExtensions);
-  ConvertResult r;
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
-    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
-      throw Error("spacing, origin and direction are for arrays; a file brings its own");
-    {
-      py::gil_scoped_release release;
-      r = convert(mesh, out_path, c);
-    }
+    const ConvertResult r = with_progress(progress, [&](const Progress& p) {
+      c.progress = p;
+      return convert(mesh, out_path, c);
+    });
     return to_python(r.asset);
   }
   auto grid = grid_from(volume, spacing, origin, direction, space);
-  {
-    py::gil_scoped_release release;
-    r = convert(*grid, out_path, c);
-  }
+  const ConvertResult r = with_progress(progress, [&](const Progress& p) {
+    c.progress = p;
+    return convert(*grid, out_path, c);
+  });
   return to_python(r.asset);
+}
+
+// "x,y,z" or three numbers, through the vocabulary's parser.
+std::array<double, 3> vector3(Options& kw, const char* name) {
+  const py::object o = kw.take(name);
+  if (py::isinstance<py::str>(o)) return pipeline::parse_vector3(o.cast<std::string>(), name);
+  std::vector<double> v;
+  try {
+    v = o.cast<std::vector<double>>();
+  } catch (const py::cast_error&) {
+    throw Error(std::string(name) + ": expected three numbers or 'x,y,z'");
+  }
+  if (v.size() != 3) throw Error(std::string(name) + ": expected three numbers, got " + std::to_string(v.size()));
+  return pipeline::parse_vector3(fmt_vector(v), name);
+}
+
+pipeline::RenderFileOptions render_options(Options& kw) {
+  pipeline::RenderFileOptions o;
+  kw.get("tf", o.tf);
+  kw.get("tf_unit", o.tf_unit);
+  get_enum(kw, "camera", o.camera);
+  kw.get("azimuth", o.azimuth);
+  kw.get("elevation", o.elevation);
+  if (kw.has("position")) o.position = vector3(kw, "position");
+  if (kw.has("target")) o.target = vector3(kw, "target");
+  if (kw.has("up")) o.up = vector3(kw, "up");
+  if (kw.has("size")) {
+    const py::object size = kw.take("size");
+    std::string text;
+    if (py::isinstance<py::str>(size)) {
+      text = size.cast<std::string>();
+    } else {
+      std::vector<py::object> wh;
+      try {
+        wh = size.cast<std::vector<py::object>>();
+      } catch (const py::cast_error&) {
+      }
+      if (wh.size() != 2) throw Error("size: expected (width, height) or 'WxH'");
+      text = std::string(py::str(wh[0])) + "x" + std::string(py::str(wh[1]));
+    }
+    o.size = pipeline::parse_image_size(text, "size");
+  }
+  kw.get("level", o.level);
+  kw.get("reference", o.reference);
+  get_enum(kw, "integration", o.integration);
+  kw.get("shading", o.shading);
+  kw.get("skip_empty", o.skip_empty);
+  if (kw.has("png")) o.png = py::str(py::module_::import("os").attr("fspath")(kw.take("png")));
+  kw.get("frames", o.frames);
+  if (kw.has("background")) o.background = vector3(kw, "background");
+  kw.get("stop_opacity", o.stop_opacity);
+  kw.get("z_opacity", o.z_opacity);
+  return o;
+}
+
+py::array_t<double> matrix4(const std::array<double, 16>& m) {
+  py::array_t<double> a({4, 4});
+  std::memcpy(a.mutable_data(), m.data(), sizeof(double) * 16);
+  return a;
+}
+
+// The frames of a render: per frame its files, size, seconds, camera matrices and, when kept,
+// RGBA (h, w, 4) and Z (h, w) float32 arrays (rows from the top, as the EXR).
+py::list render_frames(pipeline::RenderResult&& r) {
+  auto owner = std::make_shared<pipeline::RenderResult>(std::move(r));
+  py::list frames;
+  const auto f = py::ssize_t(sizeof(float));
+  for (const auto& fr : owner->frames) {
+    py::dict d;
+    d["exr"] = fr.exr;
+    d["png"] = fr.png;
+    d["width"] = fr.width;
+    d["height"] = fr.height;
+    d["seconds"] = fr.seconds;
+    d["world_to_camera"] = matrix4(fr.camera.world_to_camera());
+    d["world_to_ndc"] = matrix4(fr.camera.world_to_ndc());
+    d["rays"] = fr.stats.rays;
+    d["segments"] = fr.stats.segments;
+    const RenderImage& img = fr.image;
+    const py::ssize_t w = img.width, h = img.height;
+    if (!img.rgba.empty()) {
+      d["rgba"] = view<float>(owner, img.rgba.data(), {h, w, 4}, {4 * f * w, 4 * f, f});
+      d["z"] = view<float>(owner, img.z.data(), {h, w}, {f * w, f});
+    }
+    frames.append(d);
+  }
+  return frames;
 }
 
 CompareOptions compare_options(const py::kwargs& kwargs) {
@@ -499,7 +596,8 @@ CompareOptions compare_options(const py::kwargs& kwargs) {
   optional("psnr", o.min_psnr);
   optional("value_max", o.value_max);
   optional("value_rms", o.value_rms);
-  kw.get("count_tolerance", o.count_tolerance_percent);
+  if (kw.has("count_tolerance"))
+    o.count_tolerance_percent = pipeline::parse_percent(option_text(kw.take("count_tolerance")), "count_tolerance");
   kw.get("normal_angle", o.normal_angle_deg);
   kw.get("samples", o.samples);
   kw.get("number_tolerance", o.number_tolerance);
@@ -525,6 +623,8 @@ PYBIND11_MODULE(_mlfe, m) {
       "arguments.";
   m.attr("__version__") = MLFE_VERSION;
   py::register_exception<Error>(m, "Error", PyExc_ValueError);
+  // Registered after Error: pybind11 tries the later translators first.
+  py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
 
   m.def("read_volume", &read_volume_py, py::arg("path"));
   m.def("load", &load_py, py::arg("path"));
@@ -618,21 +718,22 @@ PYBIND11_MODULE(_mlfe, m) {
             return a;
           })
       .def("extract",
-           [](const PyBuilt& b, const std::vector<double>& iso, const py::kwargs& kwargs) {
+           [](const PyBuilt& b, const std::vector<double>& iso, const py::object& progress,
+              const py::kwargs& kwargs) {
              Options kw(kwargs);
              AssetOptions o = asset_options(kw);
              kw.finish();
              o.iso = iso;
              auto mesh = std::make_shared<PyMesh>();
-             {
-               py::gil_scoped_release release;
-               Surfaces s = extract(*b.built, o, b.grid.get());
-               mesh->extras = {{"input", b.source},
-                               {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
-                               {"iso_values", s.iso_values},
-                               {"normals", to_string(s.normals)}};
-               mesh->surfaces = std::move(s.surfaces);
-             }
+             Surfaces s = with_progress(progress, [&](const Progress& p) {
+               o.progress = p;
+               return extract(*b.built, o, b.grid.get());
+             });
+             mesh->extras = {{"input", b.source},
+                             {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
+                             {"iso_values", s.iso_values},
+                             {"normals", pipeline::enum_name(s.normals)}};
+             mesh->surfaces = std::move(s.surfaces);
              mesh->merged = merge_surfaces(mesh->surfaces);
              mesh->space = b.built->space;
              const auto& sp = b.built->transform.spacing;
@@ -642,25 +743,76 @@ PYBIND11_MODULE(_mlfe, m) {
            })
       .def("write",
            [](const PyBuilt& b, const std::string& path, const std::vector<double>& iso,
-              const py::kwargs& kwargs) {
+              const py::object& progress, const py::kwargs& kwargs) {
              Options kw(kwargs);
              AssetOptions o = asset_options(kw);
              kw.finish();
              o.iso = iso;
              const nlohmann::json prov = {{"input", b.source},
                                           {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
-             nlohmann::json summary;
-             {
-               py::gil_scoped_release release;
-               summary = write_assets(path, *b.built, o, prov, b.grid.get());
-             }
-             return to_python(summary);
+             return to_python(with_progress(progress, [&](const Progress& p) {
+               o.progress = p;
+               return write_assets(path, *b.built, o, prov, b.grid.get());
+             }));
            })
       .def("save", [](const PyBuilt& b, const std::string& path) {
         check_output_path(path, {".mlfeh"});
-        py::gil_scoped_release release;
-        write_built(path, *b.built, {{"input", b.source}});
+        std::string warning;
+        {
+          py::gil_scoped_release release;
+          warning = write_built(path, *b.built, {{"input", b.source}});
+        }
+        if (!warning.empty()) PyErr_WarnEx(PyExc_UserWarning, warning.c_str(), 1);
       });
+
+  m.def("render", [](const PyBuilt& b, const py::object& out, const py::object& progress, const py::kwargs& kwargs) {
+    Options kw(kwargs);
+    pipeline::RenderFileOptions o = render_options(kw);
+    kw.finish();
+    o.keep_images = true;
+    const std::string path = out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+    pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
+      o.progress = p;
+      return path.empty() ? pipeline::render_images(*b.built, o, b.grid.get(), b.source)
+                          : pipeline::render(*b.built, path, o, b.grid.get(), b.source);
+    });
+    py::dict result;
+    result["tetrahedra"] = r.tetrahedra;
+    result["level"] = r.level;
+    result["mesh_bytes"] = r.mesh_bytes;
+    result["written"] = r.written;
+    result["frames"] = render_frames(std::move(r));
+    return result;
+  });
+  m.def("info", [](const std::string& path, bool labels, const std::string& label_table) {
+    pipeline::InfoOptions o;
+    o.labels = labels;
+    o.label_table = label_table;
+    nlohmann::json j;
+    {
+      py::gil_scoped_release release;
+      j = pipeline::info(path, o).to_json();
+    }
+    return to_python(j);
+  });
+  m.def("export_hierarchy", [](const std::string& input, const std::string& output, int level,
+                               const py::object& progress) {
+    pipeline::ExportOptions o;
+    o.level = level;
+    const pipeline::ExportResult r = with_progress(progress, [&](const Progress& p) {
+      o.progress = p;
+      return pipeline::export_hierarchy(input, output, o);
+    });
+    py::dict d;
+    d["mesh"] = r.mesh;
+    d["elements"] = r.elements;
+    d["vertices"] = r.vertices;
+    d["level"] = r.level;
+    d["dims"] = r.dims;
+    d["seconds"] = r.resample_seconds;
+    d["written"] = r.written;
+    return d;
+  });
 
   m.def("compare_files", [](const std::string& expected, const std::string& actual, const py::kwargs& kw) {
     const CompareOptions o = compare_options(kw);
@@ -699,8 +851,9 @@ PYBIND11_MODULE(_mlfe, m) {
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
-        py::arg("space") = "");
+        py::arg("space") = "", py::arg("progress") = py::none());
   m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
-        py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none());
+        py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
+        py::arg("progress") = py::none());
 }

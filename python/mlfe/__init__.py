@@ -21,10 +21,15 @@ then lands in the wrong place).
   ``mlfe.Volume(arr.transpose(2, 1, 0), spacing=img.GetSpacing(), origin=img.GetOrigin(),
   direction=np.reshape(img.GetDirection(), (3, 3)), space="LPS")``.
 
-Errors
-------
+Errors, progress and cancel
+---------------------------
 Bad input raises :class:`mlfe.Error` (a ``ValueError``) with a one-line message naming the
-keyword or file at fault; no output file is left behind.
+keyword or file at fault; no output file is left behind. Every long call takes
+``progress=callback``: ``callback(fraction, stage)`` is called on the calling thread with the
+fraction done in [0, 1] and the stage ("reading", "building", "extracting", "simplifying",
+"rendering", "resampling", "writing"); returning ``False`` cancels the call, which then raises
+:class:`mlfe.Cancelled` (an ``mlfe.Error``) and leaves no output file. An exception raised in
+the callback, or Ctrl-C, cancels the same way and is raised as it is.
 """
 from __future__ import annotations
 
@@ -37,22 +42,27 @@ import re
 import numpy as np
 
 from . import _mlfe
-from ._mlfe import Error
+from ._mlfe import Cancelled, Error
 
 __version__ = _mlfe.__version__
 
 __all__ = [
+    "Cancelled",
     "CompareResult",
     "Error",
     "Hierarchy",
     "Mesh",
     "Volume",
+    "RenderResult",
     "build",
     "compare",
     "convert",
+    "export",
+    "info",
     "load",
     "read_image",
     "read_volume",
+    "render",
     "__version__",
 ]
 
@@ -428,7 +438,7 @@ class Hierarchy:
         return {} if info is None else info.get("metadata", {})
 
     @_library_call
-    def extract(self, iso=None, **options):
+    def extract(self, iso=None, *, progress=None, **options):
         """The iso-surfaces at ``iso`` (a number or a list) as a :class:`Mesh`, extracted as
         ``mlfe iso``/``mlfe convert`` do. Options (the command line's, as keywords): simplify,
         simplifier, snap, min_component, normals, placement, normals_toward_higher, decimate,
@@ -436,16 +446,39 @@ class Hierarchy:
         isos = _iso_values(iso)
         if isos is None and self.dim == 3:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
-        return Mesh(self._h.extract(isos or [], **options))
+        return Mesh(self._h.extract(isos or [], progress, **options))
 
     @_library_call
-    def write(self, path, *, iso=None, **options):
+    def write(self, path, *, iso=None, progress=None, **options):
         """Extracts and writes the surfaces to ``path`` by extension, as ``mlfe iso``; returns
         the asset summary. Options as :meth:`extract` plus tolerance, draco, quantize, lod."""
         isos = _iso_values(iso)
         if isos is None and self.dim == 3:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
-        return self._h.write(os.fspath(path), isos or [], **options)
+        return self._h.write(os.fspath(path), isos or [], progress, **options)
+
+    def render(self, out=None, *, progress=None, **options):
+        """Ray-casts u through the tetrahedral mesh, as ``mlfe render``; see :func:`render`."""
+        return render(self, out, progress=progress, **options)
+
+    @_library_call
+    def export(self, path, *, level=-1, progress=None):
+        """Writes the approximation as ``mlfe export`` does: on the voxel grid it was built from
+        (.nii.gz .nii .nrrd .raw .vdb) or as its leaf mesh with values and levels (.vtu .msh), in
+        the physical frame; ``level`` uses levels 0..level only (-1: all). Returns the summary
+        (written files, counts). A hierarchy built in memory is first saved beside ``path``
+        (exact values) and that file exported."""
+        out = os.fspath(path)
+        if self._h.file_info is not None:
+            return _mlfe.export_hierarchy(self.source, out, int(level), progress)
+        folder = os.path.dirname(os.path.abspath(out))
+        tmp = os.path.join(folder, ".%s.%d.mlfeh" % (os.path.basename(out), os.getpid()))
+        try:
+            self._h.save(tmp)
+            return _mlfe.export_hierarchy(tmp, out, int(level), progress)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
 
     @_library_call
     def save(self, path):
@@ -478,20 +511,22 @@ def load(path):
 
 
 @_library_call
-def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None, **options):
+def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None, progress=None,
+          **options):
     """Builds the adaptive approximation of ``volume`` as ``mlfe build`` does: a volume file, a
     tetrahedral mesh with point values (.vtu, .msh), a :class:`Volume`, or an array indexed
     ``[i, j, k]`` with its frame (``affine=`` or spacing/origin/direction/space; see
     :class:`Volume`). Options: rms ('0.5%' or a number in data units), threshold, max_vertices,
     max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,
-    max_memory. With ``iso`` and no global target, refinement follows the surfaces."""
+    max_memory ('50%', '6G', '512M' or bytes). With ``iso`` and no global target, refinement
+    follows the surfaces. ``progress``: see the module documentation."""
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
-    return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), **frame, **options))
+    return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), progress=progress, **frame, **options))
 
 
 @_library_call
 def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
-            hierarchy=None, report=None, **options):
+            hierarchy=None, report=None, progress=None, **options):
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
     the asset summary (triangles per surface, bytes). ``volume`` as in :func:`build`; build
     options as :func:`build`; asset options: tolerance, draco, quantize, lod, decimate,
@@ -501,7 +536,8 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
     paths = {k: (None if v is None else os.fspath(v)) for k, v in (("hierarchy", hierarchy), ("report", report))}
-    return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), **frame, **paths, **options)
+    return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), progress=progress, **frame, **paths,
+                         **options)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -535,23 +571,6 @@ class CompareResult:
             self.kind, len(self.differences), "; ".join("%s: %s" % d for d in self.differences[:3]))
 
 
-def _count_tolerance(value):
-    if isinstance(value, str):
-        text = value.strip()
-        if not text.endswith("%"):
-            raise Error("count_tolerance: expected a percentage such as '2%%' or a number, got %r" % value)
-        text = text[:-1]
-    else:
-        text = value
-    try:
-        v = float(text)
-    except (TypeError, ValueError):
-        raise Error("count_tolerance: expected a percentage such as '2%%' or a number, got %r" % (value,)) from None
-    if not (math.isfinite(v) and v >= 0):
-        raise Error("count_tolerance: expected a finite percentage >= 0, got %r" % (value,))
-    return v
-
-
 @_library_call
 def compare(expected, actual, **options):
     """Compares two outputs by content, as ``mlfe compare EXPECTED ACTUAL``: files (meshes,
@@ -561,8 +580,6 @@ def compare(expected, actual, **options):
     count_tolerance ('2%' or a number of percent), normal_angle (degrees), samples, image_max,
     psnr, value_max, value_rms, number_tolerance, ignore (JSON pointers, e.g.
     ['/asset/extras/tool'])."""
-    if "count_tolerance" in options:
-        options["count_tolerance"] = _count_tolerance(options["count_tolerance"])
     if "ignore" in options:
         ignore = options["ignore"]
         options["ignore"] = [ignore] if isinstance(ignore, str) else list(ignore)
@@ -584,3 +601,105 @@ def read_image(path):
     "uint8", ...) and ``attributes`` (the EXR header's, as text)."""
     fmt, channels, types, attributes = _mlfe.read_image(os.fspath(path))
     return {"format": fmt, "channels": dict(channels), "types": dict(types), "attributes": dict(attributes)}
+
+
+# ---------------------------------------------------------------------------------------------
+_RENDER_OPTIONS = ("tf", "tf_unit", "camera", "azimuth", "elevation", "position", "target", "up", "size", "level",
+                   "reference", "integration", "shading", "skip_empty", "png", "frames", "background",
+                   "stop_opacity", "z_opacity")
+
+
+class RenderResult:
+    """Images of :func:`render`: ``rgba`` float32 (height, width, 4), premultiplied linear RGBA,
+    and ``z`` float32 (height, width), the distance along the view where the accumulated opacity
+    reaches ``z_opacity`` (inf where it never does), of the first frame; ``frames`` every frame
+    (a dict with rgba, z, exr, png, width, height, seconds, world_to_camera, world_to_ndc);
+    ``written`` the files. Rows run from the top, as in the EXR."""
+
+    __slots__ = ("frames", "written", "tetrahedra", "level")
+
+    def __init__(self, raw):
+        self.frames = raw["frames"]
+        self.written = list(raw["written"])
+        self.tetrahedra = raw["tetrahedra"]
+        self.level = raw["level"]
+
+    @property
+    def rgba(self):
+        return self.frames[0]["rgba"]
+
+    @property
+    def z(self):
+        return self.frames[0]["z"]
+
+    def __repr__(self):
+        f = self.frames[0]
+        return "mlfe.RenderResult(%dx%d, frames=%d, tetrahedra=%d, written=%s)" % (
+            f["width"], f["height"], len(self.frames), self.tetrahedra, self.written)
+
+
+@_library_call
+def render(source, out=None, *, progress=None, **options):
+    """Ray-cast images, as ``mlfe render``: ``source`` a :class:`Hierarchy`, a ``.mlfeh`` file,
+    or a volume (file, :class:`Volume`, array with its frame keywords), built first with the
+    build options given. Returns a :class:`RenderResult` with the arrays; with ``out`` (.exr)
+    also writes the EXR (half RGBA, float Z, camera and transfer function in the header) and
+    with ``png=`` an sRGB preview. Options (the command line's): tf (a preset or a ParaView
+    .json), tf_unit, camera ('ortho', 'perspective'), azimuth, elevation, position, target, up,
+    size ((w, h) or 'WxH'), level, reference (the voxels themselves; volume input), integration
+    ('preintegrated', 'exact', 'trapezoid'), shading, skip_empty, png, frames, background,
+    stop_opacity, z_opacity."""
+    render_opts = {k: options.pop(k) for k in list(options) if k in _RENDER_OPTIONS}
+    if isinstance(source, Hierarchy):
+        if options:
+            raise Error("%s: not a render option (build options need a volume, not a hierarchy)" % sorted(options)[0])
+        h = source
+    else:
+        path = _fspath(source)
+        if path is not None and path.lower().endswith(".mlfeh"):
+            if options:
+                raise Error("%s: not a render option (build options need a volume)" % sorted(options)[0])
+            h = load(path)
+        else:
+            h = build(source, progress=progress, **options)
+    return RenderResult(_mlfe.render(h._h, None if out is None else os.fspath(out), progress, **render_opts))
+
+
+@_library_call
+def export(hierarchy, out, *, level=-1, progress=None):
+    """``mlfe export``: a hierarchy (file or :class:`Hierarchy`) on its voxel grid or as its
+    leaf mesh; see :meth:`Hierarchy.export`."""
+    h = hierarchy if isinstance(hierarchy, Hierarchy) else None
+    if h is not None:
+        return h.export(out, level=level, progress=progress)
+    path = _fspath(hierarchy)
+    if path is None:
+        raise Error("hierarchy: expected a .mlfeh path or an mlfe.Hierarchy, got %s" % type(hierarchy).__name__)
+    return _mlfe.export_hierarchy(path, os.fspath(out), int(level), progress)
+
+
+@_library_call
+def info(source, *, labels=False, label_table=None):
+    """What a volume or hierarchy holds, as ``mlfe info --json`` prints it: for a file (read by
+    its contents), a dict with format, dims, spacing, origin, direction, space, type, range,
+    notes (volumes) or levels, counts per level, error figures, sections (hierarchies);
+    ``labels=True`` lists a label map's labels with voxels, mm³ and names. For a
+    :class:`Volume` or array: its dims, frame, dtype and range; for a :class:`Hierarchy`: its
+    counts, frame and errors."""
+    path = _fspath(source)
+    if path is not None:
+        return _mlfe.info(path, bool(labels), "" if label_table is None else os.fspath(label_table))
+    if labels or label_table is not None:
+        raise Error("labels: listing labels needs a volume file")
+    if isinstance(source, Hierarchy):
+        spacing, origin, direction = source.frame
+        return {"hierarchy": True, "dim": source.dim, "levels": source.levels, "vertices": source.vertex_count,
+                "leaves": source.leaf_count, "spacing": list(spacing), "origin": list(origin),
+                "direction": direction.tolist(), "space": source.space, "range": list(source.value_range),
+                "errors": source.errors, "source": source.source}
+    v = source if isinstance(source, Volume) else Volume(_checked_values("source", source))
+    values = v.values
+    return {"hierarchy": False, "dim": values.ndim, "dims": list(values.shape), "voxels": int(values.size),
+            "type": str(values.dtype), "range": [float(values.min()), float(values.max())] if values.size else [],
+            "spacing": list(v.spacing), "origin": list(v.origin), "direction": v.direction.tolist(),
+            "space": v.space, "affine": v.affine.tolist(), "memory_bytes": int(values.size) * 4}

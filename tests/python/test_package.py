@@ -206,6 +206,108 @@ class FrameTest(unittest.TestCase):
         self.assertEqual(len(counts), 1)
 
 
+class PipelineCallsTest(unittest.TestCase):
+    """render, info, export, progress and cancel against the command line."""
+
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory(prefix="mlfe_calls_test_")
+        self.dir = self.tmp.name
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def path(self, name):
+        return os.path.join(self.dir, name)
+
+    def hierarchy(self):
+        h = self.path("skull.mlfeh")
+        r = cli("build", SKULL, "--rms", "2%", "-o", h, "--quiet")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        return h
+
+    def test_render_arrays_equal_the_command_line_exr(self):
+        h = self.hierarchy()
+        exr = self.path("cli.exr")
+        r = cli("render", h, "-o", exr, "--size", "64x48", "--azimuth", "30", "--elevation", "20", "--quiet")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        image = mlfe.read_image(exr)
+        result = mlfe.render(mlfe.load(h), size=(64, 48), azimuth=30, elevation=20)
+        self.assertEqual(result.rgba.shape, (48, 64, 4))
+        self.assertEqual(result.z.shape, (48, 64))
+        self.assertEqual(result.written, [])
+        self.assertGreater(float(result.rgba[..., 3].max()), 0.05)  # something is drawn
+        for c, name in enumerate("RGBA"):  # the EXR stores half floats
+            np.testing.assert_array_equal(result.rgba[..., c].astype(np.float16).astype(np.float32),
+                                          image["channels"][name], err_msg=name)
+        np.testing.assert_array_equal(result.z, image["channels"]["Z"])
+        # Written from Python: the same image (mlfe.compare), and the path form takes "WxH".
+        out = self.path("py.exr")
+        written = mlfe.render(h, out, size="64x48", azimuth=30, elevation=20)
+        self.assertEqual(written.written, [out])
+        same = mlfe.compare(exr, out, ignore=["/mlfe/tool"])
+        self.assertTrue(all(d[0].startswith("attribute") for d in same.differences), str(same))
+        with self.assertRaisesRegex(mlfe.Error, "^size: "):
+            mlfe.render(h, size="64by48")
+        with self.assertRaisesRegex(mlfe.Error, "^camera: "):
+            mlfe.render(h, camera="fisheye")
+
+    def test_cancel_from_progress_leaves_no_file(self):
+        seen = []
+
+        def stop_when_writing(fraction, stage):
+            seen.append((fraction, stage))
+            return stage != "writing"
+
+        out, hier = self.path("skull.glb"), self.path("skull.mlfeh")
+        with self.assertRaises(mlfe.Cancelled):
+            mlfe.convert(SKULL, out, iso=2.5, hierarchy=hier, progress=stop_when_writing)
+        self.assertFalse(os.path.exists(out) or os.path.exists(hier))
+        self.assertEqual(os.listdir(self.dir), [])  # no temporary files either
+        fractions = [f for f, _ in seen]
+        self.assertEqual(fractions, sorted(fractions))
+        self.assertTrue(all(0 <= f <= 1 for f in fractions))
+        self.assertIn("building", {s for _, s in seen})
+        # An exception in the callback cancels too and is raised as it is.
+        def fail(fraction, stage):
+            if stage == "building":
+                raise KeyError("stop")
+        with self.assertRaises(KeyError):
+            mlfe.build(SKULL, rms="1%", progress=fail)
+        # Without cancelling, the same call writes and reports 1 at the end.
+        seen.clear()
+        mlfe.convert(SKULL, out, iso=2.5, progress=lambda f, s: seen.append((f, s)))
+        self.assertTrue(os.path.exists(out))
+        self.assertEqual(seen[-1][0], 1.0)
+        with self.assertRaisesRegex(mlfe.Error, "^progress: expected a callable"):
+            mlfe.build(SKULL, progress=3)
+
+    def test_info_export_and_the_option_vocabulary(self):
+        h = self.hierarchy()
+        cli_info = json.loads(cli("info", h, "--json").stdout)
+        self.assertEqual(mlfe.info(h), cli_info)
+        vol_info = mlfe.info(SKULL)
+        self.assertEqual(vol_info, json.loads(cli("info", SKULL, "--json").stdout))
+        mine = mlfe.info(mlfe.read_volume(SKULL))
+        self.assertEqual(mine["dims"], [64, 64, 64])
+        # export: the leaf mesh, as `mlfe export`.
+        py_vtu, cli_vtu = self.path("py.vtu"), self.path("cli.vtu")
+        summary = mlfe.load(h).export(py_vtu)
+        self.assertEqual(summary["written"], [py_vtu])
+        self.assertEqual(cli("export", h, "-o", cli_vtu, "--quiet").returncode, 0)
+        with open(py_vtu, "rb") as a, open(cli_vtu, "rb") as b:
+            self.assertEqual(a.read(), b.read())
+        # One vocabulary: the command line's spellings are accepted, bad ones named by keyword.
+        b = mlfe.build(SKULL, rms="2%", max_memory="6G", norm="l2")
+        self.assertGreater(b.vertex_count, 0)
+        for kwargs, message in [(dict(max_memory="6X"), "max_memory"), (dict(rms="-1"), "rms"),
+                                (dict(norm="h2"), "norm")]:
+            with self.subTest(kwargs=kwargs):
+                with self.assertRaises(mlfe.Error) as caught:
+                    mlfe.build(SKULL, **kwargs)
+                self.assertTrue(str(caught.exception).startswith(message), str(caught.exception))
+                self.assertNotIn("--", str(caught.exception))
+
+
 class StubTest(unittest.TestCase):
     def test_stubs_cover_the_public_api(self):
         """The shipped .pyi stubs declare every public name and member of the package, and the
