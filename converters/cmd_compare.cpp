@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/formats/compare.h>
+#include <mlfe/pipeline.h>
 
 #include <memory>
 #include <optional>
@@ -24,19 +25,6 @@ struct CompareArgs {
   bool quiet = false;
 };
 
-/// "2%" or "2" (both percent).
-double parse_percent(const std::string& text) {
-  std::string s = text;
-  if (!s.empty() && s.back() == '%') s.pop_back();
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (used == s.size() && v >= 0) return v;
-  } catch (const std::exception&) {
-  }
-  throw CLI::ValidationError("--count-tolerance", "expected a percentage such as 2% (got '" + text + "')");
-}
-
 void run_compare(CompareArgs& a) {
   CompareOptions o = a.options;
   o.tolerance = a.tolerance;
@@ -45,10 +33,10 @@ void run_compare(CompareArgs& a) {
   o.min_psnr = a.psnr;
   o.value_max = a.value_max;
   o.value_rms = a.value_rms;
-  if (!a.count_tolerance.empty()) o.count_tolerance_percent = parse_percent(a.count_tolerance);
+  if (!a.count_tolerance.empty())
+    o.count_tolerance_percent = pipeline::parse_percent(a.count_tolerance, "--count-tolerance");
   check_distinct_files({{"EXPECTED", a.expected}, {"ACTUAL", a.actual}}, {{"--report", a.report}});
-  const CompareResult r = compare_files(a.expected, a.actual, o);
-  if (!a.report.empty()) write_compare_report(a.report, a.expected, a.actual, r);
+  const CompareResult r = pipeline::compare(a.expected, a.actual, o, a.report);
   if (r.equal()) {
     if (!a.quiet) fmt::print("equal ({})\n", r.kind);
     return;

@@ -1,5 +1,6 @@
 // mlfe convert: volume in, iso-surface asset (glTF/Draco, PLY/OBJ/STL/OFF) out, in one command;
-// the work is mlfe::convert (converters/pipeline.h).
+// the work is mlfe::pipeline::convert (include/mlfe/pipeline.h).
+#include <fmt/format.h>
 #include <mlfe/core/error.h>
 
 #include <cstdio>
@@ -21,48 +22,39 @@ void add_convert_options(CLI::App* cmd, ConvertState& s) {
   add_volume_read_options(cmd, s.read);
 }
 
-void print_written(const ConvertState& s, const nlohmann::json& summary, const char* command) {
+void print_written(const ConvertState& s, const pipeline::ConvertFileResult& r, const char* command) {
   if (!s.params.quiet)
-    std::fprintf(stderr, "mlfe %s: %zu triangles, %zu bytes -> %s\n", command,
-                 summary["triangles"].get<std::size_t>(), summary["bytes"].get<std::size_t>(),
-                 s.output.c_str());
-  std::printf("%s\n", s.output.c_str());
-  if (!s.hierarchy.empty()) std::printf("%s\n", s.hierarchy.c_str());
-  if (!s.report.empty()) std::printf("%s\n", s.report.c_str());
+    status_line(fmt::format("mlfe {}: {} triangles, {} bytes -> {}", command,
+                            r.asset["triangles"].get<std::size_t>(), r.asset["bytes"].get<std::size_t>(),
+                            s.output));
+  // The image's lines come after the asset's, its files last.
+  for (const auto& f : r.written)
+    if (r.render.written.empty() || f != r.render.written.front()) {
+      std::printf("%s\n", f.c_str());
+    } else {
+      print_render(r.render, s.params.quiet);
+      break;
+    }
 }
 
 void run_convert(const ConvertState& s, const char* command) {
-  ConvertOptions c;
-  c.hierarchy = s.hierarchy;
-  c.report = s.report;
   check_distinct_files(
       {{"input", s.input}, {"--volume", s.volume}},
       {{"--output", s.output}, {"--hierarchy", s.hierarchy}, {"--report", s.report}, {"--render", s.render}});
-  check_output_path(s.output, kAssetExtensions);
-  if (!c.hierarchy.empty()) check_output_path(c.hierarchy, {".mlfeh"});
-  if (!c.report.empty()) check_output_path(c.report, {});
-  if (!s.render.empty()) check_output_path(s.render, {".exr"});
+  pipeline::ConvertFileOptions c;
+  c.hierarchy = s.hierarchy;
+  c.report = s.report;
+  c.render = s.render;
+  c.read = s.read;
   c.asset = asset_options(s.asset);
   c.build = build_options(s.params);
-  c.keep_u = !s.render.empty();  // the image is of u
   // The provenance keeps --rms as it was spelled.
   if (!s.params.rms.empty()) c.provenance["options"]["rms"] = s.params.rms;
-  // A tetrahedral mesh input: its P1 interpolant is the input function (no voxel grid).
-  std::optional<ScalarGrid> grid;
-  std::optional<ConvertResult> r;
-  if (!detect_tet_mesh_format(s.input).empty()) {
-    r = convert(read_tet_mesh(s.input, tet_mesh_read_options(s.read)), s.output, c);
-  } else {
-    grid = read_volume(s.input, s.read);
-    r = convert(*grid, s.output, c);
-  }
-  warn_if_memory_limited(r->built, s.input, s.params.max_memory);
-  print_written(s, r->asset, command);
-  // convert --render: the image of the hierarchy just built, with mlfe render's defaults.
-  if (!s.render.empty())
-    for (const auto& f :
-         render_outputs(s.render, RenderParams{}, r->built, grid ? &*grid : nullptr, s.input, s.params.quiet))
-      std::printf("%s\n", f.c_str());
+  c.progress = progress_display(std::string("mlfe ") + command, s.params.quiet);
+  const pipeline::ConvertFileResult r = pipeline::convert(s.input, s.output, c);
+  warn_if_memory_limited(r.built, s.input, s.params.max_memory);
+  print_warnings(r.warnings);
+  print_written(s, r, command);
 }
 
 void run_convert_labels(const ConvertState& s) {
@@ -71,14 +63,14 @@ void run_convert_labels(const ConvertState& s) {
     throw CLI::ValidationError("--labels", "--labels writes surfaces only (no --hierarchy or --render yet)");
   check_output_path(s.output, kAssetExtensions);
   if (!s.report.empty()) check_output_path(s.report, {});
-  const LabelOptions o = label_options(s.labels, s.asset);
-  const ScalarGrid grid = read_volume(s.input, s.read);
-  const nlohmann::json summary = convert_labels(grid, s.output, o);
-  if (!s.report.empty()) {
-    nlohmann::json r = {{"input", s.input}, {"dims", grid.dims}, {"asset", summary}};
-    r["peak_rss_mb"] = peak_rss_mb();
-    write_json(s.report, r);
-  }
+  pipeline::ConvertFileOptions c;
+  c.labels = label_options(s.labels, s.asset);
+  c.report = s.report;
+  c.read = s.read;
+  c.build.max_memory = parse_memory_budget(s.params.max_memory, "--max-memory");
+  c.progress = progress_display("mlfe convert", s.params.quiet);
+  const pipeline::ConvertFileResult r = pipeline::convert(s.input, s.output, c);
+  const nlohmann::json& summary = r.asset;
   if (!s.params.quiet) {
     std::size_t islands = 0;
     for (const auto& [l, n] : summary["islands_removed"].items()) islands += n.get<std::size_t>();
@@ -87,15 +79,15 @@ void run_convert_labels(const ConvertState& s) {
       pieces += st["pieces"].get<std::size_t>();
       open += !st["closed"].get<bool>();
     }
-    std::fprintf(stderr,
-                 "mlfe convert: %zu structures (%zu pieces%s), %zu islands removed by --min-component%s\n",
-                 summary["structure_count"].get<std::size_t>(), pieces,
-                 open ? ", SOME NOT CLOSED" : ", all closed", islands,
-                 summary["label_table"].get<std::string>().empty()
-                     ? ", no label table (label_N names)"
-                     : (", table " + summary["label_table"].get<std::string>()).c_str());
+    status_line(
+        fmt::format("mlfe convert: {} structures ({} pieces{}), {} islands removed by --min-component{}",
+                    summary["structure_count"].get<std::size_t>(), pieces,
+                    open ? ", SOME NOT CLOSED" : ", all closed", islands,
+                    summary["label_table"].get<std::string>().empty()
+                        ? ", no label table (label_N names)"
+                        : ", table " + summary["label_table"].get<std::string>()));
   }
-  print_written(s, summary, "convert");
+  print_written(s, r, "convert");
 }
 
 namespace {
@@ -111,7 +103,6 @@ void add_convert_command(CLI::App& app) {
   add_convert_options(cmd, *state);
   add_label_options(cmd, state->labels);
   cmd->callback([state] {
-    apply_memory_budget(state->read, state->params);
     if (state->labels.labels->count() > 0)
       run_convert_labels(*state);
     else

@@ -2,21 +2,13 @@
 // anything; for a hierarchy file (.mlfeh), its levels, counts, error figures and bytes per
 // section.
 #include <fmt/format.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/label_surface.h>
-#include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/label_table.h>
-#include <mlfe/formats/vdb_reader.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/pipeline.h>
 
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
-#include <variant>
 
 #include "converters/commands.h"
 #include "converters/volume_options.h"
@@ -32,105 +24,26 @@ struct InfoArgs {
   std::string label_table;  ///< names from this table (default: the one beside the volume)
 };
 
-// The labels of a label map: value, name, voxels and volume in mm³, ascending. Throws
-// mlfe::Error for values that are not labels (label_grid).
-nlohmann::json label_rows(const ScalarGrid& g, const std::string& table_path) {
-  const LabelGrid lg = label_grid(g);
-  LabelTable table;
-  if (!table_path.empty()) {
-    table = read_label_table(table_path);
-  } else if (const std::string found = find_label_table(g.source); !found.empty()) {
-    // Beside the volume, only a file that parses as a table is one (not an earlier report).
-    try {
-      table = read_label_table(found);
-    } catch (const Error& e) {
-      std::fprintf(stderr, "mlfe: warning: %s (found beside the volume; not used)\n", e.what());
-    }
-  }
-  const double voxel_mm3 = g.transform.spacing[0] * g.transform.spacing[1] * g.transform.spacing[2];
-  nlohmann::json rows = nlohmann::json::array();
-  for (const auto& [l, n] : label_counts(lg))
-    rows.push_back({{"label", l},
-                    {"name", l == 0 && !table.entries.count(0) ? std::string("background") : table.name(l)},
-                    {"voxels", n},
-                    {"volume_mm3", double(n) * voxel_mm3}});
-  return {{"table", table.source}, {"rows", rows}};
+std::string join(const std::array<double, 9>& d) {
+  return fmt::format("[{} {} {}; {} {} {}; {} {} {}]", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7], d[8]);
 }
 
-// Per level k: vertices of level k, elements of level k, leaves of level k.
-template <int D>
-std::vector<std::array<std::size_t, 3>> level_counts(const Hierarchy<D>& h) {
-  std::vector<std::array<std::size_t, 3>> c(static_cast<std::size_t>(h.max_level()) + 1, {0, 0, 0});
-  for (std::uint32_t v = 0; v < h.vertex_count(); ++v) ++c[h.vertex_level(VertexId(v))][0];
-  for (std::uint32_t e = 0; e < h.element_count(); ++e) {
-    ++c[h.level(ElemId(e))][1];
-    if (h.is_leaf(ElemId(e))) ++c[h.level(ElemId(e))][2];
-  }
-  return c;
-}
-
-void run_hierarchy_info(const InfoArgs& a) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const HierarchyFile f = read_hierarchy(a.file);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const auto counts = std::visit([](const auto& h) { return level_counts(h); }, f.hierarchy);
-  const std::size_t nv = std::visit([](const auto& h) { return h.vertex_count(); }, f.hierarchy);
-  const std::size_t ne = std::visit([](const auto& h) { return h.element_count(); }, f.hierarchy);
-  const std::size_t nl = std::visit([](const auto& h) { return h.leaves().size(); }, f.hierarchy);
-  const auto num = [](double x) { return std::isnan(x) ? nlohmann::json(nullptr) : nlohmann::json(x); };
-  if (a.json) {
-    nlohmann::json j;
-    j["file"] = a.file;
-    j["format"] = "mlfeh";
-    j["version"] = f.version;
-    j["dim"] = f.dim;
-    j["vertices"] = nv;
-    j["elements"] = ne;
-    j["leaves"] = nl;
-    j["levels"] = f.file_levels + 1;
-    j["values"] = f.values.empty()    ? "none"
-                  : f.integer_values  ? "integer"
-                  : f.value_bound > 0 ? "quantized"
-                                      : "exact";
-    j["value_bound"] = f.value_bound;
-    j["on_lattice"] = f.on_lattice;
-    if (f.on_lattice) {
-      j["lattice_level"] = f.lattice_level;
-      j["data_dims"] = f.data_dims;
-    }
-    j["sample_error_bound"] = num(f.sample_error_bound);
-    j["range"] = {f.value_min, f.value_max};
-    j["norm"] = f.norm;
-    j["rms_error"] = num(f.rms_error);
-    j["max_error"] = num(f.max_error);
-    j["psnr_db"] = f.psnr_db > 0 && std::isinf(f.psnr_db) ? nlohmann::json("inf") : num(f.psnr_db);
-    j["spacing"] = f.transform.spacing;
-    j["origin"] = f.transform.origin;
-    j["direction"] = f.transform.direction;
-    j["space"] = f.space;
-    j["metadata"] = f.metadata;
-    for (std::size_t k = 0; k < counts.size(); ++k)
-      j["per_level"].push_back(
-          {{"level", k}, {"vertices", counts[k][0]}, {"elements", counts[k][1]}, {"leaves", counts[k][2]}});
-    for (const auto& s : f.sections)
-      j["sections"].push_back({{"name", s.name}, {"file_bytes", s.file_bytes}, {"raw_bytes", s.raw_bytes}});
-    j["read_seconds"] = seconds;
-    std::printf("%s\n", j.dump(2).c_str());
-    return;
-  }
+void print_hierarchy(const pipeline::InfoResult& r) {
+  const HierarchyFileInfo& f = r.header;
   std::uint64_t total = 0;
-  for (const auto& s : f.sections) total += s.file_bytes;
-  fmt::print("file:      {}\n", a.file);
-  fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", f.version, f.dim,
-             total, seconds);
-  fmt::print("mesh:      {} vertices, {} elements, {} leaves, {} levels\n", nv, ne, nl, f.file_levels + 1);
+  for (const auto& s : r.sections) total += s.file_bytes;
+  fmt::print("file:      {}\n", r.file);
+  fmt::print("format:    mlfe hierarchy, version {} ({}D), {} bytes; read in {:.3f} s\n", r.version, r.dim,
+             total, r.read_seconds);
+  fmt::print("mesh:      {} vertices, {} elements, {} leaves, {} levels\n", r.vertices, r.elements, r.leaves,
+             r.levels);
   fmt::print(
       "values:    {}\n",
-      f.values.empty() ? std::string("none")
-      : f.integer_values
-          ? (f.value_bound > 0 ? fmt::format("integer surpluses, every vertex within {:.6g}", f.value_bound)
+      r.value_coding == "none" ? std::string("none")
+      : r.integer_values
+          ? (r.value_bound > 0 ? fmt::format("integer surpluses, every vertex within {:.6g}", r.value_bound)
                                : std::string("integer surpluses, exact"))
-      : f.value_bound > 0 ? fmt::format("quantized, every vertex within {:.6g}", f.value_bound)
+      : r.value_bound > 0 ? fmt::format("quantized, every vertex within {:.6g}", r.value_bound)
                           : std::string("exact (f64)"));
   if (f.on_lattice)
     fmt::print("lattice:   level {} on the samples (T0 {} samples wide), data {} x {} x {} samples\n",
@@ -147,86 +60,61 @@ void run_hierarchy_info(const InfoArgs& a) {
   const auto& t = f.transform;
   fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
   fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
-  const auto& d = t.direction;
-  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7],
-             d[8]);
+  fmt::print("direction: {}\n", join(t.direction));
   fmt::print("space:     {}\n", f.space.empty() ? "(not given)" : f.space);
   if (!f.metadata.empty()) fmt::print("metadata:  {}\n", f.metadata.dump());
   fmt::print("{:>7} {:>12} {:>12} {:>12}\n", "level", "vertices", "elements", "leaves");
-  for (std::size_t k = 0; k < counts.size(); ++k)
-    fmt::print("{:>7} {:>12} {:>12} {:>12}\n", k, counts[k][0], counts[k][1], counts[k][2]);
+  for (std::size_t k = 0; k < r.per_level.size(); ++k)
+    fmt::print("{:>7} {:>12} {:>12} {:>12}\n", k, r.per_level[k].vertices, r.per_level[k].elements,
+               r.per_level[k].leaves);
   fmt::print("{:<10} {:>12} {:>12}\n", "section", "file bytes", "raw bytes");
-  for (const auto& s : f.sections) fmt::print("{:<10} {:>12} {:>12}\n", s.name, s.file_bytes, s.raw_bytes);
+  for (const auto& s : r.sections) fmt::print("{:<10} {:>12} {:>12}\n", s.name, s.file_bytes, s.raw_bytes);
+}
+
+void print_volume(const pipeline::InfoResult& r) {
+  const auto& t = r.transform;
+  fmt::print("file:      {}\n", r.file);
+  fmt::print("format:    {}\n", r.format);
+  fmt::print("dims:      {} x {} x {} ({}D, {} voxels)\n", r.dims[0], r.dims[1], r.dims[2], r.dim, r.voxels);
+  fmt::print("type:      {} (stored as float32)\n", r.type);
+  fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
+  fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
+  fmt::print("direction: {}\n", join(t.direction));
+  fmt::print("space:     {}\n", r.space.empty() ? "(not given)" : r.space);
+  // The range is the float32 samples': printed as floats, as they were read.
+  fmt::print("range:     {} .. {}\n", static_cast<float>(r.range[0]), static_cast<float>(r.range[1]));
+  fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", r.memory_bytes,
+             r.memory_bytes / 1048576.0, r.read_seconds);
+  for (const auto& name : r.grids) fmt::print("grid:      {}\n", name);
+  if (r.has_labels) {
+    fmt::print("labels:    {} (table: {})\n", r.labels.size(),
+               r.label_table.empty() ? "none" : r.label_table);
+    fmt::print("{:>8} {:>12} {:>14}  {}\n", "label", "voxels", "mm3", "name");
+    for (const auto& l : r.labels)
+      fmt::print("{:>8} {:>12} {:>14.2f}  {}\n", int(l.label), l.voxels, l.volume_mm3, l.name);
+  }
+  std::size_t start = 0;
+  while (!r.notes.empty() && start <= r.notes.size()) {
+    auto end = r.notes.find('\n', start);
+    if (end == std::string::npos) end = r.notes.size();
+    fmt::print("note:      {}\n", r.notes.substr(start, end - start));
+    start = end + 1;
+  }
 }
 
 void run_info(const InfoArgs& a) {
-  if (is_hierarchy_file(a.file)) return run_hierarchy_info(a);
-  const auto t0 = std::chrono::steady_clock::now();
-  ScalarGrid g = read_volume(a.file, a.read);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const auto range = g.value_range();
-  const std::uint64_t memory = static_cast<std::uint64_t>(g.voxel_count()) * sizeof(float);
-  std::vector<std::string> grids;
-  if (g.format == "vdb") grids = list_vdb_grids(a.file);
-  const auto& t = g.transform;
-  if (a.json) {
-    nlohmann::json j;
-    j["file"] = a.file;
-    j["format"] = g.format;
-    j["dim"] = g.dim;
-    j["dims"] = g.dims;
-    j["type"] = scalar_type_name(g.source_type);
-    j["spacing"] = t.spacing;
-    j["origin"] = t.origin;
-    j["direction"] = t.direction;
-    j["space"] = g.space;
-    j["range"] = {range[0], range[1]};
-    j["memory_bytes"] = memory;
-    j["read_seconds"] = seconds;
-    j["notes"] = g.notes;
-    if (!grids.empty()) j["grids"] = grids;
-    if (a.labels) {
-      const auto l = label_rows(g, a.label_table);
-      j["labels"] = l["rows"];
-      j["label_table"] = l["table"];
-    }
-    std::printf("%s\n", j.dump(2).c_str());
-    return;
-  }
-  fmt::print("file:      {}\n", a.file);
-  fmt::print("format:    {}\n", g.format);
-  fmt::print("dims:      {} x {} x {} ({}D, {} voxels)\n", g.dims[0], g.dims[1], g.dims[2], g.dim,
-             g.voxel_count());
-  fmt::print("type:      {} (stored as float32)\n", scalar_type_name(g.source_type));
-  fmt::print("spacing:   {} {} {}\n", t.spacing[0], t.spacing[1], t.spacing[2]);
-  fmt::print("origin:    {} {} {}\n", t.origin[0], t.origin[1], t.origin[2]);
-  const auto& d = t.direction;
-  fmt::print("direction: [{} {} {}; {} {} {}; {} {} {}]\n", d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7],
-             d[8]);
-  fmt::print("space:     {}\n", g.space.empty() ? "(not given)" : g.space);
-  fmt::print("range:     {} .. {}\n", range[0], range[1]);
-  fmt::print("memory:    {} bytes as float32 ({:.1f} MiB); read in {:.3f} s\n", memory, memory / 1048576.0,
-             seconds);
-  for (const auto& name : grids) fmt::print("grid:      {}\n", name);
-  if (a.labels) {
-    const auto l = label_rows(g, a.label_table);
-    fmt::print("labels:    {} (table: {})\n", l["rows"].size(),
-               l["table"].get<std::string>().empty() ? "none" : l["table"].get<std::string>());
-    fmt::print("{:>8} {:>12} {:>14}  {}\n", "label", "voxels", "mm3", "name");
-    for (const auto& r : l["rows"])
-      fmt::print("{:>8} {:>12} {:>14.2f}  {}\n", r["label"].get<int>(), r["voxels"].get<std::size_t>(),
-                 r["volume_mm3"].get<double>(), r["name"].get<std::string>());
-  }
-  if (!g.notes.empty()) {
-    std::string notes = g.notes;
-    std::size_t start = 0;
-    while (start <= notes.size()) {
-      auto end = notes.find('\n', start);
-      if (end == std::string::npos) end = notes.size();
-      fmt::print("note:      {}\n", notes.substr(start, end - start));
-      start = end + 1;
-    }
-  }
+  pipeline::InfoOptions o;
+  o.read = a.read;
+  o.labels = a.labels;
+  o.label_table = a.label_table;
+  const pipeline::InfoResult r = pipeline::info(a.file, o);
+  for (const auto& w : r.warnings) std::fprintf(stderr, "mlfe: warning: %s\n", w.c_str());
+  if (a.json)
+    std::printf("%s\n", r.to_json().dump(2).c_str());
+  else if (r.hierarchy)
+    print_hierarchy(r);
+  else
+    print_volume(r);
 }
 
 void add_info_command(CLI::App& app) {

@@ -1,11 +1,12 @@
 // What `mlfe convert` and `mlfe iso` share: their options and the conversion of a volume input
-// through mlfe::convert (converters/pipeline.h), with the command line's messages.
+// through mlfe::pipeline::convert (include/mlfe/pipeline.h), with the command line's messages.
 #pragma once
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <string>
 
 #include "converters/pipeline_options.h"
+#include "converters/render_command.h"
 
 namespace mlfe::cli {
 
@@ -30,7 +31,7 @@ void run_convert(const ConvertState& s, const char* command);
 void run_convert_labels(const ConvertState& s);
 
 /// The closing lines of convert and iso: the asset summary on stderr (unless quiet), then
-/// the written files on stdout.
-void print_written(const ConvertState& s, const nlohmann::json& summary, const char* command);
+/// the written files on stdout (convert --render: the image's lines before its files).
+void print_written(const ConvertState& s, const pipeline::ConvertFileResult& r, const char* command);
 
 }  // namespace mlfe::cli

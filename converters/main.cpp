@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "converters/commands.h"
+#include "converters/pipeline_options.h"
 
 namespace mlfe::cli {
 int& thread_option() {
@@ -148,16 +149,16 @@ int main(int argc, char** argv) {
     suggest(app, argc, argv);
     return usage_status;
   } catch (const mlfe::UsageError& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return app.got_subcommand("compare") ? 2 : 1;
-  } catch (const mlfe::Error& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+  } catch (const mlfe::Error& e) {  // also mlfe::pipeline::Cancelled: "mlfe: cancelled"
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return 2;
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "mlfe: out of memory\n");
+    mlfe::cli::status_line("mlfe: out of memory");
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "mlfe: %s\n", e.what());
+    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
     return 2;
   }
   return mlfe::cli::command_exit_status();

@@ -23,6 +23,8 @@
 #include <filesystem>
 #include <optional>
 
+#include "converters/progress_reporter.h"
+
 namespace mlfe {
 
 namespace fs = std::filesystem;
@@ -116,6 +118,37 @@ FieldInput checked_grid_input(const ScalarGrid& grid) {
   return {grid.transform, grid.space, grid.source, double(grid.voxel_count()) * (sizeof(float) + 1.2)};
 }
 
+// Reports the share of the refinement done through `progress` from the approximation's own
+// statistics: the RMS error toward the target on a log scale, the vertices toward the budget, the
+// level toward max_level; surface passes by their count (each pass about halves what is left).
+void add_fraction_progress(const Progress& progress, ApproximationOptions& o, double span) {
+  const pipeline::detail::Reporter report(progress);
+  report(0, "building");
+  const auto first_error = std::make_shared<double>(0);
+  const double target = o.target_rms;
+  const std::size_t max_vertices = o.max_vertices;
+  const int max_level = std::max(1, o.max_level);
+  o.progress = [report, first_error, target, max_vertices, max_level, span,
+                inner = std::move(o.progress)](const IterationStats& s) {
+    if (inner) inner(s);
+    double f = double(s.level) / max_level;
+    if (max_vertices > 0) f = std::max(f, double(s.vertices) / double(max_vertices));
+    if (target > 0 && s.rms_error > 0) {
+      if (*first_error == 0) *first_error = std::max(s.rms_error, 1e-12 * span);
+      const double e0 = *first_error;
+      f = std::max(f,
+                   e0 > target ? std::log(e0 / std::max(s.rms_error, target)) / std::log(e0 / target) : 1.0);
+    }
+    report(std::min(f, 0.99), "building");
+  };
+  const auto passes = std::make_shared<int>(0);
+  o.surface_progress = [report, passes, inner = std::move(o.surface_progress)](const SurfacePassStats& s) {
+    if (inner) inner(s);
+    ++*passes;
+    report(1.0 - std::pow(0.5, *passes), "building");
+  };
+}
+
 }  // namespace
 
 Built build(const ScalarGrid& grid, const BuildOptions& p, const std::vector<double>& iso_values) {
@@ -183,6 +216,7 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   }
   o.progress = p.progress;
   o.surface_progress = p.surface_progress;
+  if (p.fraction_progress) add_fraction_progress(p.fraction_progress, o, span);
   b.memory_budget_bytes = o.max_memory_bytes;
   const auto t0 = std::chrono::steady_clock::now();
   b.surface_driven = o.surface_driven;
@@ -191,6 +225,7 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   else
     b.approximation = approximate<3>(f, o);
   b.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (p.fraction_progress && !p.fraction_progress(1.0, "building")) throw Cancelled();
   return b;
 }
 
@@ -254,7 +289,7 @@ Built built_from_file(const std::string& path) {
   return b;
 }
 
-void write_built(const std::string& path, const Built& b, const nlohmann::json& provenance) {
+std::string write_built(const std::string& path, const Built& b, const nlohmann::json& provenance) {
   HierarchyFileInfo info;
   info.transform = b.transform;
   info.space = b.space;
@@ -268,16 +303,18 @@ void write_built(const std::string& path, const Built& b, const nlohmann::json& 
   HierarchyWriteOptions v3;
   v3.zstd_level = 19;
   v3.version = 3;
+  std::string warning;
   b.visit([&](const auto& a) {
     HierarchyFileInfo li = info;
     set_lattice_info(a, li);
     try {
       write_hierarchy(path, a.hierarchy, a.values, li, v3);
     } catch (const LevelRebuildError& e) {
-      std::fprintf(stderr, "mlfe: warning: %s; writing format version 1\n", e.what());
+      warning = std::string(e.what()) + "; writing format version 1";
       write_hierarchy(path, a.hierarchy, a.values, info);
     }
   });
+  return warning;
 }
 
 void write_json(const std::string& path, const nlohmann::json& j) {
@@ -370,19 +407,6 @@ double smallest_spacing(const GridTransform& t, int dim) {
 
 }  // namespace
 
-const char* to_string(Simplifier s) {
-  return s == Simplifier::kFast      ? "fast"
-         : s == Simplifier::kBounded ? "bounded"
-         : s == Simplifier::kMeshopt ? "meshopt"
-                                     : "auto";
-}
-const char* to_string(VertexPlacement p) {
-  return p == VertexPlacement::kInput ? "input" : p == VertexPlacement::kOptimal ? "optimal" : "auto";
-}
-const char* to_string(Normals n) {
-  return n == Normals::kGradient ? "gradient" : n == Normals::kSurface ? "surface" : "auto";
-}
-
 Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) {
   if (p.lod < 0 || p.lod > 8) throw Error(fmt::format("lod: expected 0..8, got {}", p.lod));
   if (!(p.simplify >= 0)) throw Error(fmt::format("simplify: expected a value >= 0, got {}", p.simplify));
@@ -430,6 +454,7 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       return o;
     };
     for (std::size_t i = 0; i < isos.size(); ++i) {
+      if (p.progress && !p.progress(0.5 * double(i) / double(isos.size()), "extracting")) throw Cancelled();
       GltfSurface s;
       s.iso_value = isos[i];
       s.name = fmt::format("iso {}", isos[i]);
@@ -462,6 +487,7 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
                   : p.normals == Normals::kGradient     ? VertexPlacement::kInput
                                                         : VertexPlacement::kOptimal;
   out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (p.progress && !p.progress(0.5, "simplifying")) throw Cancelled();
   if (p.simplify > 0) {
     const double voxel = smallest_spacing(b.transform, dim);
     SimplifyOptions so;
@@ -500,6 +526,7 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     }
   out.simplify_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - out.extract_seconds;
+  if (p.progress && !p.progress(1.0, "simplifying")) throw Cancelled();
   return out;
 }
 
@@ -511,8 +538,13 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   if (!(p.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", p.tolerance));
   const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim()) / 10.0;
 
-  const Surfaces extracted = extract(b, p, grid);
+  // Extraction and simplification take most of the time, writing (Draco encoding) the rest.
+  const pipeline::detail::Reporter report(p.progress);
+  AssetOptions extract_options = p;
+  extract_options.progress = report.share(0, 0.8).as_progress();
+  const Surfaces extracted = extract(b, extract_options, grid);
   const std::vector<GltfSurface>& surfaces = extracted.surfaces;
+  report(0.8, "writing");
 
   nlohmann::json summary;
   nlohmann::json per = nlohmann::json::array();
@@ -566,6 +598,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
       write_mesh_file(out, all);
     }
   }
+  report.finish("writing");
   summary["output"] = out;
   summary["surfaces"] = per;
   summary["triangles"] = total;
@@ -599,6 +632,9 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   // u is solved for only when an output holds it (the hierarchy) or the caller keeps it.
   BuildOptions p = c.build;
   p.solve_u = !c.hierarchy.empty() || c.keep_u;
+  // The build's share of the call; extraction, simplification and writing the rest.
+  const pipeline::detail::Reporter report(c.progress);
+  if (report) p.fraction_progress = report.share(0, 0.6).as_progress();
   std::vector<double> isos;
   if (f.dim() == 3) {
     if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
@@ -607,6 +643,7 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   ConvertResult result;
   Built& b = result.built;
   b = build(f, input, p, isos);
+  pipeline::detail::OutputGuard written;
   nlohmann::json prov = {{"input", fs::path(input.source).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
   if (!b.iterations().empty()) {
@@ -628,14 +665,23 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
                      {"surface_tolerance", p.surface_tolerance}};
   prov["refinement"] = b.surface_driven ? "surface-driven" : "global";
   if (c.provenance.is_object()) prov.merge_patch(c.provenance);
-  if (!c.hierarchy.empty()) write_built(c.hierarchy, b, prov);
-  result.asset = write_assets(out, b, c.asset, prov, grid);
+  if (!c.hierarchy.empty()) {
+    report(0.6, "writing");
+    if (std::string w = write_built(c.hierarchy, b, prov); !w.empty())
+      result.warnings.push_back(c.hierarchy + ": " + w);
+    written.add(c.hierarchy);
+  }
+  AssetOptions asset = c.asset;
+  if (report) asset.progress = report.share(0.65, 1).as_progress();
+  result.asset = write_assets(out, b, asset, prov, grid);
+  written.add(out);
   if (!c.report.empty()) {
     nlohmann::json r = build_report(input.source, grid, b);
     r["asset"] = result.asset;
     r["peak_rss_mb"] = peak_rss_mb();
     write_json(c.report, r);
   }
+  written.release();
   return result;
 }
 

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/usage_error.h>
+#include <unistd.h>
 
 #include <cctype>
 #include <cmath>
@@ -39,11 +40,11 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
                   "uniform levels before adapting (-1: until edges <= 16 voxels)")
       ->check(CLI::Range(-1, 12));
   cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
-      ->check(CLI::IsMember({"l2", "h1"}))
+      ->check(CLI::IsMember(pipeline::enum_name_list<Norm>()))
       ->capture_default_str();
   cmd->add_option("--preconditioner", p.preconditioner,
                   "CG preconditioner (auto: Jacobi for least squares at the samples, else BPX)")
-      ->check(CLI::IsMember({"auto", "bpx", "jacobi", "none"}))
+      ->check(CLI::IsMember(pipeline::enum_name_list<Preconditioner>()))
       ->capture_default_str();
   cmd->add_option("--surface-tolerance", p.surface_tolerance,
                   "with iso-values: refine until surfaces are within this many voxels")
@@ -85,13 +86,13 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "checks, the error estimated from quadrics; about twice as fast), meshopt (meshoptimizer, error "
          "estimated; where it would change the topology the extracted triangles stay) or auto (bounded "
          "for surfaces of up to 200000 extracted triangles, fast above)")
-      ->check(CLI::IsMember({"auto", "fast", "bounded", "meshopt"}))
+      ->check(CLI::IsMember(pipeline::enum_name_list<Simplifier>()))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
                   "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
                   "(quadric minimum near the surface: fewer triangles at the same tolerance) or auto "
                   "(optimal, input with --normals gradient)")
-      ->check(CLI::IsMember({"auto", "input", "optimal"}))
+      ->check(CLI::IsMember(pipeline::enum_name_list<VertexPlacement>()))
       ->capture_default_str();
   cmd->add_option(
          "--snap", p.snap,
@@ -109,102 +110,109 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "vertex normals: gradient (the approximation's gradients, the paper's; kept through "
                   "--simplify), surface (area-weighted from the written triangles; smaller Draco files) "
                   "or auto (gradient, surface after --simplify/--decimate)")
-      ->check(CLI::IsMember({"auto", "gradient", "surface"}))
+      ->check(CLI::IsMember(pipeline::enum_name_list<Normals>()))
       ->capture_default_str();
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
   cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
       ->check(CLI::Range(-1, 40));
 }
 
-std::vector<double> parse_values(const std::string& text, const std::string& what) {
-  std::vector<double> out;
-  std::stringstream ss(text);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      const double v = std::stod(item, &used);
-      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
-      out.push_back(v);
-    } catch (const std::exception&) {
-      throw UsageError(fmt::format("{}: not a finite number: '{}'", what, item));
-    }
-  }
-  return out;
+namespace {
+
+// One progress display per process: the bar's state, so status lines can clear it.
+struct Display {
+  bool bar_shown = false;
+  std::string stage;
+  int percent = -1;
+};
+Display& display() {
+  static Display d;
+  return d;
 }
 
-MemoryBudget parse_memory_budget(const std::string& text) {
-  std::string t = text;
-  MemoryBudget m;
-  m.percent_of_ram = false;
-  if (!t.empty()) {
-    const char c = static_cast<char>(std::toupper(static_cast<unsigned char>(t.back())));
-    if (c == '%') m.percent_of_ram = true;
-    if (c == 'K') m.unit_power = 1;
-    if (c == 'M') m.unit_power = 2;
-    if (c == 'G') m.unit_power = 3;
-    if (m.percent_of_ram || m.unit_power > 0) t.pop_back();
+}  // namespace
+
+void status_line(const std::string& text) {
+  if (display().bar_shown) {
+    std::fputs("\r\033[K", stderr);
+    display().bar_shown = false;
+    display().percent = -1;
   }
-  std::vector<double> v;
-  try {
-    v = parse_values(t, "--max-memory");
-  } catch (const UsageError&) {
-    v.clear();
-  }
-  if (v.size() != 1 || v[0] < 0 || (m.percent_of_ram && v[0] > 100))
-    throw UsageError("--max-memory: expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
-                     text + "'");
-  m.amount = v[0];
-  return m;
+  std::fprintf(stderr, "%s\n", text.c_str());
 }
 
-void apply_memory_budget(VolumeReadOptions& read, const BuildParams& p) {
-  const std::size_t budget = parse_memory_budget(p.max_memory).bytes();
-  if (budget > 0 && read.max_bytes == 0) read.max_bytes = budget;
+pipeline::Progress progress_display(const std::string& command, bool quiet) {
+  if (quiet) return {};
+  display() = Display{};
+  if (isatty(fileno(stderr))) {
+    return [command](double fraction, const std::string& stage) {
+      Display& d = display();
+      const int percent = static_cast<int>(std::floor(100 * fraction));
+      if (percent == d.percent && stage == d.stage) return true;
+      d.percent = percent;
+      d.stage = stage;
+      constexpr int kWidth = 30;
+      const int filled = std::min(kWidth, percent * kWidth / 100);
+      std::fprintf(stderr, "\r\033[K%s [%s%s] %3d%% %s", command.c_str(), std::string(filled, '#').c_str(),
+                   std::string(kWidth - filled, '.').c_str(), percent, stage.c_str());
+      if (percent >= 100 && stage == "writing") {  // done: the summary lines follow
+        std::fputs("\r\033[K", stderr);
+        d.bar_shown = false;
+      } else {
+        d.bar_shown = true;
+      }
+      std::fflush(stderr);
+      return true;
+    };
+  }
+  return [command](double fraction, const std::string& stage) {
+    Display& d = display();
+    if (stage == d.stage) return true;
+    d.stage = stage;
+    // The long tail of a command, after its input was read and checked: a bad input still
+    // fails with its one-line error (reading, extracting), and the build prints its own table.
+    if ((stage == "rendering" || stage == "resampling" || stage == "writing") && fraction < 1)
+      std::fprintf(stderr, "%s: %s\n", command.c_str(), stage.c_str());
+    return true;
+  };
+}
+
+void print_warnings(const std::vector<std::string>& warnings) {
+  for (const auto& w : warnings) status_line("mlfe: warning: " + w);
 }
 
 BuildOptions build_options(const BuildParams& p) {
   BuildOptions o;
   // --threshold replaces --rms, whose text is then not read.
-  if (!p.rms.empty() && p.threshold <= 0) {
-    std::string r = p.rms;
-    const bool percent = r.back() == '%';
-    if (percent) r.pop_back();
-    const auto v = parse_values(r, "--rms");
-    if (v.size() != 1 || v[0] <= 0) throw UsageError("--rms: expected one positive value, e.g. 0.5% or 2.0");
-    o.rms = RmsTarget{v[0], percent};
-  }
+  if (!p.rms.empty() && p.threshold <= 0) o.rms = pipeline::parse_rms(p.rms, "--rms");
   o.threshold = p.threshold;
   o.max_vertices = p.max_vertices;
   o.max_level = p.max_level;
   o.start_level = p.start_level;
-  o.norm = p.norm == "h1" ? Norm::kH1 : Norm::kL2;
-  o.preconditioner = p.preconditioner == "auto"     ? Preconditioner::kAuto
-                     : p.preconditioner == "bpx"    ? Preconditioner::kBpx
-                     : p.preconditioner == "jacobi" ? Preconditioner::kJacobi
-                                                    : Preconditioner::kNone;
+  o.norm = pipeline::parse_enum<Norm>(p.norm, "--norm");
+  o.preconditioner = pipeline::parse_enum<Preconditioner>(p.preconditioner, "--preconditioner");
   o.surface_tolerance = p.surface_tolerance;
   o.check_against_u = p.check_against_u;
   o.max_memory = parse_memory_budget(p.max_memory);
   if (!p.quiet) {
-    // The table's header comes with the first row of either kind.
+    // The table's header comes with its first row (surface passes have lines of their own).
     auto header = std::make_shared<bool>(false);
-    auto print_header = [header] {
-      if (*header) return;
-      *header = true;
-      std::fprintf(stderr, "%4s %5s %10s %10s %12s %8s %8s %5s %8s\n", "iter", "level", "vertices",
-                   "elements", "rms", "rms%", "psnr", "cg", "seconds");
+    o.surface_progress = [](const SurfacePassStats& s) {
+      status_line(
+          fmt::format("surface pass: {} vertices, {} elements, {} near a surface, {} refined, {:.2f} s",
+                      s.vertices, s.elements, s.candidates, s.marked, s.seconds));
     };
-    o.surface_progress = [print_header](const SurfacePassStats& s) {
-      print_header();
-      std::fprintf(stderr,
-                   "surface pass: %zu vertices, %zu elements, %zu near a surface, %zu refined, %.2f s\n",
-                   s.vertices, s.elements, s.candidates, s.marked, s.seconds);
-    };
-    o.progress = [print_header](const IterationStats& s) {
-      print_header();
-      std::fprintf(stderr, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f\n", s.iteration, s.level,
-                   s.vertices, s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations, s.seconds);
+    o.progress = [header](const IterationStats& s) {
+      if (!*header) {
+        *header = true;
+        status_line(fmt::format("{:>4} {:>5} {:>10} {:>10} {:>12} {:>8} {:>8} {:>5} {:>8}", "iter", "level",
+                                "vertices", "elements", "rms", "rms%", "psnr", "cg", "seconds"));
+      }
+      char row[160];
+      std::snprintf(row, sizeof row, "%4d %5d %10zu %10zu %12.5g %8.4f %8.2f %5d %8.2f", s.iteration, s.level,
+                    s.vertices, s.elements, s.rms_error, s.rms_percent, s.psnr_db, s.cg_iterations,
+                    s.seconds);
+      status_line(row);
     };
   }
   return o;
@@ -212,17 +220,10 @@ BuildOptions build_options(const BuildParams& p) {
 
 void warn_if_memory_limited(const Built& b, const std::string& source, const std::string& max_memory) {
   if (b.memory_limited())
-    std::fprintf(
-        stderr,
-        "mlfe: warning: %s: refinement stopped at the memory budget (--max-memory %s, %.0f MiB for the "
-        "build); the approximation is coarser than asked\n",
-        source.c_str(), max_memory.c_str(), double(b.memory_budget_bytes) / 1048576.0);
-}
-
-Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values) {
-  Built b = build(grid, build_options(p), iso_values);
-  warn_if_memory_limited(b, grid.source, p.max_memory);
-  return b;
+    status_line(
+        fmt::format("mlfe: warning: {}: refinement stopped at the memory budget (--max-memory {}, {:.0f} "
+                    "MiB for the build); the approximation is coarser than asked",
+                    source, max_memory, double(b.memory_budget_bytes) / 1048576.0));
 }
 
 AssetOptions asset_options(const AssetParams& p) {
@@ -234,19 +235,12 @@ AssetOptions asset_options(const AssetParams& p) {
   o.lod = p.lod;
   o.decimate = p.decimate;
   o.simplify = p.simplify;
-  o.simplifier = p.simplifier == "fast"      ? Simplifier::kFast
-                 : p.simplifier == "bounded" ? Simplifier::kBounded
-                 : p.simplifier == "meshopt" ? Simplifier::kMeshopt
-                                             : Simplifier::kAuto;
+  o.simplifier = pipeline::parse_enum<Simplifier>(p.simplifier, "--simplifier");
   o.snap = p.snap;
   o.min_component = p.min_component;
   o.normals_toward_higher = p.normals_toward_higher;
-  o.normals = p.normals == "gradient"  ? Normals::kGradient
-              : p.normals == "surface" ? Normals::kSurface
-                                       : Normals::kAuto;
-  o.placement = p.placement == "input"     ? VertexPlacement::kInput
-                : p.placement == "optimal" ? VertexPlacement::kOptimal
-                                           : VertexPlacement::kAuto;
+  o.normals = pipeline::parse_enum<Normals>(p.normals, "--normals");
+  o.placement = pipeline::parse_enum<VertexPlacement>(p.placement, "--placement");
   o.z_scale = p.z_scale;
   o.level = p.level;
   return o;
@@ -276,7 +270,7 @@ LabelOptions label_options(const LabelParams& p, const AssetParams& asset) {
   o.tolerance = asset.tolerance;
   o.draco = !asset.no_draco;
   o.quantize = asset.quantize;
-  o.warn = [](const std::string& w) { std::fprintf(stderr, "mlfe: warning: %s\n", w.c_str()); };
+  o.warn = [](const std::string& w) { status_line("mlfe: warning: " + w); };
   return o;
 }
 

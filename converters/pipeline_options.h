@@ -1,6 +1,6 @@
-// The command line's spelling of the pipeline's options (converters/pipeline.h): CLI11 options
-// that fill text parameters, parsed into the library's typed options, and the progress the
-// commands print on stderr.
+// The command line's spelling of the pipeline's options (include/mlfe/pipeline.h): CLI11 options
+// that fill text parameters, parsed into the library's typed options with the library's one
+// vocabulary (mlfe::pipeline::parse_*), and the progress the commands show on stderr.
 #pragma once
 #include <mlfe/pipeline.h>
 
@@ -32,27 +32,27 @@ struct BuildParams {
 /// --preconditioner, --surface-tolerance, --check-u, --max-memory and --quiet.
 void add_build_options(CLI::App* cmd, BuildParams& p);
 
-/// The typed options of `p`, with the progress table on stderr unless p.quiet; throws
-/// mlfe::Error on bad text (--rms, --max-memory).
+/// The typed options of `p`, with the refinement table on stderr unless p.quiet; throws
+/// mlfe::UsageError on bad text (--rms, --max-memory).
 BuildOptions build_options(const BuildParams& p);
 
-/// The memory budget of a --max-memory text ("50%", "6G", "512M", "0"); throws mlfe::Error on
-/// bad text.
-MemoryBudget parse_memory_budget(const std::string& text);
-
-/// mlfe::build with the command line's progress and its warning when refinement stopped at
-/// the memory budget.
-Built build_from_grid(const ScalarGrid& grid, const BuildParams& p, const std::vector<double>& iso_values);
+using pipeline::parse_memory_budget;
+using pipeline::parse_values;
 
 /// The warning on stderr when `b` stopped refining at its memory budget.
 void warn_if_memory_limited(const Built& b, const std::string& source, const std::string& max_memory);
 
-/// Makes the readers refuse, before allocating, a volume that needs more than --max-memory
-/// (when it is not 0), as the build refuses to grow beyond it.
-void apply_memory_budget(VolumeReadOptions& read, const BuildParams& p);
+/// Warnings of a pipeline call, one "mlfe: warning: ..." line each.
+void print_warnings(const std::vector<std::string>& warnings);
 
-/// Parses "80,150" into numbers; throws mlfe::Error on bad input.
-std::vector<double> parse_values(const std::string& text, const std::string& what);
+/// The progress of `command` ("mlfe convert") on stderr, nothing when quiet: on a terminal one
+/// bar redrawn in place ([#####.....] 45% building); otherwise a line when one of the last
+/// stages starts (rendering, resampling, writing), so logs show where the time goes without a
+/// line per percent (the build prints its own table).
+pipeline::Progress progress_display(const std::string& command, bool quiet);
+
+/// Prints one line of text on stderr, clearing a progress bar drawn on the terminal first.
+void status_line(const std::string& text);
 
 struct AssetParams {
   std::string iso;  ///< comma-separated iso-values (3D)

@@ -1,5 +1,5 @@
-// mlfe render (and convert --render): ray-cast images of a hierarchy or a volume, written as
-// OpenEXR (half RGBA premultiplied, float Z) with an optional sRGB PNG preview.
+// mlfe render (and convert --render): the command line's options of mlfe::pipeline::render, and
+// what it prints.
 #pragma once
 #include <CLI/CLI.hpp>
 #include <string>
@@ -30,11 +30,12 @@ struct RenderParams {
 /// Adds the rendering options (everything but input and output) to `cmd`.
 void add_render_options(CLI::App* cmd, RenderParams& p);
 
-/// Renders `b` (or, with p.reference, `grid`, which is then required) to `out` (.exr), and the
-/// PNG preview when asked; with p.frames > 1 a turntable of numbered files OUT_0000.exr, …
-/// Throws mlfe::Error for bad options or unwritable files. Prints one line per frame to stderr
-/// unless quiet. Returns the written files.
-std::vector<std::string> render_outputs(const std::string& out, const RenderParams& p, const Built& b,
-                                        const ScalarGrid* grid, const std::string& source, bool quiet);
+/// The typed options of `p` (mlfe::pipeline::RenderFileOptions; build, read and progress left
+/// at their defaults); throws mlfe::UsageError on bad text (--size, --position, ...).
+pipeline::RenderFileOptions render_options(const RenderParams& p);
+
+/// The render mesh and one line per frame on stderr (unless quiet), then the written files on
+/// stdout.
+void print_render(const pipeline::RenderResult& r, bool quiet);
 
 }  // namespace mlfe::cli

@@ -435,6 +435,176 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   return x;
 }
 
+// Coarse elements of a big volume cannot represent anything: uniform refinement until edges
+// are ≤ 16 voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep
+// it). On the lattice: until T0's cube is cut into cubes 16 samples wide, padding left alone.
+template <int D>
+void refine_to_start_level(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                           const Approximation<D>& out) {
+  const auto ext = f.extent();
+  int start_level = opts.start_level;
+  if (start_level < 0 && out.on_lattice) {
+    start_level = std::max(0, out.lattice.level - 4);
+  } else if (start_level < 0) {
+    double longest = 0;
+    for (int a = 0; a < D; ++a) longest += ext[a] * ext[a];
+    longest = std::sqrt(longest);
+    start_level = 0;
+    while (longest > 16 * f.resolution() && start_level < opts.max_level) {
+      longest *= 0.5;
+      ++start_level;
+    }
+  }
+  start_level = std::min(start_level, opts.max_level);
+  for (int l = 0; l < start_level; ++l) {
+    if (opts.max_vertices && h.vertex_count() * (1 << D) > opts.max_vertices) break;
+    if (!out.on_lattice) {
+      h.refine_uniform();
+      continue;
+    }
+    std::vector<ElemId> inside;
+    for (ElemId e : h.leaves())
+      if (!outside_data<D>(corners_of(h, e), out.lattice)) inside.push_back(e);
+    h.refine(std::move(inside));
+  }
+}
+
+// The integrals of the leaves not cached yet (cache and have are indexed by element id).
+template <int D>
+void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Field& f,
+                           double qedge, const ApproximationOptions& opts, const SampleLattice* lattice,
+                           std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
+  cache.resize(h.element_count());
+  have.resize(h.element_count(), 0);
+  {
+    std::vector<ElemId> todo;
+    for (ElemId e : leaves)
+      if (!have[e.value]) todo.push_back(e);
+    const auto fresh = compute_element_integrals(h, todo, f, qedge, opts.h1, lattice);
+    for (std::size_t i = 0; i < todo.size(); ++i) {
+      cache[todo[i].value] = fresh[i];
+      have[todo[i].value] = 1;
+    }
+  }
+}
+
+// Why the refine-solve loop stops after iteration `it` ("" to go on): nothing marked (target
+// reached, surfaces within tolerance, threshold, maximum level), the iteration limit, the vertex
+// budget, the surface passes' own stop, the surface-driven check of u done, or a stall.
+template <int D>
+std::string loop_stop(const Hierarchy<D>& h, const ApproximationOptions& opts, const Approximation<D>& out,
+                      const IterationStats& st, int it, bool marked_none, bool target_met,
+                      bool surface_driven, const std::string& surface_stop, bool stall_checks) {
+  std::string stop;
+  if (marked_none)
+    stop = target_met           ? "target RMS error reached"
+           : surface_driven     ? (surface_stop.empty() ? "surfaces within tolerance" : surface_stop)
+           : opts.threshold > 0 ? "no element above the threshold"
+                                : "maximum level reached";
+  if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
+  if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
+  if (stop.empty() && !surface_stop.empty()) stop = surface_stop;  // a budget ended the surface passes
+  // The mesh was built around the data's surfaces before the first solve; u is checked
+  // against them once, and what that refines is solved for and kept.
+  if (stop.empty() && surface_driven && it >= 1 && opts.target_rms <= 0 && opts.threshold <= 0)
+    stop = "surfaces built from the data, checked against u";
+  // No stalled iterations: a refinement that added next to nothing ends the loop instead of
+  // paying a full solve per handful of vertices.
+  if (stop.empty() && stall_checks && it > 0) {
+    const auto& prev = out.iterations.back();
+    const double growth = double(st.vertices - prev.vertices) / double(prev.vertices);
+    if (growth < opts.min_growth) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "stalled: the last refinement added %.2f%% of the vertices",
+                    100.0 * growth);
+      stop = buf;
+    }
+  }
+  return stop;
+}
+
+// The integral cache after refine(): compaction only moves elements down (remap[i] <= i), so a
+// forward pass in place never overwrites an entry it still has to read; surviving old elements
+// get the ids 0..kept-1 in order, everything after is new.
+template <int D>
+void remap_integral_cache(const std::vector<ElemId>& remap, std::vector<ElementIntegrals<D>>& cache,
+                          std::vector<std::uint8_t>& have) {
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < remap.size(); ++i) {
+    if (!remap[i].valid()) continue;
+    MLFE_CHECK(remap[i].value == kept);
+    if (have[i]) cache[kept] = cache[i];
+    have[kept++] = have[i];
+  }
+  std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
+}
+
+// Refinement within the vertex (or memory) budget: the worst marked elements first; if a
+// refinement overshoots the budget, refine_within() undoes it and tries fewer. Returns
+// refine()'s element remap; `count` is the number refined (0: the budget allows none, by_memory
+// when the memory budget set it). With an RMS target (excess ≥ 0), only as many as carry 60 %
+// of the excess error are picked.
+template <int D>
+std::vector<ElemId> refine_worst(Hierarchy<D>& h, const ApproximationOptions& opts, std::size_t leaf_count,
+                                 std::vector<Mark>& marked, std::size_t surface_marks, double excess,
+                                 double& vertices_per_mark, std::size_t& count, bool& by_memory) {
+  const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaf_count, &by_memory);
+  const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
+  const std::size_t cap =
+      limit
+          ? std::min(marked.size(), std::max<std::size_t>(
+                                        1, static_cast<std::size_t>(0.9 * double(room) / vertices_per_mark)))
+          : marked.size();
+  count = rank_and_select(marked, cap, surface_marks, excess);
+  // Within half a percent of the budget, further attempts would mostly be undone.
+  if (limit && room < std::max<std::size_t>(8, limit / 200)) count = 0;
+  std::vector<ElemId> sel(count);
+  for (std::size_t i = 0; i < count; ++i) sel[i] = marked[i].id;
+  // An attempt over the budget is rolled back by refine() itself (no copy of h).
+  return refine_within(h, sel, count, limit, vertices_per_mark);
+}
+
+// The iteration's mesh and error figures from the leaves' squared errors; returns their sum.
+template <int D>
+double record_errors(IterationStats& st, const Hierarchy<D>& h, std::size_t leaf_count,
+                     const std::vector<double>& err, double domain_measure, double value_span) {
+  double total = 0;
+  for (double e : err) total += e;  // sequential: deterministic
+  st.level = h.max_level();
+  st.vertices = h.vertex_count();
+  st.elements = leaf_count;
+  st.l2_error = std::sqrt(total);
+  st.rms_error = std::sqrt(total / domain_measure);
+  st.rms_percent = 100.0 * st.rms_error / value_span;
+  st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
+  return total;
+}
+
+// Solves the iteration's system for u, starting from the previous mesh's u interpolated (or,
+// first, f's interpolant on a mesh built around the surfaces, else 0); `values` becomes u.
+template <int D>
+Vector solve_iteration(const Hierarchy<D>& h, const Field& f, const SparseMatrix& m, const Vector& rhs,
+                       const ApproximationOptions& opts, double gw, const std::vector<ElemId>& leaves,
+                       const std::vector<ElementIntegrals<D>>& cache, const SampleLattice* lattice,
+                       const Approximation<D>& out, bool surface_driven, std::vector<double>& values,
+                       IterationStats& st) {
+  constexpr IntegralIndex kById = IntegralIndex::kElementId;
+  if (values.empty() && surface_driven)
+    values = out.data_values;  // f's interpolant is close to u on a mesh built around the surfaces
+  else if (values.empty())
+    values.assign(h.vertex_count(), 0.0);
+  else
+    prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
+  Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  Vector x = solve_system(h, m, rhs, start, opts, gw, st, lattice != nullptr);
+  values.assign(x.data(), x.data() + x.size());
+  if (lattice) {
+    fill_unseen(h, f, leaves, cache, kById, values);
+    x = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  }
+  return x;
+}
+
 template <int D>
 Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in) {
   if (f.dim() != D)
@@ -484,31 +654,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     refine_to_sample_error(h, *grid, opts, t0, out);
     return out;
   }
-  int start_level = opts.start_level;
-  if (start_level < 0 && out.on_lattice) {
-    start_level = std::max(0, out.lattice.level - 4);
-  } else if (start_level < 0) {
-    double longest = 0;
-    for (int a = 0; a < D; ++a) longest += ext[a] * ext[a];
-    longest = std::sqrt(longest);
-    start_level = 0;
-    while (longest > 16 * f.resolution() && start_level < opts.max_level) {
-      longest *= 0.5;
-      ++start_level;
-    }
-  }
-  start_level = std::min(start_level, opts.max_level);
-  for (int l = 0; l < start_level; ++l) {
-    if (opts.max_vertices && h.vertex_count() * (1 << D) > opts.max_vertices) break;
-    if (!out.on_lattice) {
-      h.refine_uniform();
-      continue;
-    }
-    std::vector<ElemId> inside;
-    for (ElemId e : h.leaves())
-      if (!outside_data<D>(corners_of(h, e), out.lattice)) inside.push_back(e);
-    h.refine(std::move(inside));
-  }
+  refine_to_start_level(h, f, opts, out);
   const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
   std::string surface_stop;
   if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out, lattice);
@@ -532,18 +678,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     st.iteration = it;
     auto ta = Clock::now();
     const auto leaves = h.leaves();
-    cache.resize(h.element_count());
-    have.resize(h.element_count(), 0);
-    {
-      std::vector<ElemId> todo;
-      for (ElemId e : leaves)
-        if (!have[e.value]) todo.push_back(e);
-      const auto fresh = compute_element_integrals(h, todo, f, qedge, opts.h1, lattice);
-      for (std::size_t i = 0; i < todo.size(); ++i) {
-        cache[todo[i].value] = fresh[i];
-        have[todo[i].value] = 1;
-      }
-    }
+    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, have);
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
@@ -553,63 +688,21 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
-    if (values.empty() && surface_driven)
-      values = out.data_values;  // f's interpolant is close to u on a mesh built around the surfaces
-    else if (values.empty())
-      values.assign(h.vertex_count(), 0.0);
-    else
-      prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
-    Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-    Vector x = solve_system(h, m, rhs, start, opts, gw, st, lattice != nullptr);
-    values.assign(x.data(), x.data() + x.size());
-    if (lattice) {
-      fill_unseen(h, f, leaves, cache, kById, values);
-      x = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-    }
+    const Vector x =
+        solve_iteration(h, f, m, rhs, opts, gw, leaves, cache, lattice, out, surface_driven, values, st);
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
     const auto err = element_errors(h, leaves, cache, x, gw, kById);
-    double total = 0;
-    for (double e : err) total += e;  // sequential: deterministic
-    st.level = h.max_level();
-    st.vertices = h.vertex_count();
-    st.elements = leaves.size();
-    st.l2_error = std::sqrt(total);
-    st.rms_error = std::sqrt(total / out.domain_measure);
-    st.rms_percent = 100.0 * st.rms_error / value_span;
-    st.psnr_db = st.rms_error > 0 ? 20.0 * std::log10(value_span / st.rms_error) : 999.0;
+    const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
 
     // Mark.
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     std::size_t surface_marks = 0;
     std::vector<Mark> marked =
         mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks, lattice);
-    std::string stop;
-    if (marked.empty())
-      stop = target_met           ? "target RMS error reached"
-             : surface_driven     ? (surface_stop.empty() ? "surfaces within tolerance" : surface_stop)
-             : opts.threshold > 0 ? "no element above the threshold"
-                                  : "maximum level reached";
-    if (stop.empty() && it >= opts.max_iterations) stop = "iteration limit";
-    if (stop.empty() && opts.max_vertices && h.vertex_count() >= opts.max_vertices) stop = "vertex budget";
-    if (stop.empty() && !surface_stop.empty()) stop = surface_stop;  // a budget ended the surface passes
-    // The mesh was built around the data's surfaces before the first solve; u is checked
-    // against them once, and what that refines is solved for and kept.
-    if (stop.empty() && surface_driven && it >= 1 && opts.target_rms <= 0 && opts.threshold <= 0)
-      stop = "surfaces built from the data, checked against u";
-    // No stalled iterations: a refinement that added next to nothing ends the loop instead of
-    // paying a full solve per handful of vertices.
-    if (stop.empty() && stall_checks && it > 0) {
-      const auto& prev = out.iterations.back();
-      const double growth = double(st.vertices - prev.vertices) / double(prev.vertices);
-      if (growth < opts.min_growth) {
-        char buf[96];
-        std::snprintf(buf, sizeof buf, "stalled: the last refinement added %.2f%% of the vertices",
-                      100.0 * growth);
-        stop = buf;
-      }
-    }
+    const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
+                                       surface_stop, stall_checks);
     st.estimate_seconds = since(te);
 
     if (!stop.empty()) {
@@ -627,25 +720,15 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     // uniform mesh to 8-12 on a graded one; it is learned from the previous attempt, so an
     // iteration usually takes one attempt instead of halving its way down to the budget.
     auto tr = Clock::now();
-    bool by_memory = false;
-    const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaves.size(), &by_memory);
-    const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
-    const std::size_t cap =
-        limit ? std::min(marked.size(), std::max<std::size_t>(1, static_cast<std::size_t>(0.9 * double(room) /
-                                                                                          vertices_per_mark)))
-              : marked.size();
     // Rank and select: the worst `cap` first; with an RMS target, only as many as carry 60 %
     // of the excess error.
     const double excess = opts.target_rms > 0 && opts.threshold <= 0 && !target_met
                               ? total - opts.target_rms * opts.target_rms * out.domain_measure
                               : -1.0;
-    std::size_t count = rank_and_select(marked, cap, surface_marks, excess);
-    // Within half a percent of the budget, further attempts would mostly be undone.
-    if (limit && room < std::max<std::size_t>(8, limit / 200)) count = 0;
-    std::vector<ElemId> sel(count);
-    for (std::size_t i = 0; i < count; ++i) sel[i] = marked[i].id;
-    // An attempt over the budget is rolled back by refine() itself (no copy of h).
-    const std::vector<ElemId> remap = refine_within(h, sel, count, limit, vertices_per_mark);
+    bool by_memory = false;
+    std::size_t count = 0;
+    const std::vector<ElemId> remap = refine_worst(h, opts, leaves.size(), marked, surface_marks, excess,
+                                                   vertices_per_mark, count, by_memory);
     const bool refined = count > 0;
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);
@@ -659,17 +742,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
       out.leaf_errors = err;
       break;
     }
-    // In place: compaction only moves elements down (remap[i] <= i), so a forward pass never
-    // overwrites an entry it still has to read.
-    // Surviving old elements get the ids 0..kept-1 in order; everything after is new.
-    std::size_t kept = 0;
-    for (std::size_t i = 0; i < remap.size(); ++i) {
-      if (!remap[i].valid()) continue;
-      MLFE_CHECK(remap[i].value == kept);
-      if (have[i]) cache[kept] = cache[i];
-      have[kept++] = have[i];
-    }
-    std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
+    remap_integral_cache(remap, cache, have);
   }
   out.values = std::move(values);
   if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <string>
 
 namespace mlfe {
@@ -113,27 +114,20 @@ Hierarchy<D> Hierarchy<D>::from_coarse(std::vector<Point> points, std::vector<Ce
   return h;
 }
 
+namespace {
+
+// Throws mlfe::Error naming the source file and the problem.
+using Fail = std::function<void(const std::string&)>;
+
+// from_arrays' checks of the vertex arrays: finite points, each refined vertex the midpoint of
+// two earlier ones on a lower level, no edge bisected twice. Returns the edge → midpoint map.
 template <int D>
-Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
-  using T = SimplexTraits<D>;
-  auto fail = [&](const std::string& what) { throw Error(source + ": " + what); };
+EdgeMap checked_edge_midpoints(const typename Hierarchy<D>::Arrays& a, const Fail& fail) {
+  using Point = typename Hierarchy<D>::Point;
   auto vs = [](std::size_t i) { return std::to_string(i); };
   const std::size_t nv = a.points.size();
-  const std::size_t ne = a.cells.size();
-  // Ids must stay below the invalid marker, or "invalid" could alias a real index.
-  if (nv >= VertexId::kInvalidValue) fail("too many vertices (" + vs(nv) + ")");
-  if (ne >= ElemId::kInvalidValue) fail("too many elements (" + vs(ne) + ")");
-  if (a.vertex_parents.size() != nv || a.vertex_level.size() != nv)
-    fail("vertex arrays differ in size (points " + vs(nv) + ", parents " + vs(a.vertex_parents.size()) +
-         ", levels " + vs(a.vertex_level.size()) + ")");
-  if (a.parent.size() != ne || a.first_child.size() != ne || a.num_children.size() != ne ||
-      a.level.size() != ne || a.kind.size() != ne)
-    fail("element arrays differ in size (cells " + vs(ne) + ")");
-  if (ne == 0) fail("no elements");
-
-  Hierarchy h;
-  // ---- vertices ----
-  h.edge_mid_.reserve(nv);
+  EdgeMap mid;
+  mid.reserve(nv);
   for (std::size_t v = 0; v < nv; ++v) {
     const Point& p = a.points[v];
     for (int i = 0; i < D; ++i)
@@ -159,15 +153,21 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
     if (a.vertex_level[v] == 0 || a.vertex_level[v] <= a.vertex_level[par[0].value] ||
         a.vertex_level[v] <= a.vertex_level[par[1].value])
       fail("vertex " + vs(v) + " has level " + vs(a.vertex_level[v]) + ", not above its parents' levels");
-    if (h.edge_mid_.find(par[0], par[1]).valid())
+    if (mid.find(par[0], par[1]).valid())
       fail("edge (" + vs(par[0].value) + ", " + vs(par[1].value) + ") is bisected twice");
-    h.edge_mid_.insert(par[0], par[1], VertexId(static_cast<std::uint32_t>(v)));
+    mid.insert(par[0], par[1], VertexId(static_cast<std::uint32_t>(v)));
   }
-  h.vx_.points = IndexVector<VertexId, Point>(std::move(a.points));
-  h.vx_.parents = IndexVector<VertexId, std::array<VertexId, 2>>(std::move(a.vertex_parents));
-  h.vx_.level = IndexVector<VertexId, std::uint8_t>(std::move(a.vertex_level));
+  return mid;
+}
 
-  // ---- elements: local checks ----
+// from_arrays' checks of each element's own entries: vertex indices, kind, level, parent and
+// child ranges consistent both ways, coarse elements first. Returns the number of coarse ones.
+// `nv`: the number of vertices (a.points has been moved into the hierarchy by then).
+template <int D>
+std::size_t checked_element_links(const typename Hierarchy<D>::Arrays& a, std::size_t nv, const Fail& fail) {
+  using Cell = typename Hierarchy<D>::Cell;
+  auto vs = [](std::size_t i) { return std::to_string(i); };
+  const std::size_t ne = a.cells.size();
   std::size_t coarse = 0;
   for (std::size_t e = 0; e < ne; ++e) {
     const std::string el = "element " + vs(e);
@@ -208,6 +208,37 @@ Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
     for (std::size_t i = 0; i < n; ++i)
       if (a.parent[f.value + i].value != e) fail(el + ": child " + vs(f.value + i) + " names another parent");
   }
+  return coarse;
+}
+
+}  // namespace
+
+template <int D>
+Hierarchy<D> Hierarchy<D>::from_arrays(Arrays a, const std::string& source) {
+  using T = SimplexTraits<D>;
+  const Fail fail = [&](const std::string& what) { throw Error(source + ": " + what); };
+  auto vs = [](std::size_t i) { return std::to_string(i); };
+  const std::size_t nv = a.points.size();
+  const std::size_t ne = a.cells.size();
+  // Ids must stay below the invalid marker, or "invalid" could alias a real index.
+  if (nv >= VertexId::kInvalidValue) fail("too many vertices (" + vs(nv) + ")");
+  if (ne >= ElemId::kInvalidValue) fail("too many elements (" + vs(ne) + ")");
+  if (a.vertex_parents.size() != nv || a.vertex_level.size() != nv)
+    fail("vertex arrays differ in size (points " + vs(nv) + ", parents " + vs(a.vertex_parents.size()) +
+         ", levels " + vs(a.vertex_level.size()) + ")");
+  if (a.parent.size() != ne || a.first_child.size() != ne || a.num_children.size() != ne ||
+      a.level.size() != ne || a.kind.size() != ne)
+    fail("element arrays differ in size (cells " + vs(ne) + ")");
+  if (ne == 0) fail("no elements");
+
+  Hierarchy h;
+  h.edge_mid_ = checked_edge_midpoints<D>(a, fail);
+  h.vx_.points = IndexVector<VertexId, Point>(std::move(a.points));
+  h.vx_.parents = IndexVector<VertexId, std::array<VertexId, 2>>(std::move(a.vertex_parents));
+  h.vx_.level = IndexVector<VertexId, std::uint8_t>(std::move(a.vertex_level));
+
+  // ---- elements: local checks, then the geometry of each refinement ----
+  const std::size_t coarse = checked_element_links<D>(a, nv, fail);
   h.el_.cells = IndexVector<ElemId, Cell>(std::move(a.cells));
   h.el_.parent = IndexVector<ElemId, ElemId>(std::move(a.parent));
   h.el_.first_child = IndexVector<ElemId, ElemId>(std::move(a.first_child));

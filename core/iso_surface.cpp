@@ -284,6 +284,135 @@ std::size_t walk_level(const Hierarchy<3>& h, int level, Keep&& keep, Emit&& emi
   return visited;
 }
 
+// An output vertex of the extraction: on the edge (a above the iso-value, b at or below) at
+// parameter t from a; t = 1 with u(b) = iso is the mesh vertex b itself.
+struct OutVertex {
+  VertexId a, b;
+  double t;
+};
+
+// The output of one chunk of cut elements, its vertices numbered in order of first use.
+struct Chunk {
+  std::vector<OutVertex> verts;
+  std::vector<V3> local;  // per vertex: its point on the cut edge, local frame
+  std::vector<std::array<std::uint32_t, 3>> tris;
+};
+
+// The chunks' vertices merged, chunk by chunk, a vertex keeping the number of its first use, and
+// their triangles renumbered into `mesh`; `chunks` is released.
+void merge_chunks(std::vector<Chunk>& chunks, const std::vector<double>& u, double iso,
+                  std::vector<OutVertex>& verts, std::vector<V3>& local, TriangleMesh& mesh) {
+  const std::size_t nchunks = chunks.size();
+  std::vector<std::vector<std::uint32_t>> to_global(nchunks);
+  {
+    EdgeMap on_edge;
+    std::size_t total = 0;
+    for (const auto& ch : chunks) total += ch.verts.size();
+    on_edge.reserve(total);
+    std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;
+    for (std::size_t k = 0; k < nchunks; ++k) {
+      const Chunk& ch = chunks[k];
+      auto& map = to_global[k];
+      map.resize(ch.verts.size());
+      for (std::size_t j = 0; j < ch.verts.size(); ++j) {
+        const OutVertex& ov = ch.verts[j];
+        const auto next = static_cast<std::uint32_t>(verts.size());
+        std::uint32_t id = next;
+        if (ov.t == 1.0 && u[ov.b.value] == iso) {
+          id = on_vertex.emplace(ov.b.value, next).first->second;
+        } else if (nchunks > 1) {
+          const VertexId found = on_edge.find(ov.a, ov.b);
+          if (found.valid())
+            id = found.value;
+          else
+            on_edge.insert(ov.a, ov.b, VertexId(next));
+        }
+        if (id == next) {
+          verts.push_back(ov);
+          local.push_back(ch.local[j]);
+        }
+        map[j] = id;
+      }
+    }
+  }
+  {
+    std::vector<std::size_t> offset(nchunks + 1, 0);
+    for (std::size_t k = 0; k < nchunks; ++k) offset[k + 1] = offset[k] + chunks[k].tris.size();
+    mesh.triangles.resize(offset.back());
+    tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
+      const auto& map = to_global[k];
+      std::size_t at = offset[k];
+      for (const auto& t : chunks[k].tris) mesh.triangles[at++] = {map[t[0]], map[t[1]], map[t[2]]};
+    });
+    std::vector<Chunk>().swap(chunks);
+  }
+}
+
+// Steps 3 and 4 of IsoExtractor::extract: vertex normals at the mesh vertices that carry output
+// vertices, as the volume-weighted mean of the gradients of all tetrahedra around them (those
+// have a vertex value inside [lo, hi] of the needed vertices, so the same range walk finds all
+// of them), then the gradients of u at the output vertices, interpolated along the cut edge.
+std::vector<V3> gradients_at(const Hierarchy<3>& h, int level, const std::vector<double>& u,
+                             const std::vector<float>& lo, const std::vector<float>& hi,
+                             const std::vector<OutVertex>& verts) {
+  constexpr std::uint32_t kNotNeeded = ~std::uint32_t(0);
+  std::vector<std::uint32_t> slot(h.vertex_count(), kNotNeeded);  // needed vertex -> acc slot
+  std::vector<std::array<double, 4>> acc;                         // gradient sum, volume sum
+  double nlo = 1e300, nhi = -1e300;
+  for (const auto& ov : verts)
+    for (VertexId v : {ov.a, ov.b}) {
+      if (slot[v.value] != kNotNeeded) continue;
+      slot[v.value] = static_cast<std::uint32_t>(acc.size());
+      acc.push_back({0, 0, 0, 0});
+      nlo = std::min(nlo, u[v.value]);
+      nhi = std::max(nhi, u[v.value]);
+    }
+  if (!verts.empty()) {
+    // Pick the elements around needed vertices (walk order), weigh their gradients in
+    // parallel, and add them up in walk order (the sums do not depend on the thread count).
+    std::vector<ElemId> around;
+    walk_level(
+        h, level, [&](ElemId e) { return double(hi[e.value]) >= nlo && double(lo[e.value]) <= nhi; },
+        [&](ElemId e) {
+          bool any = false;
+          for (VertexId v : h.cell(e)) any |= slot[v.value] != kNotNeeded;
+          if (any) around.push_back(e);
+        });
+    std::vector<std::array<double, 4>> weighted(around.size());  // measure × gradient, measure
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, around.size(), 2048),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const auto& c = h.cell(around[i]);
+                          const P1Element<3> el = element_of(h, around[i]);
+                          V3 g{0, 0, 0};
+                          for (int j = 0; j < 4; ++j)
+                            for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
+                          weighted[i] = {el.measure * g[0], el.measure * g[1], el.measure * g[2], el.measure};
+                        }
+                      });
+    for (std::size_t i = 0; i < around.size(); ++i)
+      for (VertexId v : h.cell(around[i]))
+        if (slot[v.value] != kNotNeeded) {
+          auto& s = acc[slot[v.value]];
+          for (int k = 0; k < 4; ++k) s[k] += weighted[i][k];
+        }
+  }
+  auto vertex_gradient = [&](VertexId v) {
+    const auto& s = acc[slot[v.value]];
+    return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
+  };
+
+  // 4. Gradients of u at the output vertices (interpolated along the cut edge).
+  std::vector<V3> grad(verts.size());
+  for (std::size_t i = 0; i < verts.size(); ++i) {
+    const auto& ov = verts[i];
+    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
+    grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
+               (1 - ov.t) * ga[2] + ov.t * gb[2]};
+  }
+  return grad;
+}
+
 }  // namespace
 
 IsoExtractor::IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values)
@@ -338,10 +467,6 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   // The cut list is split into chunks (by its length alone), each numbering its own vertices
   // in order of first use, in parallel; a sequential merge then gives every vertex the
   // number of its first use in the whole list, so the mesh is the one a single pass makes.
-  struct OutVertex {
-    VertexId a, b;
-    double t;
-  };
   // The gradient of u on each cut element orients its triangles; computed in parallel (the
   // element geometry is most of the work), used in order.
   std::vector<V3> cut_grad(cut.size());
@@ -356,11 +481,6 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
                         cut_grad[i] = g;
                       }
                     });
-  struct Chunk {
-    std::vector<OutVertex> verts;
-    std::vector<V3> local;  // per vertex: its point on the cut edge, local frame
-    std::vector<std::array<std::uint32_t, 3>> tris;
-  };
   constexpr std::size_t kChunkElements = 1 << 16;
   const std::size_t nchunks = std::max<std::size_t>(1, (cut.size() + kChunkElements - 1) / kChunkElements);
   std::vector<Chunk> chunks(nchunks);
@@ -423,109 +543,12 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   // Merge: chunk by chunk, a vertex keeps the number of its first use.
   std::vector<OutVertex> verts;
   std::vector<V3> local;
-  std::vector<std::vector<std::uint32_t>> to_global(nchunks);
-  {
-    EdgeMap on_edge;
-    std::size_t total = 0;
-    for (const auto& ch : chunks) total += ch.verts.size();
-    on_edge.reserve(total);
-    std::unordered_map<std::uint32_t, std::uint32_t> on_vertex;
-    for (std::size_t k = 0; k < nchunks; ++k) {
-      const Chunk& ch = chunks[k];
-      auto& map = to_global[k];
-      map.resize(ch.verts.size());
-      for (std::size_t j = 0; j < ch.verts.size(); ++j) {
-        const OutVertex& ov = ch.verts[j];
-        const auto next = static_cast<std::uint32_t>(verts.size());
-        std::uint32_t id = next;
-        if (ov.t == 1.0 && u[ov.b.value] == iso) {
-          id = on_vertex.emplace(ov.b.value, next).first->second;
-        } else if (nchunks > 1) {
-          const VertexId found = on_edge.find(ov.a, ov.b);
-          if (found.valid())
-            id = found.value;
-          else
-            on_edge.insert(ov.a, ov.b, VertexId(next));
-        }
-        if (id == next) {
-          verts.push_back(ov);
-          local.push_back(ch.local[j]);
-        }
-        map[j] = id;
-      }
-    }
-  }
   TriangleMesh mesh;
-  {
-    std::vector<std::size_t> offset(nchunks + 1, 0);
-    for (std::size_t k = 0; k < nchunks; ++k) offset[k + 1] = offset[k] + chunks[k].tris.size();
-    mesh.triangles.resize(offset.back());
-    tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
-      const auto& map = to_global[k];
-      std::size_t at = offset[k];
-      for (const auto& t : chunks[k].tris) mesh.triangles[at++] = {map[t[0]], map[t[1]], map[t[2]]};
-    });
-    std::vector<Chunk>().swap(chunks);
-  }
+  merge_chunks(chunks, u, iso, verts, local, mesh);
 
-  // 3. Vertex normals at the mesh vertices that carry output vertices: volume-weighted mean of
-  // the gradients of all tetrahedra around them. Those tetrahedra have a vertex value inside
-  // [lo, hi] of the needed vertices, so the same range walk finds all of them.
-  constexpr std::uint32_t kNotNeeded = ~std::uint32_t(0);
-  std::vector<std::uint32_t> slot(h.vertex_count(), kNotNeeded);  // needed vertex -> acc slot
-  std::vector<std::array<double, 4>> acc;                         // gradient sum, volume sum
-  double nlo = 1e300, nhi = -1e300;
-  for (const auto& ov : verts)
-    for (VertexId v : {ov.a, ov.b}) {
-      if (slot[v.value] != kNotNeeded) continue;
-      slot[v.value] = static_cast<std::uint32_t>(acc.size());
-      acc.push_back({0, 0, 0, 0});
-      nlo = std::min(nlo, u[v.value]);
-      nhi = std::max(nhi, u[v.value]);
-    }
-  if (!verts.empty()) {
-    // Pick the elements around needed vertices (walk order), weigh their gradients in
-    // parallel, and add them up in walk order (the sums do not depend on the thread count).
-    std::vector<ElemId> around;
-    walk_level(
-        h, level, [&](ElemId e) { return double(hi_[e.value]) >= nlo && double(lo_[e.value]) <= nhi; },
-        [&](ElemId e) {
-          bool any = false;
-          for (VertexId v : h.cell(e)) any |= slot[v.value] != kNotNeeded;
-          if (any) around.push_back(e);
-        });
-    std::vector<std::array<double, 4>> weighted(around.size());  // measure × gradient, measure
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, around.size(), 2048),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          const auto& c = h.cell(around[i]);
-                          const P1Element<3> el = element_of(h, around[i]);
-                          V3 g{0, 0, 0};
-                          for (int j = 0; j < 4; ++j)
-                            for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
-                          weighted[i] = {el.measure * g[0], el.measure * g[1], el.measure * g[2], el.measure};
-                        }
-                      });
-    for (std::size_t i = 0; i < around.size(); ++i)
-      for (VertexId v : h.cell(around[i]))
-        if (slot[v.value] != kNotNeeded) {
-          auto& s = acc[slot[v.value]];
-          for (int k = 0; k < 4; ++k) s[k] += weighted[i][k];
-        }
-  }
-  auto vertex_gradient = [&](VertexId v) {
-    const auto& s = acc[slot[v.value]];
-    return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
-  };
-
-  // 4. Gradients of u at the output vertices (interpolated along the cut edge).
-  std::vector<V3> grad(verts.size());
-  for (std::size_t i = 0; i < verts.size(); ++i) {
-    const auto& ov = verts[i];
-    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
-    grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
-               (1 - ov.t) * ga[2] + ov.t * gb[2]};
-  }
+  // 3, 4. Vertex normals at the mesh vertices that carry output vertices; the gradients of u at
+  // the output vertices.
+  std::vector<V3> grad = gradients_at(h, level, u, lo_, hi_, verts);
   if (opts.clip) clip_to_box(opts.clip_to, mesh, local, grad);
   if (opts.snap_to && opts.snap_distance > 0)
     snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);

@@ -156,44 +156,29 @@ struct TetMeshField::ClosestFace {
   }
 };
 
-TetMesh leaf_mesh(const Hierarchy<3>& h, const std::vector<double>& values) {
-  MLFE_CHECK(values.size() == h.vertex_count());
-  TetMesh m;
-  m.points.reserve(h.vertex_count());
-  for (std::size_t v = 0; v < h.vertex_count(); ++v) m.points.push_back(h.point(VertexId(std::uint32_t(v))));
-  m.tets.reserve(h.leaves().size());
-  for (ElemId e : h.leaves()) {
-    const auto& c = h.cell(e);
-    m.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
-                      std::int32_t(c[3].value)});
-  }
-  m.values = values;
-  return m;
-}
+namespace {
 
-TetMeshField::~TetMeshField() = default;
-
-TetMeshField::TetMeshField(const TetMesh& mesh) {
-  const std::string& src = mesh.source.empty() ? std::string("tetrahedral mesh") : mesh.source;
+// Every point finite and within ±1e100 (beyond that, products of coordinate differences such as
+// volumes and inverses overflow), every value finite.
+void check_points(const TetMesh& mesh, const std::string& src) {
   const std::size_t np = mesh.points.size();
-  if (mesh.values.size() != np)
-    throw Error(src + ": " + std::to_string(mesh.values.size()) + " point values for " + std::to_string(np) +
-                " points");
-  if (np > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
-      mesh.tets.size() >= std::size_t(std::numeric_limits<std::uint32_t>::max()))
-    throw Error(src + ": too many points or tetrahedra");
   for (std::size_t i = 0; i < np; ++i) {
     const auto& p = mesh.points[i];
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
       throw Error(src + ": point " + std::to_string(i) + " has a coordinate that is not a finite number");
-    // Beyond that, products of coordinate differences (volumes, inverses) overflow.
     if (std::max({std::abs(p[0]), std::abs(p[1]), std::abs(p[2])}) > 1e100)
       throw Error(src + ": point " + std::to_string(i) + " has a coordinate beyond ±1e100");
     if (!std::isfinite(mesh.values[i]))
       throw Error(src + ": the value at point " + std::to_string(i) + " is not a finite number");
   }
-  // Step 1: keep the tetrahedra of positive volume (relative to their longest edge, so the
-  // test does not depend on the mesh's unit).
+}
+
+// Step 1 of the constructor: the tetrahedra of positive volume (relative to their longest edge,
+// so the test does not depend on the mesh's unit) whose inverse and gradient are representable;
+// `degenerate` counts the others. Throws when none is left.
+std::vector<std::uint32_t> positive_volume_tets(const TetMesh& mesh, const std::string& src,
+                                                std::size_t& degenerate) {
+  const std::size_t np = mesh.points.size();
   std::vector<std::uint32_t> keep;
   keep.reserve(mesh.tets.size());
   for (std::size_t t = 0; t < mesh.tets.size(); ++t) {
@@ -222,11 +207,76 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
     if (ok)
       keep.push_back(std::uint32_t(t));
     else
-      ++degenerate_;
+      ++degenerate;
   }
   if (keep.empty())
     throw Error(src + ": no tetrahedron of positive volume (" + std::to_string(mesh.tets.size()) +
                 " tetrahedra, all flat)");
+  return keep;
+}
+
+// The faces of exactly one kept tetrahedron (index into `keep`, face opposite vertex k), in the
+// order of their sorted vertices.
+std::vector<std::pair<std::uint32_t, std::uint8_t>> boundary_faces(const TetMesh& mesh,
+                                                                   const std::vector<std::uint32_t>& keep) {
+  std::vector<std::pair<std::uint32_t, std::uint8_t>> faces;
+  struct FaceKey {
+    std::array<std::int32_t, 3> v;
+    std::uint32_t tet;
+    std::uint8_t face;
+  };
+  std::vector<FaceKey> keys;
+  keys.reserve(keep.size() * 4);
+  for (std::uint32_t t = 0; t < keep.size(); ++t)
+    for (std::uint8_t f = 0; f < 4; ++f) {
+      std::array<std::int32_t, 3> v{mesh.tets[keep[t]][kFaces[f][0]], mesh.tets[keep[t]][kFaces[f][1]],
+                                    mesh.tets[keep[t]][kFaces[f][2]]};
+      std::sort(v.begin(), v.end());
+      keys.push_back({v, t, f});
+    }
+  std::sort(keys.begin(), keys.end(), [](const FaceKey& a, const FaceKey& b) {
+    return a.v != b.v ? a.v < b.v : a.tet != b.tet ? a.tet < b.tet : a.face < b.face;
+  });
+  for (std::size_t i = 0; i < keys.size();) {
+    std::size_t j = i + 1;
+    while (j < keys.size() && keys[j].v == keys[i].v) ++j;
+    if (j - i == 1) faces.emplace_back(keys[i].tet, keys[i].face);
+    i = j;
+  }
+  return faces;
+}
+
+}  // namespace
+
+TetMesh leaf_mesh(const Hierarchy<3>& h, const std::vector<double>& values) {
+  MLFE_CHECK(values.size() == h.vertex_count());
+  TetMesh m;
+  m.points.reserve(h.vertex_count());
+  for (std::size_t v = 0; v < h.vertex_count(); ++v) m.points.push_back(h.point(VertexId(std::uint32_t(v))));
+  m.tets.reserve(h.leaves().size());
+  for (ElemId e : h.leaves()) {
+    const auto& c = h.cell(e);
+    m.tets.push_back({std::int32_t(c[0].value), std::int32_t(c[1].value), std::int32_t(c[2].value),
+                      std::int32_t(c[3].value)});
+  }
+  m.values = values;
+  return m;
+}
+
+TetMeshField::~TetMeshField() = default;
+
+TetMeshField::TetMeshField(const TetMesh& mesh) {
+  const std::string& src = mesh.source.empty() ? std::string("tetrahedral mesh") : mesh.source;
+  const std::size_t np = mesh.points.size();
+  if (mesh.values.size() != np)
+    throw Error(src + ": " + std::to_string(mesh.values.size()) + " point values for " + std::to_string(np) +
+                " points");
+  if (np > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
+      mesh.tets.size() >= std::size_t(std::numeric_limits<std::uint32_t>::max()))
+    throw Error(src + ": too many points or tetrahedra");
+  check_points(mesh, src);
+  // Step 1: keep the tetrahedra of positive volume.
+  const std::vector<std::uint32_t> keep = positive_volume_tets(mesh, src, degenerate_);
 
   // Step 2: the box of the kept tetrahedra, and the local frame.
   V3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
@@ -335,30 +385,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
   // (Eigen's KdBVH). Outside the mesh the closest point of the mesh lies on one of them; a
   // nearest-face query in the tree costs O(log n) box tests, where growing rings of buckets
   // cost a whole ring of buckets per step (~1 ms a point deep in a cut corner of a 1 M-tet mesh).
-  struct FaceKey {
-    std::array<std::int32_t, 3> v;
-    std::uint32_t tet;
-    std::uint8_t face;
-  };
-  std::vector<FaceKey> keys;
-  keys.reserve(tets_.size() * 4);
-  for (std::uint32_t t = 0; t < tets_.size(); ++t)
-    for (std::uint8_t f = 0; f < 4; ++f) {
-      std::array<std::int32_t, 3> v{tets_[t].vertex[kFaces[f][0]], tets_[t].vertex[kFaces[f][1]],
-                                    tets_[t].vertex[kFaces[f][2]]};
-      std::sort(v.begin(), v.end());
-      keys.push_back({v, t, f});
-    }
-  std::sort(keys.begin(), keys.end(), [](const FaceKey& a, const FaceKey& b) {
-    return a.v != b.v ? a.v < b.v : a.tet != b.tet ? a.tet < b.tet : a.face < b.face;
-  });
-  for (std::size_t i = 0; i < keys.size();) {
-    std::size_t j = i + 1;
-    while (j < keys.size() && keys[j].v == keys[i].v) ++j;
-    if (j - i == 1) boundary_.push_back({keys[i].tet, keys[i].face});
-    i = j;
-  }
-  std::vector<FaceKey>().swap(keys);
+  for (const auto& [t, f] : boundary_faces(mesh, keep)) boundary_.push_back({t, f});
   std::vector<std::uint32_t> ids(boundary_.size());
   std::vector<Eigen::AlignedBox3d> boxes(boundary_.size());
   for (std::uint32_t f = 0; f < boundary_.size(); ++f) {

@@ -282,6 +282,109 @@ void add_extension(tinygltf::Model& model, const std::string& name, bool require
   if (required) model.extensionsRequired.push_back(name);
 }
 
+// Every surface and its coarser levels in glTF's frame, named. All of them are converted before
+// writing: the shared quantization box needs all of them.
+std::vector<std::vector<Level>> convert_levels(const std::vector<GltfSurface>& surfaces,
+                                               const std::array<double, 9>& m, const std::string& path) {
+  std::vector<std::vector<Level>> levels(surfaces.size());
+  for (std::size_t s = 0; s < surfaces.size(); ++s) {
+    const GltfSurface& surface = surfaces[s];
+    const std::string node_name =
+        surface.node_name.empty() ? fmt::format("iso {}", surface.iso_value) : surface.node_name;
+    const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
+    levels[s].push_back(convert(surface.mesh, m, path));
+    levels[s].back().node_name = node_name;
+    levels[s].back().mesh_name = mesh_name;
+    for (std::size_t k = 0; k < surface.lods.size(); ++k) {
+      levels[s].push_back(convert(surface.lods[k], m, path));
+      levels[s].back().lod = int(k + 1);
+      levels[s].back().node_name = fmt::format("{} lod {}", node_name, k + 1);
+      levels[s].back().mesh_name = fmt::format("{} lod {}", mesh_name, k + 1);
+    }
+  }
+  return levels;
+}
+
+// The box of every vertex of every level, which quantized positions share.
+void fit_shared_box(Writer& w, const std::vector<std::vector<Level>>& levels) {
+  std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  bool any = false;
+  for (const auto& ls : levels)
+    for (const auto& l : ls)
+      for (const auto& t : l.mesh.triangles)
+        for (auto v : t) {
+          const auto& p = l.mesh.positions[v];
+          for (int k = 0; k < 3; ++k) {
+            lo[k] = any ? std::min(lo[k], p[k]) : p[k];
+            hi[k] = any ? std::max(hi[k], p[k]) : p[k];
+          }
+          any = true;
+        }
+  float range = 0;
+  for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - lo[k]);
+  w.box.min = lo;
+  w.box.range = range > 0 ? range : 1.0f;
+}
+
+// The PBR material of a surface: its colour, translucent and double-sided when not opaque.
+tinygltf::Material surface_material(const GltfSurface& surface, const std::string& name,
+                                    const std::string& path) {
+  tinygltf::Material mat;
+  mat.name = name;
+  const auto& c = surface.color;
+  for (float x : c)
+    if (!(x >= 0.0f && x <= 1.0f)) throw Error(path + ": surface color components must be in [0, 1]");
+  // Via the shortest decimal form, so 0.9f is written as 0.9 rather than 0.8999999761581421.
+  auto shortest = [](float x) { return std::stod(fmt::format("{}", x)); };
+  mat.pbrMetallicRoughness.baseColorFactor = {shortest(c[0]), shortest(c[1]), shortest(c[2]), shortest(c[3])};
+  mat.pbrMetallicRoughness.metallicFactor = 0.0;  // tissue is a dielectric
+  mat.pbrMetallicRoughness.roughnessFactor = 0.6;
+  if (c[3] < 1.0f) {
+    mat.alphaMode = "BLEND";
+    mat.doubleSided = true;  // inner structures must stay visible through the back faces
+  }
+  return mat;
+}
+
+// One node per level of a surface (extras: iso value or the surface's own, lod, triangles); the
+// coarser ones referenced from the full one through MSFT_lod. Returns the full level's node.
+int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<Level>& levels, int material,
+                      bool& any_lod) {
+  tinygltf::Model& model = w.model;
+  std::vector<int> lod_nodes;
+  int main_node = -1;
+  for (const Level& level : levels) {
+    tinygltf::Node node;
+    node.name = level.node_name;
+    tinygltf::Value::Object extras;
+    if (surface.node_extras.is_object())
+      extras = to_value(surface.node_extras).Get<tinygltf::Value::Object>();
+    else
+      extras["iso_value"] = tinygltf::Value(surface.iso_value);
+    extras["lod"] = tinygltf::Value(level.lod);
+    extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
+    node.extras = tinygltf::Value(std::move(extras));
+    if (!level.mesh.triangles.empty()) node.mesh = w.add_mesh(level, material);
+    model.nodes.push_back(node);
+    const int id = int(model.nodes.size() - 1);
+    if (level.lod == 0)
+      main_node = id;
+    else
+      lod_nodes.push_back(id);
+  }
+  if (!lod_nodes.empty()) {
+    // MSFT_lod: coarser levels are referenced from the full-resolution node and are not part
+    // of the scene, so viewers without LOD support show only the full surface.
+    tinygltf::Value::Array ids;
+    for (int id : lod_nodes) ids.push_back(tinygltf::Value(id));
+    tinygltf::Value::Object lod_ext;
+    lod_ext["ids"] = tinygltf::Value(std::move(ids));
+    model.nodes[main_node].extensions["MSFT_lod"] = tinygltf::Value(std::move(lod_ext));
+    any_lod = true;
+  }
+  return main_node;
+}
+
 }  // namespace
 
 std::array<double, 9> physical_to_gltf_matrix(const std::string& space) {
@@ -308,44 +411,10 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
     throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
 
-  // Convert every level first: the shared quantization box needs all of them.
-  std::vector<std::vector<Level>> levels(surfaces.size());
-  for (std::size_t s = 0; s < surfaces.size(); ++s) {
-    const GltfSurface& surface = surfaces[s];
-    const std::string node_name =
-        surface.node_name.empty() ? fmt::format("iso {}", surface.iso_value) : surface.node_name;
-    const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
-    levels[s].push_back(convert(surface.mesh, m, path));
-    levels[s].back().node_name = node_name;
-    levels[s].back().mesh_name = mesh_name;
-    for (std::size_t k = 0; k < surface.lods.size(); ++k) {
-      levels[s].push_back(convert(surface.lods[k], m, path));
-      levels[s].back().lod = int(k + 1);
-      levels[s].back().node_name = fmt::format("{} lod {}", node_name, k + 1);
-      levels[s].back().mesh_name = fmt::format("{} lod {}", mesh_name, k + 1);
-    }
-  }
+  const std::vector<std::vector<Level>> levels = convert_levels(surfaces, m, path);
 
   Writer w{path, options, encoding, {}, {}};
-  {
-    std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
-    bool any = false;
-    for (const auto& ls : levels)
-      for (const auto& l : ls)
-        for (const auto& t : l.mesh.triangles)
-          for (auto v : t) {
-            const auto& p = l.mesh.positions[v];
-            for (int k = 0; k < 3; ++k) {
-              lo[k] = any ? std::min(lo[k], p[k]) : p[k];
-              hi[k] = any ? std::max(hi[k], p[k]) : p[k];
-            }
-            any = true;
-          }
-    float range = 0;
-    for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - lo[k]);
-    w.box.min = lo;
-    w.box.range = range > 0 ? range : 1.0f;
-  }
+  fit_shared_box(w, levels);
   if (encoding == Encoding::kQuantized) {
     const double max_error = 0.5 * double(w.box.range) / 65534.0;
     if (max_error > options.tolerance_mm * 1e-3)
@@ -389,56 +458,11 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   }
   bool any_lod = false;
   for (std::size_t s = 0; s < surfaces.size(); ++s) {
-    tinygltf::Material mat;
-    mat.name = levels[s][0].mesh_name;
-    const auto& c = surfaces[s].color;
-    for (float x : c)
-      if (!(x >= 0.0f && x <= 1.0f)) throw Error(path + ": surface color components must be in [0, 1]");
-    // Via the shortest decimal form, so 0.9f is written as 0.9 rather than 0.8999999761581421.
-    auto shortest = [](float x) { return std::stod(fmt::format("{}", x)); };
-    mat.pbrMetallicRoughness.baseColorFactor = {shortest(c[0]), shortest(c[1]), shortest(c[2]),
-                                                shortest(c[3])};
-    mat.pbrMetallicRoughness.metallicFactor = 0.0;  // tissue is a dielectric
-    mat.pbrMetallicRoughness.roughnessFactor = 0.6;
-    if (c[3] < 1.0f) {
-      mat.alphaMode = "BLEND";
-      mat.doubleSided = true;  // inner structures must stay visible through the back faces
-    }
+    const tinygltf::Material mat = surface_material(surfaces[s], levels[s][0].mesh_name, path);
     model.materials.push_back(mat);
     const int material = int(model.materials.size() - 1);
 
-    std::vector<int> lod_nodes;
-    int main_node = -1;
-    for (const Level& level : levels[s]) {
-      tinygltf::Node node;
-      node.name = level.node_name;
-      tinygltf::Value::Object extras;
-      if (surfaces[s].node_extras.is_object())
-        extras = to_value(surfaces[s].node_extras).Get<tinygltf::Value::Object>();
-      else
-        extras["iso_value"] = tinygltf::Value(surfaces[s].iso_value);
-      extras["lod"] = tinygltf::Value(level.lod);
-      extras["triangles"] =
-          tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
-      node.extras = tinygltf::Value(std::move(extras));
-      if (!level.mesh.triangles.empty()) node.mesh = w.add_mesh(level, material);
-      model.nodes.push_back(node);
-      const int id = int(model.nodes.size() - 1);
-      if (level.lod == 0)
-        main_node = id;
-      else
-        lod_nodes.push_back(id);
-    }
-    if (!lod_nodes.empty()) {
-      // MSFT_lod: coarser levels are referenced from the full-resolution node and are not part
-      // of the scene, so viewers without LOD support show only the full surface.
-      tinygltf::Value::Array ids;
-      for (int id : lod_nodes) ids.push_back(tinygltf::Value(id));
-      tinygltf::Value::Object lod_ext;
-      lod_ext["ids"] = tinygltf::Value(std::move(ids));
-      model.nodes[main_node].extensions["MSFT_lod"] = tinygltf::Value(std::move(lod_ext));
-      any_lod = true;
-    }
+    const int main_node = add_surface_nodes(w, surfaces[s], levels[s], material, any_lod);
     if (parent >= 0)
       model.nodes[parent].children.push_back(main_node);
     else

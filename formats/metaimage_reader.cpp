@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -67,17 +68,16 @@ std::optional<ScalarType> met_type(const std::string& t) {
   return std::nullopt;
 }
 
-}  // namespace
+// A header entry, nullptr when absent.
+using Header = std::function<const std::string*(const char* key)>;
 
-ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
-  file_size(path);
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open");
-  // Header: "Key = Value" lines, ended by ElementDataFile.
+// The header: "Key = Value" lines, ended by ElementDataFile; `header_end` is where the data of
+// a LOCAL file starts.
+std::map<std::string, std::string> read_header(const std::string& path, std::istream& in,
+                                               std::uint64_t& header_end) {
   std::map<std::string, std::string> h;
   std::string line;
   bool ended = false;
-  std::uint64_t header_end = 0;
   for (int n = 0; n < 1000 && std::getline(in, line); ++n) {
     if (line.size() > 65536) fail(path, "MetaImage header line is too long");
     auto eq = line.find('=');
@@ -94,7 +94,89 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     }
   }
   if (!ended) fail(path, "not a MetaImage header or truncated (no ElementDataFile line)");
-  auto get = [&](const char* key) -> const std::string* {
+  return h;
+}
+
+// Spacing, origin and the direction of each index axis (ITK's names and their synonyms).
+void read_transform(const std::string& path, const Header& get, int ndims, GridTransform& t) {
+  const std::string* sp = get("ElementSpacing");
+  if (!sp) sp = get("ElementSize");
+  if (sp) {
+    auto s = numbers(path, "ElementSpacing", *sp, static_cast<std::size_t>(ndims));
+    for (int a = 0; a < ndims; ++a) t.spacing[a] = s[a];
+  }
+  for (const char* key : {"Offset", "Origin", "Position"}) {
+    if (auto o = get(key)) {
+      auto v = numbers(path, key, *o, static_cast<std::size_t>(ndims));
+      for (int a = 0; a < ndims; ++a) t.origin[a] = v[a];
+      break;
+    }
+  }
+  for (const char* key : {"TransformMatrix", "Rotation", "Orientation"}) {
+    if (auto m = get(key)) {
+      auto v = numbers(path, key, *m, static_cast<std::size_t>(ndims * ndims));
+      // ITK writes the direction of index axis a as the a-th group of NDims numbers.
+      std::array<std::array<double, 3>, 3> axes{};
+      axes[2] = {0, 0, 1};
+      for (int a = 0; a < ndims; ++a)
+        for (int r = 0; r < ndims; ++r) axes[a][r] = v[a * ndims + r] * t.spacing[a];
+      if (ndims == 2) axes[2][2] = t.spacing[2];
+      if (t.spacing[0] > 0 && t.spacing[1] > 0 && t.spacing[2] > 0) set_axes(path, t, axes);
+      break;
+    }
+  }
+}
+
+// The zlib stream `packed`, which must inflate to exactly `bytes`.
+std::vector<unsigned char> inflate_exactly(const std::string& path, std::string& packed,
+                                           std::uint64_t bytes) {
+  const std::uint64_t avail = packed.size();
+  std::vector<unsigned char> raw(static_cast<std::size_t>(bytes));
+  z_stream zs{};
+  if (inflateInit(&zs) != Z_OK) fail(path, "zlib initialisation failed");
+  std::uint64_t in_pos = 0, out_done = 0;
+  int rc = Z_OK;
+  bool overflow = false;
+  // zlib counts in 32-bit units; feed it in pieces so data over 4 GB works.
+  for (;;) {
+    const uInt ai = static_cast<uInt>(std::min<std::uint64_t>(avail - in_pos, 1u << 30));
+    const uInt ao = static_cast<uInt>(std::min<std::uint64_t>(bytes - out_done, 1u << 30));
+    unsigned char extra = 0;
+    zs.next_in = reinterpret_cast<Bytef*>(packed.data()) + in_pos;
+    zs.avail_in = ai;
+    zs.next_out = ao ? raw.data() + out_done : &extra;  // all voxels there: the stream must end
+    zs.avail_out = ao ? ao : 1;
+    rc = inflate(&zs, Z_NO_FLUSH);
+    const uInt used = ai - zs.avail_in;
+    const uInt made = (ao ? ao : 1) - zs.avail_out;
+    in_pos += used;
+    if (ao == 0 && made > 0) overflow = true;
+    if (ao) out_done += made;
+    if (rc == Z_STREAM_END || overflow) break;
+    if (rc != Z_OK && rc != Z_BUF_ERROR) break;
+    if (used == 0 && made == 0) break;  // no progress: input exhausted
+  }
+  std::string zmsg = zs.msg ? zs.msg : "";
+  inflateEnd(&zs);
+  if (overflow || (rc == Z_STREAM_END && out_done != bytes))
+    fail(path, fmt::format("compressed data does not inflate to the {} bytes of the dimensions", bytes));
+  if (rc != Z_STREAM_END) {
+    if (rc == Z_OK || rc == Z_BUF_ERROR)
+      fail(path, fmt::format("truncated compressed data ({} of {} bytes inflated)", out_done, bytes));
+    fail(path, "corrupt compressed data" + (zmsg.empty() ? std::string() : " (" + zmsg + ")"));
+  }
+  return raw;
+}
+
+}  // namespace
+
+ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
+  file_size(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail(path, "cannot open");
+  std::uint64_t header_end = 0;
+  const std::map<std::string, std::string> h = read_header(path, in, header_end);
+  const Header get = [&h](const char* key) -> const std::string* {
     auto it = h.find(key);
     return it == h.end() ? nullptr : &it->second;
   };
@@ -129,32 +211,7 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
 
   ScalarGrid grid;
   GridTransform& t = grid.transform;
-  const std::string* sp = get("ElementSpacing");
-  if (!sp) sp = get("ElementSize");
-  if (sp) {
-    auto s = numbers(path, "ElementSpacing", *sp, static_cast<std::size_t>(ndims));
-    for (int a = 0; a < ndims; ++a) t.spacing[a] = s[a];
-  }
-  for (const char* key : {"Offset", "Origin", "Position"}) {
-    if (auto o = get(key)) {
-      auto v = numbers(path, key, *o, static_cast<std::size_t>(ndims));
-      for (int a = 0; a < ndims; ++a) t.origin[a] = v[a];
-      break;
-    }
-  }
-  for (const char* key : {"TransformMatrix", "Rotation", "Orientation"}) {
-    if (auto m = get(key)) {
-      auto v = numbers(path, key, *m, static_cast<std::size_t>(ndims * ndims));
-      // ITK writes the direction of index axis a as the a-th group of NDims numbers.
-      std::array<std::array<double, 3>, 3> axes{};
-      axes[2] = {0, 0, 1};
-      for (int a = 0; a < ndims; ++a)
-        for (int r = 0; r < ndims; ++r) axes[a][r] = v[a * ndims + r] * t.spacing[a];
-      if (ndims == 2) axes[2][2] = t.spacing[2];
-      if (t.spacing[0] > 0 && t.spacing[1] > 0 && t.spacing[2] > 0) set_axes(path, t, axes);
-      break;
-    }
-  }
+  read_transform(path, get, ndims, t);
   grid.space = "LPS";
 
   // Data location.
@@ -213,40 +270,7 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     din.read(packed.data(), static_cast<std::streamsize>(avail));
     if (static_cast<std::uint64_t>(din.gcount()) != avail) fail(data_file, "read error");
   }
-  std::vector<unsigned char> raw(static_cast<std::size_t>(bytes));
-  z_stream zs{};
-  if (inflateInit(&zs) != Z_OK) fail(path, "zlib initialisation failed");
-  std::uint64_t in_pos = 0, out_done = 0;
-  int rc = Z_OK;
-  bool overflow = false;
-  // zlib counts in 32-bit units; feed it in pieces so data over 4 GB works.
-  for (;;) {
-    const uInt ai = static_cast<uInt>(std::min<std::uint64_t>(avail - in_pos, 1u << 30));
-    const uInt ao = static_cast<uInt>(std::min<std::uint64_t>(bytes - out_done, 1u << 30));
-    unsigned char extra = 0;
-    zs.next_in = reinterpret_cast<Bytef*>(packed.data()) + in_pos;
-    zs.avail_in = ai;
-    zs.next_out = ao ? raw.data() + out_done : &extra;  // all voxels there: the stream must end
-    zs.avail_out = ao ? ao : 1;
-    rc = inflate(&zs, Z_NO_FLUSH);
-    const uInt used = ai - zs.avail_in;
-    const uInt made = (ao ? ao : 1) - zs.avail_out;
-    in_pos += used;
-    if (ao == 0 && made > 0) overflow = true;
-    if (ao) out_done += made;
-    if (rc == Z_STREAM_END || overflow) break;
-    if (rc != Z_OK && rc != Z_BUF_ERROR) break;
-    if (used == 0 && made == 0) break;  // no progress: input exhausted
-  }
-  std::string zmsg = zs.msg ? zs.msg : "";
-  inflateEnd(&zs);
-  if (overflow || (rc == Z_STREAM_END && out_done != bytes))
-    fail(path, fmt::format("compressed data does not inflate to the {} bytes of the dimensions", bytes));
-  if (rc != Z_STREAM_END) {
-    if (rc == Z_OK || rc == Z_BUF_ERROR)
-      fail(path, fmt::format("truncated compressed data ({} of {} bytes inflated)", out_done, bytes));
-    fail(path, "corrupt compressed data" + (zmsg.empty() ? std::string() : " (" + zmsg + ")"));
-  }
+  const std::vector<unsigned char> raw = inflate_exactly(path, packed, bytes);
   allocate_values(grid);
   convert_to_float(raw.data(), *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
   add_note(grid, "zlib-compressed MetaImage");

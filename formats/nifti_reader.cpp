@@ -84,11 +84,9 @@ std::optional<ScalarType> nifti_type(int dt) {
   }
 }
 
-}  // namespace
-
-ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
-  // Check the header size field ourselves so that arbitrary files are refused with a clear
-  // message instead of whatever libnifti guesses.
+// Checks the header ourselves before libnifti sees it, so that arbitrary files are refused with a
+// clear message instead of whatever libnifti guesses; returns the header's vox_offset.
+double checked_vox_offset(const std::string& path) {
   const std::string hfile = header_file(path);
   const std::string hb = header_bytes(hfile, 540);
   if (hb.size() < 348)
@@ -150,6 +148,73 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
       fail(path, fmt::format("invalid NIfTI vox_offset {} (expected a whole number of bytes{})", vox_offset,
                              single_file ? fmt::format(" after the {}-byte header", header_end) : ""));
   }
+  return vox_offset;
+}
+
+// The voxels are read here, not by libnifti's loader, which silently turns NaN and Inf into 0:
+// the shared rule (an error unless --nan-as) must see them. The first 3D volume is the first
+// `bytes` bytes of the data.
+void read_voxels(const std::string& path, const nifti_image* nim, double vox_offset, std::uint64_t bytes,
+                 ScalarType type, ScalarGrid& grid) {
+  if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
+  if (static_cast<double>(nim->iname_offset) != vox_offset)
+    fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
+                           vox_offset, nim->iname_offset));
+  znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
+  if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
+  std::vector<char> data(bytes);
+  // fseek returns 0, gzseek the new offset; both -1 on failure.
+  const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) >= 0;
+  const std::size_t got = positioned ? znzread(data.data(), 1, data.size(), fp) : 0;
+  znzclose(fp);
+  if (got != bytes) fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
+  allocate_values(grid);
+  convert_to_float(data.data(), type, nim->byteorder != nifti_short_order(), grid.values.data(),
+                   grid.values.size());
+}
+
+// The transform: the sform, else the qform (RAS), else pixdim spacing alone.
+void read_transform(const std::string& path, const nifti_image* nim, ScalarGrid& grid) {
+  const auto& dims = grid.dims;
+  const nifti_dmat44* m = nullptr;
+  if (nim->sform_code > 0)
+    m = &nim->sto_xyz;
+  else if (nim->qform_code > 0)
+    m = &nim->qto_xyz;
+  GridTransform& t = grid.transform;
+  if (m) {
+    std::array<std::array<double, 3>, 3> axes{};
+    for (int a = 0; a < 3; ++a)
+      for (int r = 0; r < 3; ++r) axes[a][r] = m->m[r][a];
+    if (dims[2] == 1) {
+      const auto& u = axes[0];
+      const auto& v = axes[1];
+      double len2 = axes[2][0] * axes[2][0] + axes[2][1] * axes[2][1] + axes[2][2] * axes[2][2];
+      if (!(len2 > 0) || !std::isfinite(len2)) {
+        std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                                u[0] * v[1] - u[1] * v[0]};
+        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        axes[2] = len > 0 ? std::array<double, 3>{n[0] / len, n[1] / len, n[2] / len}
+                          : std::array<double, 3>{0, 0, 1};
+      }
+    }
+    set_axes(path, t, axes);
+    for (int r = 0; r < 3; ++r) t.origin[r] = m->m[r][3];
+    grid.space = "RAS";
+    if (nim->sform_code <= 0) add_note(grid, "transform from the qform (no sform)");
+  } else {
+    for (int a = 0; a < 3; ++a) {
+      double s = std::fabs(static_cast<double>(nim->pixdim[a + 1]));
+      t.spacing[a] = (std::isfinite(s) && s > 0) ? s : 1.0;
+    }
+    add_note(grid, "no qform or sform: pixdim spacing, origin 0, orientation unknown");
+  }
+}
+
+}  // namespace
+
+ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
+  const double vox_offset = checked_vox_offset(path);
 
   std::lock_guard<std::mutex> lock(nifti_mutex());
   nifti_set_debug_level(0);
@@ -196,27 +261,8 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   ScalarGrid grid;
   grid.dims = dims;
   grid.source_type = *type;
-  {
-    // The voxels are read here, not by libnifti's loader, which silently turns NaN and Inf
-    // into 0: the shared rule (an error unless --nan-as) must see them. The first 3D volume
-    // is the first `bytes` bytes of the data.
-    if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
-    if (static_cast<double>(nim->iname_offset) != vox_offset)
-      fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
-                             vox_offset, nim->iname_offset));
-    znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
-    if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
-    std::vector<char> data(bytes);
-    // fseek returns 0, gzseek the new offset; both -1 on failure.
-    const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) >= 0;
-    const std::size_t got = positioned ? znzread(data.data(), 1, data.size(), fp) : 0;
-    znzclose(fp);
-    if (got != bytes) fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
-    allocate_values(grid);
-    convert_to_float(data.data(), *type, nim->byteorder != nifti_short_order(), grid.values.data(),
-                     grid.values.size());
-    if (volumes > 1) add_note(grid, fmt::format("NIfTI has {} volumes; read the first", volumes));
-  }
+  read_voxels(path, nim.get(), vox_offset, bytes, *type, grid);
+  if (volumes > 1) add_note(grid, fmt::format("NIfTI has {} volumes; read the first", volumes));
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;
   if (slope != 0.0 && std::isfinite(slope) && std::isfinite(inter) && !(slope == 1.0 && inter == 0.0)) {
@@ -224,39 +270,7 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
     add_note(grid, fmt::format("scl_slope {} and scl_inter {} applied", slope, inter));
   }
 
-  const nifti_dmat44* m = nullptr;
-  if (nim->sform_code > 0)
-    m = &nim->sto_xyz;
-  else if (nim->qform_code > 0)
-    m = &nim->qto_xyz;
-  GridTransform& t = grid.transform;
-  if (m) {
-    std::array<std::array<double, 3>, 3> axes{};
-    for (int a = 0; a < 3; ++a)
-      for (int r = 0; r < 3; ++r) axes[a][r] = m->m[r][a];
-    if (dims[2] == 1) {
-      const auto& u = axes[0];
-      const auto& v = axes[1];
-      double len2 = axes[2][0] * axes[2][0] + axes[2][1] * axes[2][1] + axes[2][2] * axes[2][2];
-      if (!(len2 > 0) || !std::isfinite(len2)) {
-        std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                                u[0] * v[1] - u[1] * v[0]};
-        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        axes[2] = len > 0 ? std::array<double, 3>{n[0] / len, n[1] / len, n[2] / len}
-                          : std::array<double, 3>{0, 0, 1};
-      }
-    }
-    set_axes(path, t, axes);
-    for (int r = 0; r < 3; ++r) t.origin[r] = m->m[r][3];
-    grid.space = "RAS";
-    if (nim->sform_code <= 0) add_note(grid, "transform from the qform (no sform)");
-  } else {
-    for (int a = 0; a < 3; ++a) {
-      double s = std::fabs(static_cast<double>(nim->pixdim[a + 1]));
-      t.spacing[a] = (std::isfinite(s) && s > 0) ? s : 1.0;
-    }
-    add_note(grid, "no qform or sform: pixdim spacing, origin 0, orientation unknown");
-  }
+  read_transform(path, nim.get(), grid);
   if (nim->nifti_type == NIFTI_FTYPE_ANALYZE) add_note(grid, "Analyze 7.5 header (no NIfTI magic)");
   return grid;
 }

@@ -122,41 +122,11 @@ void check_header_lines(const std::string& path) {
   }
 }
 
-}  // namespace
-
-ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
-  const std::uint64_t fsize = file_size(path);
-  std::string magic = read_prefix(path, 8);
-  if (magic.rfind("NRRD000", 0) != 0) fail(path, "not a NRRD file (no NRRD000x magic)");
-  if (magic.size() < 8 || magic[7] < '1' || magic[7] > '5')
-    fail(path, "unsupported NRRD version " + magic.substr(0, 8));
-
-  check_header_lines(path);
-
-  std::lock_guard<std::mutex> lock(teem_mutex());
-  nrrdStateVerboseIO = 0;
-  std::unique_ptr<Nrrd, NrrdDeleter> header(nrrdNew());
-  std::unique_ptr<NrrdIoState, IoDeleter> nio(nrrdIoStateNew());
-  nio->skipData = AIR_TRUE;
-  if (nrrdLoad(header.get(), path.c_str(), nio.get())) fail(path, "bad NRRD header: " + biff_message());
-
-  const unsigned dim = header->dim;
-  if (dim != 2 && dim != 3)
-    fail(path,
-         fmt::format("NRRD has {} axes; only 2D height fields and 3D scalar volumes are supported", dim));
-  auto type = teem_type(header->type);
-  if (!type) fail(path, fmt::format("unsupported NRRD type {}", airEnumStr(nrrdType, header->type)));
-  std::array<std::int64_t, 3> dims{1, 1, 1};
-  for (unsigned a = 0; a < dim; ++a) {
-    std::size_t s = header->axis[a].size;
-    dims[a] = s > static_cast<std::size_t>(INT64_MAX) ? -1 : static_cast<std::int64_t>(s);
-  }
-  const std::int64_t voxels = checked_voxel_count(path, dims);
-  const int esize = scalar_type_size(*type);
-  const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
-
-  // Compare raw data with the file size before Teem allocates: Teem would allocate the full
-  // array first and only then find the file short.
+// Compares the data the header promises with the file size before Teem allocates: Teem would
+// allocate the full array first and only then find the file short.
+void check_data_size(const std::string& path, const NrrdIoState& nio_ref, std::uint64_t fsize,
+                     std::uint64_t bytes, const std::array<std::int64_t, 3>& dims, ScalarType type) {
+  const NrrdIoState* nio = &nio_ref;
   const bool attached = nio->dataFNArr->len == 0 && !nio->dataFNFormat;
   const std::string encoding = nio->encoding ? nio->encoding->name : "";
   // Deflate expands at most 1032:1, so gzip data cannot hold more than that many times its size;
@@ -173,7 +143,7 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
       if (bytes / kMaxDeflateRatio > compressed + 64)
         fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, more than "
                                     "{} bytes of gzip data can hold",
-                                    dims[0], dims[1], dims[2], scalar_type_name(*type), bytes, compressed));
+                                    dims[0], dims[1], dims[2], scalar_type_name(type), bytes, compressed));
     }
   }
   if (encoding == "raw" && nio->lineSkip == 0 && nio->byteSkip >= 0) {
@@ -189,28 +159,14 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
       if (avail < bytes)
         fail(data_file,
              fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}", dims[0],
-                         dims[1], dims[2], scalar_type_name(*type), bytes, avail));
+                         dims[1], dims[2], scalar_type_name(type), bytes, avail));
     }
   }
-  std::uint64_t need = 0;
-  if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
-  check_memory(path, need, opts, "the NRRD data and the float32 grid");
+}
 
-  std::unique_ptr<Nrrd, NrrdDeleter> nrrd(nrrdNew());
-  if (nrrdLoad(nrrd.get(), path.c_str(), nullptr)) fail(path, biff_message());
-  if (nrrd->dim != dim || nrrd->type != header->type || !nrrd->data)
-    fail(path, "NRRD header changed between reads");
-  for (unsigned a = 0; a < dim; ++a)
-    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a])
-      fail(path, "NRRD header changed between reads");
-
-  ScalarGrid grid;
-  grid.dims = dims;
-  grid.source_type = *type;
-  allocate_values(grid);
-  convert_to_float(nrrd->data, *type, false, grid.values.data(), grid.values.size());
-
-  // Transform.
+// The index-to-physical transform: space directions and origin when the header has a space
+// (RAS/LPS named; LAS converted), else per-axis spacing and min.
+void read_transform(const std::string& path, const Nrrd* nrrd, unsigned dim, ScalarGrid& grid) {
   GridTransform& t = grid.transform;
   const unsigned sdim = nrrd->spaceDim;
   if (sdim > 0) {
@@ -275,6 +231,62 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
       t.origin[a] = o;
     }
   }
+}
+
+}  // namespace
+
+ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
+  const std::uint64_t fsize = file_size(path);
+  std::string magic = read_prefix(path, 8);
+  if (magic.rfind("NRRD000", 0) != 0) fail(path, "not a NRRD file (no NRRD000x magic)");
+  if (magic.size() < 8 || magic[7] < '1' || magic[7] > '5')
+    fail(path, "unsupported NRRD version " + magic.substr(0, 8));
+
+  check_header_lines(path);
+
+  std::lock_guard<std::mutex> lock(teem_mutex());
+  nrrdStateVerboseIO = 0;
+  std::unique_ptr<Nrrd, NrrdDeleter> header(nrrdNew());
+  std::unique_ptr<NrrdIoState, IoDeleter> nio(nrrdIoStateNew());
+  nio->skipData = AIR_TRUE;
+  if (nrrdLoad(header.get(), path.c_str(), nio.get())) fail(path, "bad NRRD header: " + biff_message());
+
+  const unsigned dim = header->dim;
+  if (dim != 2 && dim != 3)
+    fail(path,
+         fmt::format("NRRD has {} axes; only 2D height fields and 3D scalar volumes are supported", dim));
+  auto type = teem_type(header->type);
+  if (!type) fail(path, fmt::format("unsupported NRRD type {}", airEnumStr(nrrdType, header->type)));
+  std::array<std::int64_t, 3> dims{1, 1, 1};
+  for (unsigned a = 0; a < dim; ++a) {
+    std::size_t s = header->axis[a].size;
+    dims[a] = s > static_cast<std::size_t>(INT64_MAX) ? -1 : static_cast<std::int64_t>(s);
+  }
+  const std::int64_t voxels = checked_voxel_count(path, dims);
+  const int esize = scalar_type_size(*type);
+  const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
+
+  const std::string encoding = nio->encoding ? nio->encoding->name : "";
+  check_data_size(path, *nio, fsize, bytes, dims, *type);
+  std::uint64_t need = 0;
+  if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
+  check_memory(path, need, opts, "the NRRD data and the float32 grid");
+
+  std::unique_ptr<Nrrd, NrrdDeleter> nrrd(nrrdNew());
+  if (nrrdLoad(nrrd.get(), path.c_str(), nullptr)) fail(path, biff_message());
+  if (nrrd->dim != dim || nrrd->type != header->type || !nrrd->data)
+    fail(path, "NRRD header changed between reads");
+  for (unsigned a = 0; a < dim; ++a)
+    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a])
+      fail(path, "NRRD header changed between reads");
+
+  ScalarGrid grid;
+  grid.dims = dims;
+  grid.source_type = *type;
+  allocate_values(grid);
+  convert_to_float(nrrd->data, *type, false, grid.values.data(), grid.values.size());
+
+  read_transform(path, nrrd.get(), dim, grid);
   if (encoding != "raw") add_note(grid, "NRRD encoding " + encoding);
   return grid;
 }

@@ -19,6 +19,7 @@
 #include <limits>
 #include <new>
 
+#include "formats/volume_formats.h"
 #include "formats/volume_reader_detail.h"
 
 namespace mlfe {
@@ -234,51 +235,15 @@ bool file_exists(const std::string& p) {
 std::string format_by_extension(const std::string& path) {
   std::string p = lower(path);
   if (ends_with(p, ".gz")) p.resize(p.size() - 3);
-  if (ends_with(p, ".nrrd") || ends_with(p, ".nhdr")) return "nrrd";
-  if (ends_with(p, ".nii") || ends_with(p, ".hdr") || ends_with(p, ".img")) return "nifti";
-  if (ends_with(p, ".vdb")) return "vdb";
-  if (ends_with(p, ".mha") || ends_with(p, ".mhd")) return "metaimage";
-  if (ends_with(p, ".pgm")) return "pgm";
-  if (ends_with(p, ".png")) return "png";
-  if (ends_with(p, ".raw") || ends_with(p, ".bin") || ends_with(p, ".dat")) return "raw";
+  for (const auto& row : volume_formats())
+    for (const char* ext : row.read_extensions)
+      if (ends_with(p, ext)) return row.name;
   return "";
 }
 
-std::int32_t le32(const std::string& s, std::size_t at) {
-  std::uint32_t v = 0;
-  for (int b = 3; b >= 0; --b) v = (v << 8) | static_cast<unsigned char>(s[at + b]);
-  return static_cast<std::int32_t>(v);
-}
-
 std::string format_by_magic(const std::string& head) {
-  auto starts = [&](const char* m, std::size_t n) {
-    return head.size() >= n && std::memcmp(head.data(), m, n) == 0;
-  };
-  if (starts("NRRD000", 7)) return "nrrd";
-  if (starts("\x20\x42\x44\x56\0\0\0\0", 8)) return "vdb";  // OpenVDB magic 0x56444220 as int64 LE
-  if (starts("\x89PNG\r\n\x1a\n", 8)) return "png";
-  if (head.size() >= 3 && head[0] == 'P' && head[1] == '5' &&
-      std::isspace(static_cast<unsigned char>(head[2])))
-    return "pgm";
-  if (head.size() >= 348) {
-    std::int32_t sz = le32(head, 0);
-    bool n1 = (sz == 348 || sz == 0x5c010000) && (std::memcmp(head.data() + 344, "n+1\0", 4) == 0 ||
-                                                  std::memcmp(head.data() + 344, "ni1\0", 4) == 0);
-    bool n2 = (sz == 540 || sz == 0x1c020000) && (std::memcmp(head.data() + 4, "n+2\0", 4) == 0 ||
-                                                  std::memcmp(head.data() + 4, "ni2\0", 4) == 0);
-    if (n1 || n2) return "nifti";
-  }
-  // MetaImage headers are "Key = Value" lines that begin with one of a few keys.
-  std::size_t i = 0;
-  while (i < head.size() && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
-  for (const char* key : {"ObjectType", "NDims", "Comment", "ObjectSubType", "DimSize"}) {
-    std::size_t n = std::strlen(key);
-    if (head.compare(i, n, key) == 0) {
-      std::size_t j = i + n;
-      while (j < head.size() && (head[j] == ' ' || head[j] == '\t')) ++j;
-      if (j < head.size() && head[j] == '=') return "metaimage";
-    }
-  }
+  for (const auto& row : volume_formats())
+    if (row.magic && row.magic(head)) return row.name;
   return "";
 }
 
@@ -369,22 +334,9 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
   }
   ScalarGrid grid;
   try {
-    if (format == "raw")
-      grid = read_raw(path, opts);
-    else if (format == "nrrd")
-      grid = read_nrrd(path, opts);
-    else if (format == "nifti")
-      grid = read_nifti(path, opts);
-    else if (format == "vdb")
-      grid = read_vdb(path, opts);
-    else if (format == "metaimage")
-      grid = read_metaimage(path, opts);
-    else if (format == "pgm")
-      grid = read_pgm(path, opts);
-    else if (format == "png")
-      grid = read_png(path, opts);
-    else
-      fail(path, "unsupported format " + format);
+    const VolumeFormatRow* row = volume_format(format);
+    if (!row) fail(path, "unsupported format " + format);
+    grid = row->read(path, opts);
   } catch (const Error&) {
     throw;
   } catch (const std::bad_alloc&) {

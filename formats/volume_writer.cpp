@@ -15,23 +15,21 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "formats/volume_formats.h"
+
 namespace mlfe {
 namespace {
 
-enum class VolumeFormat { Unknown, Nifti, Nrrd, Raw, Vdb };
-
-VolumeFormat format_of(const std::string& path) {
+// The table's row whose write extension ends `path` (case-insensitive), or nullptr.
+const volume_detail::VolumeFormatRow* writer_of(const std::string& path) {
   std::string p = path;
   std::transform(p.begin(), p.end(), p.begin(), [](unsigned char c) { return std::tolower(c); });
-  const auto ends = [&](const char* s) {
-    const std::size_t n = std::strlen(s);
-    return p.size() > n && p.compare(p.size() - n, n, s) == 0;
-  };
-  if (ends(".nii.gz") || ends(".nii")) return VolumeFormat::Nifti;
-  if (ends(".nrrd")) return VolumeFormat::Nrrd;
-  if (ends(".raw")) return VolumeFormat::Raw;
-  if (ends(".vdb")) return VolumeFormat::Vdb;
-  return VolumeFormat::Unknown;
+  for (const auto& row : volume_detail::volume_formats())
+    for (const char* ext : row.write_extensions) {
+      const std::size_t n = std::strlen(ext);
+      if (p.size() > n && p.compare(p.size() - n, n, ext) == 0) return &row;
+    }
+  return nullptr;
 }
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw Error(path + ": " + what); }
@@ -48,6 +46,10 @@ std::array<double, 3> axis_step(const GridTransform& t, int a) {
   return {t.direction[0 + a] * t.spacing[a], t.direction[3 + a] * t.spacing[a],
           t.direction[6 + a] * t.spacing[a]};
 }
+
+}  // namespace
+
+namespace volume_detail {
 
 void write_nifti(const std::string& path, const ScalarGrid& g) {
   // NIfTI coordinates are RAS: an LPS frame flips x and y.
@@ -198,26 +200,15 @@ void write_vdb(const std::string& path, const ScalarGrid& g) {
   });
 }
 
-}  // namespace
+}  // namespace volume_detail
 
-bool is_volume_output(const std::string& path) { return format_of(path) != VolumeFormat::Unknown; }
+bool is_volume_output(const std::string& path) { return writer_of(path) != nullptr; }
 
 void write_volume(const std::string& path, const ScalarGrid& g) {
   if (g.voxel_count() <= 0 || g.values.size() != static_cast<std::size_t>(g.voxel_count()))
     fail(path,
          fmt::format("{} values for a {} x {} x {} grid", g.values.size(), g.dims[0], g.dims[1], g.dims[2]));
-  switch (format_of(path)) {
-    case VolumeFormat::Nifti:
-      return write_nifti(path, g);
-    case VolumeFormat::Nrrd:
-      return write_nrrd(path, g);
-    case VolumeFormat::Raw:
-      return write_raw(path, g);
-    case VolumeFormat::Vdb:
-      return write_vdb(path, g);
-    case VolumeFormat::Unknown:
-      break;
-  }
+  if (const auto* row = writer_of(path)) return row->write(path, g);
   fail(path, "unknown volume type (.nii, .nii.gz, .nrrd, .raw, .vdb)");
 }
 

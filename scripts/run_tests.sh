@@ -4,7 +4,7 @@
 #      format round trips, CLI, golden files, Khronos glTF validator verdicts);
 #   2. the core tests again under AddressSanitizer + UBSan (Debug);
 #   3. a consumer project that does find_package(mlfe), links mlfe::core and mlfe::pipeline and
-#      converts the CT sample to a .glb the Khronos validator accepts;
+#      converts the CT sample to a .glb the Khronos validator accepts, renders and compares images;
 #   4. `pip install --no-build-isolation .` into a temporary venv, then a tiny conversion;
 #   5. bounded libFuzzer runs of every parser (MLFE_FUZZ_SECONDS each, default 30).
 set -euo pipefail
@@ -15,6 +15,9 @@ bash "$ROOT/scripts/install_deps.sh"
 echo "== clang-format (.clang-format; Debian 12's clang-format 14)"
 find "$ROOT"/{core,formats,converters,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
   xargs -0 clang-format --dry-run -Werror
+
+echo "== no function over 150 lines in core/, formats/, converters/"
+python3 "$ROOT/scripts/check_function_length.py" "$ROOT"
 
 echo "== release build and tests"
 bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON

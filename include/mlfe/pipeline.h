@@ -5,18 +5,25 @@
 // mlfe::Error with a one-line message; nothing is printed (progress goes to the callbacks).
 #pragma once
 #include <mlfe/core/approximation.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/iso_surface.h>
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/core/tet_mesh_field.h>
 #include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/volume_render.h>
+#include <mlfe/formats/compare.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/hierarchy_resample.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
 
+#include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -24,6 +31,37 @@
 #include <vector>
 
 namespace mlfe {
+
+// ---- progress and cancel (of mlfe::build and every mlfe::pipeline call) ----
+
+/// Called with the fraction of the call's work done, in [0, 1] and non-decreasing within one
+/// call, and the stage it is in: "reading", "building", "extracting", "simplifying",
+/// "rendering", "resampling", "writing". A call reports 0 when it starts and 1 when its outputs
+/// are written. Returning false cancels: the call stops at its next report and throws Cancelled.
+/// Called on the calling thread only, never concurrently; it may be empty.
+using Progress = std::function<bool(double fraction, const std::string& stage)>;
+
+/// Thrown by a call whose Progress returned false or whose CancelToken was cancelled; no output
+/// file of the call exists afterwards. An mlfe::Error, so callers that catch mlfe::Error at the
+/// top (the command line: "mlfe: cancelled", status 2) need nothing more. what(): "cancelled".
+class Cancelled : public Error {
+ public:
+  Cancelled() : Error("cancelled") {}
+};
+
+/// A flag another thread may set to stop a call: pass token.progress() (or
+/// token.progress(your_callback)) as the call's Progress. Copies share the flag.
+class CancelToken {
+ public:
+  CancelToken() : flag_(std::make_shared<std::atomic<bool>>(false)) {}
+  void cancel() const { flag_->store(true); }
+  bool cancelled() const { return flag_->load(); }
+  /// A Progress that returns false once cancel() was called, after forwarding to `inner`.
+  Progress progress(Progress inner = {}) const;
+
+ private:
+  std::shared_ptr<std::atomic<bool>> flag_;
+};
 
 enum class Norm { kL2, kH1 };
 
@@ -70,6 +108,11 @@ struct BuildOptions {
   /// Progress of the refine-solve iterations and of the surface passes; may be empty.
   std::function<void(const IterationStats&)> progress;
   std::function<void(const SurfacePassStats&)> surface_progress;
+  /// The fraction of the refinement done, stage "building": by the RMS error reached toward the
+  /// target (log scale), the vertices toward max_vertices or the levels toward max_level,
+  /// whichever is furthest; surface passes by their count. Returning false throws Cancelled
+  /// from build() (between passes). May be empty.
+  Progress fraction_progress;
 };
 
 /// The hierarchy and solution built from a grid or read from a hierarchy file: one 2D or 3D
@@ -171,8 +214,10 @@ void set_lattice_info(const Approximation<D>& a, HierarchyFileInfo& info);
 template <int D>
 void set_lattice(const HierarchyFileInfo& info, Approximation<D>& a);
 
-/// Writes the hierarchy (.mlfeh) with provenance.
-void write_built(const std::string& path, const Built& b, const nlohmann::json& provenance);
+/// Writes the hierarchy (.mlfeh) with provenance: format version 3 with exact values, or
+/// version 1 when the level-by-level rebuild would not reproduce the hierarchy. Returns the
+/// warning saying so ("" when version 3 was written); prints nothing.
+std::string write_built(const std::string& path, const Built& b, const nlohmann::json& provenance);
 
 /// The JSON report of a build (input, dims, voxels, vertices, elements, levels, iterations,
 /// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
@@ -222,6 +267,9 @@ struct AssetOptions {
   VertexPlacement placement = VertexPlacement::kAuto;
   double z_scale = 1.0;  ///< 2D height fields: height per data unit
   int level = -1;        ///< extract on this level (-1 finest)
+  /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
+  /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.
+  Progress progress;
 };
 
 /// The surfaces of an extraction, ready to write, with the choices the options resolved to.
@@ -266,11 +314,14 @@ struct ConvertOptions {
   /// Surface-driven builds solve for u only when an output holds it (the hierarchy); true also
   /// solves it for the caller (e.g. to render ConvertResult::built).
   bool keep_u = false;
+  /// The whole conversion: "building" (0..0.6), then the assets' stages and "writing".
+  Progress progress;
 };
 
 struct ConvertResult {
   Built built;
-  nlohmann::json asset;  ///< write_assets' summary
+  nlohmann::json asset;               ///< write_assets' summary
+  std::vector<std::string> warnings;  ///< e.g. the hierarchy written as version 1
 };
 
 /// Volume in, asset out: build (surface-driven around asset.iso unless a global target is set),
@@ -329,3 +380,295 @@ void write_json(const std::string& path, const nlohmann::json& j);
 double peak_rss_mb();
 
 }  // namespace mlfe
+
+// ---------------------------------------------------------------------------------------------
+// mlfe::pipeline: every command of the mlfe command line as one call, files in and files out,
+// for C++ callers, the Python module and the command line itself (a thin layer that parses its
+// text into these options and prints these results). Calls print nothing; what the command line
+// prints is in the results. Bad input or options throw mlfe::Error (mlfe::UsageError for a bad
+// option value) naming the file or the option; no output file of a failed or cancelled call
+// exists afterwards (formats/atomic_file.h).
+// ---------------------------------------------------------------------------------------------
+namespace mlfe::pipeline {
+
+// Progress, Cancelled and CancelToken are mlfe's (declared above with the build's options).
+using mlfe::Cancelled;
+using mlfe::CancelToken;
+using mlfe::Progress;
+
+// ---- the option vocabulary: one parse function per option type, for the CLI and Python ----
+// `option` names the option in messages as the caller spells it ("--max-memory" on the command
+// line, "max_memory" in Python). Each throws mlfe::UsageError on bad text.
+
+/// "50%" (of the machine's RAM), bytes with an optional K/M/G suffix ("6G", "512m", "1000"),
+/// or "0" (no budget).
+MemoryBudget parse_memory_budget(const std::string& text, const std::string& option = "--max-memory");
+/// "0.5%" (of the value range) or an absolute value "2.0"; positive.
+RmsTarget parse_rms(const std::string& text, const std::string& option = "--rms");
+/// "2%" or "2": a non-negative percentage.
+double parse_percent(const std::string& text, const std::string& option);
+/// "80,150": finite numbers, comma separated (empty text: none).
+std::vector<double> parse_values(const std::string& text, const std::string& option);
+/// "x,y,z": exactly three finite numbers.
+std::array<double, 3> parse_vector3(const std::string& text, const std::string& option);
+/// "WxH", 1..16384 each.
+std::array<int, 2> parse_image_size(const std::string& text, const std::string& option = "--size");
+
+/// The projection of render's camera.
+enum class Projection { kOrtho, kPerspective };
+
+/// One name per value of every option enum (Norm, Preconditioner, Simplifier, VertexPlacement,
+/// Normals, Projection, RayAccumulator::Rule), the command line's spelling ("l2", "bpx",
+/// "meshopt", "optimal", "surface", "perspective", "preintegrated", ...): the one table the
+/// command line, the Python module and the files' provenance use.
+template <class E>
+struct EnumName {
+  E value;
+  const char* name;
+};
+template <class E>
+const std::vector<EnumName<E>>& enum_names();
+
+/// The value named `text`; throws mlfe::UsageError naming `option` and the choices otherwise.
+template <class E>
+E parse_enum(const std::string& text, const std::string& option);
+/// The name of `value`.
+template <class E>
+const char* enum_name(E value);
+/// Every name, in the table's order (for help texts and choices).
+template <class E>
+std::vector<std::string> enum_name_list();
+
+// ---- info ----
+
+struct InfoOptions {
+  VolumeReadOptions read;
+  bool labels = false;      ///< volumes: list the labels of a label map (label_grid)
+  std::string label_table;  ///< with labels: names from this table (default: the one beside the volume)
+};
+
+struct LabelRow {
+  std::uint32_t label = 0;
+  std::string name;
+  std::size_t voxels = 0;
+  double volume_mm3 = 0;
+};
+
+struct LevelCounts {
+  std::size_t vertices = 0, elements = 0, leaves = 0;  ///< of this level
+};
+
+/// What a volume or hierarchy file holds, without computing anything.
+struct InfoResult {
+  std::string file;
+  bool hierarchy = false;  ///< a .mlfeh: the hierarchy fields below; else the volume fields
+  double read_seconds = 0;
+  std::vector<std::string> warnings;  ///< e.g. a label table beside the volume that does not parse
+  int dim = 3;
+  GridTransform transform;
+  std::string space;
+  // Volumes:
+  std::string format;  ///< "nifti", "nrrd", "vdb", ...
+  std::array<std::int64_t, 3> dims{1, 1, 1};
+  std::uint64_t voxels = 0;
+  std::string type;  ///< the stored scalar type ("uint8", "float32", ...)
+  std::array<double, 2> range{0, 0};
+  std::uint64_t memory_bytes = 0;  ///< as float32
+  std::string notes;               ///< the reader's notes, one per line
+  std::vector<std::string> grids;  ///< OpenVDB: the file's grids
+  bool has_labels = false;         ///< InfoOptions::labels was set
+  std::vector<LabelRow> labels;    ///< with InfoOptions::labels
+  std::string label_table;         ///< the table the names came from ("" none)
+  // Hierarchies (the file's header; HierarchyFile without the mesh and values):
+  HierarchyFileInfo header;
+  int version = 0;
+  std::size_t vertices = 0, elements = 0, leaves = 0;
+  int levels = 0;
+  std::string value_coding;  ///< "none", "integer", "quantized", "exact"
+  double value_bound = 0;
+  bool integer_values = false;
+  std::vector<LevelCounts> per_level;
+  std::vector<HierarchySection> sections;
+
+  /// What `mlfe info --json` prints.
+  nlohmann::json to_json() const;
+};
+
+/// `mlfe info`: reads `file` (a volume, or a hierarchy by its magic) and describes it. Throws
+/// mlfe::Error for unreadable files and, with options.labels, values that are not labels.
+InfoResult info(const std::string& file, const InfoOptions& options = {});
+
+// ---- build ----
+
+struct BuildFileOptions {
+  BuildOptions build;      ///< the build's options (its stats callbacks are called too)
+  VolumeReadOptions read;  ///< read.max_bytes 0: build.max_memory's bytes
+  /// ≥ 0: every sample of the decoded file within this of the input (data units; 0 on integer
+  /// data: lossless), split between interpolation and quantization by quantization_share.
+  /// < 0: the least-squares build of build.rms with values quantized to half its RMS error.
+  double max_error = -1;
+  double quantization_share = 0.5;  ///< [0, 1)
+  double psnr = 0;                  ///< > 0: quantization error alone at this PSNR (dB over the range)
+  std::string report;               ///< also write the JSON report here; empty: no
+  Progress progress;
+};
+
+/// The hierarchy file as written and its error figures, measured from exactly the values a
+/// reader decodes.
+struct HierarchyFileFigures {
+  GridErrors errors;  ///< at the samples (voxels) or the mesh's points
+  double bound = 0;   ///< every stored value within this (0: exact)
+  double encode_seconds = 0;
+  int version = 3;
+  std::string coding;       ///< "quantized", "integer", "exact"
+  double tolerance = 0;     ///< max_error: the interpolation's share
+  std::uint64_t bytes = 0;  ///< the file's size
+  double samples = 0;       ///< voxels or mesh points, for bits per sample
+  bool on_voxels = true;    ///< errors at the voxels (else at the mesh's points)
+};
+
+struct BuildFileResult {
+  Built built;
+  HierarchyFileFigures file;
+  double max_error = -1;              ///< the bound asked for (< 0: none), verified when ≥ 0
+  std::vector<std::string> warnings;  ///< e.g. written as format version 1
+  std::vector<std::string> written;   ///< the hierarchy, then the report
+};
+
+/// `mlfe build`: a volume or a tetrahedral mesh with point values (.vtu, .msh) to a hierarchy
+/// file (.mlfeh), values quantized (or bounded by max_error), with the JSON report when asked.
+BuildFileResult build(const std::string& input, const std::string& output, const BuildFileOptions& options);
+
+// ---- render ----
+
+struct RenderFileOptions {
+  std::string tf = "grey";  ///< a preset (transfer_function_presets()) or a ParaView .json
+  double tf_unit = 0;       ///< opacity unit length (mm); 0: one voxel (presets), 1 (JSON)
+  Projection camera = Projection::kOrtho;
+  double azimuth = 0, elevation = 0;  ///< degrees: the orbit camera around the volume's centre
+  /// Physical frame; position replaces the orbit, target (default: the centre) and up
+  /// (default 0,0,1) need it.
+  std::optional<std::array<double, 3>> position, target, up;
+  std::array<int, 2> size{500, 500};
+  int level = -1;          ///< render the approximation on this level (-1: finest)
+  bool reference = false;  ///< ray-cast the original voxels instead (needs the volume)
+  RayAccumulator::Rule integration = RayAccumulator::Rule::kPreIntegrated;
+  bool shading = false;
+  bool skip_empty = true;
+  std::string png;  ///< also an sRGB PNG preview over `background`; empty: no
+  int frames = 1;   ///< > 1: a turntable about +z, numbered files OUT_0000.exr, ...
+  std::array<double, 3> background{0, 0, 0};
+  double stop_opacity = 0.99;
+  double z_opacity = 0.5;
+  BuildOptions build;        ///< a volume input is built first (as mlfe build)
+  VolumeReadOptions read;    ///< read.max_bytes 0: build.max_memory's bytes
+  bool keep_images = false;  ///< keep every frame's image in the result (files are written anyway)
+  Progress progress;
+};
+
+struct RenderFrame {
+  std::string exr, png;  ///< written files ("" when not written)
+  int width = 0, height = 0;
+  double seconds = 0;
+  RenderStats stats;
+  Camera camera;
+  RenderImage image;  ///< with keep_images, or from render_images()
+};
+
+struct RenderResult {
+  std::vector<RenderFrame> frames;
+  std::size_t tetrahedra = 0;  ///< the render mesh (0 for the reference)
+  int level = 0;
+  std::size_t mesh_bytes = 0;
+  Built built;                       ///< what was rendered (the file's or the build's)
+  std::vector<std::string> written;  ///< every file, in order
+};
+
+/// Renders `b` (or with options.reference the volume `grid`, then required) in memory: the
+/// frames' images and statistics, no files. Throws mlfe::Error for a 2D `b` or bad options.
+RenderResult render_images(const Built& b, const RenderFileOptions& options, const ScalarGrid* grid = nullptr,
+                           const std::string& source = "");
+
+/// The same, written to `output` (.exr, half RGBA premultiplied and float Z, with the camera
+/// and the transfer function in the header) and options.png.
+RenderResult render(const Built& b, const std::string& output, const RenderFileOptions& options,
+                    const ScalarGrid* grid = nullptr, const std::string& source = "");
+
+/// `mlfe render`: a hierarchy file, or a volume built first, to `output`.
+RenderResult render(const std::string& input, const std::string& output, const RenderFileOptions& options);
+
+// ---- convert and iso ----
+
+struct ConvertFileOptions {
+  BuildOptions build;
+  AssetOptions asset;
+  VolumeReadOptions read;  ///< read.max_bytes 0: build.max_memory's bytes
+  std::string hierarchy;   ///< also write the hierarchy here (.mlfeh); empty: no
+  std::string report;      ///< also write the JSON report here; empty: no
+  /// Also a ray-cast image (.exr) of the hierarchy built, with RenderFileOptions' defaults.
+  std::string render;
+  /// Set: a label map in, one surface per structure out (convert_labels) instead of
+  /// iso-surfaces; asset.iso must then be empty, hierarchy and render too.
+  std::optional<LabelOptions> labels;
+  /// Over the pipeline's own entries in the asset's extras and the hierarchy's metadata.
+  nlohmann::json provenance = nlohmann::json::object();
+  Progress progress;
+};
+
+struct ConvertFileResult {
+  Built built;                        ///< (labels: empty)
+  nlohmann::json asset;               ///< write_assets' (or convert_labels') summary
+  std::vector<std::string> warnings;  ///< label warnings, a version-1 hierarchy
+  std::vector<std::string> written;   ///< the asset, then hierarchy, report, images
+  RenderResult render;                ///< with ConvertFileOptions::render (its built is empty)
+};
+
+/// `mlfe convert`: a volume or tetrahedral mesh file in, an asset out by extension (.glb .gltf
+/// .drc .ply .obj .stl .off), and the hierarchy, report and image when asked. Output paths are
+/// checked before any work.
+ConvertFileResult convert(const std::string& input, const std::string& output,
+                          const ConvertFileOptions& options);
+
+struct IsoOptions {
+  AssetOptions asset;
+  BuildOptions build;      ///< a volume input is built first (as convert)
+  VolumeReadOptions read;  ///< for a volume input or `volume`
+  /// With a hierarchy input: the volume it was built from (same frame and box, else
+  /// mlfe::Error), so surfaces snap onto it as in convert.
+  std::string volume;
+  std::string report;  ///< also write the JSON report here; empty: no
+  Progress progress;
+};
+
+/// `mlfe iso`: iso-surfaces of a hierarchy file (or of a volume, as convert) written to `output`.
+ConvertFileResult iso(const std::string& input, const std::string& output, const IsoOptions& options);
+
+// ---- export ----
+
+struct ExportOptions {
+  int level = -1;  ///< use levels 0..level only (-1: all)
+  Progress progress;
+};
+
+struct ExportResult {
+  bool mesh = false;  ///< .vtu/.msh: the leaf mesh; else a voxel grid
+  std::size_t elements = 0, vertices = 0;
+  int level = 0;                              ///< the finest level used
+  std::array<std::int64_t, 3> dims{1, 1, 1};  ///< grids
+  double resample_seconds = 0;
+  std::vector<std::string> written;  ///< the output (and a .raw's sidecar)
+};
+
+/// `mlfe export`: a hierarchy file's approximation on its voxel grid (.nii.gz .nii .nrrd .raw
+/// .vdb) or its leaf mesh with values and levels (.vtu .msh), in the file's frame.
+ExportResult export_hierarchy(const std::string& input, const std::string& output,
+                              const ExportOptions& options = {});
+
+// ---- compare ----
+
+/// `mlfe compare`: compare_files (<mlfe/formats/compare.h>), and the JSON report written to `report`
+/// when given.
+CompareResult compare(const std::string& expected, const std::string& actual,
+                      const CompareOptions& options = {}, const std::string& report = "");
+
+}  // namespace mlfe::pipeline

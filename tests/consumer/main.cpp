@@ -1,5 +1,7 @@
 // Uses the installed package: refines a box with mlfe::core and checks it tiles the box, then
-// converts a volume to an asset with mlfe::pipeline (the caller validates the .glb).
+// converts a volume to an asset with mlfe::pipeline (the caller validates the .glb), renders the
+// hierarchy it kept twice (a file and in memory) and compares the images with
+// mlfe::pipeline::compare. Writes OUT.glb, OUT.mlfeh, OUT.exr and OUT_again.exr.
 // Usage: mlfe_consumer VOLUME OUT.glb
 #include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
@@ -8,6 +10,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 int main(int argc, char** argv) {
@@ -36,6 +39,36 @@ int main(int argc, char** argv) {
     std::printf("consumer: %zu vertices, %zu triangles -> %s\n", r.built.vertices(),
                 r.asset["triangles"].get<std::size_t>(), argv[2]);
     if (r.asset["triangles"].get<std::size_t>() == 0) return 1;
+  } catch (const mlfe::Error& e) {
+    std::fprintf(stderr, "consumer: %s\n", e.what());
+    return 1;
+  }
+  // Render the kept hierarchy and compare two renders of it: equal images.
+  const std::string stem = std::string(argv[2]).substr(0, std::string(argv[2]).rfind('.'));
+  try {
+    mlfe::pipeline::ConvertFileOptions c;
+    c.asset.iso = {1.5};
+    c.hierarchy = stem + ".mlfeh";
+    mlfe::pipeline::convert(argv[1], stem + "_hier.glb", c);
+    mlfe::pipeline::RenderFileOptions ro;
+    ro.size = {64, 48};
+    ro.keep_images = true;
+    double last = -1;
+    ro.progress = [&last](double f, const std::string&) {
+      const bool ordered = f >= last;
+      last = f;
+      return ordered;
+    };
+    const mlfe::pipeline::RenderResult a = mlfe::pipeline::render(stem + ".mlfeh", stem + ".exr", ro);
+    const mlfe::pipeline::RenderResult b = mlfe::pipeline::render(a.built, stem + "_again.exr", ro);
+    const mlfe::CompareResult same = mlfe::pipeline::compare(stem + ".exr", stem + "_again.exr");
+    const mlfe::CompareResult other = mlfe::pipeline::compare(stem + ".exr", argv[2]);
+    std::printf("consumer: %dx%d image of %zu tetrahedra, compare: %s, against the asset: %s\n",
+                a.frames.at(0).width, a.frames.at(0).height, a.tetrahedra,
+                same.equal() ? "equal" : "different", other.kind.c_str());
+    if (last != 1.0 || !same.equal() || other.equal() ||
+        b.frames.at(0).image.rgba != a.frames.at(0).image.rgba)
+      return 1;
   } catch (const mlfe::Error& e) {
     std::fprintf(stderr, "consumer: %s\n", e.what());
     return 1;

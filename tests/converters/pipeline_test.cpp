@@ -1,4 +1,4 @@
-// The pipeline library (converters/pipeline.h) without the command line: its defaults give the
+// The pipeline library (include/mlfe/pipeline.h) without the command line: its defaults give the
 // command line's bytes, extract() and write_assets() agree, the 2D/3D holder, and bad input
 // throws mlfe::Error before any output is written.
 #include <gtest/gtest.h>

@@ -1,0 +1,38 @@
+// The one table of volume formats: name, file name extensions, magic bytes, reader and writer.
+// read_volume (formats/volume_reader.cpp) detects a file's format from it, write_volume
+// (formats/volume_writer.cpp) picks the writer from it; a new format is one row here, its reader
+// (and writer), and a fuzz entry (fuzz/CMakeLists.txt). Not part of the public API.
+#pragma once
+#include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/volume_reader.h>
+
+#include <string>
+#include <vector>
+
+namespace mlfe::volume_detail {
+
+struct VolumeFormatRow {
+  const char* name;  ///< ScalarGrid::format: "nrrd", "nifti", ...
+  /// Extensions read_volume recognises (lower case, after dropping a trailing ".gz").
+  std::vector<const char*> read_extensions;
+  /// Extensions write_volume writes (lower case, matched at the end of the name); empty: none.
+  std::vector<const char*> write_extensions;
+  /// Whether a file's first bytes (up to 512) are this format's; nullptr: no magic (raw).
+  bool (*magic)(const std::string& head);
+  ScalarGrid (*read)(const std::string& path, const VolumeReadOptions& options);
+  void (*write)(const std::string& path, const ScalarGrid& grid);  ///< nullptr: not written
+};
+
+/// Every volume format, in the order magic bytes are tried.
+const std::vector<VolumeFormatRow>& volume_formats();
+
+/// The row named `name`, or nullptr.
+const VolumeFormatRow* volume_format(const std::string& name);
+
+// The writers of the table's rows (formats/volume_writer.cpp); each writes atomically.
+void write_nifti(const std::string& path, const ScalarGrid& grid);
+void write_nrrd(const std::string& path, const ScalarGrid& grid);
+void write_raw(const std::string& path, const ScalarGrid& grid);
+void write_vdb(const std::string& path, const ScalarGrid& grid);
+
+}  // namespace mlfe::volume_detail
