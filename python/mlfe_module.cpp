@@ -117,7 +117,8 @@ BuildOptions build_options(Options& kw) {
   get_enum(kw, "preconditioner", o.preconditioner);
   kw.get("surface_tolerance", o.surface_tolerance);
   kw.get("check_u", o.check_against_u);
-  if (kw.has("max_memory")) o.max_memory = pipeline::parse_memory_budget(option_text(kw.take("max_memory")), "max_memory");
+  if (kw.has("max_memory"))
+    o.max_memory = pipeline::parse_memory_budget(option_text(kw.take("max_memory")), "max_memory");
   return o;
 }
 
@@ -169,7 +170,8 @@ Progress make_progress(const std::shared_ptr<ProgressState>& state) {
 template <class F>
 auto with_progress(const py::object& callback, F&& work) {
   if (!callback.is_none() && !PyCallable_Check(callback.ptr()))
-    throw Error("progress: expected a callable (fraction, stage), got " + std::string(py::str(callback.get_type())));
+    throw Error("progress: expected a callable (fraction, stage), got " +
+                std::string(py::str(callback.get_type())));
   auto state = std::make_shared<ProgressState>();
   state->callback = callback;
   const Progress progress = make_progress(state);
@@ -504,7 +506,8 @@ std::array<double, 3> vector3(Options& kw, const char* name) {
   } catch (const py::cast_error&) {
     throw Error(std::string(name) + ": expected three numbers or 'x,y,z'");
   }
-  if (v.size() != 3) throw Error(std::string(name) + ": expected three numbers, got " + std::to_string(v.size()));
+  if (v.size() != 3)
+    throw Error(std::string(name) + ": expected three numbers, got " + std::to_string(v.size()));
   return pipeline::parse_vector3(fmt_vector(v), name);
 }
 
@@ -597,7 +600,8 @@ CompareOptions compare_options(const py::kwargs& kwargs) {
   optional("value_max", o.value_max);
   optional("value_rms", o.value_rms);
   if (kw.has("count_tolerance"))
-    o.count_tolerance_percent = pipeline::parse_percent(option_text(kw.take("count_tolerance")), "count_tolerance");
+    o.count_tolerance_percent =
+        pipeline::parse_percent(option_text(kw.take("count_tolerance")), "count_tolerance");
   kw.get("normal_angle", o.normal_angle_deg);
   kw.get("samples", o.samples);
   kw.get("number_tolerance", o.number_tolerance);
@@ -765,25 +769,27 @@ PYBIND11_MODULE(_mlfe, m) {
         if (!warning.empty()) PyErr_WarnEx(PyExc_UserWarning, warning.c_str(), 1);
       });
 
-  m.def("render", [](const PyBuilt& b, const py::object& out, const py::object& progress, const py::kwargs& kwargs) {
-    Options kw(kwargs);
-    pipeline::RenderFileOptions o = render_options(kw);
-    kw.finish();
-    o.keep_images = true;
-    const std::string path = out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
-    pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
-      o.progress = p;
-      return path.empty() ? pipeline::render_images(*b.built, o, b.grid.get(), b.source)
-                          : pipeline::render(*b.built, path, o, b.grid.get(), b.source);
-    });
-    py::dict result;
-    result["tetrahedra"] = r.tetrahedra;
-    result["level"] = r.level;
-    result["mesh_bytes"] = r.mesh_bytes;
-    result["written"] = r.written;
-    result["frames"] = render_frames(std::move(r));
-    return result;
-  });
+  m.def("render",
+        [](const PyBuilt& b, const py::object& out, const py::object& progress, const py::kwargs& kwargs) {
+          Options kw(kwargs);
+          pipeline::RenderFileOptions o = render_options(kw);
+          kw.finish();
+          o.keep_images = true;
+          const std::string path =
+              out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+          pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
+            o.progress = p;
+            return path.empty() ? pipeline::render_images(*b.built, o, b.grid.get(), b.source)
+                                : pipeline::render(*b.built, path, o, b.grid.get(), b.source);
+          });
+          py::dict result;
+          result["tetrahedra"] = r.tetrahedra;
+          result["level"] = r.level;
+          result["mesh_bytes"] = r.mesh_bytes;
+          result["written"] = r.written;
+          result["frames"] = render_frames(std::move(r));
+          return result;
+        });
   m.def("info", [](const std::string& path, bool labels, const std::string& label_table) {
     pipeline::InfoOptions o;
     o.labels = labels;
@@ -795,24 +801,24 @@ PYBIND11_MODULE(_mlfe, m) {
     }
     return to_python(j);
   });
-  m.def("export_hierarchy", [](const std::string& input, const std::string& output, int level,
-                               const py::object& progress) {
-    pipeline::ExportOptions o;
-    o.level = level;
-    const pipeline::ExportResult r = with_progress(progress, [&](const Progress& p) {
-      o.progress = p;
-      return pipeline::export_hierarchy(input, output, o);
-    });
-    py::dict d;
-    d["mesh"] = r.mesh;
-    d["elements"] = r.elements;
-    d["vertices"] = r.vertices;
-    d["level"] = r.level;
-    d["dims"] = r.dims;
-    d["seconds"] = r.resample_seconds;
-    d["written"] = r.written;
-    return d;
-  });
+  m.def("export_hierarchy",
+        [](const std::string& input, const std::string& output, int level, const py::object& progress) {
+          pipeline::ExportOptions o;
+          o.level = level;
+          const pipeline::ExportResult r = with_progress(progress, [&](const Progress& p) {
+            o.progress = p;
+            return pipeline::export_hierarchy(input, output, o);
+          });
+          py::dict d;
+          d["mesh"] = r.mesh;
+          d["elements"] = r.elements;
+          d["vertices"] = r.vertices;
+          d["level"] = r.level;
+          d["dims"] = r.dims;
+          d["seconds"] = r.resample_seconds;
+          d["written"] = r.written;
+          return d;
+        });
 
   m.def("compare_files", [](const std::string& expected, const std::string& actual, const py::kwargs& kw) {
     const CompareOptions o = compare_options(kw);

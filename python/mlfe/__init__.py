@@ -45,6 +45,8 @@ from . import _mlfe
 from ._mlfe import Cancelled, Error
 
 __version__ = _mlfe.__version__
+Error.__doc__ = "Bad input or options: a one-line message naming the keyword or file (a ValueError)."
+Cancelled.__doc__ = "A call stopped by its progress callback (or Ctrl-C); it left no output file."
 
 __all__ = [
     "Cancelled",

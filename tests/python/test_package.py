@@ -283,17 +283,19 @@ class PipelineCallsTest(unittest.TestCase):
 
     def test_info_export_and_the_option_vocabulary(self):
         h = self.hierarchy()
-        cli_info = json.loads(cli("info", h, "--json").stdout)
-        self.assertEqual(mlfe.info(h), cli_info)
+        def untimed(d):  # the reading time differs between runs
+            return {k: untimed(v) if isinstance(v, dict) else v for k, v in d.items() if "seconds" not in k}
+
+        self.assertEqual(untimed(mlfe.info(h)), untimed(json.loads(cli("info", h, "--json").stdout)))
         vol_info = mlfe.info(SKULL)
-        self.assertEqual(vol_info, json.loads(cli("info", SKULL, "--json").stdout))
+        self.assertEqual(untimed(vol_info), untimed(json.loads(cli("info", SKULL, "--json").stdout)))
         mine = mlfe.info(mlfe.read_volume(SKULL))
         self.assertEqual(mine["dims"], [64, 64, 64])
         # export: the leaf mesh, as `mlfe export`.
         py_vtu, cli_vtu = self.path("py.vtu"), self.path("cli.vtu")
         summary = mlfe.load(h).export(py_vtu)
         self.assertEqual(summary["written"], [py_vtu])
-        self.assertEqual(cli("export", h, "-o", cli_vtu, "--quiet").returncode, 0)
+        self.assertEqual(cli("export", h, "-o", cli_vtu).returncode, 0)
         with open(py_vtu, "rb") as a, open(cli_vtu, "rb") as b:
             self.assertEqual(a.read(), b.read())
         # One vocabulary: the command line's spellings are accepted, bad ones named by keyword.
@@ -335,7 +337,7 @@ class StubTest(unittest.TestCase):
                     if isinstance(obj, type):
                         members = {m for m in vars(obj) if not m.startswith("_")}
                         self.assertEqual(members - declared[name], set())
-                    if callable(obj) and name != "Error":
+                    if callable(obj):
                         self.assertTrue(obj.__doc__, name)
         self.assertTrue(os.path.exists(os.path.join(os.path.dirname(mlfe.__file__), "py.typed")))
 
