@@ -616,23 +616,8 @@ py::tuple compare_result(const CompareResult& r) {
   return py::make_tuple(r.kind, differences, to_python(r.report), r.summary());
 }
 
-}  // namespace
-}  // namespace mlfe::python
-
-PYBIND11_MODULE(_mlfe, m) {
-  using namespace mlfe;
-  using namespace mlfe::python;
-  m.doc() =
-      "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
-      "arguments.";
-  m.attr("__version__") = MLFE_VERSION;
-  py::register_exception<Error>(m, "Error", PyExc_ValueError);
-  // Registered after Error: pybind11 tries the later translators first.
-  py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
-
-  m.def("read_volume", &read_volume_py, py::arg("path"));
-  m.def("load", &load_py, py::arg("path"));
-
+// mlfe._mlfe.Mesh: extracted surfaces and their writer.
+void bind_mesh(py::module_& m) {
   py::class_<PyMesh, std::shared_ptr<PyMesh>>(m, "Mesh")
       .def_property_readonly("vertices",
                              [](std::shared_ptr<PyMesh> s) {
@@ -674,7 +659,10 @@ PYBIND11_MODULE(_mlfe, m) {
              py::gil_scoped_release release;
              write_mesh(s, path, draco, quantize, tolerance);
            });
+}
 
+// mlfe._mlfe.Hierarchy: a built or loaded approximation.
+void bind_hierarchy(py::module_& m) {
   py::class_<PyBuilt>(m, "Hierarchy")
       .def_property_readonly("dim", [](const PyBuilt& b) { return b.built->dim(); })
       .def_property_readonly("levels", [](const PyBuilt& b) { return b.built->levels(); })
@@ -768,7 +756,10 @@ PYBIND11_MODULE(_mlfe, m) {
         }
         if (!warning.empty()) PyErr_WarnEx(PyExc_UserWarning, warning.c_str(), 1);
       });
+}
 
+// The module functions: the pipeline calls and the comparisons.
+void bind_calls(py::module_& m) {
   m.def("render",
         [](const PyBuilt& b, const py::object& out, const py::object& progress, const py::kwargs& kwargs) {
           Options kw(kwargs);
@@ -862,4 +853,26 @@ PYBIND11_MODULE(_mlfe, m) {
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
         py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
         py::arg("progress") = py::none());
+}
+
+}  // namespace
+}  // namespace mlfe::python
+
+PYBIND11_MODULE(_mlfe, m) {
+  using namespace mlfe;
+  using namespace mlfe::python;
+  m.doc() =
+      "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
+      "arguments.";
+  m.attr("__version__") = MLFE_VERSION;
+  py::register_exception<Error>(m, "Error", PyExc_ValueError);
+  // Registered after Error: pybind11 tries the later translators first.
+  py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
+
+  m.def("read_volume", &read_volume_py, py::arg("path"));
+  m.def("load", &load_py, py::arg("path"));
+
+  bind_mesh(m);
+  bind_hierarchy(m);
+  bind_calls(m);
 }
