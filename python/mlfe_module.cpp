@@ -1,10 +1,16 @@
-// The Python module `mlfe`: the pipeline library (converters/pipeline.h) for scripts and
-// notebooks. Volumes are NumPy arrays indexed [i, j, k] (x, y, z; 2D height fields [i, j]);
-// spacing, origin and direction follow the same axes. Arrays handed out (volumes read, surfaces
-// extracted, hierarchy values) are views of the C++ buffers, kept alive by their owner; a volume
-// passed in is copied once into the grid the library samples. The GIL is released while the
+// The extension `mlfe._mlfe`: the pipeline library (include/mlfe/pipeline.h) for the Python
+// package `mlfe` (python/mlfe/__init__.py), which checks and names the keywords, wraps the
+// results in documented classes and is the public interface. Volumes are NumPy arrays indexed [i, j, k] (x,
+// y, z; 2D height fields [i, j]); spacing, origin and direction follow the same axes. Arrays handed out
+// (volumes read, surfaces extracted, hierarchy values) are views of the C++ buffers, kept alive by their
+// owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
 #include <mlfe/core/error.h>
+#include <mlfe/formats/compare.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 #include <pybind11/numpy.h>
@@ -76,64 +82,43 @@ class Options {
   std::map<std::string, py::object> left_;
 };
 
+// Text options through the pipeline's vocabulary (the command line's parse functions), named
+// by their Python keyword; numbers are taken as they are.
 template <class E>
-E choice(const std::string& text, const char* what, std::initializer_list<std::pair<const char*, E>> values) {
-  std::string names;
-  for (const auto& v : values) {
-    if (text == v.first) return v.second;
-    names += (names.empty() ? "" : ", ") + std::string(v.first);
-  }
-  throw Error(std::string(what) + ": '" + text + "' is not one of " + names);
+void get_enum(Options& kw, const char* name, E& out) {
+  std::string text;
+  kw.get(name, text);
+  if (!text.empty()) out = pipeline::parse_enum<E>(text, name);
+}
+
+// A Python object as option text: str as it is, numbers in their shortest exact spelling.
+std::string option_text(const py::object& o) {
+  if (py::isinstance<py::str>(o)) return o.cast<std::string>();
+  if (py::isinstance<py::bool_>(o) || !(py::isinstance<py::int_>(o) || py::isinstance<py::float_>(o)))
+    return std::string(py::str(py::repr(o)));  // fails in the parser with the value shown
+  return py::str(o);
+}
+
+// Numbers as "a,b,c" for the vocabulary's parsers (shortest round-trip spelling).
+std::string fmt_vector(const std::vector<double>& v) {
+  std::string text;
+  for (double x : v) text += (text.empty() ? "" : ",") + std::string(py::str(py::float_(x)));
+  return text;
 }
 
 BuildOptions build_options(Options& kw) {
   BuildOptions o;
-  if (kw.has("rms")) {
-    py::object r = kw.take("rms");
-    if (py::isinstance<py::str>(r)) {
-      std::string t = r.cast<std::string>();
-      RmsTarget target;
-      target.percent_of_range = !t.empty() && t.back() == '%';
-      if (target.percent_of_range) t.pop_back();
-      std::size_t used = 0;
-      try {
-        target.value = std::stod(t, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used == 0 || used != t.size())
-        throw Error("rms: expected e.g. '0.5%' or a number, got '" + t + "'");
-      o.rms = target;
-    } else {
-      o.rms = RmsTarget{r.cast<double>(), false};
-    }
-  }
+  if (kw.has("rms")) o.rms = pipeline::parse_rms(option_text(kw.take("rms")), "rms");
   kw.get("threshold", o.threshold);
   kw.get("max_vertices", o.max_vertices);
   kw.get("max_level", o.max_level);
   kw.get("start_level", o.start_level);
-  std::string norm = "l2", pre = "auto";
-  kw.get("norm", norm);
-  o.norm = choice<Norm>(norm, "norm", {{"l2", Norm::kL2}, {"h1", Norm::kH1}});
-  kw.get("preconditioner", pre);
-  o.preconditioner = choice<Preconditioner>(pre, "preconditioner",
-                                            {{"auto", Preconditioner::kAuto},
-                                             {"bpx", Preconditioner::kBpx},
-                                             {"jacobi", Preconditioner::kJacobi},
-                                             {"none", Preconditioner::kNone}});
+  get_enum(kw, "norm", o.norm);
+  get_enum(kw, "preconditioner", o.preconditioner);
   kw.get("surface_tolerance", o.surface_tolerance);
   kw.get("check_u", o.check_against_u);
-  if (kw.has("max_memory")) {
-    py::object m = kw.take("max_memory");
-    if (py::isinstance<py::str>(m)) {
-      const std::string t = m.cast<std::string>();
-      if (t.empty() || t.back() != '%') throw Error("max_memory: a percentage text ('50%') or bytes (int)");
-      o.max_memory.amount = std::stod(t.substr(0, t.size() - 1));
-    } else {
-      o.max_memory.percent_of_ram = false;
-      o.max_memory.amount = m.cast<double>();
-    }
-  }
+  if (kw.has("max_memory"))
+    o.max_memory = pipeline::parse_memory_budget(option_text(kw.take("max_memory")), "max_memory");
   return o;
 }
 
@@ -145,28 +130,62 @@ AssetOptions asset_options(Options& kw) {
   kw.get("lod", o.lod);
   kw.get("decimate", o.decimate);
   kw.get("simplify", o.simplify);
-  std::string simplifier = "auto", normals = "auto", placement = "auto";
-  kw.get("simplifier", simplifier);
-  o.simplifier = choice<Simplifier>(simplifier, "simplifier",
-                                    {{"auto", Simplifier::kAuto},
-                                     {"fast", Simplifier::kFast},
-                                     {"bounded", Simplifier::kBounded},
-                                     {"meshopt", Simplifier::kMeshopt}});
+  get_enum(kw, "simplifier", o.simplifier);
   kw.get("snap", o.snap);
   kw.get("min_component", o.min_component);
   kw.get("normals_toward_higher", o.normals_toward_higher);
-  kw.get("normals", normals);
-  o.normals = choice<Normals>(
-      normals, "normals",
-      {{"auto", Normals::kAuto}, {"gradient", Normals::kGradient}, {"surface", Normals::kSurface}});
-  kw.get("placement", placement);
-  o.placement = choice<VertexPlacement>(placement, "placement",
-                                        {{"auto", VertexPlacement::kAuto},
-                                         {"input", VertexPlacement::kInput},
-                                         {"optimal", VertexPlacement::kOptimal}});
+  get_enum(kw, "normals", o.normals);
+  get_enum(kw, "placement", o.placement);
   kw.get("z_scale", o.z_scale);
   kw.get("level", o.level);
   return o;
+}
+
+// progress=: a Python callable (fraction, stage) -> None/True to go on, False to cancel, as a
+// pipeline Progress. Reports come on the calling thread while the GIL is released; the
+// callback takes it. Ctrl-C (a pending signal) and an exception raised by the callback cancel
+// the call too; with_progress then raises that exception instead of mlfe.Cancelled.
+struct ProgressState {
+  py::object callback;  // None: only signals are checked
+  std::unique_ptr<py::error_already_set> error;
+};
+
+Progress make_progress(const std::shared_ptr<ProgressState>& state) {
+  return [state](double fraction, const std::string& stage) -> bool {
+    py::gil_scoped_acquire gil;
+    if (state->error) return false;
+    try {
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      if (state->callback.is_none()) return true;
+      const py::object r = state->callback(fraction, stage);
+      return r.is_none() || PyObject_IsTrue(r.ptr()) == 1;
+    } catch (py::error_already_set& e) {
+      state->error = std::make_unique<py::error_already_set>(std::move(e));
+      return false;
+    }
+  };
+}
+
+// Runs work(progress) without the GIL; a cancel caused by Python re-raises its exception.
+template <class F>
+auto with_progress(const py::object& callback, F&& work) {
+  if (!callback.is_none() && !PyCallable_Check(callback.ptr()))
+    throw Error("progress: expected a callable (fraction, stage), got " +
+                std::string(py::str(callback.get_type())));
+  auto state = std::make_shared<ProgressState>();
+  state->callback = callback;
+  const Progress progress = make_progress(state);
+  try {
+    py::gil_scoped_release release;
+    return work(progress);
+  } catch (const Cancelled&) {
+    if (state->error) {
+      py::error_already_set e = std::move(*state->error);
+      state->error.reset();
+      throw e;
+    }
+    throw;
+  }
 }
 
 // A grid from an array indexed [i, j(, k)]: one copy into the library's x-fastest layout.
@@ -250,7 +269,118 @@ struct PyBuilt {
   std::shared_ptr<const Built> built;
   std::shared_ptr<const ScalarGrid> grid;
   std::string source;  // the input, for reports and provenance
+  // A loaded hierarchy file's error figures and metadata (null for a build).
+  nlohmann::json file_info;
 };
+
+// Extracted surfaces (one per iso-value, or the height field) with what writing them needs.
+struct PyMesh {
+  std::vector<GltfSurface> surfaces;
+  TriangleMesh merged;  // all surfaces in one mesh, as the single-mesh formats store them
+  std::string space;
+  double default_tolerance = 0;  // a tenth of the smallest voxel spacing
+  nlohmann::json extras;         // provenance for glTF
+};
+
+TriangleMesh merge_surfaces(const std::vector<GltfSurface>& surfaces) {
+  TriangleMesh all;
+  for (const auto& s : surfaces) {
+    const auto base = std::uint32_t(all.positions.size());
+    all.positions.insert(all.positions.end(), s.mesh.positions.begin(), s.mesh.positions.end());
+    all.normals.insert(all.normals.end(), s.mesh.normals.begin(), s.mesh.normals.end());
+    for (const auto& t : s.mesh.triangles) all.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  if (all.normals.size() != all.positions.size()) all.normals.clear();
+  return all;
+}
+
+// Writes extracted surfaces by extension as write_assets does: glTF with one node per surface,
+// the other formats one merged mesh.
+void write_mesh(const PyMesh& m, const std::string& path, bool draco, bool quantize, double tolerance) {
+  check_output_path(path, kAssetExtensions);
+  if (!(tolerance >= 0)) throw Error("tolerance: expected a value >= 0");
+  const double tol = tolerance > 0 ? tolerance : m.default_tolerance;
+  const std::string ext = lower_extension(path);
+  if (ext == ".glb" || ext == ".gltf") {
+    GltfOptions o;
+    o.draco = draco;
+    o.quantize = quantize;
+    o.tolerance_mm = tol;
+    o.space = m.space;
+    o.extras = m.extras;
+    o.extras["tolerance_mm"] = tol;
+    write_gltf(path, m.surfaces, o);
+  } else if (ext == ".drc") {
+    DracoOptions o;
+    o.tolerance = tol;
+    write_draco_file(path, m.merged, o);
+  } else {
+    write_mesh_file(path, m.merged);
+  }
+}
+
+// Leaf simplices of `b` as an (m, dim + 1) array of vertex indices.
+py::array_t<std::int64_t> leaf_cells(const Built& b) {
+  return b.visit([](const auto& a) {
+    constexpr int kCorners = std::tuple_size_v<typename std::decay_t<decltype(a.hierarchy)>::Cell>;
+    const auto leaves = a.hierarchy.leaves();
+    py::array_t<std::int64_t> out({py::ssize_t(leaves.size()), py::ssize_t(kCorners)});
+    auto w = out.template mutable_unchecked<2>();
+    for (std::size_t e = 0; e < leaves.size(); ++e)
+      for (int c = 0; c < kCorners; ++c)
+        w(py::ssize_t(e), c) = std::int64_t(a.hierarchy.cell(leaves[e])[c].value);
+    return out;
+  });
+}
+
+// Vertex positions of `b` in the physical frame (millimetres), (n, 3) float64.
+py::array_t<double> physical_positions(const Built& b) {
+  return b.visit([&b](const auto& a) {
+    const auto& pts = a.hierarchy.points();
+    py::array_t<double> out({py::ssize_t(pts.size()), py::ssize_t(3)});
+    auto w = out.template mutable_unchecked<2>();
+    for (std::size_t v = 0; v < pts.size(); ++v) {
+      std::array<double, 3> local{0, 0, 0};
+      for (std::size_t c = 0; c < pts[v].size(); ++c) local[c] = pts[v][c];
+      const auto q = b.transform.local_to_physical(local);
+      for (int c = 0; c < 3; ++c) w(py::ssize_t(v), c) = q[c];
+    }
+    return out;
+  });
+}
+
+py::array_t<std::uint8_t> vertex_levels(const Built& b) {
+  return b.visit([](const auto& a) {
+    const auto& l = a.hierarchy.vertex_level_array();
+    py::array_t<std::uint8_t> out(py::ssize_t(l.size()));
+    if (!l.empty()) std::memcpy(out.mutable_data(), l.data(), l.size());
+    return out;
+  });
+}
+
+// mlfe.load: the hierarchy file as a Built, with the error figures and metadata of its header
+// (read again on its coarsest level only).
+PyBuilt load_py(const py::object& path_like) {
+  const std::string path = py::str(py::module_::import("os").attr("fspath")(path_like));
+  PyBuilt out;
+  out.source = path;
+  HierarchyFile header;
+  {
+    py::gil_scoped_release release;
+    out.built = std::make_shared<const Built>(built_from_file(path));
+    header = read_hierarchy(path, 0);
+  }
+  auto figure = [](double v) { return std::isnan(v) ? nlohmann::json() : nlohmann::json(v); };
+  out.file_info = {{"norm", header.norm},
+                   {"rms", figure(header.rms_error)},
+                   {"max", figure(header.max_error)},
+                   {"psnr_db", figure(header.psnr_db)},
+                   {"sample_error_bound", figure(header.sample_error_bound)},
+                   {"value_bound", header.value_bound},
+                   {"version", header.version},
+                   {"metadata", header.metadata}};
+  return out;
+}
 
 // The path of a .vtu/.msh tetrahedral mesh, or "" for anything else (arrays, volume files).
 std::string tet_mesh_path(const py::object& volume) {
@@ -259,39 +389,27 @@ std::string tet_mesh_path(const py::object& volume) {
   return detect_tet_mesh_format(path).empty() ? "" : path;
 }
 
-py::tuple mesh_arrays(TriangleMesh&& m) {
-  auto owner = std::make_shared<TriangleMesh>(std::move(m));
-  const auto f3 = py::ssize_t(3 * sizeof(float)), u3 = py::ssize_t(3 * sizeof(std::uint32_t));
-  const auto nv = py::ssize_t(owner->positions.size()), nn = py::ssize_t(owner->normals.size()),
-             nt = py::ssize_t(owner->triangles.size());
-  auto vertices = view<float>(owner, owner->positions.empty() ? nullptr : owner->positions[0].data(), {nv, 3},
-                              {f3, py::ssize_t(sizeof(float))});
-  auto normals = view<float>(owner, owner->normals.empty() ? nullptr : owner->normals[0].data(), {nn, 3},
-                             {f3, py::ssize_t(sizeof(float))});
-  auto indices = view<std::uint32_t>(owner, owner->triangles.empty() ? nullptr : owner->triangles[0].data(),
-                                     {nt, 3}, {u3, py::ssize_t(sizeof(std::uint32_t))});
-  return py::make_tuple(vertices, normals, indices);
-}
-
 PyBuilt build_py(const py::object& volume, const py::object& iso, const py::object& spacing,
                  const py::object& origin, const py::object& direction, const std::string& space,
-                 const py::kwargs& kwargs) {
+                 const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
-  const BuildOptions options = build_options(kw);
+  BuildOptions options = build_options(kw);
   kw.finish();
   const std::vector<double> isos = iso.is_none() ? std::vector<double>{} : iso.cast<std::vector<double>>();
   PyBuilt out;
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
-    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
-      throw Error("spacing, origin and direction are for arrays; a file brings its own");
-    py::gil_scoped_release release;
-    out.built = std::make_shared<const Built>(build(read_tet_mesh(mesh), options, isos));
+    out.built = with_progress(progress, [&](const Progress& p) {
+      options.fraction_progress = p;
+      return std::make_shared<const Built>(build(read_tet_mesh(mesh), options, isos));
+    });
     out.source = mesh;
     return out;
   }
   auto grid = grid_from(volume, spacing, origin, direction, space);
-  py::gil_scoped_release release;
-  out.built = std::make_shared<const Built>(build(*grid, options, isos));
+  out.built = with_progress(progress, [&](const Progress& p) {
+    options.fraction_progress = p;
+    return std::make_shared<const Built>(build(*grid, options, isos));
+  });
   out.source = grid->source;
   out.grid = std::move(grid);
   return out;
@@ -343,7 +461,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
 py::object convert_py(const py::object& volume, const py::object& out, const py::object& iso,
                       const py::object& spacing, const py::object& origin, const py::object& direction,
                       const std::string& space, const py::object& hierarchy, const py::object& report,
-                      const py::kwargs& kwargs) {
+                      const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
   if (kw.has("labels")) {
     py::object picked = kw.take("labels");
@@ -363,70 +481,226 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
   // Checked before reading or copying the volume.
   check_output_path(out_path, kAssetExtensions);
-  ConvertResult r;
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
-    if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
-      throw Error("spacing, origin and direction are for arrays; a file brings its own");
-    {
-      py::gil_scoped_release release;
-      r = convert(mesh, out_path, c);
-    }
+    const ConvertResult r = with_progress(progress, [&](const Progress& p) {
+      c.progress = p;
+      return convert(mesh, out_path, c);
+    });
     return to_python(r.asset);
   }
   auto grid = grid_from(volume, spacing, origin, direction, space);
-  {
-    py::gil_scoped_release release;
-    r = convert(*grid, out_path, c);
-  }
+  const ConvertResult r = with_progress(progress, [&](const Progress& p) {
+    c.progress = p;
+    return convert(*grid, out_path, c);
+  });
   return to_python(r.asset);
 }
 
-}  // namespace
-}  // namespace mlfe::python
+// "x,y,z" or three numbers, through the vocabulary's parser.
+std::array<double, 3> vector3(Options& kw, const char* name) {
+  const py::object o = kw.take(name);
+  if (py::isinstance<py::str>(o)) return pipeline::parse_vector3(o.cast<std::string>(), name);
+  std::vector<double> v;
+  try {
+    v = o.cast<std::vector<double>>();
+  } catch (const py::cast_error&) {
+    throw Error(std::string(name) + ": expected three numbers or 'x,y,z'");
+  }
+  if (v.size() != 3)
+    throw Error(std::string(name) + ": expected three numbers, got " + std::to_string(v.size()));
+  return pipeline::parse_vector3(fmt_vector(v), name);
+}
 
-PYBIND11_MODULE(mlfe, m) {
-  using namespace mlfe;
-  using namespace mlfe::python;
-  m.doc() =
-      "mlfe: adaptive multilevel finite-element approximation of volume data (hierarchies, "
-      "iso-surfaces, glTF/Draco assets). Arrays are indexed [i, j, k] (x fastest in memory).";
-  m.attr("__version__") = MLFE_VERSION;
-  py::register_exception<Error>(m, "Error", PyExc_ValueError);
+pipeline::RenderFileOptions render_options(Options& kw) {
+  pipeline::RenderFileOptions o;
+  kw.get("tf", o.tf);
+  kw.get("tf_unit", o.tf_unit);
+  get_enum(kw, "camera", o.camera);
+  kw.get("azimuth", o.azimuth);
+  kw.get("elevation", o.elevation);
+  if (kw.has("position")) o.position = vector3(kw, "position");
+  if (kw.has("target")) o.target = vector3(kw, "target");
+  if (kw.has("up")) o.up = vector3(kw, "up");
+  if (kw.has("size")) {
+    const py::object size = kw.take("size");
+    std::string text;
+    if (py::isinstance<py::str>(size)) {
+      text = size.cast<std::string>();
+    } else {
+      std::vector<py::object> wh;
+      try {
+        wh = size.cast<std::vector<py::object>>();
+      } catch (const py::cast_error&) {
+      }
+      if (wh.size() != 2) throw Error("size: expected (width, height) or 'WxH'");
+      text = std::string(py::str(wh[0])) + "x" + std::string(py::str(wh[1]));
+    }
+    o.size = pipeline::parse_image_size(text, "size");
+  }
+  kw.get("level", o.level);
+  kw.get("reference", o.reference);
+  get_enum(kw, "integration", o.integration);
+  kw.get("shading", o.shading);
+  kw.get("skip_empty", o.skip_empty);
+  if (kw.has("png")) o.png = py::str(py::module_::import("os").attr("fspath")(kw.take("png")));
+  kw.get("frames", o.frames);
+  if (kw.has("background")) o.background = vector3(kw, "background");
+  kw.get("stop_opacity", o.stop_opacity);
+  kw.get("z_opacity", o.z_opacity);
+  return o;
+}
 
-  m.def("read_volume", &read_volume_py, py::arg("path"),
-        "Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png).\n"
-        "Returns (values, spacing, origin, info): values a float32 array indexed [i, j, k] (a view,\n"
-        "no copy), spacing and origin per axis, info a dict (direction rows, space, format,\n"
-        "source_type, notes).");
+py::array_t<double> matrix4(const std::array<double, 16>& m) {
+  py::array_t<double> a({4, 4});
+  std::memcpy(a.mutable_data(), m.data(), sizeof(double) * 16);
+  return a;
+}
 
-  py::class_<PyBuilt>(m, "Hierarchy",
-                      "An adaptive approximation built by mlfe.build(): the hierarchy, u at its "
-                      "vertices and the build's statistics.")
+// The frames of a render: per frame its files, size, seconds, camera matrices and, when kept,
+// RGBA (h, w, 4) and Z (h, w) float32 arrays (rows from the top, as the EXR).
+py::list render_frames(pipeline::RenderResult&& r) {
+  auto owner = std::make_shared<pipeline::RenderResult>(std::move(r));
+  py::list frames;
+  const auto f = py::ssize_t(sizeof(float));
+  for (const auto& fr : owner->frames) {
+    py::dict d;
+    d["exr"] = fr.exr;
+    d["png"] = fr.png;
+    d["width"] = fr.width;
+    d["height"] = fr.height;
+    d["seconds"] = fr.seconds;
+    d["world_to_camera"] = matrix4(fr.camera.world_to_camera());
+    d["world_to_ndc"] = matrix4(fr.camera.world_to_ndc());
+    d["rays"] = fr.stats.rays;
+    d["segments"] = fr.stats.segments;
+    const RenderImage& img = fr.image;
+    const py::ssize_t w = img.width, h = img.height;
+    if (!img.rgba.empty()) {
+      d["rgba"] = view<float>(owner, img.rgba.data(), {h, w, 4}, {4 * f * w, 4 * f, f});
+      d["z"] = view<float>(owner, img.z.data(), {h, w}, {f * w, f});
+    }
+    frames.append(d);
+  }
+  return frames;
+}
+
+CompareOptions compare_options(const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  CompareOptions o;
+  auto optional = [&kw](const char* name, std::optional<double>& out) {
+    if (!kw.has(name)) return;
+    double v = 0;
+    kw.get(name, v);
+    out = v;
+  };
+  optional("tolerance", o.tolerance);
+  optional("mean_tolerance", o.mean_tolerance);
+  optional("image_max", o.image_max);
+  optional("psnr", o.min_psnr);
+  optional("value_max", o.value_max);
+  optional("value_rms", o.value_rms);
+  if (kw.has("count_tolerance"))
+    o.count_tolerance_percent =
+        pipeline::parse_percent(option_text(kw.take("count_tolerance")), "count_tolerance");
+  kw.get("normal_angle", o.normal_angle_deg);
+  kw.get("samples", o.samples);
+  kw.get("number_tolerance", o.number_tolerance);
+  kw.get("ignore", o.ignore);
+  kw.finish();
+  return o;
+}
+
+py::tuple compare_result(const CompareResult& r) {
+  py::list differences;
+  for (const auto& d : r.differences) differences.append(py::make_tuple(d.item, d.reason));
+  return py::make_tuple(r.kind, differences, to_python(r.report), r.summary());
+}
+
+// mlfe._mlfe.Mesh: extracted surfaces and their writer.
+void bind_mesh(py::module_& m) {
+  py::class_<PyMesh, std::shared_ptr<PyMesh>>(m, "Mesh")
+      .def_property_readonly("vertices",
+                             [](std::shared_ptr<PyMesh> s) {
+                               const auto& p = s->merged.positions;
+                               return view<float>(
+                                   s, p.empty() ? nullptr : p[0].data(), {py::ssize_t(p.size()), 3},
+                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
+                             })
+      .def_property_readonly("normals",
+                             [](std::shared_ptr<PyMesh> s) {
+                               const auto& n = s->merged.normals;
+                               return view<float>(
+                                   s, n.empty() ? nullptr : n[0].data(), {py::ssize_t(n.size()), 3},
+                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
+                             })
+      .def_property_readonly(
+          "triangles",
+          [](std::shared_ptr<PyMesh> s) {
+            const auto& t = s->merged.triangles;
+            return view<std::uint32_t>(
+                s, t.empty() ? nullptr : t[0].data(), {py::ssize_t(t.size()), 3},
+                {py::ssize_t(3 * sizeof(std::uint32_t)), py::ssize_t(sizeof(std::uint32_t))});
+          })
+      .def_property_readonly("iso",
+                             [](const PyMesh& s) {
+                               std::vector<double> v;
+                               for (const auto& x : s.surfaces) v.push_back(x.iso_value);
+                               return v;
+                             })
+      .def_property_readonly("surface_triangles",
+                             [](const PyMesh& s) {
+                               std::vector<std::size_t> v;
+                               for (const auto& x : s.surfaces) v.push_back(x.mesh.triangles.size());
+                               return v;
+                             })
+      .def_property_readonly("space", [](const PyMesh& s) { return s.space; })
+      .def("write",
+           [](const PyMesh& s, const std::string& path, bool draco, bool quantize, double tolerance) {
+             py::gil_scoped_release release;
+             write_mesh(s, path, draco, quantize, tolerance);
+           });
+}
+
+// mlfe._mlfe.Hierarchy: a built or loaded approximation.
+void bind_hierarchy(py::module_& m) {
+  py::class_<PyBuilt>(m, "Hierarchy")
       .def_property_readonly("dim", [](const PyBuilt& b) { return b.built->dim(); })
       .def_property_readonly("levels", [](const PyBuilt& b) { return b.built->levels(); })
-      .def_property_readonly("vertices", [](const PyBuilt& b) { return b.built->vertices(); })
-      .def_property_readonly("elements", [](const PyBuilt& b) { return b.built->leaves(); })
+      .def_property_readonly("vertex_count", [](const PyBuilt& b) { return b.built->vertices(); })
+      .def_property_readonly("leaf_count", [](const PyBuilt& b) { return b.built->leaves(); })
       .def_property_readonly("stop_reason", [](const PyBuilt& b) { return b.built->stop_reason(); })
       .def_property_readonly("surface_driven", [](const PyBuilt& b) { return b.built->surface_driven; })
       .def_property_readonly("memory_limited", [](const PyBuilt& b) { return b.built->memory_limited(); })
       .def_property_readonly("seconds", [](const PyBuilt& b) { return b.built->seconds; })
+      .def_property_readonly("source", [](const PyBuilt& b) { return b.source; })
+      .def_property_readonly("space", [](const PyBuilt& b) { return b.built->space; })
       .def_property_readonly(
-          "errors",
-          [](const PyBuilt& b) {
-            py::dict d;
-            if (b.built->iterations().empty()) return d;  // u not solved (no output held it)
-            const auto& last = b.built->iterations().back();
-            d["rms"] = last.rms_error;
-            d["rms_percent"] = last.rms_percent;
-            d["l2"] = last.l2_error;
-            d["psnr_db"] = last.psnr_db;
-            return d;
-          },
-          "the final error of u against the data: rms, rms_percent (of the value range), l2, psnr_db")
+          "value_range",
+          [](const PyBuilt& b) { return py::make_tuple(b.built->value_min, b.built->value_max); })
+      .def_property_readonly("transform",
+                             [](const PyBuilt& b) {
+                               const auto& t = b.built->transform;
+                               return py::make_tuple(t.spacing, t.origin, t.direction);
+                             })
+      .def_property_readonly("has_volume", [](const PyBuilt& b) { return bool(b.grid); })
+      .def_property_readonly("file_info", [](const PyBuilt& b) { return to_python(b.file_info); })
+      .def_property_readonly("positions", [](const PyBuilt& b) { return physical_positions(*b.built); })
+      .def_property_readonly("cells", [](const PyBuilt& b) { return leaf_cells(*b.built); })
+      .def_property_readonly("vertex_levels", [](const PyBuilt& b) { return vertex_levels(*b.built); })
+      .def_property_readonly("errors",
+                             [](const PyBuilt& b) {
+                               py::dict d;
+                               if (b.built->iterations().empty()) return d;  // u not solved
+                               const auto& last = b.built->iterations().back();
+                               d["rms"] = last.rms_error;
+                               d["rms_percent"] = last.rms_percent;
+                               d["l2"] = last.l2_error;
+                               d["psnr_db"] = last.psnr_db;
+                               return d;
+                             })
       .def_property_readonly(
           "report",
-          [](const PyBuilt& b) { return to_python(build_report(b.source, b.grid.get(), *b.built)); },
-          "the JSON report of `mlfe build --report` as a dict (per-iteration rows included)")
+          [](const PyBuilt& b) { return to_python(build_report(b.source, b.grid.get(), *b.built)); })
       .def_property_readonly(
           "values",
           [](const PyBuilt& b) {
@@ -434,72 +708,171 @@ PYBIND11_MODULE(mlfe, m) {
             auto a = view<double>(b.built, v.data(), {py::ssize_t(v.size())}, {py::ssize_t(sizeof(double))});
             py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
             return a;
-          },
-          "u at every vertex (a read-only view)")
-      .def(
-          "extract",
-          [](const PyBuilt& b, double iso, const py::kwargs& kwargs) {
-            Options kw(kwargs);
-            AssetOptions o = asset_options(kw);
-            kw.finish();
-            o.iso = {iso};
-            Surfaces s;
-            {
-              py::gil_scoped_release release;
-              s = extract(*b.built, o, b.grid.get());
-            }
-            return mesh_arrays(std::move(s.surfaces.at(0).mesh));
-          },
-          py::arg("iso"),
-          "The iso-surface at `iso` as (vertices float32 (n, 3), normals float32 (n, 3), indices uint32\n"
-          "(m, 3)), physical millimetres; asset options (simplify, snap, normals, ...) as in convert.")
-      .def(
-          "write",
-          [](const PyBuilt& b, const py::object& out, const py::kwargs& kwargs) {
-            Options kw(kwargs);
-            py::object iso = kw.has("iso") ? kw.take("iso") : py::none();
-            AssetOptions o = asset_options(kw);
-            kw.finish();
-            if (!iso.is_none()) o.iso = iso.cast<std::vector<double>>();
-            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
-            const nlohmann::json prov = {{"input", b.source},
-                                         {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
-            nlohmann::json summary;
-            {
-              py::gil_scoped_release release;
-              summary = write_assets(path, *b.built, o, prov, b.grid.get());
-            }
-            return to_python(summary);
-          },
-          py::arg("out"), "Writes the iso-surfaces (iso=[...]) as an asset, by extension, as convert does.")
-      .def(
-          "save",
-          [](const PyBuilt& b, const py::object& out) {
-            const std::string path = py::str(py::module_::import("os").attr("fspath")(out));
-            check_output_path(path, {".mlfeh"});
-            py::gil_scoped_release release;
-            write_built(path, *b.built, {{"input", b.source}});
-          },
-          py::arg("out"), "Writes the hierarchy file (.mlfeh).");
+          })
+      .def("extract",
+           [](const PyBuilt& b, const std::vector<double>& iso, const py::object& progress,
+              const py::kwargs& kwargs) {
+             Options kw(kwargs);
+             AssetOptions o = asset_options(kw);
+             kw.finish();
+             o.iso = iso;
+             auto mesh = std::make_shared<PyMesh>();
+             Surfaces s = with_progress(progress, [&](const Progress& p) {
+               o.progress = p;
+               return extract(*b.built, o, b.grid.get());
+             });
+             mesh->extras = {{"input", b.source},
+                             {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
+                             {"iso_values", s.iso_values},
+                             {"normals", pipeline::enum_name(s.normals)}};
+             mesh->surfaces = std::move(s.surfaces);
+             mesh->merged = merge_surfaces(mesh->surfaces);
+             mesh->space = b.built->space;
+             const auto& sp = b.built->transform.spacing;
+             mesh->default_tolerance =
+                 (b.built->dim() == 2 ? std::min(sp[0], sp[1]) : std::min({sp[0], sp[1], sp[2]})) / 10.0;
+             return mesh;
+           })
+      .def("write",
+           [](const PyBuilt& b, const std::string& path, const std::vector<double>& iso,
+              const py::object& progress, const py::kwargs& kwargs) {
+             Options kw(kwargs);
+             AssetOptions o = asset_options(kw);
+             kw.finish();
+             o.iso = iso;
+             const nlohmann::json prov = {{"input", b.source},
+                                          {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}};
+             return to_python(with_progress(progress, [&](const Progress& p) {
+               o.progress = p;
+               return write_assets(path, *b.built, o, prov, b.grid.get());
+             }));
+           })
+      .def("save", [](const PyBuilt& b, const std::string& path) {
+        check_output_path(path, {".mlfeh"});
+        std::string warning;
+        {
+          py::gil_scoped_release release;
+          warning = write_built(path, *b.built, {{"input", b.source}});
+        }
+        if (!warning.empty()) PyErr_WarnEx(PyExc_UserWarning, warning.c_str(), 1);
+      });
+}
+
+// The module functions: the pipeline calls and the comparisons.
+void bind_calls(py::module_& m) {
+  m.def("render",
+        [](const PyBuilt& b, const py::object& out, const py::object& progress, const py::kwargs& kwargs) {
+          Options kw(kwargs);
+          pipeline::RenderFileOptions o = render_options(kw);
+          kw.finish();
+          o.keep_images = true;
+          const std::string path =
+              out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+          pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
+            o.progress = p;
+            return path.empty() ? pipeline::render_images(*b.built, o, b.grid.get(), b.source)
+                                : pipeline::render(*b.built, path, o, b.grid.get(), b.source);
+          });
+          py::dict result;
+          result["tetrahedra"] = r.tetrahedra;
+          result["level"] = r.level;
+          result["mesh_bytes"] = r.mesh_bytes;
+          result["written"] = r.written;
+          result["frames"] = render_frames(std::move(r));
+          return result;
+        });
+  m.def("info", [](const std::string& path, bool labels, const std::string& label_table) {
+    pipeline::InfoOptions o;
+    o.labels = labels;
+    o.label_table = label_table;
+    nlohmann::json j;
+    {
+      py::gil_scoped_release release;
+      j = pipeline::info(path, o).to_json();
+    }
+    return to_python(j);
+  });
+  m.def("export_hierarchy",
+        [](const std::string& input, const std::string& output, int level, const py::object& progress) {
+          pipeline::ExportOptions o;
+          o.level = level;
+          const pipeline::ExportResult r = with_progress(progress, [&](const Progress& p) {
+            o.progress = p;
+            return pipeline::export_hierarchy(input, output, o);
+          });
+          py::dict d;
+          d["mesh"] = r.mesh;
+          d["elements"] = r.elements;
+          d["vertices"] = r.vertices;
+          d["level"] = r.level;
+          d["dims"] = r.dims;
+          d["seconds"] = r.resample_seconds;
+          d["written"] = r.written;
+          return d;
+        });
+
+  m.def("compare_files", [](const std::string& expected, const std::string& actual, const py::kwargs& kw) {
+    const CompareOptions o = compare_options(kw);
+    CompareResult r;
+    {
+      py::gil_scoped_release release;
+      r = compare_files(expected, actual, o);
+    }
+    return compare_result(r);
+  });
+  m.def("compare_meshes", [](const PyMesh& expected, const PyMesh& actual, const py::kwargs& kw) {
+    const CompareOptions o = compare_options(kw);
+    CompareResult r;
+    {
+      py::gil_scoped_release release;
+      r = compare_meshes(expected.merged, actual.merged, o);
+    }
+    return compare_result(r);
+  });
+
+  m.def("read_image", [](const std::string& path) {
+    std::shared_ptr<Image> img;
+    {
+      py::gil_scoped_release release;
+      img = std::make_shared<Image>(read_image(path));
+    }
+    py::dict channels, types;
+    const auto s = py::ssize_t(sizeof(float));
+    for (const auto& c : img->channels) {
+      channels[py::str(c.name)] =
+          view<float>(img, c.values.data(), {img->height, img->width}, {s * img->width, s});
+      types[py::str(c.name)] = c.type;
+    }
+    return py::make_tuple(img->format, channels, types, img->attributes);
+  });
 
   m.def("build", &build_py, py::arg("volume"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
-        py::arg("space") = "",
-        "Builds the adaptive approximation of `volume`: a volume file, a tetrahedral mesh with point\n"
-        "values (.vtu, .msh: its P1 interpolant is the input), or an array indexed [i, j, k].\n"
-        "Options as `mlfe build`: rms ('0.5%' or a number in data units), threshold, max_vertices,\n"
-        "max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,\n"
-        "max_memory ('50%' or bytes). With iso values and no global target, refinement follows\n"
-        "the surfaces.");
+        py::arg("space") = "", py::arg("progress") = py::none());
   m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
         py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
-        "Volume (file, .vtu/.msh mesh or array) in, asset out (.glb .gltf .drc .ply .obj .stl .off),\n"
-        "as `mlfe convert`. Returns the\n"
-        "asset summary (triangles per surface, bytes). Build options as mlfe.build; asset options:\n"
-        "tolerance, draco, quantize, lod, decimate, simplify, simplifier, snap, min_component,\n"
-        "normals_toward_higher, normals, placement, z_scale, level.\n"
-        "labels=True (or a list of labels, or '3,7-9'): the volume is a label map; one closed,\n"
-        "named, coloured surface per structure (as `mlfe convert --labels`), with label_table,\n"
-        "min_component, smooth_iterations, max_offset, simplify, tolerance, draco, quantize.");
+        py::arg("progress") = py::none());
+}
+
+}  // namespace
+}  // namespace mlfe::python
+
+PYBIND11_MODULE(_mlfe, m) {
+  using namespace mlfe;
+  using namespace mlfe::python;
+  m.doc() =
+      "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
+      "arguments.";
+  m.attr("__version__") = MLFE_VERSION;
+  py::register_exception<Error>(m, "Error", PyExc_ValueError);
+  // Registered after Error: pybind11 tries the later translators first.
+  py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
+
+  m.def("read_volume", &read_volume_py, py::arg("path"));
+  m.def("load", &load_py, py::arg("path"));
+
+  bind_mesh(m);
+  bind_hierarchy(m);
+  bind_calls(m);
 }

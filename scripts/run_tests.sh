@@ -5,7 +5,8 @@
 #   2. the core tests again under AddressSanitizer + UBSan (Debug);
 #   3. a consumer project that does find_package(mlfe), links mlfe::core and mlfe::pipeline and
 #      converts the CT sample to a .glb the Khronos validator accepts, renders and compares images;
-#   4. bounded libFuzzer runs of every parser (MLFE_FUZZ_SECONDS each, default 30).
+#   4. `pip install --no-build-isolation .` into a temporary venv, then a tiny conversion;
+#   5. bounded libFuzzer runs of every parser (MLFE_FUZZ_SECONDS each, default 30).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 JOBS="${MLFE_JOBS:-$(nproc)}"
@@ -44,6 +45,26 @@ PYSITE="$(sed -n 's/^MLFE_PYTHON_INSTALL_DIR:STRING=//p' "$ROOT/build/CMakeCache
 if [ -n "$PYSITE" ]; then
   PYTHONPATH="$PREFIX/$PYSITE" /usr/bin/python3 -c "import mlfe; print('installed python module: mlfe', mlfe.__version__)"
 fi
+
+echo "== pip install . into a temporary venv"
+# README's command: setuptools (pyproject.toml) runs CMake in build-pip/ (kept, ccache: a rerun
+# only relinks the extension), the package lands in the venv with its libmlfe_formats.
+VENV_DIR="$(mktemp -d)"
+/usr/bin/python3 -m venv --system-site-packages "$VENV_DIR/venv"
+CMAKE_BUILD_PARALLEL_LEVEL="$JOBS" "$VENV_DIR/venv/bin/pip" install --quiet --no-build-isolation "$ROOT"
+(cd "$VENV_DIR" && "$VENV_DIR/venv/bin/python" - "$VENV_DIR" <<'PY'
+import os, sys
+import numpy as np
+import mlfe, mlfe.batch
+assert mlfe.__file__.startswith(sys.argv[1]), mlfe.__file__  # the venv's copy, not a build tree
+d = np.linalg.norm(np.mgrid[0:12, 0:12, 0:12].T - 5.5, axis=-1).astype(np.float32)
+out = os.path.join(sys.argv[1], "sphere.ply")
+s = mlfe.convert(d, out, iso=4, affine=np.diag([0.5, 0.5, 0.5, 1]))
+assert s["triangles"] > 0 and os.path.getsize(out) == s["bytes"], s
+print("pip-installed mlfe", mlfe.__version__, "converts:", s["triangles"], "triangles")
+PY
+)
+rm -rf "$VENV_DIR"
 
 echo "== bounded fuzzing"
 bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"

@@ -1,4 +1,4 @@
-"""Tests of the Python module: NumPy and file volumes to validated glTF, extraction counts
+"""Tests of the Python package: NumPy and file volumes to validated glTF, extraction counts
 against the command line's result, and bad input raising mlfe.Error instead of crashing.
 Run by ctest with /usr/bin/python3 (tests/CMakeLists.txt): PYTHONPATH holds the built module,
 MLFE_BINARY the command line and MLFE_SOURCE_DIR the repository."""
@@ -60,7 +60,7 @@ class PythonModuleTest(unittest.TestCase):
         # Placement follows spacing and origin: the sphere's vertices lie radius * 0.5 mm from
         # the centre (within the simplification and snapping tolerances).
         b = mlfe.build(volume, iso=[radius], spacing=(0.5, 0.5, 0.5), origin=(10, 0, 0))
-        vertices, normals, indices = b.extract(radius, simplify=0)
+        vertices = b.extract(iso=radius, simplify=0).vertices
         centre = np.array([10 + 0.5 * (volume.shape[0] - 1) / 2, 0.5 * (volume.shape[1] - 1) / 2,
                            0.5 * (volume.shape[2] - 1) / 2])
         distance = np.linalg.norm(vertices - centre, axis=1)
@@ -96,7 +96,8 @@ class PythonModuleTest(unittest.TestCase):
         ]:
             with self.subTest(cli=cli):
                 b = mlfe.build(SKULL, iso=[2.5], **build_args)
-                vertices, normals, indices = b.extract(2.5, **asset_args)
+                mesh = b.extract(iso=2.5, **asset_args)
+                vertices, normals, indices = mesh.vertices, mesh.normals, mesh.triangles
                 ply = os.path.join(self.dir, "cli.ply")
                 subprocess.run([BINARY, "convert", SKULL, "--iso", "2.5", "--quiet", "-o", ply] + cli, check=True,
                                capture_output=True)
@@ -119,8 +120,8 @@ class PythonModuleTest(unittest.TestCase):
                         "--report", rep], check=True, capture_output=True)
         with open(rep) as f:
             cli = json.load(f)
-        self.assertGreater(b.vertices, 8)
-        self.assertEqual((b.vertices, b.elements, b.levels), (cli["vertices"], cli["elements"], cli["levels"]))
+        self.assertGreater(b.vertex_count, 8)
+        self.assertEqual((b.vertex_count, b.leaf_count, b.levels), (cli["vertices"], cli["elements"], cli["levels"]))
         py_ply, cli_ply = os.path.join(self.dir, "py.ply"), os.path.join(self.dir, "cli.ply")
         mlfe.convert(vtu, py_ply, iso=[0.3], rms="1%")
         subprocess.run([BINARY, "convert", vtu, "--iso", "0.3", "--rms", "1%", "--quiet", "-o", cli_ply], check=True,
@@ -129,33 +130,45 @@ class PythonModuleTest(unittest.TestCase):
             py_bytes, cli_bytes = f1.read(), f2.read()
         self.assertGreater(ply_counts(py_ply)[1], 0)
         self.assertEqual(py_bytes, cli_bytes)
-        with self.assertRaisesRegex(mlfe.Error, "spacing, origin and direction"):
+        with self.assertRaisesRegex(mlfe.Error, "spacing: a file brings its own frame"):
             mlfe.build(vtu, spacing=(1, 1, 1))
 
     def test_build_reports_levels_counts_and_errors(self):
         b = mlfe.build(SKULL, rms="2%")
         self.assertEqual(b.dim, 3)
         self.assertGreater(b.levels, 1)
-        self.assertEqual(b.values.shape, (b.vertices,))
+        self.assertEqual(b.values.shape, (b.vertex_count,))
         self.assertLessEqual(b.errors["rms_percent"], 2.0)
-        self.assertEqual(b.report["vertices"], b.vertices)
-        self.assertEqual(b.report["elements"], b.elements)
+        self.assertEqual(b.report["vertices"], b.vertex_count)
+        self.assertEqual(b.report["elements"], b.leaf_count)
+        self.assertEqual(b.positions.shape, (b.vertex_count, 3))
+        self.assertEqual(b.tetrahedra.shape, (b.leaf_count, 4))
+        self.assertEqual(b.positions.dtype, np.float64)
+        self.assertLess(int(b.tetrahedra.max()), b.vertex_count)
+        self.assertRegex(repr(b), r"mlfe.Hierarchy\(dim=3, levels=\d+, vertices=\d+, tetrahedra=\d+")
         self.assertFalse(b.surface_driven)
 
     def test_read_volume_is_a_view_indexed_ijk(self):
-        values, spacing, origin, info = mlfe.read_volume(SKULL)
+        volume = mlfe.read_volume(SKULL)
+        values = volume.values
         self.assertEqual(values.dtype, np.float32)
         self.assertEqual(values.ndim, 3)
         self.assertFalse(values.flags.owndata)
-        self.assertEqual(len(spacing), 3)
-        self.assertEqual(info["format"], "nrrd")
-        # The array goes back in with its frame: the same asset as from the file.
-        a = os.path.join(self.dir, "from_array.ply")
+        self.assertEqual(len(volume.spacing), 3)
+        self.assertEqual(volume.info["format"], "nrrd")
+        self.assertEqual(volume.affine.shape, (4, 4))
+        self.assertIn("mlfe.Volume(shape=(64, 64, 64)", repr(volume))
+        # The Volume goes back in as it is, or the array with its affine: the file's asset.
         f = os.path.join(self.dir, "from_file.ply")
-        mlfe.convert(values, a, iso=[2.5], spacing=spacing, origin=origin, direction=info["direction"],
-                     space=info["space"])
         mlfe.convert(SKULL, f, iso=[2.5])
-        self.assertEqual(ply_counts(a), ply_counts(f))
+        for name, call in [("volume", lambda out: mlfe.convert(volume, out, iso=2.5)),
+                           ("affine", lambda out: mlfe.convert(values, out, iso=2.5, affine=volume.affine,
+                                                               space=volume.space))]:
+            with self.subTest(name):
+                a = os.path.join(self.dir, name + ".ply")
+                call(a)
+                with open(a, "rb") as x, open(f, "rb") as y:
+                    self.assertEqual(x.read(), y.read())
 
     def test_labels_match_the_command_line(self):
         """A label map with labels=True and a table: the command line's bytes, names, counts."""
@@ -183,20 +196,26 @@ class PythonModuleTest(unittest.TestCase):
         cases = [
             (lambda: mlfe.convert(np.zeros((1, 5, 5), np.float32), out, iso=[0.5]), "at least 2 samples"),
             (lambda: mlfe.convert(os.path.join(self.dir, "missing.nrrd"), out, iso=[1]), "missing.nrrd"),
-            (lambda: mlfe.convert(SKULL, out), "--iso is required"),
+            (lambda: mlfe.convert(SKULL, out), "iso is required for 3D volumes (e.g. iso=[80, 150])"),
             (lambda: mlfe.convert(SKULL, out, iso=[1], norm="h2"), "norm"),
             (lambda: mlfe.convert(SKULL, out, iso=[1], simplfy=0.2), "unknown option 'simplfy'"),
             (lambda: mlfe.convert(SKULL, os.path.join(self.dir, "x.xyz"), iso=[1]), "unknown output type"),
             (lambda: mlfe.convert(np.full((4, 4, 4), np.nan, np.float32), out, iso=[1]), "NaN"),
-            (lambda: mlfe.build(SKULL, max_level=99), "max-level"),
+            (lambda: mlfe.build(SKULL, max_level=99), "max_level: expected 0..40"),
             (lambda: mlfe.build(np.zeros((3, 3, 3, 3), np.float32)), "2D or 3D"),
             (lambda: mlfe.build(np.zeros((4, 4, 4), np.float32), spacing=(1, 0, 1)), "spacing"),
+            (lambda: mlfe.build(np.zeros((4, 4, 4), np.float32), spacing=(1, 2)), "spacing: expected 3 numbers, got 2"),
+            (lambda: mlfe.convert(SKULL, out, iso=float("nan")), "iso: expected finite numbers"),
+            (lambda: mlfe.convert(SKULL, out, iso="80"), "iso: expected a number or a list"),
+            (lambda: mlfe.convert(np.zeros((4, 4, 4)), out, iso=1, affine=np.eye(3)), "affine: expected a 4x4"),
+            (lambda: mlfe.convert(SKULL, out, iso=1, spacing=(1, 1, 1)), "spacing: a file brings its own frame"),
         ]
         for call, message in cases:
             with self.subTest(message=message):
                 with self.assertRaises(mlfe.Error) as caught:
                     call()
                 self.assertIn(message, str(caught.exception))
+                self.assertNotIn("--", str(caught.exception))  # keywords, not command-line flags
                 self.assertIsInstance(caught.exception, ValueError)
                 self.assertFalse(os.path.exists(out))
 
