@@ -47,11 +47,14 @@ if [ -n "$PYSITE" ]; then
 fi
 
 echo "== pip install . into a temporary venv"
-# README's command: setuptools (pyproject.toml) runs CMake in build-pip/ (kept, ccache: a rerun
-# only relinks the extension), the package lands in the venv with its libmlfe_formats.
+# README's command: setuptools (pyproject.toml) runs the project's CMake, the package lands in
+# the venv with its libmlfe_formats.
 VENV_DIR="$(mktemp -d)"
 /usr/bin/python3 -m venv --system-site-packages "$VENV_DIR/venv"
-CMAKE_BUILD_PARALLEL_LEVEL="$JOBS" "$VENV_DIR/venv/bin/pip" install --quiet --no-build-isolation "$ROOT"
+# The tests' build folder is reused (MLFE_PIP_BUILD_DIR): only the extension relinks, where a
+# fresh build-pip/ would compile the libraries again (minutes on 2 cores without ccache).
+MLFE_PIP_BUILD_DIR="$ROOT/build" CMAKE_BUILD_PARALLEL_LEVEL="$JOBS" \
+  "$VENV_DIR/venv/bin/pip" install --quiet --no-build-isolation "$ROOT"
 (cd "$VENV_DIR" && "$VENV_DIR/venv/bin/python" - "$VENV_DIR" <<'PY'
 import os, sys
 import numpy as np
@@ -65,6 +68,9 @@ print("pip-installed mlfe", mlfe.__version__, "converts:", s["triangles"], "tria
 PY
 )
 rm -rf "$VENV_DIR"
+# Back to the tests' configuration (the venv's interpreter is gone, the bundle was pip's).
+cmake -S "$ROOT" -B "$ROOT/build" -DMLFE_PYTHON_EXECUTABLE=/usr/bin/python3 -DMLFE_PYTHON_BUNDLE=OFF \
+  -UMLFE_PYTHON_INSTALL_DIR >/dev/null
 
 echo "== bounded fuzzing"
 bash "$ROOT/fuzz/run_fuzzers.sh" "${MLFE_FUZZ_SECONDS:-30}"
