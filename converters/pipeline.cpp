@@ -494,21 +494,22 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
-    // auto: the verified bound while it takes about a second or two (~10 µs per triangle),
-    // meshoptimizer beyond (seconds for millions of triangles; the topology-preserving
-    // collapses of `fast` take minutes on a full head, bench/RESULTS.md); decided per surface
-    // from its size alone, so the bytes do not depend on the thread count.
+    // auto: the verified bound while it takes about a second or two (~10 µs per triangle), the
+    // same topology-preserving collapses with the bound estimated beyond (a full head's 1.7 M
+    // triangles in about 10 s; meshoptimizer takes 1-2 s there but pinches the surface into
+    // thousands of non-manifold edges and keeps twice the triangles, bench/RESULTS.md); decided
+    // per surface from its size alone, so the bytes do not depend on the thread count.
     constexpr std::size_t kBoundedUpTo = 200000;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      if (p.simplifier == Simplifier::kMeshopt ||
-          (p.simplifier == Simplifier::kAuto && m.triangles.size() > kBoundedUpTo)) {
+      if (p.simplifier == Simplifier::kMeshopt) {
         m = simplify_fast(m, so.tolerance);
         return;
       }
       SimplifyOptions o = so;
-      o.verify_bound = p.simplifier != Simplifier::kFast;
+      o.verify_bound = p.simplifier == Simplifier::kBounded ||
+                       (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
       m = simplify_within(m, o);
     });
   }

@@ -87,7 +87,8 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
          "result, topology kept; ~10 microseconds per triangle), fast (the same collapses and topology "
          "checks, the error estimated from quadrics; about twice as fast), meshopt (meshoptimizer, error "
-         "estimated; where it would change the topology the extracted triangles stay) or auto (bounded "
+         "estimated, seconds for millions of triangles, but it may pinch the surface: non-manifold edges, "
+         "counted in the report) or auto (bounded "
          "for surfaces of up to 200000 extracted triangles, fast above)")
       ->check(CLI::IsMember(pipeline::enum_name_list<Simplifier>()))
       ->capture_default_str();

@@ -247,7 +247,7 @@ struct AssetOptions {
   /// with the error estimated from the quadrics (SimplifyOptions::verify_bound false);
   /// kMeshopt: meshoptimizer (simplify_fast), error estimated, seconds for millions of
   /// triangles but it may pinch the surface (non-manifold spots, counted in the report); kAuto:
-  /// bounded for surfaces of up to 200 000 extracted triangles, meshopt above.
+  /// bounded for surfaces of up to 200 000 extracted triangles, fast above (topology kept).
   Simplifier simplifier = Simplifier::kAuto;
   double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
   /// Drop connected parts of a 3D surface whose vertices lie in fewer than this many voxel
