@@ -142,7 +142,7 @@ def main():
     args = ap.parse_args()
     tools = os.path.join(args.build, "bench", "iso_tools_bench")
     m2g = os.path.join(args.build, "bench", "mesh_to_glb_bench")
-    mlfe = os.path.join(args.build, "converters", "mlfe")
+    mlfe = os.path.join(args.build, "cli", "mlfe")
     os.makedirs(args.work, exist_ok=True)
     vtk.vtkSMPTools.Initialize(ib.THREADS)
     all_rows = []

@@ -15,7 +15,7 @@ and ZFP interpolated to mlfe's PSNR (equal PSNR); inputs: the CT, the brain MRI 
 head (--fullhead, default /work/data/fullhead.nii.gz; make one with bench/make_fullhead.py).
 --share S1,S2 adds rows with `--quantization-share S` (how E is split; chosen by measurement).
 
-Usage: /usr/bin/python3 bench/hierarchy_file_bench.py [--mlfe build/converters/mlfe]
+Usage: /usr/bin/python3 bench/hierarchy_file_bench.py [--mlfe build/cli/mlfe]
            [--data /work/shared/data] [--out /tmp/hfile_bench] [--quick] [--max-error]
 Prints a Markdown table and writes OUT/results.json. Dependencies: scripts/install_bench_deps.sh.
 """
@@ -109,7 +109,7 @@ def zfp_bpv_at(points, psnr):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--mlfe", default=os.path.join(os.path.dirname(__file__), "..", "build", "converters", "mlfe"))
+    ap.add_argument("--mlfe", default=os.path.join(os.path.dirname(__file__), "..", "build", "cli", "mlfe"))
     ap.add_argument("--data", default="/work/shared/data")
     ap.add_argument("--out", default="/tmp/hfile_bench")
     ap.add_argument("--quick", action="store_true", help="one mlfe setting per input")

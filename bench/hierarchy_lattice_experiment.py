@@ -11,7 +11,7 @@ so that the error over the original voxels matches the default's (0.5 % of the r
 original domain: the padded domain's L2 mean is diluted by the ratio of the volumes), caps the
 level at 8, exports the decoded approximation and measures it on the original voxels only.
 
-    /usr/bin/python3 bench/hierarchy_lattice_experiment.py [--mlfe build/converters/mlfe]
+    /usr/bin/python3 bench/hierarchy_lattice_experiment.py [--mlfe build/cli/mlfe]
 
 Prints one markdown table row per build: the unpadded default and the padded, aligned one.
 """
@@ -48,7 +48,7 @@ def build_and_measure(mlfe, inp, out, opts, orig):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--mlfe", default=os.path.join(os.path.dirname(__file__), "..", "build", "converters", "mlfe"))
+    ap.add_argument("--mlfe", default=os.path.join(os.path.dirname(__file__), "..", "build", "cli", "mlfe"))
     ap.add_argument("--data", default="/work/shared/data")
     ap.add_argument("--out", default="/tmp/mlfe_lattice_experiment")
     a = ap.parse_args()

@@ -184,7 +184,7 @@ def main():
     ap.add_argument("--volumes", default="jhu,parcels", help="which volumes: jhu, parcels or both")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
-    mlfe = os.path.join(args.build, "converters", "mlfe")
+    mlfe = os.path.join(args.build, "cli", "mlfe")
     parcels = os.path.join(args.out, "colin27_parcels_120.nrrd")
     wanted = args.volumes.split(",")
     volumes = []

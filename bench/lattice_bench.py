@@ -9,7 +9,7 @@
 2. A vertex budget of 1/8 of the voxels against uniform 2x downsampling (every second sample,
    trilinear back to the grid), PSNR over the value range on the voxels.
 
-Usage: /usr/bin/python3 bench/lattice_bench.py --mlfe build/converters/mlfe
+Usage: /usr/bin/python3 bench/lattice_bench.py --mlfe build/cli/mlfe
            --noisy /work/data/fullhead_1mm.nii.gz --clean /work/data/fullhead_1mm_clean.nii.gz
            [--factors 0.5,0.75,1,1.5,2] [--out /tmp/lattice_bench]
 Prints Markdown tables and writes OUT/results.json.
@@ -99,7 +99,7 @@ def downsample2(v):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--mlfe", default="build/converters/mlfe")
+    ap.add_argument("--mlfe", default="build/cli/mlfe")
     ap.add_argument("--noisy", required=True)
     ap.add_argument("--clean", required=True)
     ap.add_argument("--factors", default="0.5,0.75,1,1.5,2")

@@ -116,7 +116,7 @@ def main():
     jobs = a.jobs or [os.path.join(DATA, "ct_skull_64.nrrd") + ":bone:8000,35000",
                       os.path.join(DATA, "mri_colin27_brain.nii.gz") + ":mri:45000,100000,215000"]
     os.makedirs(a.work, exist_ok=True)
-    mlfe = os.path.join(a.build, "converters", "mlfe")
+    mlfe = os.path.join(a.build, "cli", "mlfe")
     helper = os.path.join(a.build, "bench", "render_bench")
     w, h = [int(x) for x in a.size.lower().split("x")]
     env = dict(os.environ)

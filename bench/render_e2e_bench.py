@@ -85,11 +85,11 @@ def main():
     ap.add_argument("--json", default="")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
-    mlfe = os.path.join(a.build, "converters", "mlfe")
+    mlfe = os.path.join(a.build, "cli", "mlfe")
     helper = os.path.join(a.build, "bench", "render_bench")
     builds = [("new", mlfe)]
     if a.base_build:
-        builds.append(("base", os.path.join(a.base_build, "converters", "mlfe")))
+        builds.append(("base", os.path.join(a.base_build, "cli", "mlfe")))
     w, h = [int(x) for x in a.size.lower().split("x")]
     view = ["--azimuth", "0", "--elevation", "0", "--tf", a.tf]
     res = {"volume": a.volume, "size": a.size, "runs": {}}

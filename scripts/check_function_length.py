@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks the house rule "no function over 150 lines" in core/, formats/ and converters/.
+"""Checks the house rule "no function over 150 lines" in core/, formats/, pipeline/ and cli/.
 
 A function is a brace block opened at namespace or class scope after a header with a '(' (its
 signature), from the signature's first line to the closing brace; comments, string literals and
@@ -14,12 +14,12 @@ import pathlib
 import re
 import sys
 
-FOLDERS = ("core", "formats", "converters")
+FOLDERS = ("core", "formats", "pipeline", "cli")
 # Over the limit and not split yet (issue #26): reported, not failed on. Remove an entry when its
 # function is split; the check fails on an entry that no longer needs to be here.
 KNOWN = {
     "core/hierarchy.cpp": "Hierarchy<D>::refine",  # the closure rounds: to become a RefineRound class
-    "converters/label_pipeline.cpp": "convert_labels",  # the labels branch is changing it
+    "pipeline/label_pipeline.cpp": "convert_labels",  # the labels branch is changing it
 }
 SCOPE = re.compile(r"\b(namespace|class|struct|union|enum)\b|extern\s+\"C\"")
 

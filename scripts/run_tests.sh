@@ -13,10 +13,10 @@ JOBS="${MLFE_JOBS:-$(nproc)}"
 bash "$ROOT/scripts/install_deps.sh"
 
 echo "== clang-format (.clang-format; Debian 12's clang-format 14)"
-find "$ROOT"/{core,formats,converters,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
+find "$ROOT"/{core,formats,pipeline,cli,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
   xargs -0 clang-format --dry-run -Werror
 
-echo "== no function over 150 lines in core/, formats/, converters/"
+echo "== no function over 150 lines in core/, formats/, pipeline/, cli/"
 python3 "$ROOT/scripts/check_function_length.py" "$ROOT"
 
 echo "== release build and tests"

@@ -18,7 +18,7 @@
 #include <filesystem>
 #include <memory>
 
-#include "converters/progress_reporter.h"
+#include "pipeline/progress_reporter.h"
 
 namespace mlfe::pipeline {
 namespace {

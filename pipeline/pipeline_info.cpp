@@ -11,7 +11,7 @@
 #include <cmath>
 #include <variant>
 
-#include "converters/label_hierarchy.h"
+#include "pipeline/label_hierarchy.h"
 
 namespace mlfe::pipeline {
 namespace {

@@ -5,8 +5,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "converters/pipeline_options.h"
-#include "converters/render_command.h"
+#include "cli/pipeline_options.h"
+#include "cli/render_command.h"
 
 namespace mlfe::cli {
 

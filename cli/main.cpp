@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "converters/commands.h"
-#include "converters/pipeline_options.h"
+#include "cli/commands.h"
+#include "cli/pipeline_options.h"
 
 namespace mlfe::cli {
 int& thread_option() {

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "converters/commands.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 namespace {

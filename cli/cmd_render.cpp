@@ -8,9 +8,9 @@
 #include <cstdio>
 #include <memory>
 
-#include "converters/commands.h"
-#include "converters/render_command.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/render_command.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 

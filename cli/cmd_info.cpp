@@ -10,8 +10,8 @@
 #include <memory>
 #include <string>
 
-#include "converters/commands.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 namespace {

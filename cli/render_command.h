@@ -4,7 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
-#include "converters/pipeline_options.h"
+#include "cli/pipeline_options.h"
 
 namespace mlfe::cli {
 

@@ -5,9 +5,9 @@
 #include <cstdio>
 #include <memory>
 
-#include "converters/commands.h"
-#include "converters/pipeline_options.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/pipeline_options.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 namespace {

@@ -5,9 +5,9 @@
 
 #include <memory>
 
-#include "converters/commands.h"
-#include "converters/convert_command.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/convert_command.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 namespace {

@@ -12,8 +12,8 @@
 #include <filesystem>
 #include <optional>
 
-#include "converters/label_hierarchy.h"
-#include "converters/progress_reporter.h"
+#include "pipeline/label_hierarchy.h"
+#include "pipeline/progress_reporter.h"
 
 namespace mlfe::pipeline {
 namespace {

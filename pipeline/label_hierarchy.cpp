@@ -1,5 +1,5 @@
 // Label maps stored as hierarchies; see label_hierarchy.h.
-#include "converters/label_hierarchy.h"
+#include "pipeline/label_hierarchy.h"
 
 #include <fmt/format.h>
 #include <mlfe/core/error.h>

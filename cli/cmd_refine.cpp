@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "converters/commands.h"
+#include "cli/commands.h"
 
 namespace mlfe::cli {
 namespace {

@@ -7,10 +7,10 @@
 #include <memory>
 #include <optional>
 
-#include "converters/commands.h"
-#include "converters/convert_command.h"
-#include "converters/render_command.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/convert_command.h"
+#include "cli/render_command.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 

@@ -23,7 +23,7 @@
 #include <filesystem>
 #include <optional>
 
-#include "converters/progress_reporter.h"
+#include "pipeline/progress_reporter.h"
 
 namespace mlfe {
 

@@ -16,8 +16,8 @@
 #include <limits>
 #include <optional>
 
-#include "converters/label_hierarchy.h"
-#include "converters/progress_reporter.h"
+#include "pipeline/label_hierarchy.h"
+#include "pipeline/progress_reporter.h"
 
 namespace mlfe::pipeline {
 namespace {

@@ -15,8 +15,8 @@
 #include <chrono>
 #include <string>
 
-#include "converters/label_hierarchy.h"
-#include "converters/progress_reporter.h"
+#include "pipeline/label_hierarchy.h"
+#include "pipeline/progress_reporter.h"
 
 namespace mlfe::pipeline {
 namespace {

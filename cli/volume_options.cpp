@@ -1,4 +1,4 @@
-#include "converters/volume_options.h"
+#include "cli/volume_options.h"
 
 #include <mlfe/formats/atomic_file.h>
 

@@ -9,9 +9,9 @@
 #include <memory>
 #include <string>
 
-#include "converters/commands.h"
-#include "converters/pipeline_options.h"
-#include "converters/volume_options.h"
+#include "cli/commands.h"
+#include "cli/pipeline_options.h"
+#include "cli/volume_options.h"
 
 namespace mlfe::cli {
 namespace {

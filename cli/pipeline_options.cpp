@@ -1,4 +1,4 @@
-#include "converters/pipeline_options.h"
+#include "cli/pipeline_options.h"
 
 #include <fmt/format.h>
 #include <mlfe/core/error.h>
