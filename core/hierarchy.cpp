@@ -532,30 +532,50 @@ void Hierarchy<D>::reserve_for(std::size_t red_count) {
   edge_mid_.reserve(edge_mid_.size() + T::kEdges * red_count / 2);
 }
 
+// The red rounds of refine(). Each round (1) applies the round's decisions: green children
+// dropped where a parent is re-greened or refined red, red refinements made; (2) flags the
+// endpoints of the edges it split (dirty) and the vertices any round touched; (3) picks the
+// candidates: the elements created in the round and older leaves with two dirty vertices;
+// (4) decides, in parallel, which candidates need red (or their parent a new green pattern).
+// The rounds end when a round decides nothing; green_closure() then closes the mesh.
 template <int D>
-std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t vertex_limit,
-                                         std::size_t* vertices_reached) {
-  const std::size_t old_count = el_.cells.size();
-  const std::size_t old_vertex_count = vx_.points.size();
-  if (vertices_reached) *vertices_reached = old_vertex_count;
-  std::vector<ElemId> to_red;
-  to_red.reserve(marked.size());
-  for (ElemId e : marked) {
-    if (!e.valid() || e.value >= el_.cells.size() || !is_leaf(e))
-      throw Error("refine: element " + std::to_string(e.value) + " is not a leaf of this hierarchy");
-    to_red.push_back(kind(e) == ElemKind::kGreen ? parent(e) : e);
+class Hierarchy<D>::RedRounds {
+ public:
+  RedRounds(Hierarchy& h, std::size_t old_count, bool keep_undo)
+      : h_(h), old_count_(old_count), keep_undo_(keep_undo), leaf_list_(h.leaves()) {
+    dead.assign(h.el_.cells.size(), 0);
+    touched.assign(h.vx_.points.size(), 0);
+    dirty_.assign(h.vx_.points.size(), 0);
   }
-  std::sort(to_red.begin(), to_red.end());
-  to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
-  if (to_red.empty()) return compact(std::vector<std::uint8_t>(el_.cells.size(), 0), old_count);
 
-  std::vector<std::uint8_t> dead(el_.cells.size(), 0);
-  // dirty: endpoints of edges split in this round; touched: in any round of this call (and the
-  // corners of parents whose green children go, which have older midpoints on their edges).
-  std::vector<std::uint8_t> dirty(vx_.points.size(), 0), touched(vx_.points.size(), 0);
-  std::vector<VertexId> dirty_list;
-  std::vector<ElemId> leaf_list = leaves();
-  const auto alive_leaf = [&](ElemId e) { return !dead[e.value] && is_leaf(e); };
+  void run(std::vector<ElemId> to_red) {
+    std::vector<ElemId> to_regreen;
+    while (!to_red.empty() || !to_regreen.empty()) {
+      const std::size_t round_first_elem = h_.el_.cells.size();
+      const std::size_t first_new_vertex = h_.vx_.points.size();
+      apply(to_regreen, to_red);
+      flag_split_edges(first_new_vertex);
+      std::vector<ElemId> candidates = pick_candidates(round_first_elem);
+      decide(candidates, round_first_elem, to_red, to_regreen);
+      for (VertexId v : dirty_list_) dirty_[v.value] = 0;
+      dirty_list_.clear();
+      if (!use_incidence_) {
+        leaf_list_.swap(candidates);
+        if (!to_red.empty() || !to_regreen.empty()) switch_to_incidence();
+      }
+    }
+  }
+
+  std::vector<std::uint8_t> dead;     // elements removed (green children replaced)
+  std::vector<std::uint8_t> touched;  // vertices of split edges in any round (and re-greened corners)
+  // With a vertex limit: the child links of older elements as they were before this call
+  // changed them, for the rollback (elements and vertices created here are truncated away).
+  std::vector<UndoLink> undo_links;
+
+ private:
+  static constexpr std::uint32_t kNone = ~std::uint32_t(0);
+
+  bool alive_leaf(ElemId e) const { return !dead[e.value] && h_.is_leaf(e); }
 
   // The closure usually needs a few rounds, but a local refinement can need dozens (a wave of
   // green→red upgrades travelling along the refined region). Scanning every leaf each round
@@ -563,62 +583,65 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
   // vertex → element incidence (singly linked lists in flat arrays) instead, so a round costs
   // what it touches. The candidate set is the same (elements created this round, and leaves
   // with ≥ 2 dirty vertices), so the result does not change.
-  constexpr std::uint32_t kNone = ~std::uint32_t(0);
-  bool use_incidence = false;
-  std::vector<std::uint32_t> inc_head;  // per vertex: first slot or kNone
-  std::vector<std::uint32_t> inc_next;  // per slot (= element index * (D + 1) + corner)
-  std::vector<ElemId> inc_elem;         // per element index
-  const auto add_incidence = [&](ElemId e) {
-    const auto idx = static_cast<std::uint32_t>(inc_elem.size());
-    inc_elem.push_back(e);
-    const Cell& c = el_.cells[e];
+  void add_incidence(ElemId e) {
+    const auto idx = static_cast<std::uint32_t>(inc_elem_.size());
+    inc_elem_.push_back(e);
+    const Cell& c = h_.el_.cells[e];
     for (int k = 0; k <= D; ++k) {
       const std::uint32_t slot = idx * (D + 1) + static_cast<std::uint32_t>(k);
-      inc_next.push_back(inc_head[c[k].value]);
-      inc_head[c[k].value] = slot;
+      inc_next_.push_back(inc_head_[c[k].value]);
+      inc_head_[c[k].value] = slot;
     }
-  };
+  }
+
+  void switch_to_incidence() {
+    use_incidence_ = true;
+    inc_head_.assign(h_.vx_.points.size(), kNone);
+    inc_elem_.reserve(leaf_list_.size());
+    inc_next_.reserve(leaf_list_.size() * (D + 1));
+    for (ElemId e : leaf_list_) add_incidence(e);
+    std::vector<ElemId>().swap(leaf_list_);
+  }
+
   // Alive leaves incident to any vertex of `verts` with ≥ 2 vertices flagged in `flag`
-  // (sorted, unique).
-  // An element reached through several of its vertices is taken once (a flag per element
-  // instead of sorting the duplicates away); a long list is put in id order by a scan of the
-  // flags rather than a sort.
-  std::vector<std::uint8_t> seen;
-  const auto incident_candidates = [&](const std::vector<VertexId>& verts,
-                                       const std::vector<std::uint8_t>& flag, std::size_t below) {
+  // (sorted, unique). An element reached through several of its vertices is taken once (a
+  // flag per element instead of sorting the duplicates away); a long list is put in id order
+  // by a scan of the flags rather than a sort.
+  std::vector<ElemId> incident_candidates(const std::vector<VertexId>& verts,
+                                          const std::vector<std::uint8_t>& flag, std::size_t below) {
     std::vector<ElemId> out;
-    seen.resize(el_.cells.size(), 0);
+    seen_.resize(h_.el_.cells.size(), 0);
     for (VertexId v : verts) {
-      if (v.value >= inc_head.size()) continue;
-      for (std::uint32_t s = inc_head[v.value]; s != kNone; s = inc_next[s]) {
-        const ElemId e = inc_elem[s / (D + 1)];
-        if (e.value >= below || seen[e.value] || !alive_leaf(e)) continue;
+      if (v.value >= inc_head_.size()) continue;
+      for (std::uint32_t s = inc_head_[v.value]; s != kNone; s = inc_next_[s]) {
+        const ElemId e = inc_elem_[s / (D + 1)];
+        if (e.value >= below || seen_[e.value] || !alive_leaf(e)) continue;
         int n = 0;
-        for (VertexId w : el_.cells[e]) n += flag[w.value];
+        for (VertexId w : h_.el_.cells[e]) n += flag[w.value];
         if (n >= 2) {
-          seen[e.value] = 1;
+          seen_[e.value] = 1;
           out.push_back(e);
         }
       }
     }
-    if (out.size() > el_.cells.size() / 32) {
+    if (out.size() > h_.el_.cells.size() / 32) {
       out.clear();
-      for (std::size_t i = 0; i < below && i < seen.size(); ++i)
-        if (seen[i]) {
+      for (std::size_t i = 0; i < below && i < seen_.size(); ++i)
+        if (seen_[i]) {
           out.push_back(ElemId(static_cast<std::uint32_t>(i)));
-          seen[i] = 0;
+          seen_[i] = 0;
         }
     } else {
       std::sort(out.begin(), out.end());
-      for (ElemId e : out) seen[e.value] = 0;
+      for (ElemId e : out) seen_[e.value] = 0;
     }
     return out;
-  };
+  }
 
   // Alive leaves below `below` with ≥ 2 vertices flagged in `flag`, in id order; chunks in
   // parallel, concatenated in order.
-  const auto leaves_with_two_flagged = [&](const std::vector<std::uint8_t>& flag,
-                                           const std::vector<std::uint8_t>& gone, std::size_t below) {
+  std::vector<ElemId> leaves_with_two_flagged(const std::vector<std::uint8_t>& flag,
+                                              std::size_t below) const {
     constexpr std::size_t kChunk = 1 << 15;
     const std::size_t nchunks = (below + kChunk - 1) / kChunk;
     std::vector<std::vector<ElemId>> found(nchunks);
@@ -627,113 +650,112 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                         for (std::size_t k = r.begin(); k != r.end(); ++k)
                           for (std::size_t i = k * kChunk, end = std::min(below, i + kChunk); i < end; ++i) {
                             const ElemId e = elem_id(i);
-                            if (el_.num_children[e] != 0 || gone[i]) continue;
+                            if (h_.el_.num_children[e] != 0 || dead[i]) continue;
                             int m = 0;
-                            for (VertexId v : el_.cells[e]) m += flag[v.value];
+                            for (VertexId v : h_.el_.cells[e]) m += flag[v.value];
                             if (m >= 2) found[k].push_back(e);
                           }
                       });
     std::vector<ElemId> out;
     for (auto& f : found) out.insert(out.end(), f.begin(), f.end());
     return out;
-  };
+  }
 
-  // Parents of green leaves whose new hanging midpoints all lie on the parent's own edges,
-  // with an admissible combined pattern: their green children are replaced by a new green
-  // closure instead of refining the parent red. (Green elements are still never refined.)
-  // Without this, one new midpoint on a ring of green-refined elements turns the whole ring
-  // red, whose neighbours then turn red, ... — a local mark could add 10^5 vertices.
-  std::vector<ElemId> to_regreen;
-  // With a vertex limit: the child links of older elements as they were before this call
-  // changed them, for the rollback (elements and vertices created here are truncated away).
-  std::vector<UndoLink> undo_links;
-  while (!to_red.empty() || !to_regreen.empty()) {
-    const std::size_t round_first_elem = el_.cells.size();
-    const std::size_t first_new_vertex = vx_.points.size();
-    reserve_for(to_red.size());
-    // A parent whose green children go becomes a leaf again.
-    const auto drop_green_children = [&](ElemId e) {
-      if (vertex_limit > 0 && e.value < old_count)
-        undo_links.push_back({e, el_.first_child[e], el_.num_children[e]});
-      for (int i = 0; i < num_children(e); ++i) {
-        const ElemId ch(first_child(e).value + i);
-        MLFE_CHECK(kind(ch) == ElemKind::kGreen && is_leaf(ch));
-        dead[ch.value] = 1;
-      }
-      el_.num_children[e] = 0;
-      el_.first_child[e] = ElemId::invalid();
-    };
+  // A parent whose green children go becomes a leaf again.
+  void drop_green_children(ElemId e) {
+    if (keep_undo_ && e.value < old_count_)
+      undo_links.push_back({e, h_.el_.first_child[e], h_.el_.num_children[e]});
+    for (int i = 0; i < h_.num_children(e); ++i) {
+      const ElemId ch(h_.first_child(e).value + i);
+      MLFE_CHECK(h_.kind(ch) == ElemKind::kGreen && h_.is_leaf(ch));
+      dead[ch.value] = 1;
+    }
+    h_.el_.num_children[e] = 0;
+    h_.el_.first_child[e] = ElemId::invalid();
+  }
+
+  // Step 1: the round's decisions applied.
+  void apply(const std::vector<ElemId>& to_regreen, const std::vector<ElemId>& to_red) {
+    h_.reserve_for(to_red.size());
     for (ElemId e : to_regreen) {
       drop_green_children(e);
       // e is a leaf again, with midpoints from earlier calls on its edges: flag its corners so
       // hanging_mask(e, &touched) probes all of its edges.
-      for (VertexId v : el_.cells[e]) touched[v.value] = 1;
-      if (use_incidence)
+      for (VertexId v : h_.el_.cells[e]) touched[v.value] = 1;
+      if (use_incidence_)
         add_incidence(e);
       else
-        leaf_list.push_back(e);
+        leaf_list_.push_back(e);
     }
     for (ElemId e : to_red) {
-      if (!is_leaf(e)) drop_green_children(e);  // e's green children go; e is refined red instead
-      if (vertex_limit > 0 && e.value < old_count) undo_links.push_back({e, ElemId::invalid(), 0});
-      red_refine(e);
-      if (!use_incidence)
-        for (int i = 0; i < num_children(e); ++i) leaf_list.push_back(ElemId(first_child(e).value + i));
+      if (!h_.is_leaf(e)) drop_green_children(e);  // e's green children go; e is refined red instead
+      if (keep_undo_ && e.value < old_count_) undo_links.push_back({e, ElemId::invalid(), 0});
+      h_.red_refine(e);
+      if (!use_incidence_)
+        for (int i = 0; i < h_.num_children(e); ++i)
+          leaf_list_.push_back(ElemId(h_.first_child(e).value + i));
     }
-    dead.resize(el_.cells.size(), 0);
-    dirty.resize(vx_.points.size(), 0);
-    touched.resize(vx_.points.size(), 0);
-    const auto mark = [&](VertexId v) {
-      if (!dirty[v.value]) {
-        dirty[v.value] = 1;
-        dirty_list.push_back(v);
-      }
-      touched[v.value] = 1;
-    };
-    // Only the endpoints of split edges: a new vertex starts with no split edge around it, and
-    // an older leaf cannot contain it, so flagging it would only add candidates and probes.
-    // A split edge can also be an edge of a leaf's future green children (a half edge, or an
-    // edge between midpoints of the leaf's edges), whose endpoints need not be corners of that
-    // leaf: the parents of those endpoints are, so they are made dirty too and the leaf becomes
-    // a candidate (green_edges_split then sends it to red). Not touched: no edge of theirs is
-    // split by this.
+    dead.resize(h_.el_.cells.size(), 0);
+    dirty_.resize(h_.vx_.points.size(), 0);
+    touched.resize(h_.vx_.points.size(), 0);
+  }
+
+  // Step 2: only the endpoints of split edges: a new vertex starts with no split edge around
+  // it, and an older leaf cannot contain it, so flagging it would only add candidates and
+  // probes. A split edge can also be an edge of a leaf's future green children (a half edge,
+  // or an edge between midpoints of the leaf's edges), whose endpoints need not be corners of
+  // that leaf: the parents of those endpoints are, so they are made dirty too and the leaf
+  // becomes a candidate (green_edges_split then sends it to red). Not touched: no edge of
+  // theirs is split by this.
+  void flag_split_edges(std::size_t first_new_vertex) {
     const auto mark_dirty = [&](VertexId v) {
-      if (!dirty[v.value]) {
-        dirty[v.value] = 1;
-        dirty_list.push_back(v);
+      if (!dirty_[v.value]) {
+        dirty_[v.value] = 1;
+        dirty_list_.push_back(v);
       }
     };
-    for (VertexId v = vertex_id(first_new_vertex); v < vx_.points.end_id(); ++v.value)
-      for (VertexId p : vx_.parents[v]) {
-        mark(p);
-        for (VertexId g : vx_.parents[p])
+    for (VertexId v = vertex_id(first_new_vertex); v < h_.vx_.points.end_id(); ++v.value)
+      for (VertexId p : h_.vx_.parents[v]) {
+        mark_dirty(p);
+        touched[p.value] = 1;
+        for (VertexId g : h_.vx_.parents[p])
           if (g.valid()) mark_dirty(g);
       }
+  }
 
-    // Candidates: every element created in this round, and older leaves with ≥ 2 dirty vertices.
+  // Step 3: every element created in this round, and older leaves with ≥ 2 dirty vertices.
+  std::vector<ElemId> pick_candidates(std::size_t round_first_elem) {
     std::vector<ElemId> candidates;
-    if (use_incidence) {
-      inc_head.resize(vx_.points.size(), kNone);
-      for (std::size_t e = round_first_elem; e < el_.cells.size(); ++e)
+    if (use_incidence_) {
+      inc_head_.resize(h_.vx_.points.size(), kNone);
+      for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
         add_incidence(ElemId(static_cast<std::uint32_t>(e)));
       // Many dirty vertices: their incidence lists would be walked at a cache miss per slot,
       // while one parallel pass over the element arrays streams them (same set, in id order).
-      if (dirty_list.size() * 1024 > round_first_elem)
-        candidates = leaves_with_two_flagged(dirty, dead, round_first_elem);
+      if (dirty_list_.size() * 1024 > round_first_elem)
+        candidates = leaves_with_two_flagged(dirty_, round_first_elem);
       else
-        candidates = incident_candidates(dirty_list, dirty, round_first_elem);
-      for (std::size_t e = round_first_elem; e < el_.cells.size(); ++e)
+        candidates = incident_candidates(dirty_list_, dirty_, round_first_elem);
+      for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
         candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {
       // Drop refined and removed elements from the leaf list.
-      leaf_list.erase(
-          std::remove_if(leaf_list.begin(), leaf_list.end(), [&](ElemId e) { return !alive_leaf(e); }),
-          leaf_list.end());
-      candidates.swap(leaf_list);  // borrowed; given back below
+      leaf_list_.erase(
+          std::remove_if(leaf_list_.begin(), leaf_list_.end(), [&](ElemId e) { return !alive_leaf(e); }),
+          leaf_list_.end());
+      candidates.swap(leaf_list_);  // borrowed; given back by run()
     }
+    return candidates;
+  }
 
-    // Which candidates need red now? Parallel and read-only; the result is sorted, so it does
-    // not depend on scheduling.
+  // Step 4: which candidates need red now? Parallel and read-only; the result is sorted, so it
+  // does not depend on scheduling. Parents of green leaves whose new hanging midpoints all lie
+  // on the parent's own edges, with an admissible combined pattern, get a new green closure
+  // instead of red (green elements are still never refined): without this, one new midpoint on
+  // a ring of green-refined elements turns the whole ring red, whose neighbours then turn red,
+  // ... — a local mark could add 10^5 vertices.
+  void decide(const std::vector<ElemId>& candidates, std::size_t round_first_elem,
+              std::vector<ElemId>& to_red, std::vector<ElemId>& to_regreen) const {
     std::vector<ElemId> request(candidates.size(), ElemId::invalid());
     std::vector<ElemId> regreen(candidates.size(), ElemId::invalid());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4096),
@@ -742,19 +764,20 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
                           const ElemId e = candidates[i];
                           if (e.value < round_first_elem) {
                             int n = 0;
-                            for (VertexId v : el_.cells[e]) n += dirty[v.value];
+                            for (VertexId v : h_.el_.cells[e]) n += dirty_[v.value];
                             if (n < 2) continue;  // no edge of e was split in this round
                           }
-                          const unsigned mask = hanging_mask(e, &touched);
+                          const unsigned mask = h_.hanging_mask(e, &touched);
                           if (mask == 0) continue;
-                          if (kind(e) == ElemKind::kGreen) {
-                            const ElemId p = parent(e);
-                            const unsigned pmask = hanging_on_parent_edges(e, mask) ? hanging_mask(p) : 0;
-                            if (green_type(D, pmask) > 0 && !green_edges_split(p, pmask, touched))
+                          if (h_.kind(e) == ElemKind::kGreen) {
+                            const ElemId p = h_.parent(e);
+                            const unsigned pmask =
+                                h_.hanging_on_parent_edges(e, mask) ? h_.hanging_mask(p) : 0;
+                            if (green_type(D, pmask) > 0 && !h_.green_edges_split(p, pmask, touched))
                               regreen[i] = p;
                             else
                               request[i] = p;
-                          } else if (green_type(D, mask) < 0 || green_edges_split(e, mask, touched)) {
+                          } else if (green_type(D, mask) < 0 || h_.green_edges_split(e, mask, touched)) {
                             request[i] = e;
                           }
                         }
@@ -769,34 +792,55 @@ std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t
       if (r.valid() && !std::binary_search(to_red.begin(), to_red.end(), r)) to_regreen.push_back(r);
     std::sort(to_regreen.begin(), to_regreen.end());
     to_regreen.erase(std::unique(to_regreen.begin(), to_regreen.end()), to_regreen.end());
-    for (VertexId v : dirty_list) dirty[v.value] = 0;
-    dirty_list.clear();
-
-    if (!use_incidence) {
-      leaf_list.swap(candidates);
-      if (!to_red.empty() || !to_regreen.empty()) {
-        // Another round follows: switch to the incidence from here on.
-        use_incidence = true;
-        inc_head.assign(vx_.points.size(), kNone);
-        inc_elem.reserve(leaf_list.size());
-        inc_next.reserve(leaf_list.size() * (D + 1));
-        for (ElemId e : leaf_list) add_incidence(e);
-        std::vector<ElemId>().swap(leaf_list);
-      }
-    }
   }
 
-  // Only red refinement adds vertices, so the count is final here.
+  Hierarchy& h_;
+  const std::size_t old_count_;
+  const bool keep_undo_;
+  std::vector<std::uint8_t> dirty_;  // endpoints of edges split in this round
+  std::vector<VertexId> dirty_list_;
+  std::vector<ElemId> leaf_list_;  // the first round's candidates (before the incidence)
+  bool use_incidence_ = false;
+  std::vector<std::uint32_t> inc_head_;  // per vertex: first slot or kNone
+  std::vector<std::uint32_t> inc_next_;  // per slot (= element index * (D + 1) + corner)
+  std::vector<ElemId> inc_elem_;         // per element index
+  std::vector<std::uint8_t> seen_;
+};
+
+template <int D>
+std::vector<ElemId> Hierarchy<D>::refine(std::vector<ElemId> marked, std::size_t vertex_limit,
+                                         std::size_t* vertices_reached) {
+  const std::size_t old_count = el_.cells.size();
+  const std::size_t old_vertex_count = vx_.points.size();
+  if (vertices_reached) *vertices_reached = old_vertex_count;
+  // Step 1: the marked leaves, green ones replaced by their parents (green is never refined).
+  std::vector<ElemId> to_red;
+  to_red.reserve(marked.size());
+  for (ElemId e : marked) {
+    if (!e.valid() || e.value >= el_.cells.size() || !is_leaf(e))
+      throw Error("refine: element " + std::to_string(e.value) + " is not a leaf of this hierarchy");
+    to_red.push_back(kind(e) == ElemKind::kGreen ? parent(e) : e);
+  }
+  std::sort(to_red.begin(), to_red.end());
+  to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
+  if (to_red.empty()) return compact(std::vector<std::uint8_t>(el_.cells.size(), 0), old_count);
+
+  // Step 2: red rounds until the closure asks for no more.
+  RedRounds rounds(*this, old_count, vertex_limit > 0);
+  rounds.run(std::move(to_red));
+
+  // Step 3: only red refinement adds vertices, so the count is final here: over the limit,
+  // undo.
   if (vertices_reached) *vertices_reached = vx_.points.size();
   if (vertex_limit > 0 && vx_.points.size() > vertex_limit) {
-    roll_back(undo_links, old_count, old_vertex_count);
+    roll_back(rounds.undo_links, old_count, old_vertex_count);
     return {};
   }
 
-  // Close: green children for every leaf left with hanging midpoints.
-  green_closure(touched, dead);
-  dead.resize(el_.cells.size(), 0);
-  return compact(dead, old_count);
+  // Step 4: close: green children for every leaf left with hanging midpoints.
+  green_closure(rounds.touched, rounds.dead);
+  rounds.dead.resize(el_.cells.size(), 0);
+  return compact(rounds.dead, old_count);
 }
 
 template <int D>

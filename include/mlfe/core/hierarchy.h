@@ -224,6 +224,9 @@ class Hierarchy {
   void roll_back(const std::vector<UndoLink>& undo_links, std::size_t old_count,
                  std::size_t old_vertex_count);
   void green_closure(const std::vector<std::uint8_t>& touched, std::vector<std::uint8_t>& dead);
+  // refine()'s red rounds (hierarchy.cpp): the elements to refine red, then every element the
+  // conformity closure sends to red or to a new green pattern, round by round.
+  class RedRounds;
 
   // The parallel arrays, declared once: whatever applies to all of them (sizing, reserving,
   // truncating, moving an entry, memory) goes through for_each.
