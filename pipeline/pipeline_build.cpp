@@ -154,12 +154,22 @@ HierarchyFileFigures write_file(const FileJob& job, const Built& b, const Approx
   return fig;
 }
 
+// Whether rounding a value within E of an integer keeps it within E of that integer: for an
+// integer E (it rounds into [x - E, x + E]) and below 1/2 (it rounds to x).
+bool rounding_keeps(double e) { return e < 0.5 || e == std::floor(e); }
+
 // The decoded function on the voxel grid against the volume.
+// With `integers` (an error-bounded build of integer data at a bound rounding keeps), the
+// decoded samples are rounded to integers, as mlfe export writes them: the barycentric weights
+// of a sample on a vertex are not exactly 0 and 1 at every spacing (0.8 mm: errors of 1e-14
+// beside zero samples), so E = 0 gives the voxels back.
 template <int D>
-Measure<D> on_grid(const ScalarGrid& grid, const std::string& input, double range) {
-  return [&grid, input, range](const Hierarchy<D>& h, const std::vector<double>& values) {
-    return grid_errors(resample_to_grid(h, values, grid.dims, grid.transform.spacing), grid.values, range,
-                       input);
+Measure<D> on_grid(const ScalarGrid& grid, const std::string& input, double range, bool integers) {
+  return [&grid, input, range, integers](const Hierarchy<D>& h, const std::vector<double>& values) {
+    std::vector<float> decoded = resample_to_grid(h, values, grid.dims, grid.transform.spacing);
+    if (integers)
+      for (float& v : decoded) v = std::nearbyint(v);
+    return grid_errors(decoded, grid.values, range, input);
   };
 }
 
@@ -306,8 +316,10 @@ BuildFileResult build(const std::string& input, const std::string& output, const
   const double range = b.value_max - b.value_min;
   FileJob job{input, output, s, split ? &*split : nullptr, meta};
   detail::OutputGuard written;
-  r.file = b.dim() == 2 ? write_file(job, b, b.get<2>(), on_grid<2>(grid, input, range), r.warnings)
-                        : write_file(job, b, b.get<3>(), on_grid<3>(grid, input, range), r.warnings);
+  const bool integers = split && split->integer && rounding_keeps(s.max_error);
+  r.file = b.dim() == 2
+               ? write_file(job, b, b.get<2>(), on_grid<2>(grid, input, range, integers), r.warnings)
+               : write_file(job, b, b.get<3>(), on_grid<3>(grid, input, range, integers), r.warnings);
   if (split) r.file.tolerance = split->tolerance;
   r.file.samples = static_cast<double>(grid.voxel_count());
   r.written.push_back(output);

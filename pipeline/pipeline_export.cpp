@@ -13,6 +13,7 @@
 #include <mlfe/pipeline.h>
 
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include "pipeline/label_hierarchy.h"
@@ -83,6 +84,11 @@ void export_grid(const std::string& input, const std::string& output, const Hier
   report(0.3, "resampling");
   const auto t0 = std::chrono::steady_clock::now();
   g.values = resample_to_grid(h, f.values, g.dims, f.transform.spacing);
+  // An error-bounded build of integer data (integer surpluses) at a bound rounding keeps (an
+  // integer, or below 1/2): the samples are integers (pipeline_build.cpp, on_grid).
+  const double e = f.sample_error_bound;
+  if (f.integer_values && std::isfinite(e) && (e < 0.5 || e == std::floor(e)))
+    for (float& v : g.values) v = std::nearbyint(v);
   r.resample_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   report(0.7, "writing");
   write_volume(output, g);

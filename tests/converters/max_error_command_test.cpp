@@ -101,6 +101,25 @@ TEST(MaxErrorCommand, ZeroIsLosslessOnIntegerVolumes) {
   }
 }
 
+// Mostly zeros (a label map's background) at 0.8 mm: the barycentric weights of a sample on a
+// vertex are then not exactly 0 and 1, which left 1e-14 beside the zeros before the decoded
+// samples of integer builds were rounded.
+TEST(MaxErrorCommand, ZeroIsLosslessBesideZerosAtNonIntegerSpacing) {
+  const std::array<int, 3> dims{19, 14, 11};
+  std::vector<std::uint8_t> v(static_cast<std::size_t>(dims[0]) * dims[1] * dims[2], 0);
+  std::size_t i = 0;
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x, ++i)
+        v[i] = (x - 9) * (x - 9) + (y - 6) * (y - 6) + (z - 5) * (z - 5) < 16 ? 7 : (x > 14 && y < 4 ? 3 : 0);
+  const std::string raw = scratch() + "/zeros08.raw";
+  std::ofstream(raw, std::ios::binary)
+      .write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size()));
+  std::ofstream(raw + ".json") << "{\"dims\":[19,14,11],\"dtype\":\"uint8\",\"spacing\":[0.8,0.8,0.8],"
+                                  "\"endian\":\"little\"}";
+  EXPECT_EQ(round_trip_max_error(raw, 0, "zeros08_lossless"), 0.0);
+}
+
 TEST(MaxErrorCommand, EverySampleWithinTheBound) {
   // Property test: random float volumes (odd dims, anisotropic spacing) and several bounds.
   unsigned seed = 10;
