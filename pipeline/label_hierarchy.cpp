@@ -91,20 +91,24 @@ template std::vector<std::uint16_t> leaf_labels<2>(const Hierarchy<2>&, const st
 template std::vector<std::uint16_t> leaf_labels<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                                    const std::vector<double>&);
 
-nlohmann::json label_metadata(const ScalarGrid& grid, const std::string& label_table,
-                              std::vector<std::string>& warnings) {
-  const LabelGrid lg = label_grid(grid);
+LabelTable named_or_beside_table(const std::string& named, const std::string& volume,
+                                 std::vector<std::string>& warnings) {
+  if (!named.empty()) return read_label_table(named);
   LabelTable table;
-  if (!label_table.empty()) {
-    table = read_label_table(label_table);
-  } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
+  if (const std::string found = find_label_table(volume); !found.empty()) {
     try {
       table = read_label_table(found);
     } catch (const Error& e) {
       warnings.push_back(std::string(e.what()) + " (found beside the volume; not used)");
     }
   }
-  return stored_label_table(table, label_counts(lg));
+  return table;
+}
+
+nlohmann::json label_metadata(const ScalarGrid& grid, const std::string& label_table,
+                              std::vector<std::string>& warnings) {
+  const LabelGrid lg = label_grid(grid);
+  return stored_label_table(named_or_beside_table(label_table, grid.source, warnings), label_counts(lg));
 }
 
 }  // namespace mlfe::cli

@@ -29,6 +29,12 @@ constexpr double kLabelSampleBound = 0.25;
 nlohmann::json stored_label_table(const LabelTable& table,
                                   const std::map<std::uint16_t, std::size_t>& counts);
 
+/// The label table of a label map: the one named (`named`, which must parse), else the file
+/// beside the volume with its stem (find_label_table) when it parses as a table (a report.json
+/// of an earlier run, say, is not one: a warning is appended to `warnings`), else none.
+LabelTable named_or_beside_table(const std::string& named, const std::string& volume,
+                                 std::vector<std::string>& warnings);
+
 /// The label metadata `mlfe build --labels` stores (pipeline::build): the labels of `grid`
 /// checked (label_grid: bad input before any output) and the table from `label_table`, else the
 /// one beside the volume when it parses (a warning appended to `warnings` when it does not).

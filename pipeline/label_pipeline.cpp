@@ -19,6 +19,8 @@
 #include <functional>
 #include <map>
 
+#include "pipeline/label_hierarchy.h"
+
 namespace mlfe {
 
 namespace {
@@ -77,23 +79,17 @@ void check_label_options(const LabelOptions& o) {
   if (!(o.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", o.tolerance));
 }
 
-// A table named with --label-table must parse; a file that merely sits beside the volume with
-// its stem (a report.json of an earlier run, say) is used only when it is a table.
+// The named table, else one held in memory (a label hierarchy's), else the one beside the volume.
 LabelTable label_table_for(const LabelOptions& o, const ScalarGrid& grid,
                            const std::function<void(const std::string&)>& warn) {
-  LabelTable table;
-  if (!o.table.empty()) {
-    table = read_label_table(o.table);
-  } else if (!o.table_json.empty()) {
-    table = parse_label_table(o.table_json, o.table_json_source + ".json");
+  if (o.table.empty() && !o.table_json.empty()) {
+    LabelTable table = parse_label_table(o.table_json, o.table_json_source + ".json");
     table.source = o.table_json_source;
-  } else if (const std::string found = find_label_table(grid.source); !found.empty()) {
-    try {
-      table = read_label_table(found);
-    } catch (const Error& e) {
-      warn(std::string(e.what()) + " (found beside the volume; not used)");
-    }
+    return table;
   }
+  std::vector<std::string> warnings;
+  LabelTable table = cli::named_or_beside_table(o.table, grid.source, warnings);
+  for (const auto& w : warnings) warn(w);
   return table;
 }
 

@@ -35,18 +35,7 @@ void add_label_rows(const LabelGrid& lg, const GridTransform& t, const LabelTabl
 // mlfe::Error for values that are not labels (label_grid).
 void add_label_rows(const ScalarGrid& g, const std::string& table_path, InfoResult& r) {
   const LabelGrid lg = label_grid(g);
-  LabelTable table;
-  if (!table_path.empty()) {
-    table = read_label_table(table_path);
-  } else if (const std::string found = find_label_table(g.source); !found.empty()) {
-    // Beside the volume, only a file that parses as a table is one (not an earlier report).
-    try {
-      table = read_label_table(found);
-    } catch (const Error& e) {
-      r.warnings.push_back(std::string(e.what()) + " (found beside the volume; not used)");
-    }
-  }
-  add_label_rows(lg, g.transform, table, r);
+  add_label_rows(lg, g.transform, cli::named_or_beside_table(table_path, g.source, r.warnings), r);
 }
 
 // A label hierarchy (mlfe build --labels): its labels decoded at the samples, named from the
