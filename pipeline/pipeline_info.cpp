@@ -38,15 +38,6 @@ void add_label_rows(const ScalarGrid& g, const std::string& table_path, InfoResu
   add_label_rows(lg, g.transform, cli::named_or_beside_table(table_path, g.source, r.warnings), r);
 }
 
-// A label hierarchy (mlfe build --labels): its labels decoded at the samples, named from the
-// stored table (or `table_path`).
-void add_stored_label_rows(const std::string& file, const std::string& table_path, InfoResult& r) {
-  const HierarchyFile f = read_hierarchy(file);
-  cli::StoredLabelMap m = cli::read_stored_label_map(f, file);
-  if (!table_path.empty()) m.table = read_label_table(table_path);
-  add_label_rows(label_grid(m.grid), m.grid.transform, m.table, r);
-}
-
 void add_label_json(const InfoResult& r, nlohmann::json& j) {
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& l : r.labels)
@@ -68,7 +59,7 @@ std::vector<LevelCounts> level_counts(const Hierarchy<D>& h) {
   return c;
 }
 
-InfoResult hierarchy_info(const std::string& file) {
+InfoResult hierarchy_info(const std::string& file, const InfoOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   HierarchyFile f = read_hierarchy(file);
   InfoResult r;
@@ -93,6 +84,15 @@ InfoResult hierarchy_info(const std::string& file) {
   r.space = f.space;
   r.range = {f.value_min, f.value_max};
   r.header = static_cast<const HierarchyFileInfo&>(f);
+  // A label hierarchy (mlfe build --labels): its labels decoded at the samples, named from the
+  // stored table (or options.label_table).
+  if (cli::is_label_hierarchy(f)) {
+    cli::StoredLabelMap m = cli::read_stored_label_map(f, file);
+    if (!options.label_table.empty()) m.table = read_label_table(options.label_table);
+    add_label_rows(label_grid(m.grid), m.grid.transform, m.table, r);
+  } else if (options.labels) {
+    throw Error(file + ": not a label map (no stored label table; build it with mlfe build --labels)");
+  }
   return r;
 }
 
@@ -171,15 +171,7 @@ nlohmann::json InfoResult::to_json() const {
 }
 
 InfoResult info(const std::string& file, const InfoOptions& options) {
-  if (is_hierarchy_file(file)) {
-    InfoResult r = hierarchy_info(file);
-    const nlohmann::json& meta = r.header.metadata;
-    if (meta.is_object() && meta.contains("labels") && meta["labels"].is_object())
-      add_stored_label_rows(file, options.label_table, r);
-    else if (options.labels)
-      throw Error(file + ": not a label map (no stored label table; build it with mlfe build --labels)");
-    return r;
-  }
+  if (is_hierarchy_file(file)) return hierarchy_info(file, options);
   const auto t0 = std::chrono::steady_clock::now();
   const ScalarGrid g = read_volume(file, options.read);
   InfoResult r;
