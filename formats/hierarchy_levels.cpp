@@ -8,23 +8,11 @@
 #include <cmath>
 #include <cstdlib>
 #include <string>
-#include <unordered_set>
 
 namespace mlfe {
 namespace {
 
 // An element as the sorted ids of its vertices (in the input hierarchy's numbering).
-template <int D>
-struct CellKeyHash {
-  std::size_t operator()(const std::array<std::uint32_t, D + 1>& k) const {
-    std::uint64_t x = 0x9e3779b97f4a7c15ull;
-    for (std::uint32_t v : k) x = (x ^ v) * 0xff51afd7ed558ccdull, x ^= x >> 29;
-    return static_cast<std::size_t>(x);
-  }
-};
-template <int D>
-using CellKeySet = std::unordered_set<std::array<std::uint32_t, D + 1>, CellKeyHash<D>>;
-
 template <int D>
 std::array<std::uint32_t, D + 1> key_of(const typename Hierarchy<D>::Cell& c,
                                         const std::vector<VertexId>* map) {
@@ -32,6 +20,46 @@ std::array<std::uint32_t, D + 1> key_of(const typename Hierarchy<D>::Cell& c,
   for (int i = 0; i <= D; ++i) k[i] = map ? (*map)[c[i].value].value : c[i].value;
   std::sort(k.begin(), k.end());
   return k;
+}
+
+// Counterparts carried across a refine(): old element e is remap[e] now (invalid: a removed
+// green child); elements created by the call have none yet.
+inline std::vector<ElemId> carried_counterparts(const std::vector<ElemId>& remap, std::size_t old_count,
+                                                std::size_t new_count, const std::vector<ElemId>& orig) {
+  if (remap.empty()) {  // nothing refined: ids unchanged
+    std::vector<ElemId> out = orig;
+    out.resize(new_count, ElemId::invalid());
+    return out;
+  }
+  MLFE_CHECK(remap.size() == old_count);
+  std::vector<ElemId> out(new_count, ElemId::invalid());
+  for (std::size_t e = 0; e < old_count; ++e)
+    if (remap[e].valid()) out[remap[e].value] = orig[e];
+  return out;
+}
+
+// Gives each element of `rebuilt` without a counterpart the child of its parent's counterpart
+// in h with the same vertices (through to_original), trying the same child slot first.
+template <int D>
+void match_children(const Hierarchy<D>& h, const Hierarchy<D>& rebuilt,
+                    const std::vector<VertexId>& to_original, std::vector<ElemId>& orig) {
+  for (std::uint32_t e = 0; e < rebuilt.element_count(); ++e) {
+    if (orig[e].valid()) continue;
+    const ElemId p = rebuilt.parent(ElemId(e));
+    if (!p.valid() || !orig[p.value].valid()) continue;
+    const ElemId op = orig[p.value];
+    const int n = h.num_children(op);
+    if (n != rebuilt.num_children(p)) continue;
+    const auto key = key_of<D>(rebuilt.cell(ElemId(e)), &to_original);
+    const int slot = static_cast<int>(e - rebuilt.first_child(p).value);
+    for (int j = 0; j < n; ++j) {
+      const ElemId c(h.first_child(op).value + static_cast<std::uint32_t>((slot + j) % n));
+      if (key_of<D>(h.cell(c), nullptr) == key) {
+        orig[e] = c;
+        break;
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -46,8 +74,8 @@ std::vector<ElemId> refinement_candidates(const Hierarchy<D>& h, int level) {
 }
 
 template <int D>
-void apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
-                            const std::vector<std::uint8_t>& marks) {
+std::vector<ElemId> apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
+                                           const std::vector<std::uint8_t>& marks) {
   MLFE_CHECK(candidates.size() == marks.size());
   std::vector<ElemId> marked;
   for (std::size_t i = 0; i < candidates.size(); ++i) {
@@ -59,7 +87,8 @@ void apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidat
       marked.push_back(h.first_child(e));
     // else: already red-refined by an earlier closure; nothing to do.
   }
-  if (!marked.empty()) h.refine(std::move(marked));
+  if (marked.empty()) return {};
+  return h.refine(std::move(marked));
 }
 
 template <int D>
@@ -83,22 +112,24 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
   enc.rebuilt = Hierarchy<D>::from_coarse(enc.coarse_points, enc.coarse_cells);
   enc.vertex_end.push_back(enc.rebuilt.vertex_count());
 
-  // Step 2: the red-refined elements of h, by vertex set.
-  CellKeySet<D> red;
-  for (std::uint32_t e = 0; e < h.element_count(); ++e) {
-    const ElemId id(e);
-    if (!h.is_leaf(id) && h.kind(h.first_child(id)) == ElemKind::kRed)
-      red.insert(key_of<D>(h.cell(id), nullptr));
-  }
+  // Step 2: every rebuilt element's counterpart in h (same vertex set), element by element:
+  // T0 is h's T0, and a rebuilt child's counterpart is the child of its parent's counterpart
+  // with the same vertices. Candidates are red children, so each has one while the rebuild
+  // follows h; a candidate's mark is whether its counterpart is red-refined in h.
+  std::vector<ElemId> orig(enc.rebuilt.element_count(), ElemId::invalid());
+  for (std::uint32_t e = 0; e < h.coarse_count(); ++e) orig[e] = ElemId(e);
+  const auto red_refined = [&h](ElemId o) {
+    return o.valid() && !h.is_leaf(o) && h.kind(h.first_child(o)) == ElemKind::kRed;
+  };
 
-  // Step 3: per level, mark the candidates h red-refined, refine, and map the new vertices
-  // to h's through its edge→midpoint map.
+  // Step 3: per level, mark the candidates h red-refined, refine, map the new vertices to h's
+  // through its edge→midpoint map and the new elements to h's children.
   for (int k = 1; k <= levels; ++k) {
     const std::vector<ElemId> cand = refinement_candidates(enc.rebuilt, k);
     std::vector<std::uint8_t> marks(cand.size());
-    for (std::size_t i = 0; i < cand.size(); ++i)
-      marks[i] = red.count(key_of<D>(enc.rebuilt.cell(cand[i]), &enc.to_original)) ? 1 : 0;
-    apply_refinement_marks(enc.rebuilt, cand, marks);
+    for (std::size_t i = 0; i < cand.size(); ++i) marks[i] = red_refined(orig[cand[i].value]) ? 1 : 0;
+    const std::size_t old_count = enc.rebuilt.element_count();
+    const std::vector<ElemId> remap = apply_refinement_marks(enc.rebuilt, cand, marks);
     for (std::size_t v = enc.to_original.size(); v < enc.rebuilt.vertex_count(); ++v) {
       const auto& p = enc.rebuilt.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
       const VertexId o = h.edge_midpoints().find(enc.to_original[p[0].value], enc.to_original[p[1].value]);
@@ -107,20 +138,24 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
                                 " creates a vertex it does not have)");
       enc.to_original.push_back(o);
     }
+    orig = carried_counterparts(remap, old_count, enc.rebuilt.element_count(), orig);
+    match_children(h, enc.rebuilt, enc.to_original, orig);
     enc.marks.push_back(std::move(marks));
     enc.vertex_end.push_back(enc.rebuilt.vertex_count());
   }
 
-  // Step 4: the full rebuild is h (the file format relies on it).
+  // Step 4: the full rebuild is h (the file format relies on it): as many vertices, elements
+  // and leaves, and every rebuilt leaf has a leaf of h as its counterpart (distinct leaves of a
+  // conforming mesh have distinct vertex sets, so the counterparts are distinct).
   if (levels == h.max_level()) {
     bool same =
         enc.rebuilt.vertex_count() == h.vertex_count() && enc.rebuilt.element_count() == h.element_count();
-    CellKeySet<D> leaves;
-    for (ElemId e : h.leaves()) leaves.insert(key_of<D>(h.cell(e), nullptr));
     const std::vector<ElemId> rebuilt_leaves = enc.rebuilt.leaves();
-    same = same && rebuilt_leaves.size() == leaves.size();
-    for (std::size_t i = 0; same && i < rebuilt_leaves.size(); ++i)
-      same = leaves.count(key_of<D>(enc.rebuilt.cell(rebuilt_leaves[i]), &enc.to_original)) > 0;
+    same = same && rebuilt_leaves.size() == h.leaves().size();
+    for (std::size_t i = 0; same && i < rebuilt_leaves.size(); ++i) {
+      const ElemId o = orig[rebuilt_leaves[i].value];
+      same = o.valid() && h.is_leaf(o);
+    }
     if (!same)
       throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (the rebuild has " +
                               std::to_string(enc.rebuilt.vertex_count()) + " vertices and " +
@@ -206,10 +241,10 @@ template struct LevelEncoding<2>;
 template struct LevelEncoding<3>;
 template std::vector<ElemId> refinement_candidates<2>(const Hierarchy<2>&, int);
 template std::vector<ElemId> refinement_candidates<3>(const Hierarchy<3>&, int);
-template void apply_refinement_marks<2>(Hierarchy<2>&, const std::vector<ElemId>&,
-                                        const std::vector<std::uint8_t>&);
-template void apply_refinement_marks<3>(Hierarchy<3>&, const std::vector<ElemId>&,
-                                        const std::vector<std::uint8_t>&);
+template std::vector<ElemId> apply_refinement_marks<2>(Hierarchy<2>&, const std::vector<ElemId>&,
+                                                       const std::vector<std::uint8_t>&);
+template std::vector<ElemId> apply_refinement_marks<3>(Hierarchy<3>&, const std::vector<ElemId>&,
+                                                       const std::vector<std::uint8_t>&);
 template LevelEncoding<2> encode_levels<2>(const Hierarchy<2>&, int);
 template LevelEncoding<3> encode_levels<3>(const Hierarchy<3>&, int);
 template std::vector<double> quantize_hierarchical<2>(const Hierarchy<2>&, const std::vector<double>&, double,

@@ -28,10 +28,11 @@ template <int D>
 std::vector<ElemId> refinement_candidates(const Hierarchy<D>& h, int level);
 
 /// One rebuild step: refines per `marks` (one byte, 0 or 1, per candidate of
-/// refinement_candidates(h, level), sizes CHECKed).
+/// refinement_candidates(h, level), sizes CHECKed). Returns refine()'s old → new element ids,
+/// or an empty vector when nothing was marked (ids unchanged).
 template <int D>
-void apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
-                            const std::vector<std::uint8_t>& marks);
+std::vector<ElemId> apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
+                                           const std::vector<std::uint8_t>& marks);
 
 /// Thrown by encode_levels for a hierarchy the canonical rebuild does not reproduce. Known
 /// cause: Hierarchy::green_pattern breaks ties between equally long edges by global vertex id,
