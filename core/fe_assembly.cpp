@@ -26,19 +26,28 @@ std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, E
 }  // namespace
 
 template <int D>
-std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
-                                                           const std::vector<ElemId>& elems, const Field& f,
-                                                           double max_sub_edge, bool gradients,
-                                                           const SampleLattice* lattice) {
-  std::vector<ElementIntegrals<D>> out(elems.size());
+void compute_element_integrals_into(const Hierarchy<D>& h, const std::vector<ElemId>& elems, const Field& f,
+                                    double max_sub_edge, bool gradients, const SampleLattice* lattice,
+                                    ElementIntegrals<D>* out, IntegralIndex index) {
   const ScalarGrid* grid = lattice ? f.samples() : nullptr;
   MLFE_CHECK(!lattice || grid);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, elems.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i)
-          out[i] = grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, gradients)
-                        : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
+          out[index == IntegralIndex::kLeafOrder ? i : elems[i].value] =
+              grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, gradients)
+                   : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
       });
+}
+
+template <int D>
+std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
+                                                           const std::vector<ElemId>& elems, const Field& f,
+                                                           double max_sub_edge, bool gradients,
+                                                           const SampleLattice* lattice) {
+  std::vector<ElementIntegrals<D>> out(elems.size());
+  compute_element_integrals_into(h, elems, f, max_sub_edge, gradients, lattice, out.data(),
+                                 IntegralIndex::kLeafOrder);
   return out;
 }
 
@@ -261,6 +270,12 @@ template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hie
                                                                        const std::vector<ElemId>&,
                                                                        const Field&, double, bool,
                                                                        const SampleLattice*);
+template void compute_element_integrals_into<2>(const Hierarchy<2>&, const std::vector<ElemId>&, const Field&,
+                                                double, bool, const SampleLattice*, ElementIntegrals<2>*,
+                                                IntegralIndex);
+template void compute_element_integrals_into<3>(const Hierarchy<3>&, const std::vector<ElemId>&, const Field&,
+                                                double, bool, const SampleLattice*, ElementIntegrals<3>*,
+                                                IntegralIndex);
 template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double,
                                          const std::vector<ElementIntegrals<2>>*, IntegralIndex);
 template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,

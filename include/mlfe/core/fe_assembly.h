@@ -30,6 +30,13 @@ std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h
                                                            double max_sub_edge, bool gradients,
                                                            const SampleLattice* lattice = nullptr);
 
+/// compute_element_integrals written in place: the integrals of elems[i] go to out[i]
+/// (kLeafOrder) or out[elems[i]] (kElementId); `out` must have room for them.
+template <int D>
+void compute_element_integrals_into(const Hierarchy<D>& h, const std::vector<ElemId>& elems, const Field& f,
+                                    double max_sub_edge, bool gradients, const SampleLattice* lattice,
+                                    ElementIntegrals<D>* out, IntegralIndex index);
+
 /// Global matrix M + gradient_weight K over `leaves` (vertex_count() x vertex_count()). With
 /// sampled `integrals` (least squares at the samples), M is their sampled mass (singular for
 /// vertices in the padding that no sample sees: see regularize_padding in approximation.cpp).
