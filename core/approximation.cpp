@@ -471,14 +471,14 @@ void refine_to_start_level(Hierarchy<D>& h, const Field& f, const ApproximationO
 }
 
 // The integrals of the leaves not cached yet (cache and have are indexed by element id).
-// Address space for the cache up front, so that growing it never copies it: each reallocation
-// held the old and the new array at once (the build's peak) and copying and zero-filling them
-// took a fifth of a full-head build. Untouched pages cost no memory; the reservation is
-// bounded by the memory budget and by 3 elements per sample (a full head at the noise level
-// needs about 2.2); beyond that the vector grows as usual.
+// Address space for the cache (and the hierarchy's arrays) up front, so that growing them never copies them:
+// each reallocation held the old and the new array at once (the build's peak) and copying and zero-filling
+// them took a fifth of a full-head build. Untouched pages cost no memory; the reservation is bounded by the
+// memory budget and by 3 elements per sample (a full head at the noise level needs about 2.2); beyond that
+// the vector grows as usual.
 template <int D>
-void reserve_integral_cache(const Field& f, const ApproximationOptions& opts,
-                            std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
+void reserve_build_arrays(const Field& f, const ApproximationOptions& opts, Hierarchy<D>& h,
+                          std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
   const ScalarGrid* grid = f.samples();
   if (!grid || opts.max_memory_bytes == 0) return;
   const auto samples = static_cast<std::size_t>(grid->voxel_count());
@@ -486,6 +486,8 @@ void reserve_integral_cache(const Field& f, const ApproximationOptions& opts,
   try {
     cache.reserve(n);
     have.reserve(n);
+    // The hierarchy's arrays likewise (a vertex per sample at most, padding aside).
+    h.reserve(std::min(samples + samples / 4, n), n);
   } catch (const std::bad_alloc&) {
     // No address space to spare (strict overcommit): grow as needed instead.
   }
@@ -687,7 +689,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
   // Integrals cached per element id (valid for leaves); refinement remaps them.
   std::vector<ElementIntegrals<D>> cache;
   std::vector<std::uint8_t> have;
-  reserve_integral_cache(f, opts, cache, have);
+  reserve_build_arrays(f, opts, h, cache, have);
   std::vector<double> values;
   double vertices_per_mark = 2.0;  // a red refinement's 3 (2D) / 6 (3D) midpoints, shared
   // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules

@@ -515,6 +515,12 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
 }
 
 template <int D>
+void Hierarchy<D>::reserve(std::size_t vertices, std::size_t elements) {
+  if (elements > el_.cells.capacity()) el_.for_each([&](auto& a) { a.reserve(elements); });
+  if (vertices > vx_.points.capacity()) vx_.for_each([&](auto& a) { a.reserve(vertices); });
+}
+
+template <int D>
 void Hierarchy<D>::reserve_for(std::size_t red_count) {
   // Growing the parallel arrays geometrically would copy them about twice per refine() of a
   // big mesh; reserve what the red refinements need (closure adds little beyond).

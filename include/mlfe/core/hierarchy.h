@@ -135,6 +135,10 @@ class Hierarchy {
                              std::size_t* vertices_reached = nullptr);
   /// Red-refines every leaf once.
   void refine_uniform();
+  /// Room for this many vertices and elements in all, so that refinement up to them does not
+  /// reallocate (and copy) the arrays; address space only until used. No effect on results.
+  /// Throws std::bad_alloc when the address space is not there.
+  void reserve(std::size_t vertices, std::size_t elements);
 
   // ---- vertices ----
   std::size_t vertex_count() const { return vx_.points.size(); }
