@@ -154,9 +154,11 @@ std::array<std::array<double, D>, D + 1> corners_of(const Hierarchy<D>& h, ElemI
 
 // Peak bytes per leaf and per vertex of the interpolating build (max_sample_error), which
 // holds no integrals, matrix or solver vectors: the hierarchy, and in `mlfe build` its
-// canonical rebuild for the file. Measured: 2.1 GB peak RSS for the brain MRI's lossless file
-// (2.0 M vertices, 11.9 M leaves), rounded up.
-constexpr double kInterpolatingBytesPerLeaf = 160, kInterpolatingBytesPerVertex = 300;
+// canonical rebuild for the file. Measured (since the encoder keeps no hash sets): 5.1 GB peak
+// RSS for the noisy full head's lossless file (7.18 M vertices, 42.7 M leaves), about 300 B
+// per vertex and 70 per leaf; 100 per leaf keeps a margin. (160, from a run with the hash
+// sets, stopped that lossless build at the default budget with less than half of it used.)
+constexpr double kInterpolatingBytesPerLeaf = 100, kInterpolatingBytesPerVertex = 300;
 
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
 // allows at the current ratio of leaves to vertices (0: no limit). *by_memory tells which binds.
