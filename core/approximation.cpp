@@ -6,6 +6,7 @@
 #include <mlfe/core/error.h>
 #include <mlfe/core/fe_assembly.h>
 #include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/huge_pages.h>
 #include <mlfe/core/marking.h>
 #include <mlfe/core/p1_element.h>
 #include <mlfe/core/surface_estimator.h>
@@ -490,6 +491,10 @@ void reserve_build_arrays(const Field& f, const ApproximationOptions& opts, Hier
     have.reserve(n);
     // The hierarchy's arrays likewise (a vertex per sample at most, padding aside).
     h.reserve(std::min(samples + samples / 4, n), n);
+    // Huge pages: a fault per 2 MB instead of per 4 KB as the arrays fill (faults were a
+    // fifth of the build's profile on a VM).
+    advise_huge_pages(cache);
+    advise_huge_pages(have);
   } catch (const std::bad_alloc&) {
     // No address space to spare (strict overcommit): grow as needed instead.
   }

@@ -4,6 +4,7 @@
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/hierarchy.h>
+#include <mlfe/core/huge_pages.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -516,8 +517,16 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
 
 template <int D>
 void Hierarchy<D>::reserve(std::size_t vertices, std::size_t elements) {
-  if (elements > el_.cells.capacity()) el_.for_each([&](auto& a) { a.reserve(elements); });
-  if (vertices > vx_.points.capacity()) vx_.for_each([&](auto& a) { a.reserve(vertices); });
+  if (elements > el_.cells.capacity())
+    el_.for_each([&](auto& a) {
+      a.reserve(elements);
+      advise_huge_pages(a.vector());
+    });
+  if (vertices > vx_.points.capacity())
+    vx_.for_each([&](auto& a) {
+      a.reserve(vertices);
+      advise_huge_pages(a.vector());
+    });
 }
 
 template <int D>
