@@ -315,6 +315,22 @@ void interpolating_values(const Hierarchy<D>& h, const ScalarGrid& g, const Samp
 // leaf's corner values never change once created, so a leaf that passed keeps passing and
 // each pass checks only the leaves the previous one created. Fills out.values, the one
 // statistics row and the stop reason.
+// Address space for the interpolating build's hierarchy up front (a lossless build of a noisy
+// scan reaches 6 elements per sample), within the memory budget, so that refinement never
+// copies its arrays as they grow; untouched pages cost nothing.
+template <int D>
+void reserve_hierarchy(const ScalarGrid& g, const ApproximationOptions& opts, Hierarchy<D>& h) {
+  if (opts.max_memory_bytes == 0) return;
+  const auto samples = static_cast<std::size_t>(g.voxel_count());
+  const std::size_t per_element = sizeof(typename Hierarchy<D>::Cell) + 3 * sizeof(ElemId) + 3;
+  const std::size_t n = std::min(opts.max_memory_bytes / per_element, 7 * samples);
+  try {
+    h.reserve(std::min(samples + samples / 4, n), n);
+  } catch (const std::bad_alloc&) {
+    // No address space to spare (strict overcommit): grow as needed instead.
+  }
+}
+
 template <int D>
 void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const ApproximationOptions& opts,
                             Clock::time_point t0, Approximation<D>& out) {
@@ -332,6 +348,7 @@ void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const Approxim
   double vertices_per_mark = 2.0;
   std::size_t fresh = 0;
   std::string stop;
+  reserve_hierarchy(g, opts, h);
   for (;;) {
     // Step 1: values of the new vertices, then the new leaves checked (each in its own slot).
     interpolating_values(h, g, lat, out.integer_values, values);

@@ -516,7 +516,9 @@ int Hierarchy<D>::green_pattern(ElemId e, unsigned mask, std::array<Cell, 4>& ki
 }
 
 template <int D>
-void Hierarchy<D>::reserve(std::size_t vertices, std::size_t elements) {
+void Hierarchy<D>::reserve(std::size_t vertices, std::size_t elements, bool exact) {
+  if (exact && vertices > vx_.points.size())
+    edge_mid_.reserve(edge_mid_.size() + vertices - vx_.points.size());
   if (elements > el_.cells.capacity())
     el_.for_each([&](auto& a) {
       a.reserve(elements);

@@ -110,6 +110,8 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
     enc.coarse_cells.push_back(c);
   }
   enc.rebuilt = Hierarchy<D>::from_coarse(enc.coarse_points, enc.coarse_cells);
+  // The rebuild reaches h's counts (or fails): no array or map grows by copies on the way.
+  enc.rebuilt.reserve(h.vertex_count(), h.element_count(), true);
   enc.vertex_end.push_back(enc.rebuilt.vertex_count());
 
   // Step 2: every rebuilt element's counterpart in h (same vertex set), element by element:

@@ -136,9 +136,11 @@ class Hierarchy {
   /// Red-refines every leaf once.
   void refine_uniform();
   /// Room for this many vertices and elements in all, so that refinement up to them does not
-  /// reallocate (and copy) the arrays; address space only until used. No effect on results.
-  /// Throws std::bad_alloc when the address space is not there.
-  void reserve(std::size_t vertices, std::size_t elements);
+  /// reallocate (and copy) the arrays; address space only until used. With `exact`, the
+  /// edge→midpoint map is sized for `vertices` too (it is filled when sized: for counts known in
+  /// advance, such as a rebuild). No effect on results. Throws std::bad_alloc when the address
+  /// space is not there.
+  void reserve(std::size_t vertices, std::size_t elements, bool exact = false);
 
   // ---- vertices ----
   std::size_t vertex_count() const { return vx_.points.size(); }
