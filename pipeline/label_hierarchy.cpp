@@ -8,7 +8,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace mlfe::cli {
+namespace mlfe::pipeline::detail {
 
 nlohmann::json stored_label_table(const LabelTable& table,
                                   const std::map<std::uint16_t, std::size_t>& counts) {
@@ -111,4 +111,4 @@ nlohmann::json label_metadata(const ScalarGrid& grid, const std::string& label_t
   return stored_label_table(named_or_beside_table(label_table, grid.source, warnings), label_counts(lg));
 }
 
-}  // namespace mlfe::cli
+}  // namespace mlfe::pipeline::detail

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-namespace mlfe::cli {
+namespace mlfe::pipeline::detail {
 
 /// The error-bounded build of a label map keeps every decoded sample within this of its label
 /// (integer values stored exactly; the bound covers the interpolation's last bits), so rounding
@@ -65,4 +65,4 @@ template <int D>
 std::vector<std::uint16_t> leaf_labels(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                                        const std::vector<double>& values);
 
-}  // namespace mlfe::cli
+}  // namespace mlfe::pipeline::detail

@@ -88,7 +88,7 @@ LabelTable label_table_for(const LabelOptions& o, const ScalarGrid& grid,
     return table;
   }
   std::vector<std::string> warnings;
-  LabelTable table = cli::named_or_beside_table(o.table, grid.source, warnings);
+  LabelTable table = pipeline::detail::named_or_beside_table(o.table, grid.source, warnings);
   for (const auto& w : warnings) warn(w);
   return table;
 }

@@ -299,8 +299,8 @@ BuildFileResult build(const std::string& input, const std::string& output, const
     // refined until every sample is within a quarter of a label step of the interpolant (so
     // rounding the decoded samples gives the labels; 0 would fail on the last bits of the
     // barycentric coordinates at non-integer spacings).
-    meta["labels"] = cli::label_metadata(grid, s.label_table, r.warnings);
-    s.max_error = cli::kLabelSampleBound;
+    meta["labels"] = detail::label_metadata(grid, s.label_table, r.warnings);
+    s.max_error = detail::kLabelSampleBound;
     s.quantization_share = 0;
   }
   std::optional<ErrorSplit> split;

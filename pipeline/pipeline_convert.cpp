@@ -52,7 +52,7 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
   if (is_hierarchy_file(input)) {
     // A label hierarchy (mlfe build --labels): the same labels at the samples, its stored table.
     const HierarchyFile f = read_hierarchy(input);
-    grid = cli::read_stored_label_map(f, input).grid;
+    grid = detail::read_stored_label_map(f, input).grid;
     if (!f.metadata["labels"].value("labels", nlohmann::json::array()).empty()) {
       lo.table_json = f.metadata["labels"].dump();
       lo.table_json_source = input + " (stored)";

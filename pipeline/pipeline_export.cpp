@@ -48,10 +48,10 @@ void export_mesh(const std::string& input, const std::string& output, const Hier
   // A label hierarchy (mlfe build --labels): each leaf in the region of its label
   // (label_hierarchy.h: the majority of its corners), named from the stored table.
   ElementRegions regions;
-  const bool labelled = D == 3 && cli::is_label_hierarchy(f) && values;
+  const bool labelled = D == 3 && detail::is_label_hierarchy(f) && values;
   if (labelled) {
-    const LabelTable table = cli::read_stored_label_map(f, input).table;
-    regions.label = cli::leaf_labels(h, leaves, *values);
+    const LabelTable table = detail::read_stored_label_map(f, input).table;
+    regions.label = detail::leaf_labels(h, leaves, *values);
     for (std::uint16_t l : regions.label)
       if (!regions.names.count(l))
         regions.names[l] = l == 0 && !table.entries.count(0) ? "background" : table.name(l);

@@ -35,7 +35,7 @@ void add_label_rows(const LabelGrid& lg, const GridTransform& t, const LabelTabl
 // mlfe::Error for values that are not labels (label_grid).
 void add_label_rows(const ScalarGrid& g, const std::string& table_path, InfoResult& r) {
   const LabelGrid lg = label_grid(g);
-  add_label_rows(lg, g.transform, cli::named_or_beside_table(table_path, g.source, r.warnings), r);
+  add_label_rows(lg, g.transform, detail::named_or_beside_table(table_path, g.source, r.warnings), r);
 }
 
 void add_label_json(const InfoResult& r, nlohmann::json& j) {
@@ -86,8 +86,8 @@ InfoResult hierarchy_info(const std::string& file, const InfoOptions& options) {
   r.header = static_cast<const HierarchyFileInfo&>(f);
   // A label hierarchy (mlfe build --labels): its labels decoded at the samples, named from the
   // stored table (or options.label_table).
-  if (cli::is_label_hierarchy(f)) {
-    cli::StoredLabelMap m = cli::read_stored_label_map(f, file);
+  if (detail::is_label_hierarchy(f)) {
+    detail::StoredLabelMap m = detail::read_stored_label_map(f, file);
     if (!options.label_table.empty()) m.table = read_label_table(options.label_table);
     add_label_rows(label_grid(m.grid), m.grid.transform, m.table, r);
   } else if (options.labels) {
