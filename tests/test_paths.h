@@ -5,11 +5,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <vector>
 
 namespace mlfe::test {
 
@@ -44,6 +46,16 @@ inline std::string scratch_dir(const std::string& sub = "") {
   const std::filesystem::path p = dir.path / sub;
   std::filesystem::create_directories(p);
   return p.string();
+}
+
+/// The bytes of a file (empty when it cannot be read), and a file written with exactly `b`.
+inline std::vector<std::uint8_t> read_file_bytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), {});
+}
+inline void write_file_bytes(const std::filesystem::path& p, const std::vector<std::uint8_t>& b) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
 }
 
 #ifdef MLFE_BINARY

@@ -51,15 +51,8 @@ HierarchyFileInfo sample_info() {
 
 fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir("hierarchy_io")) / name; }
 
-Bytes read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return Bytes(std::istreambuf_iterator<char>(in), {});
-}
-
-void write_bytes(const fs::path& p, const Bytes& b) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-}
+Bytes read_bytes(const fs::path& p) { return test::read_file_bytes(p); }
+void write_bytes(const fs::path& p, const Bytes& b) { test::write_file_bytes(p, b); }
 
 // Recomputes the trailing CRC so that a deliberate corruption reaches the later checks.
 void fix_crc(Bytes& b) {

@@ -6,7 +6,6 @@
 #include <mlfe/core/hierarchical_basis.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -18,6 +17,7 @@
 #include <string>
 
 #include "tests/core/test_hierarchies.h"
+#include "tests/test_paths.h"
 
 namespace mlfe {
 namespace {
@@ -25,21 +25,10 @@ namespace {
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
-fs::path temp_file(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("mlfe_hierarchy_v2_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir / name;
-}
+fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir("hierarchy_v2")) / name; }
 
-Bytes read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return Bytes(std::istreambuf_iterator<char>(in), {});
-}
-
-void write_bytes(const fs::path& p, const Bytes& b) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-}
+Bytes read_bytes(const fs::path& p) { return test::read_file_bytes(p); }
+void write_bytes(const fs::path& p, const Bytes& b) { test::write_file_bytes(p, b); }
 
 // Random local refinement over several rounds, so greens are re-greened and upgraded to red
 // across calls (the order in which the rebuild's steps differ from the original's).

@@ -6,7 +6,6 @@
 #include <mlfe/core/error.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
-#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -16,27 +15,18 @@
 #include <random>
 #include <string>
 
+#include "tests/test_paths.h"
+
 namespace mlfe {
 namespace {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
-fs::path temp_file(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("mlfe_hierarchy_v3_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir / name;
-}
+fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir("hierarchy_v3")) / name; }
 
-Bytes read_bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return Bytes(std::istreambuf_iterator<char>(in), {});
-}
-
-void write_bytes(const fs::path& p, const Bytes& b) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
-}
+Bytes read_bytes(const fs::path& p) { return test::read_file_bytes(p); }
+void write_bytes(const fs::path& p, const Bytes& b) { test::write_file_bytes(p, b); }
 
 // T0 as the lattice's cube 2^L samples wide (spacing 0.5, 2, 1.25), refined at random so some
 // level-L vertices exist; data 5 x 3 x 7 samples (L = 3).
