@@ -100,6 +100,43 @@ std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::s
 // Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
 // lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
 // bits of the other two), so neighbouring tetrahedra find the same vertex.
+// Point numbers by lattice key (never 0), open addressing: the extraction looks a key up for
+// every corner pair of every mixed tetrahedron, and a node per key costs more than the rest.
+class PointIds {
+ public:
+  // The number stored for `key`, or make()'s, stored, when there is none.
+  template <class Make>
+  std::uint32_t get(std::uint64_t key, Make make) {
+    std::size_t i = slot(key);
+    if (keys_[i] == key) return ids_[i];
+    const std::uint32_t id = make();
+    keys_[i] = key, ids_[i] = id;
+    if (++size_ * 2 > keys_.size()) grow();
+    return id;
+  }
+
+ private:
+  std::size_t slot(std::uint64_t key) const {
+    const std::size_t mask = keys_.size() - 1;
+    std::size_t i = std::size_t((key * 0x9E3779B97F4A7C15ull) >> 20) & mask;
+    while (keys_[i] != 0 && keys_[i] != key) i = (i + 1) & mask;
+    return i;
+  }
+  void grow() {
+    std::vector<std::uint64_t> keys(keys_.size() * 2, 0);
+    std::vector<std::uint32_t> ids(keys.size());
+    keys.swap(keys_), ids.swap(ids_);
+    for (std::size_t i = 0; i < keys.size(); ++i)
+      if (keys[i] != 0) {
+        const std::size_t j = slot(keys[i]);
+        keys_[j] = keys[i], ids_[j] = ids[i];
+      }
+  }
+  std::vector<std::uint64_t> keys_ = std::vector<std::uint64_t>(1 << 12, 0);
+  std::vector<std::uint32_t> ids_ = std::vector<std::uint32_t>(1 << 12);
+  std::size_t size_ = 0;
+};
+
 class Extractor {
  public:
   explicit Extractor(const LabelGrid& g) : g_(g), sx_(g.dims[0] + 2), sy_(g.dims[1] + 2) {}
@@ -182,21 +219,18 @@ class Extractor {
   std::uint32_t mid(int s, int t) {
     if (s > t) std::swap(s, t);
     const std::uint64_t key = key_[s] * 8 + (bits_[s] ^ bits_[t]);
-    auto [it, added] = edges_.try_emplace(key, 0u);
-    if (added)
-      it->second =
-          add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2});
-    return it->second;
+    return edges_.get(key, [&] {
+      return add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2});
+    });
   }
 
   // The centroid of the face with corners r < s < t.
   std::uint32_t face_point(int r, int s, int t) {
     const std::uint64_t key = key_[r] * 64 + (bits_[s] ^ bits_[r]) * 8 + (bits_[t] ^ bits_[r]);
-    auto [it, added] = faces_.try_emplace(key, 0u);
-    if (added)
-      it->second = add_point({(x_[r][0] + x_[s][0] + x_[t][0]) / 3, (x_[r][1] + x_[s][1] + x_[t][1]) / 3,
-                              (x_[r][2] + x_[s][2] + x_[t][2]) / 3});
-    return it->second;
+    return faces_.get(key, [&] {
+      return add_point({(x_[r][0] + x_[s][0] + x_[t][0]) / 3, (x_[r][1] + x_[s][1] + x_[t][1]) / 3,
+                        (x_[r][2] + x_[s][2] + x_[t][2]) / 3});
+    });
   }
 
   // A triangle separating the cells of corners s and t (which carry different labels): oriented
@@ -218,7 +252,7 @@ class Extractor {
   V3 x_[4]{};
   std::uint16_t label_[4]{};
   std::uint64_t key_[4]{};
-  std::unordered_map<std::uint64_t, std::uint32_t> edges_, faces_;
+  PointIds edges_, faces_;
   LabelInterfaces out_;
 };
 
@@ -300,9 +334,9 @@ class ComplexDecimator {
                       });
     // Step 3: the whole complex up to the tolerance, cheapest first (the blocks' borders, and
     // the merges that shape the result).
-    std::vector<std::uint32_t> all;
-    for (std::uint32_t v = 0; v < x_.positions.size(); ++v)
-      if (alive_[v]) all.push_back(v);
+    renumber_alive();
+    std::vector<std::uint32_t> all(x_.positions.size());
+    std::iota(all.begin(), all.end(), 0u);
     Queue q;
     q.limit2 = tol2_;
     decimate(all, kEverywhere, q);
@@ -685,6 +719,45 @@ class ComplexDecimator {
     neighbours(v, q.nv);
     for (auto w : q.nv)
       if (in_scope(w, scope)) push(v, w, q);
+  }
+
+  // Drops dead vertices and triangles, numbering the rest in the same order (so every choice
+  // that compares numbers or follows their order is the same), for a smaller working set.
+  void renumber_alive() {
+    const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
+    std::vector<std::uint32_t> vmap(nv, ~0u), tmap(nt, ~0u);
+    std::uint32_t n = 0;
+    for (std::size_t v = 0; v < nv; ++v)
+      if (alive_[v]) {
+        vmap[v] = n;
+        x_.positions[n] = x_.positions[v], q_[n] = q_[v], kind_[n] = kind_[v];
+        tris_of_[n].swap(tris_of_[v]);
+        ++n;
+      }
+    x_.positions.resize(n), q_.resize(n), kind_.resize(n), tris_of_.resize(n);
+    x_.positions.shrink_to_fit(), q_.shrink_to_fit(), tris_of_.shrink_to_fit();
+    alive_.assign(n, 1);
+    std::uint32_t m = 0;
+    for (std::size_t t = 0; t < nt; ++t)
+      if (tri_alive_[t]) {
+        tmap[t] = m;
+        for (int c = 0; c < 3; ++c) x_.triangles[m][c] = vmap[x_.triangles[t][c]];
+        x_.labels[m] = x_.labels[t];
+        ++m;
+      }
+    x_.triangles.resize(m), x_.labels.resize(m);
+    x_.triangles.shrink_to_fit(), x_.labels.shrink_to_fit();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          auto& tv = tris_of_[v];
+                          std::size_t kept = 0;
+                          for (auto t : tv)
+                            if (tri_alive_[t]) tv[kept++] = tmap[t];
+                          tv.resize(kept);
+                        }
+                      });
+    tri_alive_.assign(m, 1);
   }
 
   // Drops dead triangles and unused vertices; vertices numbered in first use.
