@@ -15,8 +15,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <functional>
 #include <iterator>
 #include <limits>
@@ -97,9 +95,6 @@ std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::s
   return n;
 }
 
-// Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
-// lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
-// bits of the other two), so neighbouring tetrahedra find the same vertex.
 // Point numbers by lattice key (never 0), open addressing: the extraction looks a key up for
 // every corner pair of every mixed tetrahedron, and a node per key costs more than the rest.
 class PointIds {
@@ -137,6 +132,9 @@ class PointIds {
   std::size_t size_ = 0;
 };
 
+// Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
+// lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
+// bits of the other two), so neighbouring tetrahedra find the same vertex.
 class Extractor {
  public:
   explicit Extractor(const LabelGrid& g) : g_(g), sx_(g.dims[0] + 2), sy_(g.dims[1] + 2) {}
@@ -180,9 +178,10 @@ class Extractor {
     // Step 3: three or four labels: the interface graph on the faces (a segment across each
     // two-label face, three spokes to the centroid of each three-label face) is fanned to the
     // tetrahedron's centroid, where the junction curves of the labels meet.
-    const std::uint32_t centre = add_point({(x_[0][0] + x_[1][0] + x_[2][0] + x_[3][0]) / 4,
-                                            (x_[0][1] + x_[1][1] + x_[2][1] + x_[3][1]) / 4,
-                                            (x_[0][2] + x_[1][2] + x_[2][2] + x_[3][2]) / 4});
+    const std::uint32_t centre = add_point(
+        {(x_[0][0] + x_[1][0] + x_[2][0] + x_[3][0]) / 4, (x_[0][1] + x_[1][1] + x_[2][1] + x_[3][1]) / 4,
+         (x_[0][2] + x_[1][2] + x_[2][2] + x_[3][2]) / 4},
+        0);
     for (int omit = 3; omit >= 0; --omit) {
       int f[3], n = 0;
       for (int s = 0; s < 4; ++s)
@@ -205,12 +204,19 @@ class Extractor {
     }
   }
 
-  LabelInterfaces take() { return std::move(out_); }
+  // The complex of the tetrahedra given, and per point its lattice key (edge keys even, face
+  // keys odd, 0 for tetrahedron centroids).
+  struct Piece {
+    LabelInterfaces x;
+    std::vector<std::uint64_t> keys;
+  };
+  Piece take() { return {std::move(out_), std::move(keys_of_)}; }
 
  private:
-  std::uint32_t add_point(const V3& p) {
+  std::uint32_t add_point(const V3& p, std::uint64_t key) {
     MLFE_CHECK(out_.positions.size() < 0xffffffffu);
     out_.positions.push_back(p);
+    keys_of_.push_back(key);
     return static_cast<std::uint32_t>(out_.positions.size() - 1);
   }
 
@@ -220,7 +226,8 @@ class Extractor {
     if (s > t) std::swap(s, t);
     const std::uint64_t key = key_[s] * 8 + (bits_[s] ^ bits_[t]);
     return edges_.get(key, [&] {
-      return add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2});
+      return add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2},
+                       key * 2);
     });
   }
 
@@ -229,7 +236,8 @@ class Extractor {
     const std::uint64_t key = key_[r] * 64 + (bits_[s] ^ bits_[r]) * 8 + (bits_[t] ^ bits_[r]);
     return faces_.get(key, [&] {
       return add_point({(x_[r][0] + x_[s][0] + x_[t][0]) / 3, (x_[r][1] + x_[s][1] + x_[t][1]) / 3,
-                        (x_[r][2] + x_[s][2] + x_[t][2]) / 3});
+                        (x_[r][2] + x_[s][2] + x_[t][2]) / 3},
+                       key * 2 + 1);
     });
   }
 
@@ -254,6 +262,7 @@ class Extractor {
   std::uint64_t key_[4]{};
   PointIds edges_, faces_;
   LabelInterfaces out_;
+  std::vector<std::uint64_t> keys_of_;
 };
 
 // Per vertex its triangles, in triangle order (compressed rows).
@@ -911,13 +920,53 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
 }
 
 LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<KuhnTet>& tets) {
-  Extractor x(g);
-  for (const auto& t : tets) {
+  for (const auto& t : tets)
     MLFE_CHECK(t.order < 6 && t.i >= -1 && t.j >= -1 && t.k >= -1 && t.i < g.dims[0] && t.j < g.dims[1] &&
                t.k < g.dims[2]);
-    x.tet(t);
+  // Step 1: runs of whole z layers (when the tetrahedra come in layer order) extracted apart,
+  // in parallel. Two runs share only the points in the plane between them.
+  std::vector<std::size_t> cut{0};
+  if (std::is_sorted(tets.begin(), tets.end(),
+                     [](const KuhnTet& a, const KuhnTet& b) { return a.k < b.k; })) {
+    const std::size_t run = std::max<std::size_t>(tets.size() / 16, 1);
+    for (std::size_t n = 1; n < tets.size(); ++n)
+      if (tets[n].k != tets[n - 1].k && n - cut.back() >= run) cut.push_back(n);
   }
-  return x.take();
+  cut.push_back(tets.size());
+  std::vector<Extractor::Piece> pieces(cut.size() - 1);
+  tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t c) {
+    Extractor x(g);
+    for (std::size_t n = cut[c]; n < cut[c + 1]; ++n) x.tet(tets[n]);
+    pieces[c] = x.take();
+  });
+  // Step 2: joined in order. A run's point already made by the run below (in the plane
+  // between them, found by key) keeps that number; the others are numbered in the order they
+  // were made, so the numbering is the one a single pass over all tetrahedra gives.
+  LabelInterfaces out;
+  PointIds below;  // the previous run's points in its top plane
+  for (std::size_t c = 0; c < pieces.size(); ++c) {
+    Extractor::Piece& piece = pieces[c];
+    const double bottom = cut[c] < tets.size() ? double(tets[cut[c]].k) : 0,
+                 top = cut[c + 1] > cut[c] ? double(tets[cut[c + 1] - 1].k + 1) : 0;
+    const bool shares_below = c > 0, shares_above = c + 1 < pieces.size();
+    PointIds above;
+    std::vector<std::uint32_t> id(piece.x.positions.size());
+    for (std::size_t i = 0; i < id.size(); ++i) {
+      const V3& p = piece.x.positions[i];
+      auto add = [&] {
+        MLFE_CHECK(out.positions.size() < 0xffffffffu);
+        out.positions.push_back(p);
+        return std::uint32_t(out.positions.size() - 1);
+      };
+      id[i] = shares_below && p[2] == bottom ? below.get(piece.keys[i], add) : add();
+      if (shares_above && p[2] == top) above.get(piece.keys[i], [&] { return id[i]; });
+    }
+    below = std::move(above);
+    for (const auto& t : piece.x.triangles) out.triangles.push_back({id[t[0]], id[t[1]], id[t[2]]});
+    out.labels.insert(out.labels.end(), piece.x.labels.begin(), piece.x.labels.end());
+    piece = {};
+  }
+  return out;
 }
 
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& o) {
