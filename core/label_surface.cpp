@@ -385,8 +385,8 @@ class ComplexDecimator {
   };
   // Blocks of kBlock³ voxels; a pass's scope is a block's number or the whole complex. The
   // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
-  // 73 % at 0.2, with the same distances as one pass over the whole (bench/RESULTS.md);
-  // more makes the blocks' seams show.
+  // 73 % at 0.2, with distances within the spread that reordering near-equal merges of one
+  // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
 
