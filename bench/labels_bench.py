@@ -26,6 +26,7 @@ The >= 100-label volume: the colin27 brain (181 x 217 x 181, 1 mm) cut into 60 V
 above the brain's median), 120 labels; written as a uint16 NRRD.
 
   /usr/bin/python3 bench/labels_bench.py --build build --out /tmp/labels_bench
+  /usr/bin/python3 bench/labels_bench.py --build build --timing-rounds 5 --base-build ../base/build
 """
 import argparse
 import json
@@ -162,6 +163,41 @@ def run_mlfe(mlfe, vol, out_dir, tag, extra):
                  "all_closed": all(s["closed"] for s in r["asset"]["structures"])}
 
 
+def timed(cmd):
+    """Runs cmd under /usr/bin/time; returns (process, wall seconds, user + sys seconds)."""
+    p = subprocess.run(["/usr/bin/time", "-f", "TIME %e %U %S"] + cmd, capture_output=True, text=True, check=True)
+    e, u, s = [float(x) for x in [l for l in p.stderr.splitlines() if l.startswith("TIME")][-1].split()[1:]]
+    return p, e, u + s
+
+
+def timing_rounds(mlfe, base_mlfe, vol, out_dir, rounds):
+    """Time only, interleaved: per round the VTK worker, mlfe with 2 and 1 threads and (when
+    given) a base build's mlfe with 2 threads. VTK's wall is its worker's own clock; CPU is user +
+    sys of each process. Prints each round and the minima and medians."""
+    import statistics
+    glb = os.path.join(out_dir, "timing.glb")
+    peers = [("mlfe, 2 threads", mlfe, 2), ("mlfe, 1 thread", mlfe, 1)]
+    if base_mlfe:
+        peers.append(("base mlfe, 2 threads", base_mlfe, 2))
+    rows = {"VTK pipeline": []}
+    rows.update({name: [] for name, _, _ in peers})
+    for i in range(rounds):
+        load = open("/proc/loadavg").read().split()[0]
+        p, _, cpu = timed([sys.executable, "-c", VTK_WORKER, vol, out_dir])
+        rows["VTK pipeline"].append((json.loads(p.stdout.strip().splitlines()[-1])["seconds"], cpu))
+        for name, binary, threads in peers:
+            _, wall, cpu = timed([binary, "--threads", str(threads), "convert", vol, "--labels", "-o", glb, "--quiet"])
+            rows[name].append((wall, cpu))
+        print(json.dumps({"round": i, "load": load, "wall_cpu": {k: r[-1] for k, r in rows.items()}}), flush=True)
+    vtk_wall = statistics.median(x[0] for x in rows["VTK pipeline"])
+    vtk_cpu = statistics.median(x[1] for x in rows["VTK pipeline"])
+    for name, r in rows.items():
+        wall, cpu = [x[0] for x in r], [x[1] for x in r]
+        print("%-22s wall min %.2f median %.2f  cpu min %.2f median %.2f  median/VTK wall %.2f cpu %.2f" %
+              (name, min(wall), statistics.median(wall), min(cpu), statistics.median(cpu),
+               statistics.median(wall) / vtk_wall, statistics.median(cpu) / vtk_cpu), flush=True)
+
+
 def distances(build, vol, glb, out_dir):
     tool = os.path.join(build, "bench", "label_distance_bench")
     p = subprocess.run([tool, vol, glb, out_dir], check=True, capture_output=True, text=True)
@@ -182,9 +218,17 @@ def main():
     ap.add_argument("--out", default="/tmp/labels_bench")
     ap.add_argument("--mlfe-args", default="", help="extra mlfe convert options")
     ap.add_argument("--volumes", default="jhu,parcels", help="which volumes: jhu, parcels or both")
+    ap.add_argument("--timing-rounds", type=int, default=0,
+                    help="instead: this many interleaved timing rounds on the JHU atlas (no distances)")
+    ap.add_argument("--base-build", default="", help="with --timing-rounds: a second build to time beside")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     mlfe = os.path.join(args.build, "cli", "mlfe")
+    if args.timing_rounds > 0:
+        base = os.path.join(args.base_build, "cli", "mlfe") if args.base_build else ""
+        timing_rounds(mlfe, base, os.path.join(SHARED, "atlas_jhu_wm_labels_1mm.nii.gz"), args.out,
+                      args.timing_rounds)
+        return
     parcels = os.path.join(args.out, "colin27_parcels_120.nrrd")
     wanted = args.volumes.split(",")
     volumes = []

@@ -10,6 +10,7 @@
 #include <mlfe/core/error.h>
 #include <mlfe/core/label_surface.h>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -94,6 +95,43 @@ std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::s
   return n;
 }
 
+// Point numbers by lattice key (never 0), open addressing: the extraction looks a key up for
+// every corner pair of every mixed tetrahedron, and a node per key costs more than the rest.
+class PointIds {
+ public:
+  // The number stored for `key`, or make()'s, stored, when there is none.
+  template <class Make>
+  std::uint32_t get(std::uint64_t key, Make make) {
+    std::size_t i = slot(key);
+    if (keys_[i] == key) return ids_[i];
+    const std::uint32_t id = make();
+    keys_[i] = key, ids_[i] = id;
+    if (++size_ * 2 > keys_.size()) grow();
+    return id;
+  }
+
+ private:
+  std::size_t slot(std::uint64_t key) const {
+    const std::size_t mask = keys_.size() - 1;
+    std::size_t i = std::size_t((key * 0x9E3779B97F4A7C15ull) >> 20) & mask;
+    while (keys_[i] != 0 && keys_[i] != key) i = (i + 1) & mask;
+    return i;
+  }
+  void grow() {
+    std::vector<std::uint64_t> keys(keys_.size() * 2, 0);
+    std::vector<std::uint32_t> ids(keys.size());
+    keys.swap(keys_), ids.swap(ids_);
+    for (std::size_t i = 0; i < keys.size(); ++i)
+      if (keys[i] != 0) {
+        const std::size_t j = slot(keys[i]);
+        keys_[j] = keys[i], ids_[j] = ids[i];
+      }
+  }
+  std::vector<std::uint64_t> keys_ = std::vector<std::uint64_t>(1 << 12, 0);
+  std::vector<std::uint32_t> ids_ = std::vector<std::uint32_t>(1 << 12);
+  std::size_t size_ = 0;
+};
+
 // Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
 // lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
 // bits of the other two), so neighbouring tetrahedra find the same vertex.
@@ -140,9 +178,10 @@ class Extractor {
     // Step 3: three or four labels: the interface graph on the faces (a segment across each
     // two-label face, three spokes to the centroid of each three-label face) is fanned to the
     // tetrahedron's centroid, where the junction curves of the labels meet.
-    const std::uint32_t centre = add_point({(x_[0][0] + x_[1][0] + x_[2][0] + x_[3][0]) / 4,
-                                            (x_[0][1] + x_[1][1] + x_[2][1] + x_[3][1]) / 4,
-                                            (x_[0][2] + x_[1][2] + x_[2][2] + x_[3][2]) / 4});
+    const std::uint32_t centre = add_point(
+        {(x_[0][0] + x_[1][0] + x_[2][0] + x_[3][0]) / 4, (x_[0][1] + x_[1][1] + x_[2][1] + x_[3][1]) / 4,
+         (x_[0][2] + x_[1][2] + x_[2][2] + x_[3][2]) / 4},
+        0);
     for (int omit = 3; omit >= 0; --omit) {
       int f[3], n = 0;
       for (int s = 0; s < 4; ++s)
@@ -165,12 +204,19 @@ class Extractor {
     }
   }
 
-  LabelInterfaces take() { return std::move(out_); }
+  // The complex of the tetrahedra given, and per point its lattice key (edge keys even, face
+  // keys odd, 0 for tetrahedron centroids).
+  struct Piece {
+    LabelInterfaces x;
+    std::vector<std::uint64_t> keys;
+  };
+  Piece take() { return {std::move(out_), std::move(keys_of_)}; }
 
  private:
-  std::uint32_t add_point(const V3& p) {
+  std::uint32_t add_point(const V3& p, std::uint64_t key) {
     MLFE_CHECK(out_.positions.size() < 0xffffffffu);
     out_.positions.push_back(p);
+    keys_of_.push_back(key);
     return static_cast<std::uint32_t>(out_.positions.size() - 1);
   }
 
@@ -179,21 +225,20 @@ class Extractor {
   std::uint32_t mid(int s, int t) {
     if (s > t) std::swap(s, t);
     const std::uint64_t key = key_[s] * 8 + (bits_[s] ^ bits_[t]);
-    auto [it, added] = edges_.try_emplace(key, 0u);
-    if (added)
-      it->second =
-          add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2});
-    return it->second;
+    return edges_.get(key, [&] {
+      return add_point({(x_[s][0] + x_[t][0]) / 2, (x_[s][1] + x_[t][1]) / 2, (x_[s][2] + x_[t][2]) / 2},
+                       key * 2);
+    });
   }
 
   // The centroid of the face with corners r < s < t.
   std::uint32_t face_point(int r, int s, int t) {
     const std::uint64_t key = key_[r] * 64 + (bits_[s] ^ bits_[r]) * 8 + (bits_[t] ^ bits_[r]);
-    auto [it, added] = faces_.try_emplace(key, 0u);
-    if (added)
-      it->second = add_point({(x_[r][0] + x_[s][0] + x_[t][0]) / 3, (x_[r][1] + x_[s][1] + x_[t][1]) / 3,
-                              (x_[r][2] + x_[s][2] + x_[t][2]) / 3});
-    return it->second;
+    return faces_.get(key, [&] {
+      return add_point({(x_[r][0] + x_[s][0] + x_[t][0]) / 3, (x_[r][1] + x_[s][1] + x_[t][1]) / 3,
+                        (x_[r][2] + x_[s][2] + x_[t][2]) / 3},
+                       key * 2 + 1);
+    });
   }
 
   // A triangle separating the cells of corners s and t (which carry different labels): oriented
@@ -215,31 +260,47 @@ class Extractor {
   V3 x_[4]{};
   std::uint16_t label_[4]{};
   std::uint64_t key_[4]{};
-  std::unordered_map<std::uint64_t, std::uint32_t> edges_, faces_;
+  PointIds edges_, faces_;
   LabelInterfaces out_;
+  std::vector<std::uint64_t> keys_of_;
 };
 
-// The edges of the complex, sorted, each marked when it lies on a junction curve: where its
-// triangles are not exactly two of the same interface (three or more labels meet there).
-std::vector<std::pair<std::uint64_t, bool>> classified_edges(const LabelInterfaces& x) {
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> edges;
-  edges.reserve(x.triangles.size() * 3);
-  for (std::size_t t = 0; t < x.triangles.size(); ++t) {
-    const std::uint32_t pair = std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1];
-    for (int c = 0; c < 3; ++c)
-      edges.emplace_back(edge_key(x.triangles[t][c], x.triangles[t][(c + 1) % 3]), pair);
+// Per vertex its triangles, in triangle order (compressed rows).
+struct VertexTriangles {
+  std::vector<std::uint32_t> start, tris;
+  explicit VertexTriangles(const LabelInterfaces& x) : start(x.positions.size() + 1, 0) {
+    for (const auto& t : x.triangles)
+      for (auto v : t) ++start[v + 1];
+    for (std::size_t v = 0; v + 1 < start.size(); ++v) start[v + 1] += start[v];
+    tris.resize(start.back());
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t t = 0; t < x.triangles.size(); ++t)
+      for (auto v : x.triangles[t]) tris[fill[v]++] = t;
   }
-  std::sort(edges.begin(), edges.end());
-  std::vector<std::pair<std::uint64_t, bool>> unique;
-  for (std::size_t i = 0; i < edges.size();) {
+};
+
+// The neighbours of v, ascending, each marked when the edge to it lies on a junction curve:
+// where its triangles are not exactly two of the same interface (three or more labels meet).
+// `around` is scratch.
+void classified_neighbours(const LabelInterfaces& x, const VertexTriangles& vt, std::uint32_t v,
+                           std::vector<std::pair<std::uint32_t, std::uint32_t>>& around,
+                           std::vector<std::pair<std::uint32_t, bool>>& out) {
+  around.clear();
+  for (std::uint32_t n = vt.start[v]; n < vt.start[v + 1]; ++n) {
+    const std::uint32_t t = vt.tris[n];
+    for (auto w : x.triangles[t])
+      if (w != v) around.emplace_back(w, std::uint32_t(x.labels[t][0]) << 16 | x.labels[t][1]);
+  }
+  std::sort(around.begin(), around.end());
+  out.clear();
+  for (std::size_t i = 0; i < around.size();) {
     std::size_t j = i;
     bool same = true;
-    for (; j < edges.size() && edges[j].first == edges[i].first; ++j)
-      same &= edges[j].second == edges[i].second;
-    unique.emplace_back(edges[i].first, !(same && j - i == 2));
+    for (; j < around.size() && around[j].first == around[i].first; ++j)
+      same &= around[j].second == around[i].second;
+    out.emplace_back(around[i].first, !(same && j - i == 2));
     i = j;
   }
-  return unique;
 }
 
 // Garland & Heckbert's quadric edge collapse (SIGGRAPH 1997) over the whole interface complex
@@ -250,35 +311,44 @@ std::vector<std::pair<std::uint64_t, bool>> classified_edges(const LabelInterfac
 // (placed on the segment between them where the quadric is least); where curves meet, and at
 // vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
 // label's closed surface onto a closed surface, so closed stays closed and shared stays shared.
+//
+// Two passes over a fixed partition of space into blocks: first every block on its own (in
+// parallel), collapsing only edges whose ends and all their neighbours lie in the block, then
+// the whole complex. A block's collapses touch nothing outside it (see run()), and each pass is
+// sequential in itself, so the result does not depend on the thread count; and a block's few
+// thousand vertices stay in cache, where the collapse over the whole complex at once waits on
+// memory for every triangle list it reads.
 class ComplexDecimator {
  public:
   ComplexDecimator(LabelInterfaces& x, double tolerance) : x_(x), tol2_(tolerance * tolerance) {}
 
   void run() {
+    // Step 1: vertex kinds, triangle lists and quadrics.
+    vertex_triangles();
     classify();
     init_quadrics();
-    // Every edge once, from its lower vertex, in vertex order.
-    for (std::uint32_t v = 0; v < x_.positions.size(); ++v) {
-      neighbours(v, nv_);
-      for (auto w : nv_)
-        if (w > v) push(v, w);
-    }
-    // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
-    // candidates, most of them stale, costs more than the collapses). Within a bucket the last
-    // pushed goes first; all sequential, so the order is the same on every run.
-    lowest_ = 0;
-    for (;;) {
-      while (lowest_ < kBuckets && buckets_[lowest_].empty()) ++lowest_;
-      if (lowest_ == kBuckets) break;
-      const Candidate c = buckets_[lowest_].back();
-      buckets_[lowest_].pop_back();
-      if (!alive_[c.a] || !alive_[c.b]) continue;
-      std::uint32_t from = 0, to = 0;
-      V3 p{};
-      const double cost = plan(c.a, c.b, from, to, p);
-      if (!(cost <= tol2_) || bucket_of(cost) != lowest_) continue;
-      if (collapsible(from, to, p)) collapse(from, to, p);
-    }
+    // Step 2: each block's inside alone, the cheap merges only (where the order hardly
+    // matters). A collapse of u into v writes u's and v's triangle lists, their triangles, v's
+    // position and quadric, and reads their neighbours; with both ends inside a block (no
+    // neighbour in another block: a collapse inside a block never adds one, so this stays
+    // true), all of that belongs to the block.
+    const std::vector<std::vector<std::uint32_t>> blocks = block_insides();
+    tbb::enumerable_thread_specific<Queue> queues;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        Queue& q = queues.local();
+                        q.limit2 = tol2_ * kBlockShare * kBlockShare;
+                        for (std::size_t b = r.begin(); b != r.end(); ++b)
+                          decimate(blocks[b], std::uint32_t(b), q);
+                      });
+    // Step 3: the whole complex up to the tolerance, cheapest first (the blocks' borders, and
+    // the merges that shape the result).
+    renumber_alive();
+    std::vector<std::uint32_t> all(x_.positions.size());
+    std::iota(all.begin(), all.end(), 0u);
+    Queue q;
+    q.limit2 = tol2_;
+    decimate(all, kEverywhere, q);
     compact();
   }
 
@@ -304,43 +374,69 @@ class ComplexDecimator {
     std::uint32_t a, b;
   };
   static constexpr std::size_t kBuckets = 2048;
+  // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
+  // candidates, most of them stale, costs more than the collapses). Within a bucket the last
+  // pushed goes first. Also the scratch lists of one pass.
+  struct Queue {
+    std::vector<std::vector<Candidate>> buckets = std::vector<std::vector<Candidate>>(kBuckets);
+    std::size_t lowest = kBuckets;
+    double limit2 = 0;  // the pass's largest cost
+    std::vector<std::uint32_t> nu, nv, common, apex;
+  };
+  // Blocks of kBlock³ voxels; a pass's scope is a block's number or the whole complex. The
+  // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
+  // 73 % at 0.2, with distances within the spread that reordering near-equal merges of one
+  // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
+  static constexpr double kBlock = 16, kBlockShare = 0.2;
+  static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
+
+  void vertex_triangles() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::uint32_t> count(nv, 0);
+    for (const auto& t : x_.triangles)
+      for (auto v : t) ++count[v];
+    tris_of_.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) tris_of_[v].reserve(count[v]);
+    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
+      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
+    tri_alive_.assign(x_.triangles.size(), 1);
+    alive_.assign(nv, 1);
+  }
 
   // Kinds: interior (no junction edge), curve (two junction edges), fixed (other counts, or a
   // vertex whose triangles do not form one closed fan: a non-manifold point of an interface).
   void classify() {
     const std::size_t nv = x_.positions.size();
     kind_.assign(nv, kInterior);
-    alive_.assign(nv, 1);
-    tris_of_.assign(nv, {});
-    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
-      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
-    tri_alive_.assign(x_.triangles.size(), 1);
-    // Per vertex its junction edges, counted from its own triangles (a global edge list would
-    // cost more memory than the collapse itself).
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> around;
-    for (std::uint32_t v = 0; v < nv; ++v) {
-      around.clear();
-      for (auto t : tris_of_[v])
-        for (auto w : x_.triangles[t])
-          if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
-      std::sort(around.begin(), around.end());
-      int junction_degree = 0;
-      for (std::size_t i = 0; i < around.size();) {
-        std::size_t j = i;
-        while (j < around.size() && around[j].first == around[i].first) ++j;
-        junction_degree += !(j - i == 2 && around[i].second == around[i + 1].second);
-        i = j;
-      }
-      if (junction_degree == 2) kind_[v] = kCurve;
-      if (junction_degree != 0 && junction_degree != 2) kind_[v] = kFixed;
-      if (kind_[v] == kInterior && !one_fan(v)) kind_[v] = kFixed;
-    }
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          // Per vertex its junction edges, counted from its own triangles (a global edge list would
+          // cost more memory than the collapse itself).
+          std::vector<std::pair<std::uint32_t, std::uint32_t>> around, link;
+          for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            around.clear();
+            for (auto t : tris_of_[v])
+              for (auto w : x_.triangles[t])
+                if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
+            std::sort(around.begin(), around.end());
+            int junction_degree = 0;
+            for (std::size_t i = 0; i < around.size();) {
+              std::size_t j = i;
+              while (j < around.size() && around[j].first == around[i].first) ++j;
+              junction_degree += !(j - i == 2 && around[i].second == around[i + 1].second);
+              i = j;
+            }
+            if (junction_degree == 2) kind_[v] = kCurve;
+            if (junction_degree != 0 && junction_degree != 2) kind_[v] = kFixed;
+            if (kind_[v] == kInterior && !one_fan(std::uint32_t(v), link)) kind_[v] = kFixed;
+          }
+        });
   }
 
   // Whether the triangles around an interior vertex form one closed fan: the edges opposite v
   // form one cycle.
-  bool one_fan(std::uint32_t v) const {
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> link;
+  bool one_fan(std::uint32_t v, std::vector<std::pair<std::uint32_t, std::uint32_t>>& link) const {
+    link.clear();
     for (auto t : tris_of_[v]) {
       const auto& tri = x_.triangles[t];
       const int c = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
@@ -360,24 +456,98 @@ class ComplexDecimator {
     return steps + 1 == link.size();
   }
 
+  // Per vertex the sum of its triangles' area-weighted plane quadrics, in triangle order.
   void init_quadrics() {
     q_.assign(x_.positions.size(), Quadric{});
-    for (const auto& t : x_.triangles) {
-      const V3 &p0 = x_.positions[t[0]], &p1 = x_.positions[t[1]], &p2 = x_.positions[t[2]];
-      V3 n = cross(sub(p1, p0), sub(p2, p0));
-      const double len = std::sqrt(dot(n, n));
-      if (!(len > 0)) continue;
-      const double area = len / 2;
-      for (auto& c : n) c /= len;
-      const double d = -dot(n, p0);
-      // area * (n.p + d)^2
-      Quadric q;
-      q.a[0] = area * n[0] * n[0], q.a[1] = area * n[0] * n[1], q.a[2] = area * n[0] * n[2];
-      q.a[3] = area * n[1] * n[1], q.a[4] = area * n[1] * n[2], q.a[5] = area * n[2] * n[2];
-      for (int c = 0; c < 3; ++c) q.b[c] = -area * d * n[c];
-      q.c = area * d * d;
-      q.w = area;
-      for (auto v : t) q_[v].add(q);
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, q_.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v)
+            for (auto t : tris_of_[v]) {
+              const auto& tri = x_.triangles[t];
+              const V3 &p0 = x_.positions[tri[0]], &p1 = x_.positions[tri[1]], &p2 = x_.positions[tri[2]];
+              V3 n = cross(sub(p1, p0), sub(p2, p0));
+              const double len = std::sqrt(dot(n, n));
+              if (!(len > 0)) continue;
+              const double area = len / 2;
+              for (auto& c : n) c /= len;
+              const double d = -dot(n, p0);
+              // area * (n.p + d)^2
+              Quadric q;
+              q.a[0] = area * n[0] * n[0], q.a[1] = area * n[0] * n[1], q.a[2] = area * n[0] * n[2];
+              q.a[3] = area * n[1] * n[1], q.a[4] = area * n[1] * n[2], q.a[5] = area * n[2] * n[2];
+              for (int c = 0; c < 3; ++c) q.b[c] = -area * d * n[c];
+              q.c = area * d * d;
+              q.w = area;
+              q_[v].add(q);
+            }
+        });
+  }
+
+  // The vertices inside each non-empty block (no neighbour in another block), ascending; every
+  // vertex's scope_ is its block's number in that list, or kBorder.
+  std::vector<std::vector<std::uint32_t>> block_insides() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::uint64_t> cell(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          std::uint64_t key = 0;
+                          for (int c = 0; c < 3; ++c) {
+                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
+                            key = key << 21 | std::uint64_t(std::clamp(s, 0.0, double((1 << 21) - 1)));
+                          }
+                          cell[v] = key;
+                        }
+                      });
+    scope_.assign(nv, kBorder);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          bool inside = alive_[v];
+                          for (auto t : tris_of_[v])
+                            if (tri_alive_[t])
+                              for (auto w : x_.triangles[t]) inside &= cell[w] == cell[v];
+                          if (inside) scope_[v] = 0;
+                        }
+                      });
+    // Number the blocks in order of their cells.
+    std::vector<std::uint64_t> cells;
+    for (std::size_t v = 0; v < nv; ++v)
+      if (scope_[v] == 0) cells.push_back(cell[v]);
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<std::vector<std::uint32_t>> blocks(cells.size());
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      if (scope_[v] == kBorder) continue;
+      scope_[v] = std::uint32_t(std::lower_bound(cells.begin(), cells.end(), cell[v]) - cells.begin());
+      blocks[scope_[v]].push_back(v);
+    }
+    return blocks;
+  }
+
+  bool in_scope(std::uint32_t v, std::uint32_t scope) const {
+    return scope == kEverywhere || scope_[v] == scope;
+  }
+
+  // One pass: every edge of `vertices` within `scope` queued once, from its lower vertex, in
+  // vertex order, then collapsed cheapest first while within the tolerance.
+  void decimate(const std::vector<std::uint32_t>& vertices, std::uint32_t scope, Queue& q) {
+    for (auto v : vertices) {
+      neighbours(v, q.nv);
+      for (auto w : q.nv)
+        if (w > v && in_scope(w, scope)) push(v, w, q);
+    }
+    for (;;) {
+      while (q.lowest < kBuckets && q.buckets[q.lowest].empty()) ++q.lowest;
+      if (q.lowest == kBuckets) break;
+      const Candidate c = q.buckets[q.lowest].back();
+      q.buckets[q.lowest].pop_back();
+      if (!alive_[c.a] || !alive_[c.b]) continue;
+      std::uint32_t from = 0, to = 0;
+      V3 p{};
+      const double cost = plan(c.a, c.b, from, to, p);
+      if (!(cost <= q.limit2) || bucket_of(cost, q) != q.lowest) continue;
+      if (collapsible(from, to, p, q)) collapse(from, to, p, scope, q);
     }
   }
 
@@ -459,26 +629,32 @@ class ComplexDecimator {
   }
 
   // Queues the collapse of edge {a, b} when it is allowed and within the tolerance.
-  void push(std::uint32_t a, std::uint32_t b) {
+  void push(std::uint32_t a, std::uint32_t b, Queue& q) const {
     std::uint32_t from = 0, to = 0;
     V3 p{};
     const double cost = plan(a, b, from, to, p);
-    if (!(cost <= tol2_)) return;
-    const std::size_t bucket = bucket_of(cost);
-    buckets_[bucket].push_back({a, b});
-    lowest_ = std::min(lowest_, bucket);
+    if (!(cost <= q.limit2)) return;
+    const std::size_t bucket = bucket_of(cost, q);
+    q.buckets[bucket].push_back({a, b});
+    q.lowest = std::min(q.lowest, bucket);
   }
 
-  std::size_t bucket_of(double cost) const {
-    return std::min(kBuckets - 1, std::size_t(std::sqrt(cost / tol2_) * double(kBuckets)));
+  static std::size_t bucket_of(double cost, const Queue& q) {
+    return std::min(kBuckets - 1, std::size_t(std::sqrt(cost / q.limit2) * double(kBuckets)));
   }
 
-  void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
+  // The live neighbours of v, ascending; drops v's dead triangles from its list on the way.
+  void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) {
     out.clear();
-    for (auto t : tris_of_[v])
-      if (tri_alive_[t])
+    auto& tv = tris_of_[v];
+    std::size_t kept = 0;
+    for (auto t : tv)
+      if (tri_alive_[t]) {
+        tv[kept++] = t;
         for (auto w : x_.triangles[t])
           if (w != v) out.push_back(w);
+      }
+    tv.resize(kept);
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
   }
@@ -486,27 +662,26 @@ class ComplexDecimator {
   // Topology (the link condition: the common neighbours of the two ends are exactly the apexes
   // of the triangles on the edge; no closed piece below a tetrahedron; a junction curve keeps at
   // least three vertices per loop) and geometry (no triangle flips or degenerates).
-  bool collapsible(std::uint32_t u, std::uint32_t v, const V3& p) {
-    neighbours(u, nu_);
-    neighbours(v, nv_);
-    if (nu_.size() <= 3 && nv_.size() <= 3) return false;
-    common_.clear();
-    std::set_intersection(nu_.begin(), nu_.end(), nv_.begin(), nv_.end(), std::back_inserter(common_));
-    apex_.clear();
+  bool collapsible(std::uint32_t u, std::uint32_t v, const V3& p, Queue& q) {
+    neighbours(u, q.nu);
+    neighbours(v, q.nv);
+    if (q.nu.size() <= 3 && q.nv.size() <= 3) return false;
+    q.common.clear();
+    std::set_intersection(q.nu.begin(), q.nu.end(), q.nv.begin(), q.nv.end(), std::back_inserter(q.common));
+    q.apex.clear();
     for (auto t : tris_of_[u]) {
-      if (!tri_alive_[t]) continue;
       const auto& tri = x_.triangles[t];
       if (tri[0] != v && tri[1] != v && tri[2] != v) continue;
       for (auto w : tri)
-        if (w != u && w != v) apex_.push_back(w);
+        if (w != u && w != v) q.apex.push_back(w);
     }
-    if (apex_.empty()) return false;
-    std::sort(apex_.begin(), apex_.end());
-    apex_.erase(std::unique(apex_.begin(), apex_.end()), apex_.end());
-    if (apex_ != common_) return false;
+    if (q.apex.empty()) return false;
+    std::sort(q.apex.begin(), q.apex.end());
+    q.apex.erase(std::unique(q.apex.begin(), q.apex.end()), q.apex.end());
+    if (q.apex != q.common) return false;
     if (kind_[u] == kCurve && kind_[v] != kInterior) {
       // The other curve neighbours of u and v must differ (else a loop of three closes up).
-      for (auto w : common_)
+      for (auto w : q.common)
         if (kind_[w] != kInterior && junction_edge(u, w) && junction_edge(v, w)) return false;
     }
     return !flips(u, v, p) && !flips(v, u, p);
@@ -532,7 +707,8 @@ class ComplexDecimator {
     return false;
   }
 
-  void collapse(std::uint32_t u, std::uint32_t v, const V3& p) {
+  // Merges u into v at p and queues v's edges within `scope` again.
+  void collapse(std::uint32_t u, std::uint32_t v, const V3& p, std::uint32_t scope, Queue& q) {
     for (auto t : tris_of_[u]) {
       if (!tri_alive_[t]) continue;
       auto& tri = x_.triangles[t];
@@ -546,14 +722,51 @@ class ComplexDecimator {
     }
     tris_of_[u].clear();
     tris_of_[u].shrink_to_fit();
-    auto& tv = tris_of_[v];
-    tv.erase(std::remove_if(tv.begin(), tv.end(), [&](std::uint32_t t) { return !tri_alive_[t]; }), tv.end());
     alive_[u] = 0;
     x_.positions[v] = p;
     q_[v].add(q_[u]);
-    neighbours(v, nv_);
-    const std::vector<std::uint32_t> around = nv_;
-    for (auto w : around) push(v, w);
+    neighbours(v, q.nv);
+    for (auto w : q.nv)
+      if (in_scope(w, scope)) push(v, w, q);
+  }
+
+  // Drops dead vertices and triangles, numbering the rest in the same order (so every choice
+  // that compares numbers or follows their order is the same), for a smaller working set.
+  void renumber_alive() {
+    const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
+    std::vector<std::uint32_t> vmap(nv, ~0u), tmap(nt, ~0u);
+    std::uint32_t n = 0;
+    for (std::size_t v = 0; v < nv; ++v)
+      if (alive_[v]) {
+        vmap[v] = n;
+        x_.positions[n] = x_.positions[v], q_[n] = q_[v], kind_[n] = kind_[v];
+        tris_of_[n].swap(tris_of_[v]);
+        ++n;
+      }
+    x_.positions.resize(n), q_.resize(n), kind_.resize(n), tris_of_.resize(n);
+    x_.positions.shrink_to_fit(), q_.shrink_to_fit(), tris_of_.shrink_to_fit();
+    alive_.assign(n, 1);
+    std::uint32_t m = 0;
+    for (std::size_t t = 0; t < nt; ++t)
+      if (tri_alive_[t]) {
+        tmap[t] = m;
+        for (int c = 0; c < 3; ++c) x_.triangles[m][c] = vmap[x_.triangles[t][c]];
+        x_.labels[m] = x_.labels[t];
+        ++m;
+      }
+    x_.triangles.resize(m), x_.labels.resize(m);
+    x_.triangles.shrink_to_fit(), x_.labels.shrink_to_fit();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          auto& tv = tris_of_[v];
+                          std::size_t kept = 0;
+                          for (auto t : tv)
+                            if (tri_alive_[t]) tv[kept++] = tmap[t];
+                          tv.resize(kept);
+                        }
+                      });
+    tri_alive_.assign(m, 1);
   }
 
   // Drops dead triangles and unused vertices; vertices numbered in first use.
@@ -584,9 +797,7 @@ class ComplexDecimator {
   std::vector<char> alive_, tri_alive_;
   std::vector<std::vector<std::uint32_t>> tris_of_;
   std::vector<Quadric> q_;
-  std::vector<std::vector<Candidate>> buckets_ = std::vector<std::vector<Candidate>>(kBuckets);
-  std::size_t lowest_ = 0;
-  std::vector<std::uint32_t> nu_, nv_, common_, apex_;
+  std::vector<std::uint32_t> scope_;
 };
 
 }  // namespace
@@ -709,43 +920,84 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
 }
 
 LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<KuhnTet>& tets) {
-  Extractor x(g);
-  for (const auto& t : tets) {
+  for (const auto& t : tets)
     MLFE_CHECK(t.order < 6 && t.i >= -1 && t.j >= -1 && t.k >= -1 && t.i < g.dims[0] && t.j < g.dims[1] &&
                t.k < g.dims[2]);
-    x.tet(t);
+  // Step 1: runs of whole z layers (when the tetrahedra come in layer order) extracted apart,
+  // in parallel. Two runs share only the points in the plane between them.
+  std::vector<std::size_t> cut{0};
+  if (std::is_sorted(tets.begin(), tets.end(),
+                     [](const KuhnTet& a, const KuhnTet& b) { return a.k < b.k; })) {
+    const std::size_t run = std::max<std::size_t>(tets.size() / 16, 1);
+    for (std::size_t n = 1; n < tets.size(); ++n)
+      if (tets[n].k != tets[n - 1].k && n - cut.back() >= run) cut.push_back(n);
   }
-  return x.take();
+  cut.push_back(tets.size());
+  std::vector<Extractor::Piece> pieces(cut.size() - 1);
+  tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t c) {
+    Extractor x(g);
+    for (std::size_t n = cut[c]; n < cut[c + 1]; ++n) x.tet(tets[n]);
+    pieces[c] = x.take();
+  });
+  // Step 2: joined in order. A run's point already made by the run below (in the plane
+  // between them, found by key) keeps that number; the others are numbered in the order they
+  // were made, so the numbering is the one a single pass over all tetrahedra gives.
+  LabelInterfaces out;
+  PointIds below;  // the previous run's points in its top plane
+  for (std::size_t c = 0; c < pieces.size(); ++c) {
+    Extractor::Piece& piece = pieces[c];
+    const double bottom = cut[c] < tets.size() ? double(tets[cut[c]].k) : 0,
+                 top = cut[c + 1] > cut[c] ? double(tets[cut[c + 1] - 1].k + 1) : 0;
+    const bool shares_below = c > 0, shares_above = c + 1 < pieces.size();
+    PointIds above;
+    std::vector<std::uint32_t> id(piece.x.positions.size());
+    for (std::size_t i = 0; i < id.size(); ++i) {
+      const V3& p = piece.x.positions[i];
+      auto add = [&] {
+        MLFE_CHECK(out.positions.size() < 0xffffffffu);
+        out.positions.push_back(p);
+        return std::uint32_t(out.positions.size() - 1);
+      };
+      id[i] = shares_below && p[2] == bottom ? below.get(piece.keys[i], add) : add();
+      if (shares_above && p[2] == top) above.get(piece.keys[i], [&] { return id[i]; });
+    }
+    below = std::move(above);
+    for (const auto& t : piece.x.triangles) out.triangles.push_back({id[t[0]], id[t[1]], id[t[2]]});
+    out.labels.insert(out.labels.end(), piece.x.labels.begin(), piece.x.labels.end());
+    piece = {};
+  }
+  return out;
 }
 
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& o) {
   if (o.iterations <= 0 || x.triangles.empty()) return;
   const std::size_t nv = x.positions.size();
-  // Step 1: the edges, junction curves marked.
-  const std::vector<std::pair<std::uint64_t, bool>> unique = classified_edges(x);
-  // Step 2: each vertex's smoothing neighbours: all of them inside an interface, the two along
-  // its curve on a junction, none where curves meet.
-  std::vector<std::uint32_t> junction_degree(nv, 0);
-  for (const auto& [e, junction] : unique)
-    if (junction) ++junction_degree[e >> 32], ++junction_degree[e & 0xffffffffu];
-  auto follows = [&](std::uint32_t v, bool junction) {
-    return junction_degree[v] == 0 || (junction_degree[v] == 2 && junction);
+  // Step 1: each vertex's smoothing neighbours, ascending: all of them inside an interface,
+  // the two along its curve on a junction (the edges to them on junction curves), none where
+  // curves meet. Counted, then listed, vertex by vertex in parallel.
+  const VertexTriangles vt(x);
+  std::vector<std::uint32_t> start(nv + 1, 0), nbr;
+  auto each_followed = [&](auto&& visit) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::vector<std::pair<std::uint32_t, std::uint32_t>> around;
+                        std::vector<std::pair<std::uint32_t, bool>> nb;
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          classified_neighbours(x, vt, std::uint32_t(v), around, nb);
+                          std::size_t junction_degree = 0;
+                          for (const auto& [w, junction] : nb) junction_degree += junction;
+                          if (junction_degree != 0 && junction_degree != 2) continue;
+                          for (const auto& [w, junction] : nb)
+                            if (junction_degree == 0 || junction) visit(v, w);
+                        }
+                      });
   };
-  std::vector<std::uint32_t> start(nv + 1, 0);
-  for (const auto& [e, junction] : unique) {
-    const std::uint32_t a = std::uint32_t(e >> 32), b = std::uint32_t(e & 0xffffffffu);
-    start[a + 1] += follows(a, junction);
-    start[b + 1] += follows(b, junction);
-  }
+  each_followed([&](std::size_t v, std::uint32_t) { ++start[v + 1]; });
   for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-  std::vector<std::uint32_t> nbr(start[nv]);
+  nbr.resize(start[nv]);
   {
     std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-    for (const auto& [e, junction] : unique) {
-      const std::uint32_t a = std::uint32_t(e >> 32), b = std::uint32_t(e & 0xffffffffu);
-      if (follows(a, junction)) nbr[fill[a]++] = b;
-      if (follows(b, junction)) nbr[fill[b]++] = a;
-    }
+    each_followed([&](std::size_t v, std::uint32_t w) { nbr[fill[v]++] = w; });
   }
   // Step 3: Taubin's λ|μ passes (Jacobi), each move clamped to the offset bound.
   const std::vector<V3> original = x.positions;

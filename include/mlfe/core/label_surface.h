@@ -122,7 +122,7 @@ struct LabelSmoothingOptions {
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& options);
 
 /// Simplifies the complex by quadric edge collapse (Garland & Heckbert 1997) over all its
-/// interfaces at once, cheapest merge first, each merged vertex placed where the summed
+/// interfaces at once, cheap merges first, each merged vertex placed where the summed
 /// quadrics (area-weighted planes of the triangles it absorbed) are least. A merge is made only
 /// when that RMS distance to the absorbed planes stays within `tolerance` voxels. Constraints
 /// keep the complex a partition: a vertex inside one interface merges with a neighbour in the
@@ -132,9 +132,11 @@ void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& op
 /// opens a closed surface; the link condition (the ends' common neighbours are exactly the
 /// edge's apexes), a no-flip test on every moved triangle, at least a tetrahedron per closed
 /// piece and three vertices per junction loop keep every label's surface closed, consistently
-/// oriented and its islands present, and the interfaces shared. Sequential, so the same result
-/// for any thread count. Returns the number of vertices removed. Throws mlfe::Error unless
-/// `tolerance` is positive and finite.
+/// oriented and its islands present, and the interfaces shared. The cheap merges (within a fifth
+/// of the tolerance) go first inside fixed blocks of 16³ voxels, in parallel, away from the
+/// blocks' borders; then the whole complex, cheapest first. The blocks do not interact and each
+/// pass is sequential in itself, so the same result for any thread count. Returns the number of
+/// vertices removed. Throws mlfe::Error unless `tolerance` is positive and finite.
 std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
 
 /// The closed surface of `label`: its triangles from the complex, oriented outward (normals
