@@ -156,8 +156,9 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
 // order the threads filled it in.
 // Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
 // are left as boundary faces).
-std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems,
-                           std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
+std::size_t face_adjacency(
+    const Hierarchy<3>& h, const std::vector<ElemId>& elems,
+    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
   const std::size_t nv = h.vertex_count();
   struct Face {
@@ -704,9 +705,8 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
   hit.face = int(best_slot % 4);
   hit.t = best_t;
   const StepRecord& R = records_[hit.tet];
-  hit.inward = double(R.n[0][hit.face]) * d[0] + double(R.n[1][hit.face]) * d[1] +
-                   double(R.n[2][hit.face]) * d[2] <
-               0;
+  hit.inward =
+      double(R.n[0][hit.face]) * d[0] + double(R.n[1][hit.face]) * d[1] + double(R.n[2][hit.face]) * d[2] < 0;
   return true;
 }
 
@@ -983,7 +983,8 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
                       const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
-  const int levels = m.ray_entry() == RayEntry::kBoundaryFaces ? std::numeric_limits<int>::max() : kSkipLevels;
+  const int levels =
+      m.ray_entry() == RayEntry::kBoundaryFaces ? std::numeric_limits<int>::max() : kSkipLevels;
   return trace(
       m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r), levels); },
       visit, entry_hint);

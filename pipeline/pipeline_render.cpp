@@ -51,7 +51,8 @@ double fine_edge_length(const Hierarchy<3>& h) {
   len.reserve(6 * h.coarse_count());
   for (std::size_t e = 0; e < h.coarse_count(); ++e) {
     const auto& c = h.cell(ElemId(std::uint32_t(e)));
-    for (const auto& ev : SimplexTraits<3>::kEdgeVerts) len.push_back(distance(h.point(c[ev[0]]), h.point(c[ev[1]])));
+    for (const auto& ev : SimplexTraits<3>::kEdgeVerts)
+      len.push_back(distance(h.point(c[ev[0]]), h.point(c[ev[1]])));
   }
   const auto at = len.begin() + std::ptrdiff_t(len.size() / 10);
   std::nth_element(len.begin(), at, len.end());
@@ -158,7 +159,8 @@ RenderOptions ray_options(const RenderFileOptions& p) {
 // The header of every frame: the camera, the source, the renderer, the transfer function and
 // what Z and alpha mean.
 ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, const TransferFunction& tf,
-                             const RenderResult& r, int max_level, const std::string& source, RayEntry entry) {
+                             const RenderResult& r, int max_level, const std::string& source,
+                             RayEntry entry) {
   const std::string renderer =
       p.reference ? std::string("reference: trilinear voxels, 2 samples per voxel")
       : entry == RayEntry::kBoundaryFaces
@@ -189,7 +191,8 @@ ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, cons
 std::unique_ptr<TetRenderMesh> render_mesh_of(const Approximation<3>& a, const RenderFileOptions& p,
                                               RayEntry entry, const std::string& source) {
   if (entry == RayEntry::kHierarchy)
-    return std::make_unique<TetRenderMesh>(a.hierarchy, a.values, p.level, a.on_lattice ? &a.data_extent : nullptr);
+    return std::make_unique<TetRenderMesh>(a.hierarchy, a.values, p.level,
+                                           a.on_lattice ? &a.data_extent : nullptr);
   try {
     return std::make_unique<TetRenderMesh>(a.hierarchy, a.values, -1, nullptr, entry);
   } catch (const Cancelled&) {
@@ -282,7 +285,8 @@ Built built_of_mesh(const TetMesh& mesh) {
     throw Error(fmt::format("{}: {} values for {} points", source, mesh.values.size(), np));
   for (std::size_t i = 0; i < np; ++i)
     for (double x : {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2], mesh.values[i]})
-      if (!std::isfinite(x)) throw Error(fmt::format("{}: point {} has a non-finite coordinate or value", source, i));
+      if (!std::isfinite(x))
+        throw Error(fmt::format("{}: point {} has a non-finite coordinate or value", source, i));
   std::vector<Hierarchy<3>::Cell> cells;
   cells.reserve(mesh.tets.size());
   for (std::size_t t = 0; t < mesh.tets.size(); ++t) {

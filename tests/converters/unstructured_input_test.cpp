@@ -252,7 +252,8 @@ TEST(UnstructuredInput, CommandLineBuildsAndConvertsAMesh) {
 // A constant field on the cube with the corner [0.5, 1]^3 cut away, and a transfer function of
 // constant opacity 0.3 per 0.25 (ParaView JSON, so it does not depend on the value range).
 struct ConstantCutCube {
-  TetMesh mesh = test::kuhn_mesh(8, [](const V3&) { return 1.0; }, test::in_cut_corner);
+  TetMesh mesh = test::kuhn_mesh(
+      8, [](const V3&) { return 1.0; }, test::in_cut_corner);
   std::string tf = scratch("constant_tf.json");
   ConstantCutCube() {
     mesh.source = "cut_cube.vtu";
@@ -298,16 +299,19 @@ TEST(UnstructuredRender, ImageIsTheIntegralThroughTheNonConvexMesh) {
     for (int x = 0; x < f.width; ++x) {
       V3 ro, rd;
       f.camera.ray(x, y, ro, rd);
-      const double len = box_chord({0, 0, 0}, {1, 1, 1}, ro, rd) - box_chord({0.5, 0.5, 0.5}, {1, 1, 1}, ro, rd);
+      const double len =
+          box_chord({0, 0, 0}, {1, 1, 1}, ro, rd) - box_chord({0.5, 0.5, 0.5}, {1, 1, 1}, ro, rd);
       covered += len > 0;
-      EXPECT_NEAR(f.image.rgba[4 * (y * f.width + x) + 3], 1 - std::pow(0.7, len / 0.25), 1e-5) << x << "," << y;
+      EXPECT_NEAR(f.image.rgba[4 * (y * f.width + x) + 3], 1 - std::pow(0.7, len / 0.25), 1e-5)
+          << x << "," << y;
     }
   EXPECT_GT(covered, 300);
 }
 
 TEST(UnstructuredRender, CommandLineRendersVtuAndMshSameBytesWithOneAndTwoThreads) {
   const std::string a = scratch("mesh1.exr"), b = scratch("mesh2.exr");
-  const std::string opts = " --tf hot --size 64x48 --azimuth 225 --elevation 20 --camera perspective --shading";
+  const std::string opts =
+      " --tf hot --size 64x48 --azimuth 225 --elevation 20 --camera perspective --shading";
   auto r = test::run_mlfe("--threads 1 render " + poisson_vtu() + " -o " + a + opts);
   ASSERT_EQ(r.status, 0) << r.err;
   EXPECT_NE(r.err.find("re-entries"), std::string::npos) << r.err;  // the view crosses the cut

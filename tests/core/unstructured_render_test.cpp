@@ -21,8 +21,8 @@ using Vec3 = std::array<double, 3>;
 Hierarchy<3> coarse_of(const TetMesh& m) {
   std::vector<Hierarchy<3>::Cell> cells;
   for (const auto& t : m.tets)
-    cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])), VertexId(std::uint32_t(t[2])),
-                     VertexId(std::uint32_t(t[3]))});
+    cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])),
+                     VertexId(std::uint32_t(t[2])), VertexId(std::uint32_t(t[3]))});
   return Hierarchy<3>::from_coarse(m.points, cells);
 }
 
@@ -56,7 +56,8 @@ TransferFunction constant_opacity(double alpha, double unit) {
 }
 
 TEST(UnstructuredRender, RayLeavingAndReenteringGetsBothParts) {
-  const TetMesh mesh = test::kuhn_mesh(8, [](const Vec3&) { return 1.0; }, in_column);
+  const TetMesh mesh = test::kuhn_mesh(
+      8, [](const Vec3&) { return 1.0; }, in_column);
   const Hierarchy<3> h = coarse_of(mesh);
   const TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
   // Squares of 1/8 on the boundary: 48 on top and bottom, 64 on x = 0 and y = 0, 32 on x = 1
@@ -107,7 +108,8 @@ TEST(UnstructuredRender, NoRayLostThroughBoundaryVerticesAndEdges) {
   // Rays along the axes on the (1/8) lattice enter through boundary vertices and edges of the
   // Kuhn faces; inside the material each one must cross its whole chord. Rays in the cut's own
   // faces (x or y = 0.5 over the column) graze the boundary: either answer is right there.
-  const TetMesh mesh = test::kuhn_mesh(8, [](const Vec3&) { return 1.0; }, in_column);
+  const TetMesh mesh = test::kuhn_mesh(
+      8, [](const Vec3&) { return 1.0; }, in_column);
   const Hierarchy<3> h = coarse_of(mesh);
   const TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
   const Vec3 dirs[] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};

@@ -226,8 +226,8 @@ class TetRenderMesh {
   /// t in [t_min, t_max] (only inward ones with `inward_only`), smallest t first, then the
   /// lowest (4 × tet + face); never the faces given as `skip` (4 × tet + face, kNoNeighbor for
   /// none). t is where the ray meets the face's plane as the walk computes it (record()).
-  bool boundary_hit(const std::array<double, 3>& o, const std::array<double, 3>& d, double t_min, double t_max,
-                    bool inward_only, const std::uint32_t (&skip)[2], BoundaryHit& hit) const;
+  bool boundary_hit(const std::array<double, 3>& o, const std::array<double, 3>& d, double t_min,
+                    double t_max, bool inward_only, const std::uint32_t (&skip)[2], BoundaryHit& hit) const;
   /// Boundary faces of the rendered triangulation (0 with RayEntry::kHierarchy).
   std::size_t boundary_face_count() const;
 
