@@ -126,7 +126,8 @@ void add_render_command(CLI::App& app) {
   auto state = std::make_shared<RenderState>();
   CLI::App* cmd = app.add_subcommand(
       "render",
-      "Ray-cast EXR image of a hierarchy or a volume, face to face through the adaptive tetrahedral mesh");
+      "Ray-cast EXR image of a hierarchy, a volume or an unstructured tetrahedral mesh (.vtu/.msh), face to "
+      "face through the tetrahedra");
   cmd->add_option("input", state->input,
                   "hierarchy (.mlfeh), 3D volume (built first, as mlfe build) or tetrahedral mesh with point "
                   "values (.vtu, .msh; rendered as it is, --grid names the array)")
