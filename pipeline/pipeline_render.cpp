@@ -62,14 +62,15 @@ double fine_edge_length(const Hierarchy<3>& h) {
 // Presets span the data's range with opacities per voxel (per fine edge of an unstructured
 // mesh) unless told; a ParaView file keeps its own values, per unit length unless told.
 TransferFunction choose_transfer_function(const RenderFileOptions& p, const Built& b, RayEntry entry) {
-  const GridTransform& tr = b.transform;
-  const double voxel = entry == RayEntry::kBoundaryFaces
-                           ? fine_edge_length(b.get<3>().hierarchy)
-                           : std::min({tr.spacing[0], tr.spacing[1], tr.spacing[2]});
   if (lower_extension(p.tf) == ".json")
     return read_paraview_transfer_function(p.tf, p.tf_unit > 0 ? p.tf_unit : 1.0);
+  const GridTransform& tr = b.transform;
+  const double voxel = p.tf_unit > 0 ? p.tf_unit
+                       : entry == RayEntry::kBoundaryFaces
+                           ? fine_edge_length(b.get<3>().hierarchy)
+                           : std::min({tr.spacing[0], tr.spacing[1], tr.spacing[2]});
   const double lo = b.value_min, hi = b.value_max > b.value_min ? b.value_max : b.value_min + 1;
-  return transfer_function_preset(p.tf, lo, hi, p.tf_unit > 0 ? p.tf_unit : voxel);
+  return transfer_function_preset(p.tf, lo, hi, voxel);
 }
 
 // The volume's bounding ball in the physical frame: the data's box (T0's cube is padded on the
