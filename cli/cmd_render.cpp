@@ -1,6 +1,6 @@
-// mlfe render: ray-cast EXR images of a hierarchy (.mlfeh) or a volume (built first with the
-// same defaults as mlfe build), face to face through the adaptive tetrahedral mesh; the work is
-// mlfe::pipeline::render.
+// mlfe render: ray-cast EXR images of a hierarchy (.mlfeh), a volume (built first with the
+// same defaults as mlfe build) or an unstructured tetrahedral mesh (.vtu/.msh, as it is), face
+// to face through the tetrahedra; the work is mlfe::pipeline::render.
 #include <fmt/format.h>
 #include <mlfe/formats/transfer_function_io.h>
 #include <mlfe/pipeline.h>
@@ -21,7 +21,8 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
                   "transfer function: a preset (" + presets + ") or a ParaView colour map .json")
       ->capture_default_str();
   cmd->add_option("--tf-unit", p.tf_unit,
-                  "length (mm) the opacities refer to (0: one voxel for presets, 1 for ParaView files)")
+                  "length (mm) the opacities refer to (0: one voxel for presets, a mesh's fine edge for "
+                  "presets on a .vtu/.msh, 1 for ParaView files)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--camera", p.camera, "projection")
       ->check(CLI::IsMember(pipeline::enum_name_list<pipeline::Projection>()))
@@ -92,9 +93,9 @@ void print_render(const pipeline::RenderResult& r, bool quiet) {
       const RenderStats& st = f.stats;
       status_line(fmt::format(
           "mlfe render: {}x{} in {:.3f} s, {} rays, {} segments, {} skips, {} relocated, {} at the "
-          "step bound -> {}",
+          "step bound{} -> {}",
           f.width, f.height, f.seconds, st.rays, st.segments, st.skips, st.relocations, st.step_bound_hits,
-          f.exr));
+          st.reentries ? fmt::format(", {} re-entries", st.reentries) : std::string(), f.exr));
     }
   }
   for (const auto& f : r.written) std::printf("%s\n", f.c_str());
@@ -125,8 +126,11 @@ void add_render_command(CLI::App& app) {
   auto state = std::make_shared<RenderState>();
   CLI::App* cmd = app.add_subcommand(
       "render",
-      "Ray-cast EXR image of a hierarchy or a volume, face to face through the adaptive tetrahedral mesh");
-  cmd->add_option("input", state->input, "hierarchy (.mlfeh) or 3D volume (built first, as mlfe build)")
+      "Ray-cast EXR image of a hierarchy, a volume or an unstructured tetrahedral mesh (.vtu/.msh), face to "
+      "face through the tetrahedra");
+  cmd->add_option("input", state->input,
+                  "hierarchy (.mlfeh), 3D volume (built first, as mlfe build) or tetrahedral mesh with point "
+                  "values (.vtu, .msh; rendered as it is, --grid names the array)")
       ->required();
   cmd->add_option("-o,--output", state->output, "image (.exr; numbered with --frames)")->required();
   add_render_options(cmd, state->render);

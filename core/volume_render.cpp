@@ -154,8 +154,11 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
 // matched within each bucket (a few dozen faces) by their other two vertex ids. Within a bucket
 // the faces are put in (key, slot) order before matching, so the result does not depend on the
 // order the threads filled it in.
-void face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems,
-                    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
+// Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
+// are left as boundary faces).
+std::size_t face_adjacency(
+    const Hierarchy<3>& h, const std::vector<ElemId>& elems,
+    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
   const std::size_t nv = h.vertex_count();
   struct Face {
@@ -189,6 +192,7 @@ void face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems,
       faces[fill[low]++] = {key[0], key[1], std::uint32_t(4 * i + f)};
     }
   // 3. per bucket: equal keys are the two sides of one face.
+  std::atomic<std::size_t> overshared{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
       Face* first = faces.get() + start[v];
@@ -207,9 +211,11 @@ void face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems,
         records[a / 4].next[a % 4] = b;
         records[b / 4].next[b % 4] = a;
         ++q;
+        if (q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2) overshared.fetch_add(1);
       }
     }
   });
+  return overshared.load();
 }
 
 // Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
@@ -386,9 +392,11 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 
 // ---------------------------------------------------------------- render mesh
 
+TetRenderMesh::~TetRenderMesh() = default;
+
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
-                             const std::array<double, 3>* clip_to)
-    : h_(h) {
+                             const std::array<double, 3>* clip_to, RayEntry entry)
+    : h_(h), entry_(entry) {
   if (values.size() != h.vertex_count())
     throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
                 std::to_string(h.vertex_count()) + " vertices");
@@ -419,7 +427,10 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
   records_.resize(elems_.size());  // not initialised: every field is set below
   advise_huge_pages(records_);
-  face_adjacency(h, elems_, records_);
+  const std::size_t overshared = face_adjacency(h, elems_, records_);
+  if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
+    throw Error("render: " + std::to_string(overshared) +
+                " faces are shared by more than two tetrahedra (not a conforming mesh)");
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
     Vec3 p[4];
@@ -511,6 +522,8 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
           grid_hi_[c] = std::max(grid_hi_[c], hi_[i]);
         }
   }
+  // 6. unstructured meshes: the boundary faces in their bucket grid.
+  if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
 
 int TetRenderMesh::grid_index(int a, double x) const {
@@ -550,10 +563,157 @@ double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::a
   }
 }
 
+// ---------------------------------------------------------------- boundary faces
+
+// The boundary faces of an unstructured mesh (RayEntry::kBoundaryFaces) in a uniform grid of
+// buckets over the box: each bucket lists the faces whose (padded) bounding box overlaps it.
+struct TetRenderMesh::BoundaryGrid {
+  struct Face {
+    Vec3 p[3];           // the vertices in ascending id order (see face_crossed)
+    std::uint32_t slot;  // 4 × render index + local face
+  };
+  std::vector<Face> faces;
+  int n[3] = {1, 1, 1};
+  Vec3 lo{0, 0, 0}, cell{1, 1, 1};
+  std::vector<std::uint32_t> start, list;  // bucket c holds list[start[c] .. start[c + 1])
+
+  int index(int a, double x) const { return std::clamp(int(std::floor((x - lo[a]) / cell[a])), 0, n[a] - 1); }
+  std::size_t bytes() const {
+    return faces.capacity() * sizeof(Face) + (start.capacity() + list.capacity()) * sizeof(std::uint32_t);
+  }
+};
+
+void TetRenderMesh::build_boundary_grid() {
+  auto g = std::make_unique<BoundaryGrid>();
+  // 1. the faces without a neighbour, in render order.
+  for (std::size_t r = 0; r < records_.size(); ++r)
+    for (int f = 0; f < 4; ++f) {
+      if (records_[r].next[f] != kNoNeighbor) continue;
+      const auto& c = h_.cell(elems_[r]);
+      VertexId v[3] = {c[kFaceVerts[f][0]], c[kFaceVerts[f][1]], c[kFaceVerts[f][2]]};
+      std::sort(v, v + 3);
+      BoundaryGrid::Face face;
+      for (int i = 0; i < 3; ++i) face.p[i] = h_.point(v[i]);
+      face.slot = std::uint32_t(4 * r + f);
+      g->faces.push_back(face);
+    }
+  // 2. buckets: about 8 faces per bucket along a surface (a closed surface of F faces in a grid
+  // of n³ buckets meets ~6 n² of them), at most 256 along the longest axis.
+  const Vec3 ext = sub(hi_box_, lo_box_);
+  const double longest = std::max({ext[0], ext[1], ext[2]});
+  const double per_axis = std::clamp(std::sqrt(double(g->faces.size()) / 8.0), 1.0, 256.0);
+  g->lo = lo_box_;
+  for (int a = 0; a < 3; ++a) {
+    g->n[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
+    g->cell[a] = ext[a] > 0 ? ext[a] / g->n[a] : 1.0;
+  }
+  const std::size_t cells = std::size_t(g->n[0]) * g->n[1] * g->n[2];
+  const double pad = 1e-7 * longest;
+  // Calls visit(bucket) for every bucket face i's padded bounding box overlaps.
+  const auto for_buckets = [&](const BoundaryGrid::Face& face, auto&& visit) {
+    int c0[3], c1[3];
+    for (int a = 0; a < 3; ++a) {
+      const double lo = std::min({face.p[0][a], face.p[1][a], face.p[2][a]});
+      const double hi = std::max({face.p[0][a], face.p[1][a], face.p[2][a]});
+      c0[a] = g->index(a, lo - pad);
+      c1[a] = g->index(a, hi + pad);
+    }
+    for (int z = c0[2]; z <= c1[2]; ++z)
+      for (int y = c0[1]; y <= c1[1]; ++y)
+        for (int x = c0[0]; x <= c1[0]; ++x) visit((std::size_t(z) * g->n[1] + y) * g->n[0] + x);
+  };
+  g->start.assign(cells + 1, 0);
+  for (const auto& face : g->faces) for_buckets(face, [&](std::size_t c) { ++g->start[c + 1]; });
+  for (std::size_t c = 0; c < cells; ++c) g->start[c + 1] += g->start[c];
+  g->list.resize(g->start[cells]);
+  std::vector<std::uint32_t> fill(g->start.begin(), g->start.end() - 1);
+  for (std::size_t i = 0; i < g->faces.size(); ++i)
+    for_buckets(g->faces[i], [&](std::size_t c) { g->list[fill[c]++] = std::uint32_t(i); });
+  boundary_ = std::move(g);
+}
+
+std::size_t TetRenderMesh::boundary_face_count() const { return boundary_ ? boundary_->faces.size() : 0; }
+
+namespace {
+
+// Whether the line o + t d meets the triangle (inclusive), by the signs of the edge terms
+// d · ((a − o) × (b − o)). Each is computed with the edge's lower vertex id first (face
+// vertices are stored in id order), so two faces sharing an edge compute the same number and
+// no ray slips between them.
+inline bool face_crossed(const Vec3 (&p)[3], const Vec3& o, const Vec3& d) {
+  const Vec3 a = sub(p[0], o), b = sub(p[1], o), c = sub(p[2], o);
+  const double e01 = dot(d, cross(a, b)), e12 = dot(d, cross(b, c)), e02 = dot(d, cross(a, c));
+  // Around the triangle 0 → 1 → 2 → 0 the terms are e01, e12, −e02.
+  return (e01 >= 0 && e12 >= 0 && e02 <= 0) || (e01 <= 0 && e12 <= 0 && e02 >= 0);
+}
+
+}  // namespace
+
+bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::array<double, 3>& d, double t_min,
+                                 double t_max, bool inward_only, const std::uint32_t (&skip)[2],
+                                 BoundaryHit& hit) const {
+  MLFE_CHECK(boundary_ != nullptr);
+  const BoundaryGrid& g = *boundary_;
+  // 3D DDA (as first_visible) from the bucket of o + t_min d; a hit found in a bucket is the
+  // first when it lies before the bucket's far side (a nearer face would be listed in a
+  // bucket already visited).
+  const Vec3 p = axpy(o, t_min, d);
+  int i[3], step[3];
+  double t_next[3], t_delta[3];
+  for (int a = 0; a < 3; ++a) {
+    i[a] = g.index(a, p[a]);
+    step[a] = d[a] > 0 ? 1 : d[a] < 0 ? -1 : 0;
+    if (step[a] == 0) {
+      t_next[a] = t_delta[a] = std::numeric_limits<double>::infinity();
+      continue;
+    }
+    const double face = g.lo[a] + (i[a] + (step[a] > 0 ? 1 : 0)) * g.cell[a];
+    t_next[a] = t_min + (face - p[a]) / d[a];
+    t_delta[a] = g.cell[a] / std::abs(d[a]);
+  }
+  bool found = false;
+  double best_t = std::numeric_limits<double>::infinity();
+  std::uint32_t best_slot = kNoNeighbor;
+  while (true) {
+    const std::size_t c = (std::size_t(i[2]) * g.n[1] + i[1]) * g.n[0] + i[0];
+    for (std::uint32_t k = g.start[c]; k != g.start[c + 1]; ++k) {
+      const BoundaryGrid::Face& face = g.faces[g.list[k]];
+      if (face.slot == skip[0] || face.slot == skip[1]) continue;
+      // The plane as record_exit sees it.
+      const StepRecord& R = records_[face.slot / 4];
+      const int f = int(face.slot % 4);
+      const double nx = R.n[0][f], ny = R.n[1][f], nz = R.n[2][f];
+      const double den = nx * d[0] + ny * d[1] + nz * d[2];
+      if (den == 0 || (inward_only && den > 0)) continue;
+      const double t = (R.h[f] - (nx * o[0] + ny * o[1] + nz * o[2])) / den;
+      if (!(t >= t_min && t <= t_max)) continue;
+      if (t > best_t || (t == best_t && face.slot > best_slot)) continue;
+      if (!face_crossed(face.p, o, d)) continue;
+      found = true;
+      best_t = t;
+      best_slot = face.slot;
+    }
+    const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2) : (t_next[1] < t_next[2] ? 1 : 2);
+    if (found && best_t <= t_next[a]) break;
+    if (t_next[a] > t_max) break;
+    i[a] += step[a];
+    if (i[a] < 0 || i[a] >= g.n[a]) break;
+    t_next[a] += t_delta[a];
+  }
+  if (!found) return false;
+  hit.tet = best_slot / 4;
+  hit.face = int(best_slot % 4);
+  hit.t = best_t;
+  const StepRecord& R = records_[hit.tet];
+  hit.inward =
+      double(R.n[0][hit.face]) * d[0] + double(R.n[1][hit.face]) * d[1] + double(R.n[2][hit.face]) * d[2] < 0;
+  return true;
+}
+
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
          records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
-         (lo_.capacity() + hi_.capacity()) * sizeof(float);
+         (lo_.capacity() + hi_.capacity()) * sizeof(float) + (boundary_ ? boundary_->bytes() : 0);
 }
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
@@ -660,8 +820,48 @@ struct RayWalk {
   std::uint64_t bound = 0;
   std::uint32_t r = 0;
   int entry = -1;
+  std::uint32_t entered = TetRenderMesh::kNoNeighbor;  // boundary face of the last entry
   TraceResult res;
 };
+
+// RayEntry::kBoundaryFaces: the element containing o + t d, walked back along −d from the
+// boundary face `hit` the ray leaves through after t (the ray is inside the mesh in between:
+// a camera inside the mesh, or a start moved forward by first_visible).
+std::uint32_t walk_back(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
+                        const TetRenderMesh::BoundaryHit& hit, double t, std::uint64_t bound) {
+  const Vec3 back{-d[0], -d[1], -d[2]};
+  std::uint32_t r = hit.tet;
+  int entry = hit.face;
+  double s = -hit.t;  // o + s·back = o + t·d at s = −t
+  for (std::uint64_t step = 0; step < bound; ++step) {
+    const TetRenderMesh::StepRecord& R = m.record(r);
+    double s_out;
+    const int f = record_exit(R, o, back, s, entry, s_out);
+    const std::uint32_t next = R.next[f];
+    if (s_out >= -t || next == TetRenderMesh::kNoNeighbor) break;
+    r = next >> 2;
+    entry = int(next & 3u);
+    s = s_out;
+  }
+  return r;
+}
+
+// Step 2 for RayEntry::kBoundaryFaces: the first boundary face crossed after w.t; inward, the
+// walk starts there, else at the element walked back to.
+inline bool begin_boundary_walk(const TetRenderMesh& m, RayWalk& w) {
+  const std::uint32_t none[2] = {TetRenderMesh::kNoNeighbor, TetRenderMesh::kNoNeighbor};
+  TetRenderMesh::BoundaryHit hit;
+  if (!m.boundary_hit(w.o, w.d, w.t - w.eps, w.res.t_far + w.eps, false, none, hit)) return false;
+  if (hit.inward) {
+    w.r = hit.tet;
+    w.entry = hit.face;
+    w.entered = 4 * hit.tet + std::uint32_t(hit.face);
+    w.t = std::max(w.t, hit.t);
+  } else {
+    w.r = walk_back(m, w.o, w.d, hit, w.t, w.bound);
+  }
+  return true;
+}
 
 // Steps 1–2: clips the ray and finds its entry element; false when nothing is to be walked.
 inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
@@ -669,6 +869,7 @@ inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
   w.o = o, w.d = d;
   w.res = TraceResult{};
   w.entry = -1;
+  w.entered = TetRenderMesh::kNoNeighbor;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, w.res.t_near, w.res.t_far)) return false;
   w.res.hit = true;
   w.eps = 1e-9 * (w.res.t_far - w.res.t_near +
@@ -679,6 +880,7 @@ inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
     w.t = m.first_visible(o, d, w.t, w.res.t_far, *skip);
     if (w.t >= w.res.t_far) return false;
   }
+  if (m.ray_entry() == RayEntry::kBoundaryFaces) return begin_boundary_walk(m, w);
   // Entry: walk from the previous pixel's entry (usually the same or a neighbouring element),
   // else descend the hierarchy.
   const std::int32_t start = entry_hint && entry_hint->valid() ? m.render_index(*entry_hint) : -1;
@@ -742,6 +944,19 @@ inline bool walk_step(const TetRenderMesh& m, const CompiledTransferFunction* sk
   const std::uint32_t next = R.next[f];
   if (next == TetRenderMesh::kNoNeighbor) {
     if (w.t >= res.t_far - w.eps) return false;
+    if (m.ray_entry() == RayEntry::kBoundaryFaces) {
+      // Left through the boundary: on to the next inward face behind (a non-convex mesh), never
+      // the face just left nor the one last entered by (a ray grazing an edge would bounce).
+      const std::uint32_t skip[2] = {4 * w.r + std::uint32_t(f), w.entered};
+      TetRenderMesh::BoundaryHit hit;
+      if (!m.boundary_hit(o, d, w.t - w.eps, res.t_far, true, skip, hit)) return false;
+      ++res.reentries;
+      w.r = hit.tet;
+      w.entry = hit.face;
+      w.entered = 4 * hit.tet + std::uint32_t(hit.face);
+      w.t = std::max(w.t, hit.t);
+      return true;
+    }
     // Left the mesh before the box exit (rounding at the boundary): locate again.
     ++res.relocations;
     w.r = m.locate(axpy(o, w.t, d), d, m.element(w.r));
@@ -768,8 +983,10 @@ TraceResult trace(const TetRenderMesh& m, const Vec3& o, const Vec3& d, const Co
 TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origin,
                       const std::array<double, 3>& dir, const CompiledTransferFunction* skip,
                       const std::function<bool(const TraceSegment&)>& visit, ElemId* entry_hint) {
+  const int levels =
+      m.ray_entry() == RayEntry::kBoundaryFaces ? std::numeric_limits<int>::max() : kSkipLevels;
   return trace(
-      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r), kSkipLevels); },
+      m, origin, dir, skip, [&](std::uint32_t r) { return empty_state(m, *skip, m.element(r), levels); },
       visit, entry_hint);
 }
 
@@ -778,9 +995,10 @@ TraceResult trace_ray(const TetRenderMesh& m, const std::array<double, 3>& origi
 namespace {
 
 struct Counters {
-  std::atomic<std::uint64_t> rays{0}, segments{0}, skips{0}, relocations{0}, bound{0};
+  std::atomic<std::uint64_t> rays{0}, segments{0}, skips{0}, relocations{0}, bound{0}, reentries{0};
   void to(RenderStats* s) const {
     if (!s) return;
+    s->reentries = reentries;
     s->rays = rays;
     s->segments = segments;
     s->skips = skips;
@@ -850,13 +1068,15 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
   std::vector<std::uint8_t> state;
   if (opt.skip_empty) {
     state.resize(m.size());
+    const int levels =
+        m.ray_entry() == RayEntry::kBoundaryFaces ? std::numeric_limits<int>::max() : opt.skip_levels;
     // In the hierarchy's element order, in which its per-element arrays are read.
     tbb::parallel_for(
         tbb::blocked_range<std::uint32_t>(0, std::uint32_t(m.hierarchy().element_count()), 4096),
         [&](const auto& range) {
           for (std::uint32_t e = range.begin(); e != range.end(); ++e) {
             const std::int32_t r = m.render_index(ElemId(e));
-            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e), opt.skip_levels);
+            if (r >= 0) state[std::size_t(r)] = empty_state(m, ctf, ElemId(e), levels);
           }
         });
   }
@@ -891,6 +1111,7 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
     n.segments.fetch_add(segments, std::memory_order_relaxed);
     if (r.skips) n.skips.fetch_add(r.skips, std::memory_order_relaxed);
     if (r.relocations) n.relocations.fetch_add(r.relocations, std::memory_order_relaxed);
+    if (r.reentries) n.reentries.fetch_add(r.reentries, std::memory_order_relaxed);
     if (r.step_bound_hit) n.bound.fetch_add(1, std::memory_order_relaxed);
   });
   n.to(stats);

@@ -323,7 +323,8 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
   std::string format = detect_volume_format(path);
   if (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty())) format = "raw";
   if (format.empty() && !detect_tet_mesh_format(path).empty())
-    fail(path, "a tetrahedral mesh (.vtu/.msh): build, convert and iso read it; this needs a voxel volume");
+    fail(path,
+         "a tetrahedral mesh (.vtu/.msh): build, convert, iso and render read it; this needs a voxel volume");
   if (format.empty()) {
     std::string head = read_prefix(path, 8);
     std::string hex;

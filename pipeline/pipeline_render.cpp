@@ -13,6 +13,7 @@
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -43,15 +44,33 @@ nlohmann::json tf_json(const TransferFunction& tf) {
           {"opacityUnitLength", tf.unit_length}};
 }
 
-// Presets span the data's range with opacities per voxel unless told; a ParaView file keeps
-// its own values, per unit length unless told.
-TransferFunction choose_transfer_function(const RenderFileOptions& p, const Built& b) {
-  const GridTransform& tr = b.transform;
-  const double voxel = std::min({tr.spacing[0], tr.spacing[1], tr.spacing[2]});
+// The length an unstructured mesh's preset opacities refer to: the 10th percentile of its
+// edge lengths (TetMeshField::resolution(), the "voxel" of mlfe build on a mesh).
+double fine_edge_length(const Hierarchy<3>& h) {
+  std::vector<double> len;
+  len.reserve(6 * h.coarse_count());
+  for (std::size_t e = 0; e < h.coarse_count(); ++e) {
+    const auto& c = h.cell(ElemId(std::uint32_t(e)));
+    for (const auto& ev : SimplexTraits<3>::kEdgeVerts)
+      len.push_back(distance(h.point(c[ev[0]]), h.point(c[ev[1]])));
+  }
+  const auto at = len.begin() + std::ptrdiff_t(len.size() / 10);
+  std::nth_element(len.begin(), at, len.end());
+  return *at;
+}
+
+// Presets span the data's range with opacities per voxel (per fine edge of an unstructured
+// mesh) unless told; a ParaView file keeps its own values, per unit length unless told.
+TransferFunction choose_transfer_function(const RenderFileOptions& p, const Built& b, RayEntry entry) {
   if (lower_extension(p.tf) == ".json")
     return read_paraview_transfer_function(p.tf, p.tf_unit > 0 ? p.tf_unit : 1.0);
+  const GridTransform& tr = b.transform;
+  const double voxel = p.tf_unit > 0 ? p.tf_unit
+                       : entry == RayEntry::kBoundaryFaces
+                           ? fine_edge_length(b.get<3>().hierarchy)
+                           : std::min({tr.spacing[0], tr.spacing[1], tr.spacing[2]});
   const double lo = b.value_min, hi = b.value_max > b.value_min ? b.value_max : b.value_min + 1;
-  return transfer_function_preset(p.tf, lo, hi, p.tf_unit > 0 ? p.tf_unit : voxel);
+  return transfer_function_preset(p.tf, lo, hi, voxel);
 }
 
 // The volume's bounding ball in the physical frame: the data's box (T0's cube is padded on the
@@ -108,10 +127,12 @@ Camera frame_camera(const RenderFileOptions& p, const Framing& framing, int fram
 }
 
 void check_render_options(const RenderFileOptions& p, const Built& b, const ScalarGrid* grid,
-                          const std::string& source) {
+                          const std::string& source, RayEntry entry) {
   if (b.dim() != 3) throw Error(source + ": rendering needs a 3D volume or hierarchy");
   if (p.reference && !grid)
-    throw Error(source + ": --reference needs the volume itself as input, not a hierarchy");
+    throw Error(source + (entry == RayEntry::kBoundaryFaces
+                              ? ": --reference needs a volume as input (a mesh is rendered as it is)"
+                              : ": --reference needs the volume itself as input, not a hierarchy"));
   for (int s : p.size)
     if (s < 1 || s > 16384)
       throw UsageError(fmt::format("--size: expected WxH (1..16384), got {}x{}", p.size[0], p.size[1]));
@@ -139,15 +160,20 @@ RenderOptions ray_options(const RenderFileOptions& p) {
 // The header of every frame: the camera, the source, the renderer, the transfer function and
 // what Z and alpha mean.
 ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, const TransferFunction& tf,
-                             const RenderResult& r, int max_level, const std::string& source) {
+                             const RenderResult& r, int max_level, const std::string& source,
+                             RayEntry entry) {
+  const std::string renderer =
+      p.reference ? std::string("reference: trilinear voxels, 2 samples per voxel")
+      : entry == RayEntry::kBoundaryFaces
+          ? fmt::format("unstructured tetrahedral mesh as given, {} integration", enum_name(p.integration))
+          : fmt::format("tetrahedral mesh, level {} of {}, {} integration", r.level, max_level,
+                        enum_name(p.integration));
   ExrAttributes attr;
   attr.world_to_camera = cam.world_to_camera();
   attr.world_to_ndc = cam.world_to_ndc();
   attr.strings = {
       {"mlfe/source", std::filesystem::path(source).filename().string()},
-      {"mlfe/renderer", p.reference ? std::string("reference: trilinear voxels, 2 samples per voxel")
-                                    : fmt::format("tetrahedral mesh, level {} of {}, {} integration", r.level,
-                                                  max_level, enum_name(p.integration))},
+      {"mlfe/renderer", renderer},
       {"mlfe/transferFunction", tf_json(tf).dump()},
       {"mlfe/zConvention",
        fmt::format(
@@ -161,11 +187,30 @@ ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, cons
   return attr;
 }
 
+// The render mesh of b: its level p.level, or an unstructured mesh as it is (its errors named
+// after the source).
+std::unique_ptr<TetRenderMesh> render_mesh_of(const Approximation<3>& a, const RenderFileOptions& p,
+                                              RayEntry entry, const std::string& source) {
+  if (entry == RayEntry::kHierarchy)
+    return std::make_unique<TetRenderMesh>(a.hierarchy, a.values, p.level,
+                                           a.on_lattice ? &a.data_extent : nullptr);
+  try {
+    return std::make_unique<TetRenderMesh>(a.hierarchy, a.values, -1, nullptr, entry);
+  } catch (const Cancelled&) {
+    throw;
+  } catch (const Error& e) {
+    std::string what = e.what();
+    if (what.rfind("render: ", 0) == 0) what = what.substr(8);
+    throw Error(source + ": " + what);
+  }
+}
+
 // Every frame, rendered and (with `output`) written; the render mesh is built once.
 RenderResult render_frames(const Built& b, const std::string& output, const RenderFileOptions& p,
-                           const ScalarGrid* grid, const std::string& source) {
-  check_render_options(p, b, grid, source);
-  const TransferFunction tf = choose_transfer_function(p, b);
+                           const ScalarGrid* grid, const std::string& source,
+                           RayEntry entry = RayEntry::kHierarchy) {
+  check_render_options(p, b, grid, source, entry);
+  const TransferFunction tf = choose_transfer_function(p, b, entry);
   const detail::Reporter report(p.progress);
   report(0, "rendering");
   const Framing framing = frame_volume(b);
@@ -175,8 +220,7 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
   detail::OutputGuard written;
   std::unique_ptr<TetRenderMesh> mesh;
   if (!p.reference) {
-    mesh = std::make_unique<TetRenderMesh>(a3.hierarchy, a3.values, p.level,
-                                           a3.on_lattice ? &a3.data_extent : nullptr);
+    mesh = render_mesh_of(a3, p, entry, source);
     r.tetrahedra = mesh->size();
     r.level = mesh->level();
     r.mesh_bytes = mesh->memory_bytes();
@@ -194,7 +238,7 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
     if (!output.empty()) {
       report((frame + 0.9) / p.frames, "writing");
       f.exr = numbered(output, frame, p.frames);
-      write_exr(f.exr, f.image, exr_attributes(p, f.camera, tf, r, a3.hierarchy.max_level(), source));
+      write_exr(f.exr, f.image, exr_attributes(p, f.camera, tf, r, a3.hierarchy.max_level(), source, entry));
       r.written.push_back(f.exr);
       written.add(f.exr);
       if (!p.png.empty()) {
@@ -232,7 +276,70 @@ Built built_for_render(const ScalarGrid& grid, const RenderFileOptions& o, const
   return b;
 }
 
+// An unstructured mesh as a one-level hierarchy (T0 = the mesh, finest level) with its values
+// at the points, in the physical frame (identity transform); tetrahedra of zero volume are left
+// out, as mlfe build does.
+Built built_of_mesh(const TetMesh& mesh) {
+  const std::string source = mesh.source.empty() ? std::string("tetrahedral mesh") : mesh.source;
+  const std::size_t np = mesh.points.size();
+  if (mesh.values.size() != np)
+    throw Error(fmt::format("{}: {} values for {} points", source, mesh.values.size(), np));
+  for (std::size_t i = 0; i < np; ++i)
+    for (double x : {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2], mesh.values[i]})
+      if (!std::isfinite(x))
+        throw Error(fmt::format("{}: point {} has a non-finite coordinate or value", source, i));
+  std::vector<Hierarchy<3>::Cell> cells;
+  cells.reserve(mesh.tets.size());
+  for (std::size_t t = 0; t < mesh.tets.size(); ++t) {
+    Hierarchy<3>::Cell c;
+    for (int k = 0; k < 4; ++k) {
+      const std::int32_t v = mesh.tets[t][k];
+      if (v < 0 || std::size_t(v) >= np)
+        throw Error(fmt::format("{}: tetrahedron {} refers to point {} of {}", source, t, v, np));
+      c[k] = VertexId(std::uint32_t(v));
+    }
+    const auto& p0 = mesh.points[c[0].value];
+    Vec3 e[3];
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) e[k][a] = mesh.points[c[k + 1].value][a] - p0[a];
+    const double volume = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) -
+                          e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
+                          e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);
+    if (volume != 0) cells.push_back(c);
+  }
+  if (cells.empty()) throw Error(source + ": no tetrahedron of positive volume to render");
+  if (cells.size() >= (std::size_t(1) << 30))
+    throw Error(fmt::format("{}: {} tetrahedra exceed the renderer's limit of 2^30", source, cells.size()));
+  Built b;
+  const auto range = std::minmax_element(mesh.values.begin(), mesh.values.end());
+  b.value_min = *range.first;
+  b.value_max = *range.second;
+  Approximation<3> a;
+  a.hierarchy = Hierarchy<3>::from_coarse(mesh.points, std::move(cells));
+  a.values = mesh.values;
+  b.approximation = std::move(a);
+  return b;
+}
+
 }  // namespace
+
+RenderResult render_images(const TetMesh& mesh, const RenderFileOptions& options) {
+  RenderFileOptions o = options;
+  o.keep_images = true;
+  const Built b = built_of_mesh(mesh);
+  RenderResult r = render_frames(b, "", o, nullptr, mesh.source, RayEntry::kBoundaryFaces);
+  r.built = b;
+  return r;
+}
+
+RenderResult render(const TetMesh& mesh, const std::string& output, const RenderFileOptions& options) {
+  check_output_path(output, {".exr"});
+  if (!options.png.empty()) check_output_path(options.png, {".png"});
+  Built b = built_of_mesh(mesh);
+  RenderResult r = render_frames(b, output, options, nullptr, mesh.source, RayEntry::kBoundaryFaces);
+  r.built = std::move(b);
+  return r;
+}
 
 RenderResult render_images(const Built& b, const RenderFileOptions& options, const ScalarGrid* grid,
                            const std::string& source) {
@@ -264,6 +371,11 @@ RenderResult render(const std::string& input, const std::string& output, const R
   }
   VolumeReadOptions read = options.read;
   if (read.max_bytes == 0) read.max_bytes = options.build.max_memory.bytes();
+  if (!detect_tet_mesh_format(input).empty()) {
+    // An unstructured mesh is rendered as it is: no build.
+    const TetMesh mesh = read_tet_mesh(input, tet_mesh_read_options(read));
+    return render(mesh, output, o);
+  }
   const ScalarGrid grid = read_volume(input, read);
   if (grid.dim != 3) throw Error(input + ": rendering needs a 3D volume");
   for (int a = 0; a < 3; ++a)

@@ -781,6 +781,30 @@ void bind_calls(py::module_& m) {
           result["frames"] = render_frames(std::move(r));
           return result;
         });
+  // A .vtu/.msh mesh rendered as it is (pipeline::render(TetMesh)); `grid` names the array.
+  m.def("render_mesh", [](const std::string& mesh_path, const py::object& out, const py::object& progress,
+                          const py::kwargs& kwargs) {
+    Options kw(kwargs);
+    TetMeshReadOptions read;
+    kw.get("grid", read.array_name);
+    pipeline::RenderFileOptions o = render_options(kw);
+    kw.finish();
+    o.keep_images = true;
+    const std::string path =
+        out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+    pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
+      o.progress = p;
+      const TetMesh mesh = read_tet_mesh(mesh_path, read);
+      return path.empty() ? pipeline::render_images(mesh, o) : pipeline::render(mesh, path, o);
+    });
+    py::dict result;
+    result["tetrahedra"] = r.tetrahedra;
+    result["level"] = r.level;
+    result["mesh_bytes"] = r.mesh_bytes;
+    result["written"] = r.written;
+    result["frames"] = render_frames(std::move(r));
+    return result;
+  });
   m.def("info", [](const std::string& path, bool labels, const std::string& label_table) {
     pipeline::InfoOptions o;
     o.labels = labels;

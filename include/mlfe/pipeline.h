@@ -607,8 +607,21 @@ RenderResult render_images(const Built& b, const RenderFileOptions& options, con
 RenderResult render(const Built& b, const std::string& output, const RenderFileOptions& options,
                     const ScalarGrid* grid = nullptr, const std::string& source = "");
 
-/// `mlfe render`: a hierarchy file, or a volume built first, to `output`.
+/// `mlfe render`: a hierarchy file, a volume built first, or a tetrahedral mesh with point
+/// values (.vtu, .msh; read.grid_name names the array) rendered as it is, to `output`.
 RenderResult render(const std::string& input, const std::string& output, const RenderFileOptions& options);
+
+/// An unstructured tetrahedral mesh with point values (a finite-element solution) rendered
+/// directly, no build: the mesh is T0 and the finest level, rays enter and re-enter it through
+/// its boundary faces (RayEntry::kBoundaryFaces), so it need not be convex nor fill its box.
+/// Physical frame = the mesh's coordinates; preset opacities per its fine edge length (10th
+/// percentile) unless options.tf_unit; build and level options do not apply (level -1 or 0).
+/// Tetrahedra of zero volume are left out. Throws mlfe::Error ("<mesh.source>: ...") for
+/// values that do not match the points, bad indices, non-finite numbers, no tetrahedron of
+/// positive volume, or a face shared by more than two tetrahedra (not a conforming mesh).
+/// Result::built holds the one-level hierarchy.
+RenderResult render(const TetMesh& mesh, const std::string& output, const RenderFileOptions& options);
+RenderResult render_images(const TetMesh& mesh, const RenderFileOptions& options);
 
 // ---- convert and iso ----
 

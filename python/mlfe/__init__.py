@@ -643,8 +643,9 @@ class RenderResult:
 @_library_call
 def render(source, out=None, *, progress=None, **options):
     """Ray-cast images, as ``mlfe render``: ``source`` a :class:`Hierarchy`, a ``.mlfeh`` file,
-    or a volume (file, :class:`Volume`, array with its frame keywords), built first with the
-    build options given. Returns a :class:`RenderResult` with the arrays; with ``out`` (.exr)
+    a volume (file, :class:`Volume`, array with its frame keywords), built first with the
+    build options given, or a tetrahedral mesh with point values (``.vtu``, ``.msh``; ``grid=``
+    names the array) rendered as it is, no build. Returns a :class:`RenderResult` with the arrays; with ``out`` (.exr)
     also writes the EXR (half RGBA, float Z, camera and transfer function in the header) and
     with ``png=`` an sRGB preview. Options (the command line's): tf (a preset or a ParaView
     .json), tf_unit, camera ('ortho', 'perspective'), azimuth, elevation, position, target, up,
@@ -658,6 +659,14 @@ def render(source, out=None, *, progress=None, **options):
         h = source
     else:
         path = _fspath(source)
+        if path is not None and path.lower().endswith((".vtu", ".msh")):
+            grid = options.pop("grid", None)
+            if options:
+                raise Error("%s: not a render option (a mesh is rendered as it is, not built)" % sorted(options)[0])
+            if grid is not None:
+                render_opts["grid"] = grid
+            return RenderResult(_mlfe.render_mesh(path, None if out is None else os.fspath(out), progress,
+                                                  **render_opts))
         if path is not None and path.lower().endswith(".mlfeh"):
             if options:
                 raise Error("%s: not a render option (build options need a volume)" % sorted(options)[0])

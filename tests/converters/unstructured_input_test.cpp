@@ -231,9 +231,10 @@ TEST(UnstructuredInput, CommandLineBuildsAndConvertsAMesh) {
   ASSERT_EQ(r.status, 0) << r.err;
 
   // What needs a voxel volume says so; bad input exits 2 and writes nothing.
-  r = test::run_mlfe("render " + poisson_vtu() + " -o " + scratch("r.exr"));
+  r = test::run_mlfe("render " + poisson_vtu() + " --reference -o " + scratch("r.exr"));
   EXPECT_EQ(r.status, 2);
-  EXPECT_NE(r.err.find("needs a voxel volume"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--reference needs a volume"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(scratch("r.exr")));
   const std::string cut = scratch("cut.vtu"), out = scratch("cut.mlfeh");
   {
     std::ifstream src(poisson_vtu(), std::ios::binary);
@@ -243,6 +244,135 @@ TEST(UnstructuredInput, CommandLineBuildsAndConvertsAMesh) {
   r = test::run_mlfe("build " + cut + " -o " + out);
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.err.find(cut + ": "), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+// ---- mlfe render on the mesh itself (no build) ----
+
+// A constant field on the cube with the corner [0.5, 1]^3 cut away, and a transfer function of
+// constant opacity 0.3 per 0.25 (ParaView JSON, so it does not depend on the value range).
+struct ConstantCutCube {
+  TetMesh mesh = test::kuhn_mesh(
+      8, [](const V3&) { return 1.0; }, test::in_cut_corner);
+  std::string tf = scratch("constant_tf.json");
+  ConstantCutCube() {
+    mesh.source = "cut_cube.vtu";
+    std::ofstream(tf) << R"([{"Name": "constant", "RGBPoints": [0, 1, 1, 1, 2, 1, 1, 1],
+                             "Points": [0, 0.3, 0.5, 0, 2, 0.3, 0.5, 0]}])";
+  }
+};
+
+double box_chord(const V3& lo, const V3& hi, const V3& o, const V3& d) {
+  double t0 = 0, t1 = 1e300;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
+      continue;
+    }
+    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+    t0 = std::max(t0, std::min(ta, tb));
+    t1 = std::min(t1, std::max(ta, tb));
+  }
+  return std::max(0.0, t1 - t0);
+}
+
+TEST(UnstructuredRender, ImageIsTheIntegralThroughTheNonConvexMesh) {
+  // Every pixel's opacity against 1 − (1 − 0.3)^(length in the mesh / 0.25), the length being
+  // the chord in the cube minus the chord in the cut corner: rays that cross the material, the
+  // cut and the material again must get both parts. The view looks across the cut.
+  const ConstantCutCube c;
+  pipeline::RenderFileOptions o;
+  o.tf = c.tf;
+  o.tf_unit = 0.25;
+  o.size = {40, 32};
+  o.azimuth = 225;
+  o.elevation = 30;
+  o.stop_opacity = 1;
+  const pipeline::RenderResult r = pipeline::render_images(c.mesh, o);
+  ASSERT_EQ(r.frames.size(), 1u);
+  const pipeline::RenderFrame& f = r.frames[0];
+  EXPECT_EQ(r.tetrahedra, c.mesh.tets.size());
+  EXPECT_GT(f.stats.reentries, 0u);
+  EXPECT_EQ(f.stats.step_bound_hits, 0u);
+  int covered = 0;
+  for (int y = 0; y < f.height; ++y)
+    for (int x = 0; x < f.width; ++x) {
+      V3 ro, rd;
+      f.camera.ray(x, y, ro, rd);
+      const double len =
+          box_chord({0, 0, 0}, {1, 1, 1}, ro, rd) - box_chord({0.5, 0.5, 0.5}, {1, 1, 1}, ro, rd);
+      covered += len > 0;
+      EXPECT_NEAR(f.image.rgba[4 * (y * f.width + x) + 3], 1 - std::pow(0.7, len / 0.25), 1e-5)
+          << x << "," << y;
+    }
+  EXPECT_GT(covered, 300);
+}
+
+TEST(UnstructuredRender, CommandLineRendersVtuAndMshSameBytesWithOneAndTwoThreads) {
+  const std::string a = scratch("mesh1.exr"), b = scratch("mesh2.exr");
+  const std::string opts =
+      " --tf hot --size 64x48 --azimuth 225 --elevation 20 --camera perspective --shading";
+  auto r = test::run_mlfe("--threads 1 render " + poisson_vtu() + " -o " + a + opts);
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_NE(r.err.find("re-entries"), std::string::npos) << r.err;  // the view crosses the cut
+  ASSERT_EQ(test::run_mlfe("--threads 2 render " + poisson_vtu() + " -o " + b + opts).status, 0);
+  EXPECT_GT(fs::file_size(a), 1000u);
+  EXPECT_EQ(test::read_bytes(a), test::read_bytes(b));
+  // The repository's small meshes, .msh and .vtu, with the array named.
+  for (const char* name : {"small_tets_bin22.msh", "small_tets_raw.vtu"}) {
+    const std::string out = scratch(std::string(name) + ".exr");
+    r = test::run_mlfe("render " + test::test_data_path(name) + " -o " + out + " --size 32x32 --quiet");
+    EXPECT_EQ(r.status, 0) << name << ": " << r.err;
+    EXPECT_TRUE(fs::exists(out)) << name;
+  }
+}
+
+TEST(UnstructuredRender, BadMeshesExitTwoWithOneLineAndNoOutput) {
+  const std::string out = scratch("bad_mesh.exr");
+  const auto expect_rejected = [&](const std::string& mesh, const std::string& why) {
+    const auto r = test::run_mlfe("render " + mesh + " -o " + out + " --quiet");
+    EXPECT_EQ(r.status, 2) << r.err;
+    EXPECT_NE(r.err.find(mesh + ": "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(why), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(fs::exists(out));
+  };
+  // A tetrahedron listed twice: its inner faces belong to three tetrahedra.
+  {
+    const ConstantCutCube c;
+    std::vector<Hierarchy<3>::Cell> cells;
+    for (const auto& t : c.mesh.tets)
+      cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])),
+                       VertexId(std::uint32_t(t[2])), VertexId(std::uint32_t(t[3]))});
+    const Hierarchy<3> h = Hierarchy<3>::from_coarse(c.mesh.points, cells);
+    std::vector<ElemId> elems = h.leaves();
+    elems.push_back(elems[7]);
+    const std::string twice = scratch("twice.vtu");
+    write_vtu(twice, h, elems, &c.mesh.values, nullptr);
+    expect_rejected(twice, "more than two tetrahedra");
+  }
+  // Only a flat tetrahedron.
+  const std::string flat = scratch("flat.vtu");
+  std::ofstream(flat) << R"(<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1"><UnstructuredGrid><Piece NumberOfPoints="4" NumberOfCells="1">
+<PointData Scalars="u"><DataArray type="Float64" Name="u" format="ascii">0 1 2 3</DataArray></PointData>
+<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 0 0 2 0 0 3 0 0</DataArray></Points>
+<Cells><DataArray type="Int32" Name="connectivity" format="ascii">0 1 2 3</DataArray>
+<DataArray type="Int32" Name="offsets" format="ascii">4</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">10</DataArray></Cells>
+</Piece></UnstructuredGrid></VTKFile>
+)";
+  expect_rejected(flat, "no tetrahedron of positive volume");
+  // A truncated file.
+  const std::string cut = scratch("cut_render.vtu");
+  {
+    std::ifstream src(poisson_vtu(), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(src)), {});
+    std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  }
+  expect_rejected(cut, "");
+  // A level the mesh does not have is a usage error (1).
+  EXPECT_EQ(test::run_mlfe("render " + poisson_vtu() + " -o " + out + " --level 1").status, 1);
   EXPECT_FALSE(fs::exists(out));
 }
 

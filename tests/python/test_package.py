@@ -251,6 +251,22 @@ class PipelineCallsTest(unittest.TestCase):
         with self.assertRaisesRegex(mlfe.Error, "^camera: "):
             mlfe.render(h, camera="fisheye")
 
+    def test_render_mesh_equals_the_command_line_exr(self):
+        # A .vtu finite-element mesh is rendered as it is (no build), as `mlfe render mesh.vtu`.
+        mesh = os.path.join(SOURCE, "tests", "data", "small_tets_raw.vtu")
+        exr = self.path("mesh_cli.exr")
+        r = cli("render", mesh, "-o", exr, "--size", "40x30", "--azimuth", "30", "--tf", "hot", "--quiet")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        image = mlfe.read_image(exr)
+        result = mlfe.render(mesh, size=(40, 30), azimuth=30, tf="hot")
+        self.assertEqual(result.level, 0)
+        self.assertGreater(float(result.rgba[..., 3].max()), 0.01)
+        for c, name in enumerate("RGBA"):
+            np.testing.assert_array_equal(result.rgba[..., c].astype(np.float16).astype(np.float32),
+                                          image["channels"][name], err_msg=name)
+        with self.assertRaisesRegex(mlfe.Error, "not a render option"):
+            mlfe.render(mesh, rms=0.1)
+
     def test_cancel_from_progress_leaves_no_file(self):
         seen = []
 

@@ -25,6 +25,15 @@
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
 // The rendered elements are kept in Z-order of their centroids, so that the records a tile of
 // rays reads lie close together in memory.
+// Unstructured meshes (RayEntry::kBoundaryFaces: T0 is a given mesh, e.g. a finite-element
+// solution read from .vtu/.msh, which need not fill its box nor be convex): steps 2 and 5 go
+// through the mesh's boundary faces instead, kept in a uniform bucket grid over the box. A ray
+// enters at the first boundary face it crosses inward (a 3D DDA through the buckets, testing the
+// faces listed there); when it leaves through a boundary face it looks for the next inward one
+// behind it, so it re-enters a non-convex mesh (Bunyk, Kaufman & Silva 1997 do the same with
+// per-pixel lists of projected boundary faces). The face test is watertight: the edge terms of
+// a face are computed with the edge's lower vertex id first, so the two faces sharing an edge
+// see the same number, and a ray through the edge hits at least one of them.
 // Exit test: the parametric form of the face-crossing test (as in Bunyk et al.) with the
 // entry-face exclusion as tie-break, not Plücker coordinates (Platis & Theoharis 2003).
 #pragma once
@@ -114,6 +123,18 @@ struct RenderStats {
   std::uint64_t skips = 0;            ///< transparent coarse elements crossed in one step
   std::uint64_t relocations = 0;      ///< rays located again after leaving the mesh early
   std::uint64_t step_bound_hits = 0;  ///< rays ended by the step bound (should be 0)
+  std::uint64_t reentries = 0;        ///< RayEntry::kBoundaryFaces: entries after the first
+};
+
+/// How a ray finds its entry element and where it goes when it leaves the mesh.
+enum class RayEntry {
+  /// T0 fills the box (a hierarchy built on a volume or a mesh's box): locate through the
+  /// hierarchy; leaving the mesh before the box's far side is rounding, located again.
+  kHierarchy,
+  /// T0 is an arbitrary conforming mesh (Hierarchy::from_coarse of an unstructured mesh): enter
+  /// and re-enter through its boundary faces (the file comment); no transparent ancestor is
+  /// skipped (locating behind it would need the hierarchy to fill the box).
+  kBoundaryFaces,
 };
 
 /// The triangulation T_k of a hierarchy prepared for ray casting: face neighbours of its
@@ -126,8 +147,11 @@ class TetRenderMesh {
   /// triangulation, smaller levels use the hierarchical basis (surpluses above k dropped).
   /// With `clip_to` (a hierarchy on the samples' lattice, sample_lattice.h), rays are clipped to
   /// the data's box [0, clip_to] instead of T0's padded cube.
+  /// With RayEntry::kBoundaryFaces, throws mlfe::Error ("render: ...") when a face is shared
+  /// by more than two of the rendered tetrahedra (not a conforming mesh).
   TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level = -1,
-                const std::array<double, 3>* clip_to = nullptr);
+                const std::array<double, 3>* clip_to = nullptr, RayEntry entry = RayEntry::kHierarchy);
+  ~TetRenderMesh();
 
   std::size_t size() const { return elems_.size(); }
   int level() const { return level_; }
@@ -189,6 +213,24 @@ class TetRenderMesh {
   /// Bytes the renderer adds on top of the hierarchy and its values.
   std::size_t memory_bytes() const;
 
+  RayEntry ray_entry() const { return entry_; }
+  /// A boundary face the ray crosses: face `face` of element `tet` (render index) at t,
+  /// `inward` when the ray enters the mesh there.
+  struct BoundaryHit {
+    std::uint32_t tet = 0;
+    int face = 0;
+    double t = 0;
+    bool inward = false;
+  };
+  /// RayEntry::kBoundaryFaces only: the first boundary face the ray o + t d crosses with
+  /// t in [t_min, t_max] (only inward ones with `inward_only`), smallest t first, then the
+  /// lowest (4 × tet + face); never the faces given as `skip` (4 × tet + face, kNoNeighbor for
+  /// none). t is where the ray meets the face's plane as the walk computes it (record()).
+  bool boundary_hit(const std::array<double, 3>& o, const std::array<double, 3>& d, double t_min,
+                    double t_max, bool inward_only, const std::uint32_t (&skip)[2], BoundaryHit& hit) const;
+  /// Boundary faces of the rendered triangulation (0 with RayEntry::kHierarchy).
+  std::size_t boundary_face_count() const;
+
  private:
   const Hierarchy<3>& h_;
   int level_;
@@ -204,6 +246,10 @@ class TetRenderMesh {
   std::array<double, 3> grid_cell_;
   std::vector<float> grid_lo_, grid_hi_;  // per cell of the range grid (empty: lo > hi)
   int grid_index(int a, double x) const;
+  void build_boundary_grid();
+  RayEntry entry_ = RayEntry::kHierarchy;
+  struct BoundaryGrid;
+  std::unique_ptr<BoundaryGrid> boundary_;
 };
 
 /// One piece of a traced ray: tetrahedron `tet` (render index; −1 for a skipped transparent
@@ -222,6 +268,7 @@ struct TraceResult {
   bool hit = false;              ///< the ray met the domain box
   double t_near = 0, t_far = 0;  ///< its chord in the box
   std::uint64_t steps = 0, skips = 0, relocations = 0;
+  std::uint64_t reentries = 0;  ///< RayEntry::kBoundaryFaces: entries after the first
   bool step_bound_hit = false;
 };
 
