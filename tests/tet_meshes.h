@@ -2,6 +2,7 @@
 // .vtu/.msh readers, the paper's Poisson example): Kuhn-split cube grids, optionally with
 // cubes left out. Header-only.
 #pragma once
+#include <mlfe/core/hierarchy.h>
 #include <mlfe/core/tet_mesh_field.h>
 
 #include <algorithm>
@@ -70,5 +71,31 @@ inline double poisson_u(const std::array<double, 3>& p) {
 
 /// Whether p lies in the cut corner [0.5, 1]^3 (strictly inside in x and y and z).
 inline bool in_cut_corner(const std::array<double, 3>& p) { return p[0] > 0.5 && p[1] > 0.5 && p[2] > 0.5; }
+
+/// The mesh as T0 of a hierarchy (the tetrahedra in their order, vertex ids as they are).
+inline Hierarchy<3> coarse_hierarchy(const TetMesh& m) {
+  std::vector<Hierarchy<3>::Cell> cells;
+  for (const auto& t : m.tets)
+    cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])),
+                     VertexId(std::uint32_t(t[2])), VertexId(std::uint32_t(t[3]))});
+  return Hierarchy<3>::from_coarse(m.points, cells);
+}
+
+/// Length of the ray o + t d (t ≥ 0) inside the box [lo, hi], computed independently of the
+/// renderers (slab clipping), for checks of ray-cast images.
+inline double box_chord(const std::array<double, 3>& lo, const std::array<double, 3>& hi,
+                        const std::array<double, 3>& o, const std::array<double, 3>& d) {
+  double t0 = 0, t1 = 1e300;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
+      continue;
+    }
+    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+    t0 = std::max(t0, std::min(ta, tb));
+    t1 = std::min(t1, std::max(ta, tb));
+  }
+  return std::max(0.0, t1 - t0);
+}
 
 }  // namespace mlfe::test

@@ -262,20 +262,6 @@ struct ConstantCutCube {
   }
 };
 
-double box_chord(const V3& lo, const V3& hi, const V3& o, const V3& d) {
-  double t0 = 0, t1 = 1e300;
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] == 0) {
-      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
-      continue;
-    }
-    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
-    t0 = std::max(t0, std::min(ta, tb));
-    t1 = std::min(t1, std::max(ta, tb));
-  }
-  return std::max(0.0, t1 - t0);
-}
-
 TEST(UnstructuredRender, ImageIsTheIntegralThroughTheNonConvexMesh) {
   // Every pixel's opacity against 1 − (1 − 0.3)^(length in the mesh / 0.25), the length being
   // the chord in the cube minus the chord in the cut corner: rays that cross the material, the
@@ -300,7 +286,7 @@ TEST(UnstructuredRender, ImageIsTheIntegralThroughTheNonConvexMesh) {
       V3 ro, rd;
       f.camera.ray(x, y, ro, rd);
       const double len =
-          box_chord({0, 0, 0}, {1, 1, 1}, ro, rd) - box_chord({0.5, 0.5, 0.5}, {1, 1, 1}, ro, rd);
+          test::box_chord({0, 0, 0}, {1, 1, 1}, ro, rd) - test::box_chord({0.5, 0.5, 0.5}, {1, 1, 1}, ro, rd);
       covered += len > 0;
       EXPECT_NEAR(f.image.rgba[4 * (y * f.width + x) + 3], 1 - std::pow(0.7, len / 0.25), 1e-5)
           << x << "," << y;
@@ -340,11 +326,7 @@ TEST(UnstructuredRender, BadMeshesExitTwoWithOneLineAndNoOutput) {
   // A tetrahedron listed twice: its inner faces belong to three tetrahedra.
   {
     const ConstantCutCube c;
-    std::vector<Hierarchy<3>::Cell> cells;
-    for (const auto& t : c.mesh.tets)
-      cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])),
-                       VertexId(std::uint32_t(t[2])), VertexId(std::uint32_t(t[3]))});
-    const Hierarchy<3> h = Hierarchy<3>::from_coarse(c.mesh.points, cells);
+    const Hierarchy<3> h = test::coarse_hierarchy(c.mesh);
     std::vector<ElemId> elems = h.leaves();
     elems.push_back(elems[7]);
     const std::string twice = scratch("twice.vtu");

@@ -18,34 +18,13 @@ namespace {
 
 using Vec3 = std::array<double, 3>;
 
-Hierarchy<3> coarse_of(const TetMesh& m) {
-  std::vector<Hierarchy<3>::Cell> cells;
-  for (const auto& t : m.tets)
-    cells.push_back({VertexId(std::uint32_t(t[0])), VertexId(std::uint32_t(t[1])),
-                     VertexId(std::uint32_t(t[2])), VertexId(std::uint32_t(t[3]))});
-  return Hierarchy<3>::from_coarse(m.points, cells);
-}
-
-// Chord of the ray o + t d (t ≥ 0) in the box [lo, hi], independent of the renderer.
-double chord(const Vec3& lo, const Vec3& hi, const Vec3& o, const Vec3& d) {
-  double t0 = 0, t1 = 1e300;
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] == 0) {
-      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
-      continue;
-    }
-    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
-    t0 = std::max(t0, std::min(ta, tb));
-    t1 = std::min(t1, std::max(ta, tb));
-  }
-  return std::max(0.0, t1 - t0);
-}
-
 // The unit cube without the column x, y > 0.5 (the Poisson cut corner, extruded along z).
 bool in_column(const Vec3& c) { return c[0] > 0.5 && c[1] > 0.5; }
 const Vec3 kLo{0, 0, 0}, kHi{1, 1, 1}, kColLo{0.5, 0.5, 0}, kColHi{1, 1, 1};
 
-double l_chord(const Vec3& o, const Vec3& d) { return chord(kLo, kHi, o, d) - chord(kColLo, kColHi, o, d); }
+double l_chord(const Vec3& o, const Vec3& d) {
+  return test::box_chord(kLo, kHi, o, d) - test::box_chord(kColLo, kColHi, o, d);
+}
 
 TransferFunction constant_opacity(double alpha, double unit) {
   TransferFunction tf;
@@ -58,7 +37,7 @@ TransferFunction constant_opacity(double alpha, double unit) {
 TEST(UnstructuredRender, RayLeavingAndReenteringGetsBothParts) {
   const TetMesh mesh = test::kuhn_mesh(
       8, [](const Vec3&) { return 1.0; }, in_column);
-  const Hierarchy<3> h = coarse_of(mesh);
+  const Hierarchy<3> h = test::coarse_hierarchy(mesh);
   const TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
   // Squares of 1/8 on the boundary: 48 on top and bottom, 64 on x = 0 and y = 0, 32 on x = 1
   // and y = 1, 32 on each wall of the cut; two triangles each.
@@ -110,7 +89,7 @@ TEST(UnstructuredRender, NoRayLostThroughBoundaryVerticesAndEdges) {
   // faces (x or y = 0.5 over the column) graze the boundary: either answer is right there.
   const TetMesh mesh = test::kuhn_mesh(
       8, [](const Vec3&) { return 1.0; }, in_column);
-  const Hierarchy<3> h = coarse_of(mesh);
+  const Hierarchy<3> h = test::coarse_hierarchy(mesh);
   const TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
   const Vec3 dirs[] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
   int rays = 0;
@@ -134,7 +113,8 @@ TEST(UnstructuredRender, NoRayLostThroughBoundaryVerticesAndEdges) {
                                  (o[1] == 0.5 && ax != 1 && (ax == 0 || o[0] >= 0.5));
         const double c = l_chord(o, d);
         if (on_cut_wall) {
-          EXPECT_TRUE(std::abs(sum - c) < 1e-9 || std::abs(sum - chord(kLo, kHi, o, d)) < 1e-9) << sum;
+          EXPECT_TRUE(std::abs(sum - c) < 1e-9 || std::abs(sum - test::box_chord(kLo, kHi, o, d)) < 1e-9)
+              << sum;
           continue;
         }
         ++rays;
@@ -156,7 +136,7 @@ struct SameTetrahedra {
     h.refine_uniform();
     for (const auto& p : h.points()) u.push_back(std::sin(3 * p[0]) * std::cos(2 * p[1]) + p[2] * p[2]);
     mesh = leaf_mesh(h, u);
-    coarse = coarse_of(mesh);
+    coarse = test::coarse_hierarchy(mesh);
   }
 };
 
@@ -191,7 +171,7 @@ TEST(UnstructuredRender, SameImageAsTheHierarchyRendererOnTheSameTetrahedra) {
 
 TEST(UnstructuredRender, SameBytesWithOneAndTwoThreads) {
   const TetMesh mesh = test::kuhn_mesh(10, test::poisson_u, in_column);
-  const Hierarchy<3> h = coarse_of(mesh);
+  const Hierarchy<3> h = test::coarse_hierarchy(mesh);
   const TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
   const TransferFunction tf = transfer_function_preset("hot", 0, 0.8, 0.1);
   const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 215, 25, true, 64, 48);
@@ -210,7 +190,7 @@ TEST(UnstructuredRender, SameBytesWithOneAndTwoThreads) {
 TEST(UnstructuredRender, RejectsAFaceSharedByThreeTetrahedra) {
   TetMesh mesh = test::kuhn_mesh(2, [](const Vec3& p) { return p[0]; });
   mesh.tets.push_back(mesh.tets[3]);  // the same tetrahedron twice
-  const Hierarchy<3> h = coarse_of(mesh);
+  const Hierarchy<3> h = test::coarse_hierarchy(mesh);
   try {
     TetRenderMesh m(h, mesh.values, -1, nullptr, RayEntry::kBoundaryFaces);
     FAIL() << "accepted a non-conforming mesh";

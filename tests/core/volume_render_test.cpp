@@ -10,6 +10,7 @@
 #include <set>
 
 #include "tests/core/test_hierarchies.h"
+#include "tests/tet_meshes.h"
 
 namespace mlfe {
 namespace {
@@ -21,21 +22,6 @@ Hierarchy<3> lattice_box() {  // [0,1]^3, vertices on the lattice (1/4) Z^3, plu
   h.refine_uniform();
   h.refine_uniform();
   return test::refine_toward_origin(std::move(h), 1);
-}
-
-// Chord of the ray in the box [lo, hi], computed independently of the renderer.
-double chord(const Vec3& lo, const Vec3& hi, const Vec3& o, const Vec3& d) {
-  double t0 = 0, t1 = 1e300;
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] == 0) {
-      if (o[a] < lo[a] || o[a] > hi[a]) return 0;
-      continue;
-    }
-    const double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
-    t0 = std::max(t0, std::min(ta, tb));
-    t1 = std::min(t1, std::max(ta, tb));
-  }
-  return std::max(0.0, t1 - t0);
 }
 
 TEST(TraceRay, NoLostRaysThroughVerticesEdgesAndFaces) {
@@ -75,7 +61,7 @@ TEST(TraceRay, NoLostRaysThroughVerticesEdgesAndFaces) {
           sum += s.t1 - s.t0;
           return true;
         });
-        const double c = chord(m.box_lo(), m.box_hi(), o, d);
+        const double c = test::box_chord(m.box_lo(), m.box_hi(), o, d);
         if (c == 0) continue;
         ++rays;
         segments += seen.size();
@@ -119,7 +105,7 @@ TEST(RenderMesh, ConstantOpacityGivesAnalyticTransmittanceIncludingGrazingRays) 
       for (int x = 0; x < cam.width; ++x) {
         Vec3 o, d;
         cam.ray(x, y, o, d);
-        const double expected = 1 - std::pow(1 - 0.4, chord(m.box_lo(), m.box_hi(), o, d) / 0.5);
+        const double expected = 1 - std::pow(1 - 0.4, test::box_chord(m.box_lo(), m.box_hi(), o, d) / 0.5);
         EXPECT_NEAR(img.rgba[4 * (y * cam.width + x) + 3], expected, 1e-5) << x << "," << y;
       }
   }
