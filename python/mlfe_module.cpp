@@ -47,6 +47,10 @@ std::array<double, 3> triple(const py::handle& h, const char* what, double fill)
   return out;
 }
 
+// Whether h names a file (a str or an os.PathLike), and that file name as os.fspath gives it.
+bool is_path(const py::handle& h) { return py::isinstance<py::str>(h) || py::hasattr(h, "__fspath__"); }
+std::string fspath(const py::handle& p) { return py::str(py::module_::import("os").attr("fspath")(p)); }
+
 py::object to_python(const nlohmann::json& j) { return py::module_::import("json").attr("loads")(j.dump()); }
 
 // The keyword options of build/convert/extract, consumed as they are read so that unknown
@@ -221,10 +225,10 @@ std::shared_ptr<ScalarGrid> grid_from_array(const py::array& in, const py::objec
 std::shared_ptr<ScalarGrid> grid_from(const py::object& volume, const py::object& spacing,
                                       const py::object& origin, const py::object& direction,
                                       const std::string& space) {
-  if (py::isinstance<py::str>(volume) || py::hasattr(volume, "__fspath__")) {
+  if (is_path(volume)) {
     if (!spacing.is_none() || !origin.is_none() || !direction.is_none())
       throw Error("spacing, origin and direction are for arrays; a file brings its own");
-    const std::string path = py::str(py::module_::import("os").attr("fspath")(volume));
+    const std::string path = fspath(volume);
     py::gil_scoped_release release;
     return std::make_shared<ScalarGrid>(read_volume(path));
   }
@@ -232,7 +236,7 @@ std::shared_ptr<ScalarGrid> grid_from(const py::object& volume, const py::object
 }
 
 py::tuple read_volume_py(const py::object& path) {
-  const std::string p = py::str(py::module_::import("os").attr("fspath")(path));
+  const std::string p = fspath(path);
   std::shared_ptr<ScalarGrid> g;
   {
     py::gil_scoped_release release;
@@ -361,7 +365,7 @@ py::array_t<std::uint8_t> vertex_levels(const Built& b) {
 // mlfe.load: the hierarchy file as a Built, with the error figures and metadata of its header
 // (read again on its coarsest level only).
 PyBuilt load_py(const py::object& path_like) {
-  const std::string path = py::str(py::module_::import("os").attr("fspath")(path_like));
+  const std::string path = fspath(path_like);
   PyBuilt out;
   out.source = path;
   HierarchyFile header;
@@ -384,8 +388,8 @@ PyBuilt load_py(const py::object& path_like) {
 
 // The path of a .vtu/.msh tetrahedral mesh, or "" for anything else (arrays, volume files).
 std::string tet_mesh_path(const py::object& volume) {
-  if (!py::isinstance<py::str>(volume) && !py::hasattr(volume, "__fspath__")) return "";
-  const std::string path = py::str(py::module_::import("os").attr("fspath")(volume));
+  if (!is_path(volume)) return "";
+  const std::string path = fspath(volume);
   return detect_tet_mesh_format(path).empty() ? "" : path;
 }
 
@@ -431,8 +435,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
       if (l < 0 || l > 65535) throw Error("labels: " + std::to_string(l) + " is not a label 0..65535");
       o.labels.push_back(static_cast<std::uint16_t>(l));
     }
-  auto fspath = py::module_::import("os").attr("fspath");
-  if (kw.has("label_table")) o.table = py::str(fspath(kw.take("label_table")));
+  if (kw.has("label_table")) o.table = fspath(kw.take("label_table"));
   kw.get("min_component", o.min_component);
   kw.get("smooth_iterations", o.smoothing_iterations);
   kw.get("max_offset", o.max_offset);
@@ -441,7 +444,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   kw.get("draco", o.draco);
   kw.get("quantize", o.quantize);
   kw.finish();
-  const std::string out_path = py::str(fspath(out));
+  const std::string out_path = fspath(out);
   check_output_path(out_path, kAssetExtensions);
   auto grid = grid_from(volume, spacing, origin, direction, space);
   // Warnings (absent labels) are collected without the GIL and raised as Python warnings.
@@ -454,7 +457,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
         convert_labels(*grid, out_path, o, {{"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"}});
   }
   for (const auto& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
-  if (!report.is_none()) write_json(py::str(fspath(report)), {{"asset", summary}});
+  if (!report.is_none()) write_json(fspath(report), {{"asset", summary}});
   return to_python(summary);
 }
 
@@ -474,10 +477,9 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   c.asset = asset_options(kw);
   kw.finish();
   if (!iso.is_none()) c.asset.iso = iso.cast<std::vector<double>>();
-  auto fspath = py::module_::import("os").attr("fspath");
-  if (!hierarchy.is_none()) c.hierarchy = py::str(fspath(hierarchy));
-  if (!report.is_none()) c.report = py::str(fspath(report));
-  const std::string out_path = py::str(fspath(out));
+  if (!hierarchy.is_none()) c.hierarchy = fspath(hierarchy);
+  if (!report.is_none()) c.report = fspath(report);
+  const std::string out_path = fspath(out);
   c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
   // Checked before reading or copying the volume.
   check_output_path(out_path, kAssetExtensions);
@@ -542,7 +544,7 @@ pipeline::RenderFileOptions render_options(Options& kw) {
   get_enum(kw, "integration", o.integration);
   kw.get("shading", o.shading);
   kw.get("skip_empty", o.skip_empty);
-  if (kw.has("png")) o.png = py::str(py::module_::import("os").attr("fspath")(kw.take("png")));
+  if (kw.has("png")) o.png = fspath(kw.take("png"));
   kw.get("frames", o.frames);
   if (kw.has("background")) o.background = vector3(kw, "background");
   kw.get("stop_opacity", o.stop_opacity);
@@ -582,6 +584,17 @@ py::list render_frames(pipeline::RenderResult&& r) {
     frames.append(d);
   }
   return frames;
+}
+
+// What mlfe.render returns: the render's figures and its frames.
+py::dict render_result(pipeline::RenderResult&& r) {
+  py::dict result;
+  result["tetrahedra"] = r.tetrahedra;
+  result["level"] = r.level;
+  result["mesh_bytes"] = r.mesh_bytes;
+  result["written"] = r.written;
+  result["frames"] = render_frames(std::move(r));
+  return result;
 }
 
 CompareOptions compare_options(const py::kwargs& kwargs) {
@@ -766,20 +779,13 @@ void bind_calls(py::module_& m) {
           pipeline::RenderFileOptions o = render_options(kw);
           kw.finish();
           o.keep_images = true;
-          const std::string path =
-              out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+          const std::string path = out.is_none() ? "" : fspath(out);
           pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
             o.progress = p;
             return path.empty() ? pipeline::render_images(*b.built, o, b.grid.get(), b.source)
                                 : pipeline::render(*b.built, path, o, b.grid.get(), b.source);
           });
-          py::dict result;
-          result["tetrahedra"] = r.tetrahedra;
-          result["level"] = r.level;
-          result["mesh_bytes"] = r.mesh_bytes;
-          result["written"] = r.written;
-          result["frames"] = render_frames(std::move(r));
-          return result;
+          return render_result(std::move(r));
         });
   // A .vtu/.msh mesh rendered as it is (pipeline::render(TetMesh)); `grid` names the array.
   m.def("render_mesh", [](const std::string& mesh_path, const py::object& out, const py::object& progress,
@@ -790,20 +796,13 @@ void bind_calls(py::module_& m) {
     pipeline::RenderFileOptions o = render_options(kw);
     kw.finish();
     o.keep_images = true;
-    const std::string path =
-        out.is_none() ? "" : std::string(py::str(py::module_::import("os").attr("fspath")(out)));
+    const std::string path = out.is_none() ? "" : fspath(out);
     pipeline::RenderResult r = with_progress(progress, [&](const Progress& p) {
       o.progress = p;
       const TetMesh mesh = read_tet_mesh(mesh_path, read);
       return path.empty() ? pipeline::render_images(mesh, o) : pipeline::render(mesh, path, o);
     });
-    py::dict result;
-    result["tetrahedra"] = r.tetrahedra;
-    result["level"] = r.level;
-    result["mesh_bytes"] = r.mesh_bytes;
-    result["written"] = r.written;
-    result["frames"] = render_frames(std::move(r));
-    return result;
+    return render_result(std::move(r));
   });
   m.def("info", [](const std::string& path, bool labels, const std::string& label_table) {
     pipeline::InfoOptions o;
