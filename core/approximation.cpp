@@ -310,27 +310,29 @@ void interpolating_values(const Hierarchy<D>& h, const ScalarGrid& g, const Samp
   }
 }
 
+// Address space for a build's hierarchy up front, within the memory budget and at most
+// `per_sample` elements per sample, so that refinement never copies its arrays as they grow
+// (each reallocation held the old and the new arrays at once and copied them); untouched pages
+// cost nothing. Returns the elements reserved, 0 when there is no budget or no address space
+// to spare (strict overcommit: the arrays then grow as needed).
+template <int D>
+std::size_t reserve_hierarchy(std::size_t samples, const ApproximationOptions& opts, Hierarchy<D>& h,
+                              std::size_t bytes_per_element, std::size_t per_sample) {
+  if (opts.max_memory_bytes == 0) return 0;
+  const std::size_t n = std::min(opts.max_memory_bytes / bytes_per_element, per_sample * samples);
+  try {
+    h.reserve(std::min(samples + samples / 4, n), n);  // a vertex per sample at most, padding aside
+    return n;
+  } catch (const std::bad_alloc&) {
+    return 0;
+  }
+}
+
 // The interpolating build (ApproximationOptions::max_sample_error): passes over the leaves
 // refine every leaf owning a sample farther than the bound from the leaf's interpolant. A
 // leaf's corner values never change once created, so a leaf that passed keeps passing and
 // each pass checks only the leaves the previous one created. Fills out.values, the one
 // statistics row and the stop reason.
-// Address space for the interpolating build's hierarchy up front (a lossless build of a noisy
-// scan reaches 6 elements per sample), within the memory budget, so that refinement never
-// copies its arrays as they grow; untouched pages cost nothing.
-template <int D>
-void reserve_hierarchy(const ScalarGrid& g, const ApproximationOptions& opts, Hierarchy<D>& h) {
-  if (opts.max_memory_bytes == 0) return;
-  const auto samples = static_cast<std::size_t>(g.voxel_count());
-  const std::size_t per_element = sizeof(typename Hierarchy<D>::Cell) + 3 * sizeof(ElemId) + 3;
-  const std::size_t n = std::min(opts.max_memory_bytes / per_element, 7 * samples);
-  try {
-    h.reserve(std::min(samples + samples / 4, n), n);
-  } catch (const std::bad_alloc&) {
-    // No address space to spare (strict overcommit): grow as needed instead.
-  }
-}
-
 template <int D>
 void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const ApproximationOptions& opts,
                             Clock::time_point t0, Approximation<D>& out) {
@@ -348,7 +350,9 @@ void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const Approxim
   double vertices_per_mark = 2.0;
   std::size_t fresh = 0;
   std::string stop;
-  reserve_hierarchy(g, opts, h);
+  // A lossless build of a noisy scan reaches 6 elements per sample.
+  reserve_hierarchy(static_cast<std::size_t>(g.voxel_count()), opts, h,
+                    sizeof(typename Hierarchy<D>::Cell) + 3 * sizeof(ElemId) + 3, 7);
   for (;;) {
     // Step 1: values of the new vertices, then the new leaves checked (each in its own slot).
     interpolating_values(h, g, lat, out.integer_values, values);
@@ -490,33 +494,31 @@ void refine_to_start_level(Hierarchy<D>& h, const Field& f, const ApproximationO
   }
 }
 
-// The integrals of the leaves not cached yet (cache and have are indexed by element id).
-// Address space for the cache (and the hierarchy's arrays) up front, so that growing them never copies them:
-// each reallocation held the old and the new array at once (the build's peak) and copying and zero-filling
-// them took a fifth of a full-head build. Untouched pages cost no memory; the reservation is bounded by the
-// memory budget and by 3 elements per sample (a full head at the noise level needs about 2.2); beyond that
-// the vector grows as usual.
+// The integral cache's address space up front with the hierarchy's (reserve_hierarchy): its
+// reallocations were the build's peak, and copying and zero-filling it took a fifth of a
+// full-head build. At most 3 elements per sample (a full head at the noise level needs about
+// 2.2); beyond that the vectors grow as usual.
 template <int D>
 void reserve_build_arrays(const Field& f, const ApproximationOptions& opts, Hierarchy<D>& h,
                           std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
   const ScalarGrid* grid = f.samples();
-  if (!grid || opts.max_memory_bytes == 0) return;
-  const auto samples = static_cast<std::size_t>(grid->voxel_count());
-  const std::size_t n = std::min(opts.max_memory_bytes / sizeof(ElementIntegrals<D>), 3 * samples);
+  if (!grid) return;
+  const std::size_t n = reserve_hierarchy(static_cast<std::size_t>(grid->voxel_count()), opts, h,
+                                          sizeof(ElementIntegrals<D>), 3);
+  if (n == 0) return;
   try {
     cache.reserve(n);
     have.reserve(n);
-    // The hierarchy's arrays likewise (a vertex per sample at most, padding aside).
-    h.reserve(std::min(samples + samples / 4, n), n);
     // Huge pages: a fault per 2 MB instead of per 4 KB as the arrays fill (faults were a
     // fifth of the build's profile on a VM).
     advise_huge_pages(cache);
     advise_huge_pages(have);
   } catch (const std::bad_alloc&) {
-    // No address space to spare (strict overcommit): grow as needed instead.
+    // No address space to spare: grow as needed instead.
   }
 }
 
+// The integrals of the leaves not cached yet (cache and have are indexed by element id).
 template <int D>
 void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Field& f,
                            double qedge, const ApproximationOptions& opts, const SampleLattice* lattice,
