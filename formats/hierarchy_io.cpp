@@ -695,11 +695,9 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
   // The rebuild's arrays at their final size from the start (from_arrays keeps the capacity):
   // grown level by level, refine() would copy them at every level. The header's counts are
   // not trusted yet, so the reservation is bounded by what the file's size can describe.
-  std::size_t nv_reserved = 0;
   {
     const std::uint64_t cap = std::uint64_t(kMaxReserveFactor) * r.file_size() + 4096;
     const auto nv = static_cast<std::size_t>(std::min<std::uint64_t>(head.nv, cap));
-    nv_reserved = nv;
     const auto ne = static_cast<std::size_t>(std::min<std::uint64_t>(head.ne, cap));
     a.points.reserve(nv);
     a.vertex_parents.reserve(nv);
@@ -728,8 +726,6 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
   a.level.assign(ne0, 0);
   a.kind.assign(ne0, ElemKind::kCoarse);
   Hierarchy<D> h = Hierarchy<D>::from_arrays(std::move(a), path + ": invalid T0");
-  // The edge→midpoint map too, when every level is read (it would rehash at each doubling).
-  if (max_level < 0) h.reserve(nv_reserved, 0, true);
   check_lattice_box(path, h, f);
   get_values(path, c, h, head, 0, nv0, f.values, "T0");
   if (c.left() != 0) throw Error(path + ": trailing bytes in the T0 section");
