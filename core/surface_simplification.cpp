@@ -53,6 +53,7 @@
 #include <cmath>
 #include <cstdint>
 #include <initializer_list>
+#include <iterator>
 #include <limits>
 #include <string>
 #include <vector>
@@ -115,6 +116,33 @@ struct Csr {
   std::size_t size(Index r) const { return offset[r + 1] - offset[r]; }
   const Index* begin(Index r) const { return items.data() + offset[r]; }
   const Index* end(Index r) const { return items.data() + offset[r + 1]; }
+};
+
+// Per-vertex lists that change a few at a time: row r is items[start[r] .. start[r] + count[r]),
+// with room for cap[r] items in place; a row that outgrows its room moves to the end of items.
+// The collapses of a pass change the stars of a few thousand vertices of hundreds of thousands,
+// so the rows are updated where they change instead of being rebuilt every pass.
+struct Rows {
+  std::vector<Index> start, count, cap, items;
+  std::size_t size(Index r) const { return count[r]; }
+  const Index* begin(Index r) const { return items.data() + start[r]; }
+  const Index* end(Index r) const { return items.data() + start[r] + count[r]; }
+  // Row r := `row`, in place when it fits.
+  void assign(Index r, const std::vector<Index>& row) {
+    if (row.size() > cap[r]) {
+      start[r] = Index(items.size());
+      cap[r] = Index(row.size());
+      items.resize(items.size() + row.size());
+    }
+    std::copy(row.begin(), row.end(), items.begin() + start[r]);
+    count[r] = Index(row.size());
+  }
+  // Drops the items of row r for which dead(item).
+  template <class Dead>
+  void remove_if(Index r, Dead&& dead) {
+    Index* b = items.data() + start[r];
+    count[r] = Index(std::remove_if(b, b + count[r], dead) - b);
+  }
 };
 
 // A neighbour of a vertex and the number of its faces that contain the edge to it
@@ -208,6 +236,9 @@ class Simplifier {
     screened_.assign(nv, 0);
     keyed_.assign(nv, 0);
     dirty_.assign(nv, 1);
+    dirty_list_.resize(nv);
+    for (Index v = 0; v < Index(nv); ++v) dirty_list_[v] = v;
+    build_face_points();  // with an estimated bound once: no points, never rebuilt
     stamp_.assign(nv, 0);
     removed_faces_.assign(nv, 0);
   }
@@ -238,12 +269,11 @@ class Simplifier {
     bool screen = false;
     while (alive_faces_ > opts_.min_triangles) {
       ++passes;
-      build_face_points();
+      if (opts_.verify_bound) build_face_points();  // else no points: fp_ stays empty
       // Cheap keys (quadric cost of the best-looking neighbour) for vertices whose
       // neighbourhood changed; the full legality check waits until a vertex is selected.
-      work.clear();
-      for (Index v = 0; v < Index(pos_.size()); ++v)
-        if (dirty_[v]) work.push_back(v);
+      work.swap(dirty_list_);
+      dirty_list_.clear();
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, work.size(), 512),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           Scratch s;
@@ -295,6 +325,7 @@ class Simplifier {
       selected.clear();
       for (const auto& c : sorted_) {
         const Index v0 = c.second;
+        if (stamp_[v0] == stamp) continue;  // v0 is in its own closed ring
         bool free = true;
         for (const Index* f = vf_.begin(v0); f != vf_.end(v0) && free; ++f)
           for (Index v : faces_[*f]) free = free && stamp_[v] != stamp;
@@ -332,7 +363,7 @@ class Simplifier {
       collapses += applied;
       screen = screen || 2 * applied < selected.size();
       if (applied == 0) continue;  // only stuck vertices were selected; they are skipped now
-      build_vertex_faces();
+      update_vertex_faces(selected);
       survivors.clear();
       for (Index v0 : selected)
         if (target_[v0] != kNone) {
@@ -346,19 +377,24 @@ class Simplifier {
   // After the stars of `changed` vertices changed (vf_ rebuilt): keys read the closed one-ring
   // (quadric, neighbours' faces), so that ring is re-keyed; the full checks of a stuck vertex
   // also read its neighbours' rings, so a stuck vertex next to a re-keyed one is tried again.
+  // (A stuck vertex shares a face with a re-keyed one exactly when it lies in that one's ring,
+  // so the rings of the re-keyed vertices are searched, not every vertex.)
   void mark_changed(const std::vector<Index>& changed) {
     for (Index v : changed)
       for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
-        for (Index a : faces_[*f]) dirty_[a] = 1;
+        for (Index a : faces_[*f]) mark_dirty(a);
     std::vector<Index> unstick;
-    for (Index v = 0; v < Index(pos_.size()); ++v) {
-      if (!stuck_[v] || dirty_[v]) continue;
-      bool near = false;
-      for (const Index* f = vf_.begin(v); f != vf_.end(v) && !near; ++f)
-        for (Index a : faces_[*f]) near = near || dirty_[a];
-      if (near) unstick.push_back(v);
-    }
-    for (Index v : unstick) dirty_[v] = 1;
+    for (Index a : dirty_list_)
+      for (const Index* f = vf_.begin(a); f != vf_.end(a); ++f)
+        for (Index v : faces_[*f])
+          if (stuck_[v] && !dirty_[v]) unstick.push_back(v);
+    for (Index v : unstick) mark_dirty(v);
+  }
+
+  void mark_dirty(Index v) {
+    if (dirty_[v]) return;
+    dirty_[v] = 1;
+    dirty_list_.push_back(v);
   }
 
   // Edge flips that bring valences toward 6 (4 on the boundary): Draco's connectivity coder
@@ -373,7 +409,7 @@ class Simplifier {
     std::vector<Neighbour> n;
     for (int pass = 0; pass < 3; ++pass) {  // later passes flip a few hundred edges
       build_vertex_faces();
-      build_face_points();
+      if (opts_.verify_bound) build_face_points();
       for (Index v = 0; v < Index(pos_.size()); ++v) {
         neighbours(v, n);
         valence[v] = int(n.size());
@@ -472,16 +508,46 @@ class Simplifier {
 
   void build_vertex_faces() {
     const std::size_t nv = pos_.size();
-    vf_.offset.assign(nv + 1, 0);
+    vf_.count.assign(nv, 0);
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
-        for (Index v : faces_[f]) ++vf_.offset[v + 1];
-    for (std::size_t v = 0; v < nv; ++v) vf_.offset[v + 1] += vf_.offset[v];
-    vf_.items.resize(vf_.offset[nv]);
-    std::vector<Index> fill(vf_.offset.begin(), vf_.offset.end() - 1);
+        for (Index v : faces_[f]) ++vf_.count[v];
+    vf_.start.resize(nv);
+    Index total = 0;
+    for (std::size_t v = 0; v < nv; ++v) {
+      vf_.start[v] = total;
+      total += vf_.count[v];
+    }
+    vf_.cap = vf_.count;
+    vf_.items.resize(total);
+    std::vector<Index> fill(vf_.start);
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
         for (Index v : faces_[f]) vf_.items[fill[v]++] = Index(f);
+  }
+
+  // vf_ after the collapses v0 -> target_[v0] of `selected` (faces_ and face_alive_ updated):
+  // each survivor's row becomes the ascending merge of its own and v0's alive faces, the
+  // vertices opposite a collapsed edge lose its faces. The collapses are disjoint, so the order
+  // does not matter. Rows that moved leave holes; once these outweigh the rows, all are
+  // rebuilt (a function of the mesh alone, like everything here).
+  void update_vertex_faces(const std::vector<Index>& selected) {
+    std::vector<Index> row;
+    auto dead = [&](Index f) { return !face_alive_[f]; };
+    for (Index v0 : selected) {
+      const Index v1 = target_[v0];
+      if (v1 == kNone) continue;
+      for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
+        if (!face_alive_[*f])
+          for (Index x : faces_[*f])
+            if (x != v0 && x != v1) vf_.remove_if(x, dead);
+      row.clear();
+      std::set_union(vf_.begin(v0), vf_.end(v0), vf_.begin(v1), vf_.end(v1), std::back_inserter(row));
+      row.erase(std::remove_if(row.begin(), row.end(), dead), row.end());
+      vf_.assign(v1, row);
+      vf_.count[v0] = 0;
+    }
+    if (vf_.items.size() > 6 * alive_faces_ + (std::size_t(1) << 16)) build_vertex_faces();
   }
 
   void build_face_points() {
@@ -828,11 +894,12 @@ class Simplifier {
   std::vector<Vec3> points_;  // input positions: the points kept within the bound
   bool optimal_ = false;
   std::vector<std::array<Index, 3>> input_faces_;
-  Csr input_vf_;  // input vertex -> input faces
+  Rows input_vf_;  // input vertex -> input faces
   std::vector<uint8_t> boundary_;
   std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
   std::vector<uint8_t> face_alive_, locked_, dirty_, stuck_;
+  std::vector<Index> dirty_list_;                 // the vertices with dirty_ set
   std::vector<uint8_t> screened_;                 // passed the full checks since its last key
   std::vector<Index> keyed_;                      // pass in which the key was last computed
   std::vector<std::pair<double, Index>> sorted_;  // candidates by (key, vertex)
@@ -847,8 +914,8 @@ class Simplifier {
   // Faces removed by the collapse of each vertex, written by collapse(): one slot per vertex, so
   // parallel collapses never share one.
   std::vector<std::size_t> removed_faces_;
-  Csr vf_;  // vertex -> alive faces, ascending
-  Csr fp_;  // face -> attached points, ascending
+  Rows vf_;  // vertex -> alive faces, ascending
+  Csr fp_;   // face -> attached points, ascending
 };
 
 }  // namespace
