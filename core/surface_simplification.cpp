@@ -55,6 +55,8 @@
 #include <initializer_list>
 #include <iterator>
 #include <limits>
+#include <memory>
+#include <queue>
 #include <string>
 #include <vector>
 
@@ -118,30 +120,54 @@ struct Csr {
   const Index* end(Index r) const { return items.data() + offset[r + 1]; }
 };
 
-// Per-vertex lists that change a few at a time: row r is items[start[r] .. start[r] + count[r]),
-// with room for cap[r] items in place; a row that outgrows its room moves to the end of items.
-// The collapses of a pass change the stars of a few thousand vertices of hundreds of thousands,
-// so the rows are updated where they change instead of being rebuilt every pass.
-struct Rows {
-  std::vector<Index> start, count, cap, items;
-  std::size_t size(Index r) const { return count[r]; }
-  const Index* begin(Index r) const { return items.data() + start[r]; }
-  const Index* end(Index r) const { return items.data() + start[r] + count[r]; }
-  // Row r := `row`, in place when it fits.
-  void assign(Index r, const std::vector<Index>& row) {
-    if (row.size() > cap[r]) {
-      start[r] = Index(items.size());
-      cap[r] = Index(row.size());
-      items.resize(items.size() + row.size());
+// Storage that never moves what it handed out, so rows can be placed in it by several
+// threads, each with its own arena.
+class Arena {
+ public:
+  Index* take(std::size_t n) {
+    if (n > left_) {
+      const std::size_t size = std::max<std::size_t>(n, std::size_t(1) << 14);
+      chunks_.emplace_back(new Index[size]);
+      next_ = chunks_.back().get();
+      left_ = size;
     }
-    std::copy(row.begin(), row.end(), items.begin() + start[r]);
-    count[r] = Index(row.size());
+    Index* p = next_;
+    next_ += n;
+    left_ -= n;
+    used_ += n;
+    return p;
+  }
+  std::size_t used() const { return used_; }
+
+ private:
+  std::vector<std::unique_ptr<Index[]>> chunks_;
+  Index* next_ = nullptr;
+  std::size_t left_ = 0, used_ = 0;
+};
+
+// Per-vertex lists that change a few at a time: row r is row[r][0 .. count[r]), with room for
+// cap[r] items in place; a row that outgrows its room moves to an arena. The collapses of a
+// pass change the stars of a few thousand vertices of hundreds of thousands, so the rows are
+// updated where they change instead of being rebuilt every pass.
+struct Rows {
+  std::vector<Index*> row;
+  std::vector<Index> count, cap, items;  // items: the rows as last built, contiguous
+  std::size_t size(Index r) const { return count[r]; }
+  const Index* begin(Index r) const { return row[r]; }
+  const Index* end(Index r) const { return row[r] + count[r]; }
+  // Row r := `items`, in place when it fits (else in `arena`, with some room to grow).
+  void assign(Index r, const std::vector<Index>& list, Arena& arena) {
+    if (list.size() > cap[r]) {
+      cap[r] = Index(list.size() + 4);
+      row[r] = arena.take(cap[r]);
+    }
+    std::copy(list.begin(), list.end(), row[r]);
+    count[r] = Index(list.size());
   }
   // Drops the items of row r for which dead(item).
   template <class Dead>
   void remove_if(Index r, Dead&& dead) {
-    Index* b = items.data() + start[r];
-    count[r] = Index(std::remove_if(b, b + count[r], dead) - b);
+    count[r] = Index(std::remove_if(row[r], row[r] + count[r], dead) - row[r]);
   }
 };
 
@@ -210,7 +236,12 @@ class Simplifier {
       for (Index v : f) quadric_[v].add_plane(u, -u.dot(pos_[f[0]]), 0.5 * len);
     }
     build_vertex_faces();
-    if (optimal_) input_vf_ = vf_;
+    if (optimal_) {
+      input_vf_.offset.assign(1, 0);
+      for (Index v = 0; v < Index(nv); ++v)
+        input_vf_.offset.push_back(input_vf_.offset.back() + vf_.count[v]);
+      input_vf_.items = vf_.items;  // as just built: contiguous, in vertex order
+    }
     // Every input vertex is a point to keep within the bound, attached to its first face
     // (distance 0). Vertices no triangle uses are not part of the surface. An estimated bound
     // attaches none, so no collapse checks or moves points.
@@ -249,6 +280,9 @@ class Simplifier {
     // MRI's 467 k-triangle surface this gave 2.5 % fewer triangles and a 2.7 % smaller Draco
     // file for 20 % more time; further rounds gained under 0.5 % each.
     for (int round = 0; round < 2; ++round) {
+      // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
+      if (round == 0 && !opts_.verify_bound && opts_.min_triangles == 0)
+        for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
       collapse_all(st.passes, st.collapses);
       if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
       std::vector<Index> flipped;
@@ -371,6 +405,153 @@ class Simplifier {
           survivors.push_back(target_[v0]);
         }
       mark_changed(survivors);
+    }
+  }
+
+  // Step 1 with an estimated bound: every block of space on its own, in parallel, cheapest
+  // collapse first (a heap per block), with both ends of each collapse inside the block (no
+  // neighbour in another block). A collapse writes the faces around v0, the survivor's
+  // position, quadric and row, and the rows of v0's neighbours, and reads the rings of its two
+  // ends: all of it belongs to the block, and a vertex inside a block stays inside (it only
+  // gains neighbours of the block). So blocks never see each other's changes, each is
+  // sequential in itself, and the result does not depend on the thread count. The passes then
+  // take the blocks' seams and whatever the order left. The face points of a verified bound
+  // are per pass (fp_), so there the passes do everything.
+  void simplify_blocks(double shift, std::size_t& collapses) {
+    const std::vector<std::vector<Index>> blocks = block_insides(shift);
+    std::vector<std::size_t> removed(blocks.size(), 0), done(blocks.size(), 0);
+    block_arenas_.resize(blocks.size());
+    in_blocks_ = true;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t b = r.begin(); b != r.end(); ++b)
+                          simplify_block(blocks[b], Index(b), block_arenas_[b], removed[b], done[b]);
+                      });
+    in_blocks_ = false;
+    for (std::size_t b = 0; b < blocks.size(); ++b) {
+      alive_faces_ -= removed[b];
+      collapses += done[b];
+    }
+    build_vertex_faces();  // contiguous again; every vertex is still dirty, so the passes key all
+  }
+
+  // The vertices inside each block of space (cubes of kBlockEdges mean input edges, moved by
+  // `shift` of their edge along each axis), ascending; inside_[v] is the number of v's block,
+  // or kNone for vertices with a neighbour in another block (and locked or unused ones).
+  std::vector<std::vector<Index>> block_insides(double shift) {
+    const std::size_t nv = pos_.size();
+    if (!(cell_ > 0)) {  // from the input mesh (the first call)
+      double length = 0;
+      lo_ = Vec3::Constant(std::numeric_limits<double>::infinity());
+      for (const auto& f : faces_)
+        for (int k = 0; k < 3; ++k) {
+          length += (pos_[f[k]] - pos_[f[(k + 1) % 3]]).norm();
+          lo_ = lo_.cwiseMin(pos_[f[k]]);
+        }
+      cell_ = kBlockEdges * length / (3.0 * double(std::max<std::size_t>(faces_.size(), 1)));
+    }
+    const double cell = cell_;
+    std::vector<std::uint64_t> key(nv, ~std::uint64_t(0));
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            if (vf_.size(Index(v)) == 0 || !(cell > 0)) continue;
+            std::uint64_t k = 0;
+            for (int c = 0; c < 3; ++c)
+              k = (k << 21) | std::uint64_t(std::floor((pos_[v][c] - lo_[c]) / cell + 1 - shift));
+            key[v] = k;
+          }
+        });
+    inside_.assign(nv, kNone);
+    best_.assign(nv, kNone);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          if (key[v] == ~std::uint64_t(0) || locked_[v]) continue;
+                          bool in = true;
+                          for (const Index* f = vf_.begin(Index(v)); f != vf_.end(Index(v)) && in; ++f)
+                            for (Index w : faces_[*f]) in = in && key[w] == key[v];
+                          if (in) inside_[v] = 0;
+                        }
+                      });
+    std::vector<std::uint64_t> cells;
+    for (std::size_t v = 0; v < nv; ++v)
+      if (inside_[v] != kNone) cells.push_back(key[v]);
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<std::vector<Index>> blocks(cells.size());
+    for (std::size_t v = 0; v < nv; ++v)
+      if (inside_[v] != kNone) {
+        inside_[v] = Index(std::lower_bound(cells.begin(), cells.end(), key[v]) - cells.begin());
+        blocks[inside_[v]].push_back(Index(v));
+      }
+    return blocks;
+  }
+
+  // One block's collapses, cheapest first: after each, the survivor's ring is keyed again and
+  // stuck vertices next to it are tried again (as mark_changed() does between passes).
+  void simplify_block(const std::vector<Index>& verts, Index b, Arena& arena, std::size_t& removed,
+                      std::size_t& done) {
+    using Item = std::pair<double, Index>;
+    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+    Scratch s;
+    std::vector<Index> row, ring, again;
+    auto push = [&](Index v) {
+      stuck_[v] = 0;
+      if (key_[v] < kNoKey) heap.push({key_[v], v});
+    };
+    for (Index v : verts) {
+      key_[v] = cheapest(v, s, &best_[v]);
+      push(v);
+    }
+    while (!heap.empty()) {
+      const Item top = heap.top();
+      heap.pop();
+      const Index v0 = top.second;
+      if (top.first != key_[v0] || stuck_[v0] || !collapse(v0, s)) continue;  // stale, or stuck
+      const Index v1 = target_[v0];
+      key_[v0] = kNoKey;
+      removed += removed_faces_[v0];
+      ++done;
+      update_vertex_faces(v0, v1, row, arena);
+      // Keys: v1's quadric, position and ring changed; a neighbour's only through its edges to
+      // v0 (gone) and v1, as every other edge's cost reads the same quadrics and positions. So
+      // a neighbour whose cheapest edge went elsewhere needs that one edge only, for the very
+      // key a full evaluation gives.
+      ring.clear();
+      for (const Index* f = vf_.begin(v1); f != vf_.end(v1); ++f)
+        for (Index a : faces_[*f]) ring.push_back(a);
+      std::sort(ring.begin(), ring.end());
+      ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+      // Pushed again: changed keys (a heap entry whose key is unchanged is still valid) and
+      // stuck vertices next to a changed one, which are tried again.
+      again.clear();
+      for (Index a : ring) {
+        if (inside_[a] == b) {
+          const double old = key_[a];
+          if (a == v1 || best_[a] == v0 || best_[a] == v1) {
+            key_[a] = cheapest(a, s, &best_[a]);
+          } else {  // also when no other edge qualified (best_[a] == kNone)
+            auto lower = [&](double cost, Index w) {
+              if (cost < key_[a]) {
+                key_[a] = cost;
+                best_[a] = w;
+              }
+            };
+            if (boundary_[a])  // the edge's face count matters
+              for_each_target(a, s, lower, v1);
+            else
+              lower(edge_cost(a, v1, false), v1);
+          }
+          if (key_[a] != old || stuck_[a]) again.push_back(a);
+        }
+        for (const Index* g = vf_.begin(a); g != vf_.end(a); ++g)
+          for (Index w : faces_[*g])
+            if (inside_[w] == b && stuck_[w]) again.push_back(w);
+      }
+      std::sort(again.begin(), again.end());
+      again.erase(std::unique(again.begin(), again.end()), again.end());
+      for (Index a : again) push(a);
     }
   }
 
@@ -512,42 +693,49 @@ class Simplifier {
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
         for (Index v : faces_[f]) ++vf_.count[v];
-    vf_.start.resize(nv);
+    std::vector<Index> start(nv);
     Index total = 0;
     for (std::size_t v = 0; v < nv; ++v) {
-      vf_.start[v] = total;
+      start[v] = total;
       total += vf_.count[v];
     }
     vf_.cap = vf_.count;
     vf_.items.resize(total);
-    std::vector<Index> fill(vf_.start);
+    std::vector<Index> fill(start);
     for (std::size_t f = 0; f < faces_.size(); ++f)
       if (face_alive_[f])
         for (Index v : faces_[f]) vf_.items[fill[v]++] = Index(f);
+    vf_.row.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) vf_.row[v] = vf_.items.data() + start[v];
+    arena_ = Arena();
+    block_arenas_.clear();
   }
 
-  // vf_ after the collapses v0 -> target_[v0] of `selected` (faces_ and face_alive_ updated):
-  // each survivor's row becomes the ascending merge of its own and v0's alive faces, the
-  // vertices opposite a collapsed edge lose its faces. The collapses are disjoint, so the order
-  // does not matter. Rows that moved leave holes; once these outweigh the rows, all are
-  // rebuilt (a function of the mesh alone, like everything here).
+  // vf_ after the collapses v0 -> target_[v0] of `selected` (faces_ and face_alive_ updated).
+  // The collapses are disjoint, so the order does not matter. Rows that moved leave holes;
+  // once these outweigh the rows, all are rebuilt (a function of the mesh alone, like
+  // everything here).
   void update_vertex_faces(const std::vector<Index>& selected) {
     std::vector<Index> row;
+    for (Index v0 : selected)
+      if (target_[v0] != kNone) update_vertex_faces(v0, target_[v0], row, arena_);
+    if (arena_.used() > 3 * alive_faces_ + (std::size_t(1) << 16)) build_vertex_faces();
+  }
+
+  // vf_ after the collapse v0 -> v1: v1's row becomes the ascending merge of its own and v0's
+  // alive faces, the vertices opposite the edge lose its faces. Writes the rows of v0's closed
+  // ring only.
+  void update_vertex_faces(Index v0, Index v1, std::vector<Index>& row, Arena& arena) {
     auto dead = [&](Index f) { return !face_alive_[f]; };
-    for (Index v0 : selected) {
-      const Index v1 = target_[v0];
-      if (v1 == kNone) continue;
-      for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
-        if (!face_alive_[*f])
-          for (Index x : faces_[*f])
-            if (x != v0 && x != v1) vf_.remove_if(x, dead);
-      row.clear();
-      std::set_union(vf_.begin(v0), vf_.end(v0), vf_.begin(v1), vf_.end(v1), std::back_inserter(row));
-      row.erase(std::remove_if(row.begin(), row.end(), dead), row.end());
-      vf_.assign(v1, row);
-      vf_.count[v0] = 0;
-    }
-    if (vf_.items.size() > 6 * alive_faces_ + (std::size_t(1) << 16)) build_vertex_faces();
+    for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
+      if (!face_alive_[*f])
+        for (Index x : faces_[*f])
+          if (x != v0 && x != v1) vf_.remove_if(x, dead);
+    row.clear();
+    std::set_union(vf_.begin(v0), vf_.end(v0), vf_.begin(v1), vf_.end(v1), std::back_inserter(row));
+    row.erase(std::remove_if(row.begin(), row.end(), dead), row.end());
+    vf_.assign(v1, row, arena);
+    vf_.count[v0] = 0;
   }
 
   void build_face_points() {
@@ -618,20 +806,29 @@ class Simplifier {
 
   // Calls each(cost, w) for every neighbour w that v0 may move onto (cost: the quadric error
   // with a tiny length term breaking ties); returns whether v0 is on the boundary. Fills s.n0.
+  // `only` (if not kNone): that neighbour alone is considered.
   template <class Each>
-  bool for_each_target(Index v0, Scratch& s, Each&& each) const {
+  bool for_each_target(Index v0, Scratch& s, Each&& each, Index only = kNone) const {
     neighbours(v0, s.n0);
     const bool boundary0 = on_boundary(s.n0);
     for (const auto& x : s.n0) {
-      if (locked_[x.v]) continue;
+      if (only != kNone && x.v != only) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
-      const Vec3 p = place(v0, x.v, boundary0);
-      const double cost = eval_sum(quadric_[v0], quadric_[x.v], p);
-      // The estimated bound: the merged planes' mean squared distance.
-      if (!opts_.verify_bound && cost > tol2_ * (quadric_[v0].weight() + quadric_[x.v].weight())) continue;
-      each(cost + 1e-12 * (pos_[x.v] - pos_[v0]).squaredNorm(), x.v);
+      const double cost = edge_cost(v0, x.v, boundary0);
+      if (cost < kNoKey) each(cost, x.v);
     }
     return boundary0;
+  }
+
+  // The key of moving v0 onto its neighbour w (kNoKey: not allowed), the edge's face count
+  // aside (see for_each_target).
+  double edge_cost(Index v0, Index w, bool boundary0) const {
+    if (locked_[w] || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
+    const Vec3 p = place(v0, w, boundary0);
+    const double cost = eval_sum(quadric_[v0], quadric_[w], p);
+    // The estimated bound: the merged planes' mean squared distance.
+    if (!opts_.verify_bound && cost > tol2_ * (quadric_[v0].weight() + quadric_[w].weight())) return kNoKey;
+    return cost + 1e-12 * (pos_[w] - pos_[v0]).squaredNorm();
   }
 
   // Neighbours v0 may move onto, cheapest first (ties by index).
@@ -644,11 +841,18 @@ class Simplifier {
     return boundary0;
   }
 
-  // The first key of ordered_targets(), without sorting.
-  double cheapest(Index v0, Scratch& s) const {
+  // The first key of ordered_targets(), without sorting; *target: a neighbour with that key.
+  double cheapest(Index v0, Scratch& s, Index* target = nullptr) const {
     if (locked_[v0] || vf_.size(v0) == 0) return kNoKey;
     double best = kNoKey;
-    for_each_target(v0, s, [&](double cost, Index) { best = std::min(best, cost); });
+    Index at = kNone;
+    for_each_target(v0, s, [&](double cost, Index w) {
+      if (cost < best) {
+        best = cost;
+        at = w;
+      }
+    });
+    if (target) *target = at;
     return best;
   }
 
@@ -894,7 +1098,7 @@ class Simplifier {
   std::vector<Vec3> points_;  // input positions: the points kept within the bound
   bool optimal_ = false;
   std::vector<std::array<Index, 3>> input_faces_;
-  Rows input_vf_;  // input vertex -> input faces
+  Csr input_vf_;  // input vertex -> input faces
   std::vector<uint8_t> boundary_;
   std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
@@ -914,8 +1118,17 @@ class Simplifier {
   // Faces removed by the collapse of each vertex, written by collapse(): one slot per vertex, so
   // parallel collapses never share one.
   std::vector<std::size_t> removed_faces_;
-  Rows vf_;  // vertex -> alive faces, ascending
-  Csr fp_;   // face -> attached points, ascending
+  // Step 1 (simplify_blocks): the blocks' cube edge in mean input edge lengths.
+  static constexpr double kBlockEdges = 48;
+  std::vector<Index> inside_;        // per vertex: its block, kNone on a block's border
+  std::vector<Index> best_;          // per vertex inside a block: the neighbour giving its key
+  bool in_blocks_ = false;           // collapses stay inside the blocks
+  double cell_ = 0;                  // the blocks' edge
+  Vec3 lo_;                          // the corner of the blocks' grid
+  Rows vf_;                          // vertex -> alive faces, ascending
+  Arena arena_;                      // rows moved by the passes
+  std::vector<Arena> block_arenas_;  // rows moved by the blocks' collapses
+  Csr fp_;                           // face -> attached points, ascending
 };
 
 }  // namespace
