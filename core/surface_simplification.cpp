@@ -859,17 +859,30 @@ class Simplifier {
   // The cheapest neighbour v0 may move onto under all checks, or kNone.
   Index find_target(Index v0, Scratch& s) const {
     const bool boundary0 = ordered_targets(v0, s);
-    for (const auto& c : s.order) {
-      const Index v1 = c.second;
-      const int edge_faces = keeps_topology(v0, v1, boundary0, s);
-      if (edge_faces < 0) continue;
-      const Vec3 p = place(v0, v1, boundary0);
-      if (keeps_geometry(v0, v1, edge_faces, p, s)) return v1;
-      // Where the quadric minimum leaves the surface (tight tolerances on curved parts), the
-      // half-edge collapse may still pass.
-      if (p != pos_[v1] && keeps_geometry(v0, v1, edge_faces, pos_[v1], s)) return v1;
-    }
+    for (const auto& c : s.order)
+      if (passes(v0, c.second, boundary0, s)) return c.second;
     return kNone;
+  }
+
+  // find_target(), trying the neighbour that gave v0's key first (in the blocks, where keys
+  // come with it: most collapses then need no other cost evaluated).
+  Index find_target_from(Index v0, Index first, Scratch& s) const {
+    if (first != kNone) {
+      neighbours(v0, s.n0);
+      if (passes(v0, first, on_boundary(s.n0), s)) return first;
+    }
+    return find_target(v0, s);
+  }
+
+  // v0 may move onto v1 under all checks (s.n0: v0's neighbours).
+  bool passes(Index v0, Index v1, bool boundary0, Scratch& s) const {
+    const int edge_faces = keeps_topology(v0, v1, boundary0, s);
+    if (edge_faces < 0) return false;
+    const Vec3 p = place(v0, v1, boundary0);
+    if (keeps_geometry(v0, v1, edge_faces, p, s)) return true;
+    // Where the quadric minimum leaves the surface (tight tolerances on curved parts), the
+    // half-edge collapse may still pass.
+    return p != pos_[v1] && keeps_geometry(v0, v1, edge_faces, pos_[v1], s);
   }
 
   // Where the merged vertex goes: the minimum of the summed quadrics (Garland & Heckbert) when
@@ -910,7 +923,8 @@ class Simplifier {
   bool collapse(Index v0, Scratch& s) {
     target_[v0] = kNone;
     removed_faces_[v0] = 0;
-    const Index v1 = find_target(v0, s);  // leaves the faces around v1 in s.targets
+    // (Both leave the move in s.move and the faces around v1 in s.targets.)
+    const Index v1 = in_blocks_ ? find_target_from(v0, best_[v0], s) : find_target(v0, s);
     if (v1 == kNone) {
       stuck_[v0] = 1;
       return false;
