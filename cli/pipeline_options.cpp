@@ -119,6 +119,12 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
   cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
       ->check(CLI::Range(-1, 40));
+  cmd->add_option("--surface", p.surface,
+                  "3D surfaces from: samples (marching cubes on the volume's samples, the hierarchy's finest "
+                  "level without building it), hierarchy (marching tetrahedra on the hierarchy's level, the "
+                  "paper's) or auto (samples when the volume is at hand and the finest level is asked)")
+      ->check(CLI::IsMember(pipeline::enum_name_list<SurfaceSource>()))
+      ->capture_default_str();
 }
 
 namespace {
@@ -262,6 +268,7 @@ AssetOptions asset_options(const AssetParams& p) {
   o.placement = pipeline::parse_enum<VertexPlacement>(p.placement, "--placement");
   o.z_scale = p.z_scale;
   o.level = p.level;
+  o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "--surface");
   return o;
 }
 

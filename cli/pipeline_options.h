@@ -72,6 +72,7 @@ struct AssetParams {
   std::string placement = "auto";  ///< "auto", "input", "optimal"
   double z_scale = 1.0;
   int level = -1;
+  std::string surface = "auto";  ///< "auto", "samples", "hierarchy"
 };
 
 /// Adds --iso, --tolerance, --no-draco, --quantize, --lod, --decimate, --simplify,

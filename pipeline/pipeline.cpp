@@ -424,21 +424,35 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     check_iso_in_range(p.iso, b.value_min, b.value_max, "the hierarchy");
     isos = p.iso;
     std::sort(isos.begin(), isos.end());
+    const bool have_samples = grid && grid->dim == 3;
+    if (p.surface == SurfaceSource::kSamples && !have_samples)
+      throw Error("--surface samples: needs the volume's samples (a hierarchy file has none)");
+    if (p.surface == SurfaceSource::kSamples && p.level >= 0)
+      throw UsageError("--surface samples extracts on the finest level; --level asks for another");
+    // auto: a build without a global target (surface-driven) exists to carry the data's surfaces,
+    // which the samples give exactly; a global target (--rms, --max-vertices, ...) asks for the
+    // approximation's.
+    out.source = p.surface == SurfaceSource::kSamples || (p.surface == SurfaceSource::kAuto && have_samples &&
+                                                          p.level < 0 && b.surface_driven)
+                     ? SurfaceSource::kSamples
+                     : SurfaceSource::kHierarchy;
+    const bool from_samples = out.source == SurfaceSource::kSamples;
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
     // some of them away. With the volume at hand the asset takes the interpolant.
     // A build keeps them; a hierarchy read from a file (iso --volume) samples them again.
     std::vector<double> nodal_data;
-    if (grid && grid->dim == 3 && b.surface_driven) {
+    if (grid && grid->dim == 3 && b.surface_driven && !(from_samples && p.lod == 0)) {
       nodal_data = a3.data_values;
       sample_at_vertices(a3.hierarchy, GridField(*grid), nodal_data);
     }
-    IsoExtractor x(a3.hierarchy, nodal_data.empty() ? a3.values : nodal_data);
+    std::optional<IsoExtractor> x;
+    if (!from_samples || p.lod > 0) x.emplace(a3.hierarchy, nodal_data.empty() ? a3.values : nodal_data);
     const int finest = a3.hierarchy.max_level();
     const int level = p.level < 0 ? finest : std::min(p.level, finest);
     std::optional<GridField> field;
-    if (grid && grid->dim == 3 && p.snap > 0) field.emplace(*grid);
+    if (grid && grid->dim == 3 && p.snap > 0 && (!from_samples || p.lod > 0)) field.emplace(*grid);
     out.snapped = field.has_value();
     auto options = [&](int at) {
       IsoOptions o;
@@ -461,10 +475,11 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       Dropped dropped;
       IsoOptions o = options(level);
       o.dropped = &dropped;
-      s.mesh = x.extract(isos[i], b.transform, o);
+      // On the samples the surface is the data's own: nothing to snap or clip.
+      s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o) : x->extract(isos[i], b.transform, o);
       out.dropped.push_back(dropped);
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
-        s.lods.push_back(x.extract(isos[i], b.transform, options(level - 2 * k)));
+        s.lods.push_back(x->extract(isos[i], b.transform, options(level - 2 * k)));
       // Surfaces that enclose others are translucent so the inner ones stay visible: with
       // normals toward lower values the innermost surface is the highest iso-value.
       const bool innermost = p.normals_toward_higher ? i == 0 : i + 1 == isos.size();
@@ -587,6 +602,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
     if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
       o.extras["placement"] = to_string(extracted.placement);
     o.extras["normals"] = to_string(extracted.normals);
+    if (b.dim() == 3) o.extras["surface"] = to_string(extracted.source);
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.
@@ -601,6 +617,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   }
   report.finish("writing");
   summary["output"] = out;
+  if (b.dim() == 3) summary["surface"] = to_string(extracted.source);
   summary["surfaces"] = per;
   summary["triangles"] = total;
   summary["bytes"] = written_file_size(out);
@@ -641,9 +658,24 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
     if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     isos = c.asset.iso;
   }
+  // Surfaces from the samples (extract()'s choice, made here before the build) need no hierarchy:
+  // unless an output holds it (the file, u, LODs), the build stops at T0.
+  const bool surface_driven =
+      !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty() && p.max_sample_error < 0;
+  const bool from_samples = grid && grid->dim == 3 && c.asset.level < 0 &&
+                            (c.asset.surface == SurfaceSource::kSamples ||
+                             (c.asset.surface == SurfaceSource::kAuto && surface_driven));
+  const bool hierarchy_needed = !from_samples || !c.hierarchy.empty() || c.keep_u || c.asset.lod > 0;
+  if (!hierarchy_needed) {
+    check_build_options(p, f.dim());  // what the build would refuse, refused all the same
+    p.max_level = 0;
+  }
   ConvertResult result;
   Built& b = result.built;
   b = build(f, input, p, isos);
+  if (!hierarchy_needed)
+    std::get<Approximation<3>>(b.approximation).stop_reason =
+        "not refined: the surfaces come from the samples (--surface), no output holds the hierarchy";
   pipeline::detail::OutputGuard written;
   nlohmann::json prov = {{"input", fs::path(input.source).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
@@ -656,7 +688,6 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   prov["vertices"] = b.vertices();
   // The effective target: the default RMS applies only without iso-values (surface-driven
   // refinement otherwise) or alongside another global target.
-  const bool surface_driven = !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty();
   prov["options"] = {{"rms", p.rms            ? rms_text(*p.rms)
                              : surface_driven ? "none (surface-driven)"
                                               : "0.5%"},

@@ -140,6 +140,7 @@ AssetOptions asset_options(Options& kw) {
   kw.get("normals_toward_higher", o.normals_toward_higher);
   get_enum(kw, "normals", o.normals);
   get_enum(kw, "placement", o.placement);
+  get_enum(kw, "surface", o.surface);
   kw.get("z_scale", o.z_scale);
   kw.get("level", o.level);
   return o;

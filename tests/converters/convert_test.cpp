@@ -445,6 +445,13 @@ TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
                     "ct_skull_iso1.5_3_8000_simplify0.2.ply");
 }
 
+// The default surface: marching cubes on the samples (no global target, the finest level), raw.
+TEST(Golden, SkullSurfaceFromTheSamplesMatchesCheckedInPly) {
+  expect_golden_ply(kSkull + " --iso 2.5 --simplify 0 --quiet", "ct_skull_iso2.5_samples.ply");
+  expect_golden_ply(kSkull + " --iso 2.5 --simplify 0 --surface samples --max-vertices 3000 --quiet",
+                    "ct_skull_iso2.5_samples.ply");
+}
+
 TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
   const std::string dem = test::sample_path("dem_jacksboro.nrrd");
   const std::string glb = scratch() + "/dem.glb", rep = scratch() + "/dem.json";
@@ -591,14 +598,17 @@ TEST(Convert, DefaultConvertKeepsSmallPartsAndIsDeterministic) {
 
 // A surface-driven convert solves for u only when an output holds it: without --hierarchy the
 // report has no iterations and no RMS error; with it, u is solved and stored. The asset comes
-// from the data's interpolant either way, so its bytes do not change.
+// from the data's interpolant either way, so its bytes do not change. By default that asset is
+// the samples' own surface, so without --hierarchy nothing is refined at all.
 TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   const std::string a = scratch() + "/nou.ply", b = scratch() + "/withu.ply", h = scratch() + "/withu.mlfeh";
   const std::string ra = scratch() + "/nou.json", rb = scratch() + "/withu.json";
-  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra).status, 0);
-  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h)
-                .status,
-            0);
+  const std::string tets = " --surface hierarchy";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra + tets).status, 0);
+  ASSERT_EQ(
+      run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h + tets)
+          .status,
+      0);
   EXPECT_EQ(read_bytes(a), read_bytes(b));
   const json ja = json::parse(read_bytes(ra)), jb = json::parse(read_bytes(rb));
   EXPECT_EQ(ja["iterations"].get<int>(), 0);
@@ -609,12 +619,23 @@ TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   EXPECT_EQ(ja["vertices"], jb["vertices"]);  // the same mesh: the surface passes decide it
   const std::string c = scratch() + "/fromh.ply";
   ASSERT_EQ(run("iso " + h + " --iso 1.5 --quiet -o " + c).status, 0);  // the stored u extracts
+  // From the samples (the default): the hierarchy only when an output holds it, the same asset.
+  const std::string s1 = scratch() + "/samples1.ply", s2 = scratch() + "/samples2.ply",
+                    rs = scratch() + "/samples.json";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + s1 + " --report " + rs).status, 0);
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + s2 + " --hierarchy " + h).status, 0);
+  EXPECT_EQ(read_bytes(s1), read_bytes(s2));
+  const json js = json::parse(read_bytes(rs));
+  EXPECT_EQ(js["vertices"].get<int>(), 8);
+  EXPECT_NE(js["stop_reason"].get<std::string>().find("samples"), std::string::npos);
+  EXPECT_EQ(js["asset"]["surface"].get<std::string>(), "samples");
 }
 
 // --max-memory: a build that would not fit stops refining with a message, and still writes.
 TEST(Convert, MemoryBudgetStopsWithAMessage) {
   const std::string out = scratch() + "/mem.ply", rep = scratch() + "/mem.json";
-  const RunResult r = run("convert " + kSkull + " --iso 1.5 --max-memory 12M -o " + out + " --report " + rep);
+  const RunResult r = run("convert " + kSkull + " --iso 1.5 --surface hierarchy --max-memory 12M -o " + out +
+                          " --report " + rep);
   EXPECT_EQ(r.status, 0);
   EXPECT_NE(r.err.find("memory budget"), std::string::npos) << r.err;
   EXPECT_TRUE(json::parse(read_bytes(rep))["memory_limited"].get<bool>());
