@@ -64,6 +64,7 @@ struct AssetParams {
   int lod = 0;
   std::size_t decimate = 0;
   double simplify = 0.3;
+  double ratio = 0.1;
   std::string simplifier = "auto";  ///< "auto", "fast", "bounded"
   double snap = 1.0;
   std::size_t min_component = 0;

@@ -134,6 +134,7 @@ AssetOptions asset_options(Options& kw) {
   kw.get("lod", o.lod);
   kw.get("decimate", o.decimate);
   kw.get("simplify", o.simplify);
+  kw.get("ratio", o.ratio);
   get_enum(kw, "simplifier", o.simplifier);
   kw.get("snap", o.snap);
   kw.get("min_component", o.min_component);

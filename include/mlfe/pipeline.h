@@ -245,11 +245,17 @@ struct AssetOptions {
   /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
   /// compact (bench/convert_bench.py).
   double simplify = 0.3;
+  /// Simplification stops at this fraction of each extracted surface's triangles, or earlier
+  /// where the `simplify` bound binds (0: the bound alone). The default gives assets of about a
+  /// tenth of the marching-cubes triangles, as asset pipelines' ratio simplifiers do, with the
+  /// error well inside the bound.
+  double ratio = 0.1;
   /// kBounded: simplify_within, error verified; kFast: the same collapses and topology checks
   /// with the error estimated from the quadrics (SimplifyOptions::verify_bound false);
   /// kMeshopt: meshoptimizer (simplify_fast), error estimated, seconds for millions of
   /// triangles but it may pinch the surface (non-manifold spots, counted in the report); kAuto:
-  /// bounded for surfaces of up to 200 000 extracted triangles, fast above (topology kept).
+  /// bounded, but fast for surfaces of over 200 000 extracted triangles with a ratio below 5 %
+  /// (topology kept either way).
   Simplifier simplifier = Simplifier::kAuto;
   double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
   /// Drop connected parts of a 3D surface whose vertices lie in fewer than this many voxel

@@ -320,7 +320,7 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
   const std::string full = scratch() + "/opt_full.ply", pinned = scratch() + "/opt_pinned.ply",
                     one = scratch() + "/opt1.ply", two = scratch() + "/opt2.ply",
                     glb = scratch() + "/opt.glb";
-  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
+  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --ratio 0 --quiet";  // the bound alone
   ASSERT_EQ(run("convert " + common + " --simplify 0 -o " + full).status, 0);
   ASSERT_EQ(
       run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status,
@@ -441,8 +441,33 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
 
 // The README's main job on a small budget: snapped, simplified (default placement) surfaces.
 TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
-  expect_golden_ply(kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --simplifier bounded --quiet",
-                    "ct_skull_iso1.5_3_8000_simplify0.2.ply");
+  expect_golden_ply(
+      kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --ratio 0 --simplifier bounded --quiet",
+      "ct_skull_iso1.5_3_8000_simplify0.2.ply");
+}
+
+// --ratio: simplification stops at that fraction of the extracted triangles unless the bound
+// binds first; 0 leaves the bound alone, which removes more.
+TEST(Convert, RatioStopsTheSimplificationAtAFractionOfTheExtraction) {
+  const std::string raw = scratch() + "/ratio_raw.ply", dflt = scratch() + "/ratio_default.ply",
+                    quarter = scratch() + "/ratio_quarter.ply", bound = scratch() + "/ratio_bound.ply";
+  const std::string common = "convert " + kSkull + " --iso 2.5 --quiet -o ";
+  ASSERT_EQ(run(common + raw + " --simplify 0").status, 0);
+  ASSERT_EQ(run(common + dflt).status, 0);
+  ASSERT_EQ(run(common + quarter + " --ratio 0.25").status, 0);
+  ASSERT_EQ(run(common + bound + " --ratio 0").status, 0);
+  const std::size_t n = read_mesh_file(raw).triangle_count();
+  const std::size_t d = read_mesh_file(dflt).triangle_count(), q = read_mesh_file(quarter).triangle_count(),
+                    b = read_mesh_file(bound).triangle_count();
+  std::printf("triangles: %zu extracted; ratio 0.1: %zu, 0.25: %zu, 0 (bound only): %zu\n", n, d, q, b);
+  // A collapse removes two triangles (one on the volume's faces), and a pass may end one past
+  // the floor.
+  EXPECT_LE(d, n / 10 + 2);
+  EXPECT_GE(d, n / 10 - 2);
+  EXPECT_LE(q, n / 4 + 2);
+  EXPECT_GE(q, n / 4 - 2);
+  EXPECT_LT(b, d);
+  EXPECT_EQ(run(common + dflt + " --ratio 1.5").status, 1);  // usage
 }
 
 // The default surface: marching cubes on the samples (no global target, the finest level), raw.
