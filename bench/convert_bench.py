@@ -18,7 +18,7 @@ end-to-end time (VTK's reader on the volume + flying edges + meshopt_simplify + 
 writer on the result), comparable with the whole `mlfe convert` command.
 
 usage: bench/convert_bench.py [--build DIR] [--work DIR] [--tolerances 0.3,0.6] [--json OUT]
-                              [--no-quadric] VOL:ISO [...]
+                              [--no-quadric] [--variants "ARGS;ARGS"] VOL:ISO [...]
 Uses /usr/bin/python3 with python3-vtk9, python3-scipy (scripts/install_bench_deps.sh); threads 2.
 """
 import argparse
@@ -134,6 +134,8 @@ def main():
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
     ap.add_argument("--work", default="/tmp/mlfe_convert_bench")
     ap.add_argument("--tolerances", default="0.3,0.6", help="extra mlfe runs with --simplify S (voxels)")
+    ap.add_argument("--variants", default="",
+                    help="extra mlfe runs with these options, ';'-separated (e.g. '--simplifier bounded;--surface hierarchy')")
     ap.add_argument("--samples", type=int, default=60000)
     ap.add_argument("--json", default=None)
     ap.add_argument("--no-gltfpack", action="store_true", help="skip flying edges + gltfpack (npm gltfpack 1.3)")
@@ -191,9 +193,12 @@ def main():
         j = json.loads(out.strip().splitlines()[-1])
         rows.append(dict(method="OpenVDB volumeToMesh adaptivity 0.5", triangles=j["triangles"],
                          seconds=j["mesh_seconds"], detail=f"+ grid {j['grid_seconds']:.2f}", peak_mb=rss, ply=ply))
-        for simp in [None] + [float(x) for x in args.tolerances.split(",") if x]:
-            key = "default" if simp is None else f"s{simp:g}"
-            extra = [] if simp is None else ["--simplify", f"{simp:g}"]
+        runs = [("default", "mlfe convert (defaults)", [])]
+        runs += [(f"s{float(x):g}", f"mlfe convert --simplify {float(x):g}", ["--simplify", f"{float(x):g}"])
+                 for x in args.tolerances.split(",") if x]
+        runs += [(f"v{i}", f"mlfe convert {v.strip()}", v.split()) for i, v in enumerate(args.variants.split(";"))
+                 if v.strip()]
+        for key, label, extra in runs:
             glb, rep = W(f"mlfe_{key}.glb"), W(f"mlfe_{key}.json")
             cmd = [mlfe, "--threads", str(ib.THREADS), "convert", path, "--iso", f"{iso:g}"] + extra
             ib.log("  ", " ".join(cmd))
@@ -201,7 +206,6 @@ def main():
             report = json.load(open(rep))
             subprocess.run(cmd + ["-o", W(f"mlfe_{key}_mm.ply"), "--quiet"], check=True, stdout=subprocess.DEVNULL)
             physical_to_index(W(f"mlfe_{key}_mm.ply"), W(f"mlfe_{key}.ply"), meta)
-            label = "mlfe convert" + ("" if simp is None else f" --simplify {simp:g}") + (" (defaults)" if simp is None else "")
             rows.append(dict(method=label, triangles=report["asset"]["triangles"], seconds=wall,
                              detail=f"build {report['seconds']:.2f}, asset {report['asset']['seconds']:.2f}; "
                                     f"{report['vertices']} vertices, {report['elements']} leaves",
@@ -252,8 +256,9 @@ def print_table(name, iso, meta, voxels, rows):
         if not r["method"].startswith("mlfe"):
             continue
         line = f"- {r['method']}: {100.0 * r['triangles'] / n_mc:.1f}% of MC, mean {r['mean_vox']:.3f}, " \
-               f"Hausdorff {r['hausdorff_vox']:.2f}, {r['seconds']:.2f} s, {r['peak_mb']:.0f} MiB, " \
-               f"{r['peak_mb'] * 1048576 / r['leaves']:.0f} B/leaf, {r['peak_mb'] * 1048576 / voxels:.1f} B/voxel"
+               f"Hausdorff {r['hausdorff_vox']:.2f}, {r['seconds']:.2f} s, {r['peak_mb']:.0f} MiB, "
+        line += f"{r['peak_mb'] * 1048576 / r['leaves']:.0f} B/leaf, " if r["leaves"] > 1000 else "no hierarchy, "
+        line += f"{r['peak_mb'] * 1048576 / voxels:.1f} B/voxel"
         if mcqd:
             line += f"; time / (MC + QD 10%) = {r['seconds'] / mcqd['seconds']:.2f}"
         if femo:

@@ -69,6 +69,7 @@ static int usage() {
                "[--surface-tolerance S]\n"
                "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME "
                "SNAP_VOXELS [input|optimal]]]\n"
+               "       iso_tools_bench [--threads N] cubes VOL ISO OUT.ply\n"
                "       iso_tools_bench meshopt IN.ply TARGET_TRIANGLES OUT.ply\n");
   return 1;
 }
@@ -266,6 +267,17 @@ int main(int argc, char** argv) {
              {"absolute_error", err * meshopt_simplifyScale(&in.positions[0][0], in.positions.size(), 12)},
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()}};
+    } else if (mode == "cubes" && args.size() == 4) {
+      // cubes VOL ISO OUT.ply: mlfe's marching cubes on the samples' lattice
+      const ScalarGrid g = read_volume(args[1]);
+      const auto t0 = Clock::now();
+      const TriangleMesh m = lattice_iso_surface(g, std::atof(args[2].c_str()));
+      const double secs = since(t0);
+      write_mesh_file(args[3], m);
+      out = {{"method", "lattice marching cubes"},
+             {"seconds", secs},
+             {"triangles", m.triangles.size()},
+             {"vertices", m.positions.size()}};
     } else if (mode == "kuhn" && args.size() == 4) {
       // kuhn VOL ISO OUT.ply: marching tetrahedra on the Kuhn triangulation of every voxel cube
       // (the finest level of the samples' lattice), index coordinates, welded.

@@ -82,14 +82,19 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "default 0.34)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--ratio", p.ratio,
+                  "--simplify stops at this fraction of each extracted surface's triangles, or earlier where "
+                  "its bound binds (0: the bound alone; iso-surfaces)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option(
          "--simplifier", p.simplifier,
          "--simplify's algorithm: bounded (every extracted vertex verified within the tolerance of the "
          "result, topology kept; ~10 microseconds per triangle), fast (the same collapses and topology "
          "checks, the error estimated from quadrics; about twice as fast), meshopt (meshoptimizer, error "
          "estimated, seconds for millions of triangles, but it may pinch the surface: non-manifold edges, "
-         "counted in the report) or auto (bounded "
-         "for surfaces of up to 200000 extracted triangles, fast above)")
+         "counted in the report) or auto (bounded, but fast for surfaces of over 200000 extracted "
+         "triangles with --ratio below 0.05)")
       ->check(CLI::IsMember(pipeline::enum_name_list<Simplifier>()))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
@@ -100,8 +105,9 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->capture_default_str();
   cmd->add_option(
          "--snap", p.snap,
-         "move surface vertices onto the volume's own iso-surface, at most this many voxels "
-         "along the approximation's gradient (0: keep the approximation's surface; needs the volume)")
+         "surfaces from the hierarchy: move their vertices onto the volume's own iso-surface, at most this "
+         "many voxels along the approximation's gradient (0: keep the approximation's surface; needs the "
+         "volume; surfaces from the samples are on it already)")
       ->check(CLI::Range(0.0, 8.0))
       ->capture_default_str();
   cmd->add_option("--min-component", p.min_component,
@@ -119,6 +125,12 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
   cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
       ->check(CLI::Range(-1, 40));
+  cmd->add_option("--surface", p.surface,
+                  "3D surfaces from: samples (marching cubes on the volume's samples, the hierarchy's finest "
+                  "level without building it), hierarchy (marching tetrahedra on the hierarchy's level, the "
+                  "paper's) or auto (samples when the volume is at hand and the finest level is asked)")
+      ->check(CLI::IsMember(pipeline::enum_name_list<SurfaceSource>()))
+      ->capture_default_str();
 }
 
 namespace {
@@ -254,6 +266,7 @@ AssetOptions asset_options(const AssetParams& p) {
   o.lod = p.lod;
   o.decimate = p.decimate;
   o.simplify = p.simplify;
+  o.ratio = p.ratio;
   o.simplifier = pipeline::parse_enum<Simplifier>(p.simplifier, "--simplifier");
   o.snap = p.snap;
   o.min_component = p.min_component;
@@ -262,6 +275,7 @@ AssetOptions asset_options(const AssetParams& p) {
   o.placement = pipeline::parse_enum<VertexPlacement>(p.placement, "--placement");
   o.z_scale = p.z_scale;
   o.level = p.level;
+  o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "--surface");
   return o;
 }
 

@@ -64,6 +64,7 @@ struct AssetParams {
   int lod = 0;
   std::size_t decimate = 0;
   double simplify = 0.3;
+  double ratio = 0.1;
   std::string simplifier = "auto";  ///< "auto", "fast", "bounded"
   double snap = 1.0;
   std::size_t min_component = 0;
@@ -72,6 +73,7 @@ struct AssetParams {
   std::string placement = "auto";  ///< "auto", "input", "optimal"
   double z_scale = 1.0;
   int level = -1;
+  std::string surface = "auto";  ///< "auto", "samples", "hierarchy"
 };
 
 /// Adds --iso, --tolerance, --no-draco, --quantize, --lod, --decimate, --simplify,

@@ -13,6 +13,8 @@
 #include <cmath>
 #include <unordered_map>
 
+#include "surface_parts.h"
+
 namespace mlfe {
 
 namespace {
@@ -118,68 +120,6 @@ void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3
         }
     }
   }
-}
-
-// Drops the connected parts of `mesh` whose vertices (local frame) lie in fewer than
-// `min_cells` voxel cells, and the vertices only they used (from `local` and `grad` too).
-// Parts and order are a function of the mesh alone.
-Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad,
-                         const std::array<double, 3>& spacing, std::size_t min_cells) {
-  Dropped d;
-  const std::size_t nv = local.size();
-  // 1. Parts: union-find over the vertices of every triangle.
-  std::vector<std::uint32_t> parent(nv);
-  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
-  auto find = [&](std::uint32_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
-  for (const auto& t : mesh.triangles)
-    for (int k = 1; k < 3; ++k) {
-      const std::uint32_t a = find(t[0]), b = find(t[k]);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);
-    }
-  // 2. Size of a part: the distinct voxel cells its vertices lie in.
-  std::vector<std::pair<std::uint32_t, std::uint64_t>> cells(nv);
-  for (std::uint32_t v = 0; v < nv; ++v) {
-    std::uint64_t key = 0;
-    for (int k = 0; k < 3; ++k)
-      key = (key << 21) | (std::uint64_t(std::max(0.0, std::floor(local[v][k] / spacing[k]))) & 0x1fffff);
-    cells[v] = {find(v), key};
-  }
-  std::sort(cells.begin(), cells.end());
-  std::vector<std::uint32_t> size(nv, 0);
-  for (std::size_t i = 0; i < nv; ++i)
-    if (i == 0 || cells[i] != cells[i - 1]) ++size[cells[i].first];
-  for (std::uint32_t v = 0; v < nv; ++v)
-    if (parent[v] == v && size[v] > 0) (size[v] < min_cells ? d.parts : d.kept_parts) += 1;
-  if (d.parts == 0) return d;
-  // 3. Keep the triangles of big parts and the vertices they use, in order.
-  std::vector<std::uint32_t> remap(nv, ~0u);
-  std::vector<std::array<std::uint32_t, 3>> tris;
-  tris.reserve(mesh.triangles.size());
-  for (const auto& t : mesh.triangles) {
-    if (size[find(t[0])] < min_cells) {
-      ++d.triangles;
-      continue;
-    }
-    tris.push_back(t);
-    for (auto v : t) remap[v] = 0;
-  }
-  std::uint32_t next = 0;
-  for (std::uint32_t v = 0; v < nv; ++v)
-    if (remap[v] == 0) {
-      remap[v] = next;
-      local[next] = local[v];
-      grad[next] = grad[v];
-      ++next;
-    }
-  local.resize(next);
-  grad.resize(next);
-  for (auto& t : tris)
-    for (auto& v : t) v = remap[v];
-  mesh.triangles = std::move(tris);
-  return d;
 }
 
 // Sutherland–Hodgman against the planes x_a = hi_a of the box [0, hi] (the surface never
@@ -415,6 +355,72 @@ std::vector<V3> gradients_at(const Hierarchy<3>& h, int level, const std::vector
 
 }  // namespace
 
+namespace detail {
+
+// Drops the connected parts of `mesh` whose vertices (local frame) lie in fewer than
+// `min_cells` voxel cells, and the vertices only they used (from `local` and `grad` too).
+// Parts and order are a function of the mesh alone.
+Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad,
+                         const std::array<double, 3>& spacing, std::size_t min_cells) {
+  Dropped d;
+  const std::size_t nv = local.size();
+  // 1. Parts: union-find over the vertices of every triangle.
+  std::vector<std::uint32_t> parent(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
+  auto find = [&](std::uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (const auto& t : mesh.triangles)
+    for (int k = 1; k < 3; ++k) {
+      const std::uint32_t a = find(t[0]), b = find(t[k]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  // 2. Size of a part: the distinct voxel cells its vertices lie in.
+  std::vector<std::pair<std::uint32_t, std::uint64_t>> cells(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    std::uint64_t key = 0;
+    for (int k = 0; k < 3; ++k)
+      key = (key << 21) | (std::uint64_t(std::max(0.0, std::floor(local[v][k] / spacing[k]))) & 0x1fffff);
+    cells[v] = {find(v), key};
+  }
+  std::sort(cells.begin(), cells.end());
+  std::vector<std::uint32_t> size(nv, 0);
+  for (std::size_t i = 0; i < nv; ++i)
+    if (i == 0 || cells[i] != cells[i - 1]) ++size[cells[i].first];
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (parent[v] == v && size[v] > 0) (size[v] < min_cells ? d.parts : d.kept_parts) += 1;
+  if (d.parts == 0) return d;
+  // 3. Keep the triangles of big parts and the vertices they use, in order.
+  std::vector<std::uint32_t> remap(nv, ~0u);
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    if (size[find(t[0])] < min_cells) {
+      ++d.triangles;
+      continue;
+    }
+    tris.push_back(t);
+    for (auto v : t) remap[v] = 0;
+  }
+  std::uint32_t next = 0;
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (remap[v] == 0) {
+      remap[v] = next;
+      local[next] = local[v];
+      grad[next] = grad[v];
+      ++next;
+    }
+  local.resize(next);
+  grad.resize(next);
+  for (auto& t : tris)
+    for (auto& v : t) v = remap[v];
+  mesh.triangles = std::move(tris);
+  return d;
+}
+
+}  // namespace detail
+
 IsoExtractor::IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values)
     : h_(h), values_(values) {
   if (values.size() != h.vertex_count())
@@ -553,7 +559,7 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   if (opts.snap_to && opts.snap_distance > 0)
     snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);
   if (opts.min_component > 0 || opts.dropped) {
-    const Dropped d = drop_small_parts(mesh, local, grad, transform.spacing, opts.min_component);
+    const Dropped d = detail::drop_small_parts(mesh, local, grad, transform.spacing, opts.min_component);
     if (opts.dropped) *opts.dropped = d;
   }
 

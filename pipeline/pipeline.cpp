@@ -424,21 +424,35 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     check_iso_in_range(p.iso, b.value_min, b.value_max, "the hierarchy");
     isos = p.iso;
     std::sort(isos.begin(), isos.end());
+    const bool have_samples = grid && grid->dim == 3;
+    if (p.surface == SurfaceSource::kSamples && !have_samples)
+      throw Error("--surface samples: needs the volume's samples (a hierarchy file has none)");
+    if (p.surface == SurfaceSource::kSamples && p.level >= 0)
+      throw UsageError("--surface samples extracts on the finest level; --level asks for another");
+    // auto: a build without a global target (surface-driven) exists to carry the data's surfaces,
+    // which the samples give exactly; a global target (--rms, --max-vertices, ...) asks for the
+    // approximation's.
+    out.source = p.surface == SurfaceSource::kSamples || (p.surface == SurfaceSource::kAuto && have_samples &&
+                                                          p.level < 0 && b.surface_driven)
+                     ? SurfaceSource::kSamples
+                     : SurfaceSource::kHierarchy;
+    const bool from_samples = out.source == SurfaceSource::kSamples;
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
     // some of them away. With the volume at hand the asset takes the interpolant.
     // A build keeps them; a hierarchy read from a file (iso --volume) samples them again.
     std::vector<double> nodal_data;
-    if (grid && grid->dim == 3 && b.surface_driven) {
+    if (grid && grid->dim == 3 && b.surface_driven && !(from_samples && p.lod == 0)) {
       nodal_data = a3.data_values;
       sample_at_vertices(a3.hierarchy, GridField(*grid), nodal_data);
     }
-    IsoExtractor x(a3.hierarchy, nodal_data.empty() ? a3.values : nodal_data);
+    std::optional<IsoExtractor> x;
+    if (!from_samples || p.lod > 0) x.emplace(a3.hierarchy, nodal_data.empty() ? a3.values : nodal_data);
     const int finest = a3.hierarchy.max_level();
     const int level = p.level < 0 ? finest : std::min(p.level, finest);
     std::optional<GridField> field;
-    if (grid && grid->dim == 3 && p.snap > 0) field.emplace(*grid);
+    if (grid && grid->dim == 3 && p.snap > 0 && (!from_samples || p.lod > 0)) field.emplace(*grid);
     out.snapped = field.has_value();
     auto options = [&](int at) {
       IsoOptions o;
@@ -461,10 +475,11 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       Dropped dropped;
       IsoOptions o = options(level);
       o.dropped = &dropped;
-      s.mesh = x.extract(isos[i], b.transform, o);
+      // On the samples the surface is the data's own: nothing to snap or clip.
+      s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o) : x->extract(isos[i], b.transform, o);
       out.dropped.push_back(dropped);
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
-        s.lods.push_back(x.extract(isos[i], b.transform, options(level - 2 * k)));
+        s.lods.push_back(x->extract(isos[i], b.transform, options(level - 2 * k)));
       // Surfaces that enclose others are translucent so the inner ones stay visible: with
       // normals toward lower values the innermost surface is the highest iso-value.
       const bool innermost = p.normals_toward_higher ? i == 0 : i + 1 == isos.size();
@@ -493,13 +508,18 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     SimplifyOptions so;
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
+    if (!(p.ratio >= 0 && p.ratio <= 1)) throw Error(fmt::format("ratio: expected 0..1, got {}", p.ratio));
     // Surfaces are independent: one task each, and each simplification is parallel inside.
-    // auto: the verified bound while it takes about a second or two (~10 µs per triangle), the
-    // same topology-preserving collapses with the bound estimated beyond (a full head's 1.7 M
-    // triangles in about 10 s; meshoptimizer takes 1-2 s there but pinches the surface into
-    // thousands of non-manifold edges and keeps twice the triangles, bench/RESULTS.md); decided
-    // per surface from its size alone, so the bytes do not depend on the thread count.
+    // auto: the verified bound, unless a surface of over 200 000 triangles is to go below 5 % of
+    // them: the verified bound's late passes (~10 µs per triangle) then take minutes, and the
+    // same topology-preserving collapses with the bound estimated from the quadrics take
+    // seconds (meshoptimizer takes 1-2 s there but pinches the surface into thousands of
+    // non-manifold edges and keeps twice the triangles, bench/RESULTS.md). Down to the default
+    // ratio of 10 % the verified bound costs about what the estimate does and keeps thin parts
+    // the quadrics let retract (a full head: Hausdorff 0.87 against 2.46 voxels). Decided per
+    // surface from its size and the options alone, so the bytes do not depend on the threads.
     constexpr std::size_t kBoundedUpTo = 200000;
+    constexpr double kBoundedDownTo = 0.05;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
@@ -508,8 +528,10 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
         return;
       }
       SimplifyOptions o = so;
+      o.min_triangles = std::size_t(p.ratio * double(m.triangles.size()));
       o.verify_bound = p.simplifier == Simplifier::kBounded ||
-                       (p.simplifier == Simplifier::kAuto && m.triangles.size() <= kBoundedUpTo);
+                       (p.simplifier == Simplifier::kAuto &&
+                        (m.triangles.size() <= kBoundedUpTo || p.ratio >= kBoundedDownTo));
       m = simplify_within(m, o);
     });
   }
@@ -584,9 +606,11 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
     o.extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
     o.extras["simplify_voxels"] = p.simplify;
     if (p.simplify > 0) o.extras["simplifier"] = to_string(p.simplifier);
+    if (p.simplify > 0 && b.dim() == 3) o.extras["simplify_ratio"] = p.ratio;
     if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
       o.extras["placement"] = to_string(extracted.placement);
     o.extras["normals"] = to_string(extracted.normals);
+    if (b.dim() == 3) o.extras["surface"] = to_string(extracted.source);
     write_gltf(out, surfaces, o);
   } else {
     // Single-mesh formats: all surfaces in one mesh.
@@ -601,6 +625,7 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   }
   report.finish("writing");
   summary["output"] = out;
+  if (b.dim() == 3) summary["surface"] = to_string(extracted.source);
   summary["surfaces"] = per;
   summary["triangles"] = total;
   summary["bytes"] = written_file_size(out);
@@ -641,9 +666,24 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
     if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
     isos = c.asset.iso;
   }
+  // Surfaces from the samples (extract()'s choice, made here before the build) need no hierarchy:
+  // unless an output holds it (the file, u, LODs), the build stops at T0.
+  const bool surface_driven =
+      !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty() && p.max_sample_error < 0;
+  const bool from_samples = grid && grid->dim == 3 && c.asset.level < 0 &&
+                            (c.asset.surface == SurfaceSource::kSamples ||
+                             (c.asset.surface == SurfaceSource::kAuto && surface_driven));
+  const bool hierarchy_needed = !from_samples || !c.hierarchy.empty() || c.keep_u || c.asset.lod > 0;
+  if (!hierarchy_needed) {
+    check_build_options(p, f.dim());  // what the build would refuse, refused all the same
+    p.max_level = 0;
+  }
   ConvertResult result;
   Built& b = result.built;
   b = build(f, input, p, isos);
+  if (!hierarchy_needed)
+    std::get<Approximation<3>>(b.approximation).stop_reason =
+        "not refined: the surfaces come from the samples (--surface), no output holds the hierarchy";
   pipeline::detail::OutputGuard written;
   nlohmann::json prov = {{"input", fs::path(input.source).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION}};
@@ -656,7 +696,6 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   prov["vertices"] = b.vertices();
   // The effective target: the default RMS applies only without iso-values (surface-driven
   // refinement otherwise) or alongside another global target.
-  const bool surface_driven = !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty();
   prov["options"] = {{"rms", p.rms            ? rms_text(*p.rms)
                              : surface_driven ? "none (surface-driven)"
                                               : "0.5%"},

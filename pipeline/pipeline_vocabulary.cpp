@@ -141,6 +141,13 @@ const std::vector<EnumName<Normals>>& enum_names<Normals>() {
   return t;
 }
 template <>
+const std::vector<EnumName<SurfaceSource>>& enum_names<SurfaceSource>() {
+  static const std::vector<EnumName<SurfaceSource>> t = {{SurfaceSource::kAuto, "auto"},
+                                                         {SurfaceSource::kSamples, "samples"},
+                                                         {SurfaceSource::kHierarchy, "hierarchy"}};
+  return t;
+}
+template <>
 const std::vector<EnumName<Projection>>& enum_names<Projection>() {
   static const std::vector<EnumName<Projection>> t = {{Projection::kOrtho, "ortho"},
                                                       {Projection::kPerspective, "perspective"}};
@@ -187,6 +194,7 @@ MLFE_PIPELINE_ENUM(Preconditioner)
 MLFE_PIPELINE_ENUM(Simplifier)
 MLFE_PIPELINE_ENUM(VertexPlacement)
 MLFE_PIPELINE_ENUM(Normals)
+MLFE_PIPELINE_ENUM(SurfaceSource)
 MLFE_PIPELINE_ENUM(Projection)
 MLFE_PIPELINE_ENUM(RayAccumulator::Rule)
 #undef MLFE_PIPELINE_ENUM
@@ -196,5 +204,6 @@ MLFE_PIPELINE_ENUM(RayAccumulator::Rule)
 const char* to_string(Simplifier s) { return pipeline::enum_name(s); }
 const char* to_string(VertexPlacement p) { return pipeline::enum_name(p); }
 const char* to_string(Normals n) { return pipeline::enum_name(n); }
+const char* to_string(SurfaceSource s) { return pipeline::enum_name(s); }
 
 }  // namespace mlfe

@@ -134,12 +134,14 @@ AssetOptions asset_options(Options& kw) {
   kw.get("lod", o.lod);
   kw.get("decimate", o.decimate);
   kw.get("simplify", o.simplify);
+  kw.get("ratio", o.ratio);
   get_enum(kw, "simplifier", o.simplifier);
   kw.get("snap", o.snap);
   kw.get("min_component", o.min_component);
   kw.get("normals_toward_higher", o.normals_toward_higher);
   get_enum(kw, "normals", o.normals);
   get_enum(kw, "placement", o.placement);
+  get_enum(kw, "surface", o.surface);
   kw.get("z_scale", o.z_scale);
   kw.get("level", o.level);
   return o;

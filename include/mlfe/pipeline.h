@@ -227,11 +227,13 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
 enum class Simplifier { kAuto, kFast, kBounded, kMeshopt };
 enum class VertexPlacement { kAuto, kInput, kOptimal };
 enum class Normals { kAuto, kGradient, kSurface };
+enum class SurfaceSource { kAuto, kSamples, kHierarchy };
 
 /// The command line's spelling of each option value ("auto", "fast", "input", "gradient", ...).
 const char* to_string(Simplifier s);
 const char* to_string(VertexPlacement p);
 const char* to_string(Normals n);
+const char* to_string(SurfaceSource s);
 
 struct AssetOptions {
   std::vector<double> iso;   ///< iso-values (3D volumes; required there)
@@ -243,11 +245,17 @@ struct AssetOptions {
   /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
   /// compact (bench/convert_bench.py).
   double simplify = 0.3;
+  /// Simplification stops at this fraction of each extracted surface's triangles, or earlier
+  /// where the `simplify` bound binds (0: the bound alone). The default gives assets of about a
+  /// tenth of the marching-cubes triangles, as asset pipelines' ratio simplifiers do, with the
+  /// error well inside the bound.
+  double ratio = 0.1;
   /// kBounded: simplify_within, error verified; kFast: the same collapses and topology checks
   /// with the error estimated from the quadrics (SimplifyOptions::verify_bound false);
   /// kMeshopt: meshoptimizer (simplify_fast), error estimated, seconds for millions of
   /// triangles but it may pinch the surface (non-manifold spots, counted in the report); kAuto:
-  /// bounded for surfaces of up to 200 000 extracted triangles, fast above (topology kept).
+  /// bounded, but fast for surfaces of over 200 000 extracted triangles with a ratio below 5 %
+  /// (topology kept either way).
   Simplifier simplifier = Simplifier::kAuto;
   double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
   /// Drop connected parts of a 3D surface whose vertices lie in fewer than this many voxel
@@ -268,6 +276,12 @@ struct AssetOptions {
   VertexPlacement placement = VertexPlacement::kAuto;
   double z_scale = 1.0;  ///< 2D height fields: height per data unit
   int level = -1;        ///< extract on this level (-1 finest)
+  /// Where 3D surfaces come from. kSamples: marching cubes on the samples' lattice
+  /// (lattice_iso_surface: the data's own surface, the hierarchy's finest level without building
+  /// it; needs the volume and the finest level); kHierarchy: marching tetrahedra on T_level
+  /// (IsoExtractor, the paper's); kAuto: the samples when the volume is at hand and the finest
+  /// level is asked, else the hierarchy. LODs always come from the hierarchy.
+  SurfaceSource surface = SurfaceSource::kAuto;
   /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
   /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.
   Progress progress;
@@ -278,7 +292,8 @@ struct Surfaces {
   std::vector<GltfSurface> surfaces;  ///< one per iso-value, ascending (3D), or the height field
   std::vector<double> iso_values;     ///< ascending (empty in 2D)
   bool snapped = false;               ///< vertices were moved onto the volume's own surface
-  std::vector<Dropped> dropped;       ///< per surface: what AssetOptions::min_component dropped
+  SurfaceSource source = SurfaceSource::kHierarchy;  ///< kSamples or kHierarchy
+  std::vector<Dropped> dropped;  ///< per surface: what AssetOptions::min_component dropped
   VertexPlacement placement = VertexPlacement::kOptimal;  ///< kInput or kOptimal
   Normals normals = Normals::kGradient;                   ///< kGradient or kSurface
   double extract_seconds = 0, simplify_seconds = 0;       ///< extraction (and snapping); the rest

@@ -443,8 +443,8 @@ class Hierarchy:
     def extract(self, iso=None, *, progress=None, **options):
         """The iso-surfaces at ``iso`` (a number or a list) as a :class:`Mesh`, extracted as
         ``mlfe iso``/``mlfe convert`` do. Options (the command line's, as keywords): simplify,
-        simplifier, snap, min_component, normals, placement, normals_toward_higher, decimate,
-        z_scale, level. A 2D height field needs no iso."""
+        ratio, simplifier, snap, min_component, normals, placement, normals_toward_higher, decimate,
+        z_scale, level, surface. A 2D height field needs no iso."""
         isos = _iso_values(iso)
         if isos is None and self.dim == 3:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
@@ -532,8 +532,10 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
     the asset summary (triangles per surface, bytes). ``volume`` as in :func:`build`; build
     options as :func:`build`; asset options: tolerance, draco, quantize, lod, decimate,
-    simplify, simplifier, snap, min_component, normals_toward_higher, normals, placement,
-    z_scale, level. ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
+    simplify, ratio, simplifier, snap, min_component, normals_toward_higher, normals, placement,
+    z_scale, level, surface ('auto', 'samples': marching cubes on the volume's samples,
+    'hierarchy': marching tetrahedra on the hierarchy). ``hierarchy=``/``report=``: also write
+    the .mlfeh and the JSON report.
     ``labels=True`` (or a list, or '3,7-9'): the volume is a label map; one closed, named
     surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)

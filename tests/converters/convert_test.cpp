@@ -320,7 +320,7 @@ TEST(Convert, OptimalPlacementIsSmallerAndStaysWithinTheToleranceBothWays) {
   const std::string full = scratch() + "/opt_full.ply", pinned = scratch() + "/opt_pinned.ply",
                     one = scratch() + "/opt1.ply", two = scratch() + "/opt2.ply",
                     glb = scratch() + "/opt.glb";
-  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --quiet";
+  const std::string common = kSkull + " --iso 1.5 --max-vertices 8000 --ratio 0 --quiet";  // the bound alone
   ASSERT_EQ(run("convert " + common + " --simplify 0 -o " + full).status, 0);
   ASSERT_EQ(
       run("convert " + common + " --simplify 0.3 --simplifier bounded --placement input -o " + pinned).status,
@@ -441,8 +441,40 @@ TEST(Golden, SkullConversionMatchesCheckedInOutputs) {
 
 // The README's main job on a small budget: snapped, simplified (default placement) surfaces.
 TEST(Golden, SimplifiedSkullAssetMatchesCheckedInPly) {
-  expect_golden_ply(kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --simplifier bounded --quiet",
-                    "ct_skull_iso1.5_3_8000_simplify0.2.ply");
+  expect_golden_ply(
+      kSkull + " --iso 1.5,3 --max-vertices 8000 --simplify 0.2 --ratio 0 --simplifier bounded --quiet",
+      "ct_skull_iso1.5_3_8000_simplify0.2.ply");
+}
+
+// --ratio: simplification stops at that fraction of the extracted triangles unless the bound
+// binds first; 0 leaves the bound alone, which removes more.
+TEST(Convert, RatioStopsTheSimplificationAtAFractionOfTheExtraction) {
+  const std::string raw = scratch() + "/ratio_raw.ply", dflt = scratch() + "/ratio_default.ply",
+                    quarter = scratch() + "/ratio_quarter.ply", bound = scratch() + "/ratio_bound.ply";
+  const std::string common = "convert " + kSkull + " --iso 2.5 --quiet -o ";
+  ASSERT_EQ(run(common + raw + " --simplify 0").status, 0);
+  ASSERT_EQ(run(common + dflt).status, 0);
+  ASSERT_EQ(run(common + quarter + " --ratio 0.25").status, 0);
+  ASSERT_EQ(run(common + bound + " --ratio 0").status, 0);
+  const std::size_t n = read_mesh_file(raw).triangle_count();
+  const std::size_t d = read_mesh_file(dflt).triangle_count(), q = read_mesh_file(quarter).triangle_count(),
+                    b = read_mesh_file(bound).triangle_count();
+  std::printf("triangles: %zu extracted; ratio 0.1: %zu, 0.25: %zu, 0 (bound only): %zu\n", n, d, q, b);
+  // A collapse removes two triangles (one on the volume's faces), and a pass may end one past
+  // the floor.
+  EXPECT_LE(d, n / 10 + 2);
+  EXPECT_GE(d, n / 10 - 2);
+  EXPECT_LE(q, n / 4 + 2);
+  EXPECT_GE(q, n / 4 - 2);
+  EXPECT_LT(b, d);
+  EXPECT_EQ(run(common + dflt + " --ratio 1.5").status, 1);  // usage
+}
+
+// The default surface: marching cubes on the samples (no global target, the finest level), raw.
+TEST(Golden, SkullSurfaceFromTheSamplesMatchesCheckedInPly) {
+  expect_golden_ply(kSkull + " --iso 2.5 --simplify 0 --quiet", "ct_skull_iso2.5_samples.ply");
+  expect_golden_ply(kSkull + " --iso 2.5 --simplify 0 --surface samples --max-vertices 3000 --quiet",
+                    "ct_skull_iso2.5_samples.ply");
 }
 
 TEST(Convert, HeightFieldBecomesAValidTerrainAsset) {
@@ -591,14 +623,17 @@ TEST(Convert, DefaultConvertKeepsSmallPartsAndIsDeterministic) {
 
 // A surface-driven convert solves for u only when an output holds it: without --hierarchy the
 // report has no iterations and no RMS error; with it, u is solved and stored. The asset comes
-// from the data's interpolant either way, so its bytes do not change.
+// from the data's interpolant either way, so its bytes do not change. By default that asset is
+// the samples' own surface, so without --hierarchy nothing is refined at all.
 TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   const std::string a = scratch() + "/nou.ply", b = scratch() + "/withu.ply", h = scratch() + "/withu.mlfeh";
   const std::string ra = scratch() + "/nou.json", rb = scratch() + "/withu.json";
-  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra).status, 0);
-  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h)
-                .status,
-            0);
+  const std::string tets = " --surface hierarchy";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + a + " --report " + ra + tets).status, 0);
+  ASSERT_EQ(
+      run("convert " + kSkull + " --iso 1.5 --quiet -o " + b + " --report " + rb + " --hierarchy " + h + tets)
+          .status,
+      0);
   EXPECT_EQ(read_bytes(a), read_bytes(b));
   const json ja = json::parse(read_bytes(ra)), jb = json::parse(read_bytes(rb));
   EXPECT_EQ(ja["iterations"].get<int>(), 0);
@@ -609,12 +644,23 @@ TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   EXPECT_EQ(ja["vertices"], jb["vertices"]);  // the same mesh: the surface passes decide it
   const std::string c = scratch() + "/fromh.ply";
   ASSERT_EQ(run("iso " + h + " --iso 1.5 --quiet -o " + c).status, 0);  // the stored u extracts
+  // From the samples (the default): the hierarchy only when an output holds it, the same asset.
+  const std::string s1 = scratch() + "/samples1.ply", s2 = scratch() + "/samples2.ply",
+                    rs = scratch() + "/samples.json";
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + s1 + " --report " + rs).status, 0);
+  ASSERT_EQ(run("convert " + kSkull + " --iso 1.5 --quiet -o " + s2 + " --hierarchy " + h).status, 0);
+  EXPECT_EQ(read_bytes(s1), read_bytes(s2));
+  const json js = json::parse(read_bytes(rs));
+  EXPECT_EQ(js["vertices"].get<int>(), 8);
+  EXPECT_NE(js["stop_reason"].get<std::string>().find("samples"), std::string::npos);
+  EXPECT_EQ(js["asset"]["surface"].get<std::string>(), "samples");
 }
 
 // --max-memory: a build that would not fit stops refining with a message, and still writes.
 TEST(Convert, MemoryBudgetStopsWithAMessage) {
   const std::string out = scratch() + "/mem.ply", rep = scratch() + "/mem.json";
-  const RunResult r = run("convert " + kSkull + " --iso 1.5 --max-memory 12M -o " + out + " --report " + rep);
+  const RunResult r = run("convert " + kSkull + " --iso 1.5 --surface hierarchy --max-memory 12M -o " + out +
+                          " --report " + rep);
   EXPECT_EQ(r.status, 0);
   EXPECT_NE(r.err.find("memory budget"), std::string::npos) << r.err;
   EXPECT_TRUE(json::parse(read_bytes(rep))["memory_limited"].get<bool>());

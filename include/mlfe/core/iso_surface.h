@@ -77,6 +77,17 @@ class IsoExtractor {
   mutable std::size_t visited_ = 0;
 };
 
+/// The iso-surface of the samples themselves (their trilinear interpolant), by marching cubes on
+/// the grid's lattice: the finest level of a hierarchy on the samples' lattice, without building
+/// it (core/lattice_iso_surface.cpp). One vertex per lattice edge the iso-value crosses (a sample
+/// is above when its value > iso; a crossing at a sample moves 1/1024 of the edge off it), so
+/// the surface is welded, closed where the data's surface is (boundary edges only at the
+/// volume's faces), consistently oriented, and every vertex's triangles form one fan. Positions
+/// and normals (the samples' central-difference gradients, interpolated along the edge) are
+/// mapped through grid.transform. Of `opts`, only normals_toward_higher, min_component and
+/// dropped apply. Vertex and triangle order are a function of the grid alone. grid.dim must be 3.
+TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts = {});
+
 /// A 2D height field as a surface: the leaf triangles (or T_level) lifted to z = z_scale·u,
 /// mapped through the transform's x/y part (z added along the third axis of the direction),
 /// normals from the lifted triangles, area-weighted. For DEMs and images.
