@@ -178,6 +178,25 @@ struct Rows {
   }
 };
 
+// Rows built contiguous from (row, item) pairs given in item order: each(add) calls add(r, i)
+// for every item, twice (once to count, once to fill), in the same order.
+template <class Each>
+void build_rows(Rows& rows, std::size_t n, Each&& each) {
+  rows.count.assign(n, 0);
+  each([&](Index r, Index) { ++rows.count[r]; });
+  std::vector<Index> start(n);
+  Index total = 0;
+  for (std::size_t r = 0; r < n; ++r) {
+    start[r] = total;
+    total += rows.count[r];
+  }
+  rows.cap = rows.count;
+  rows.items.resize(total);
+  rows.row.resize(n);
+  for (std::size_t r = 0; r < n; ++r) rows.row[r] = rows.items.data() + start[r];
+  each([&](Index r, Index i) { rows.items[start[r]++] = i; });
+}
+
 // A neighbour of a vertex and the number of its faces that contain the edge to it
 // (1: boundary edge, 2: interior edge, more: non-manifold).
 struct Neighbour {
@@ -276,7 +295,7 @@ class Simplifier {
     dirty_.assign(nv, 1);
     dirty_list_.resize(nv);
     for (Index v = 0; v < Index(nv); ++v) dirty_list_[v] = v;
-    build_face_points();  // with an estimated bound once: no points, never rebuilt
+    build_face_points();  // then updated where collapses re-home points
     stamp_.assign(nv, 0);
     removed_faces_.assign(nv, 0);
   }
@@ -288,7 +307,7 @@ class Simplifier {
     // file for 20 % more time; further rounds gained under 0.5 % each.
     for (int round = 0; round < 2; ++round) {
       // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
-      if (round == 0 && !opts_.verify_bound && opts_.min_triangles == 0)
+      if (round == 0 && faces_.size() >= kBlocksFrom)
         for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
       collapse_all(st.passes, st.collapses);
       if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
@@ -297,6 +316,7 @@ class Simplifier {
       st.flips += flipped.size() / 4;
       if (flipped.empty()) break;
       build_vertex_faces();
+      build_face_points();
       mark_changed(flipped);
     }
     if (stats) *stats = st;
@@ -310,7 +330,6 @@ class Simplifier {
     bool screen = false;
     while (alive_faces_ > opts_.min_triangles) {
       ++passes;
-      if (opts_.verify_bound) build_face_points();  // else no points: fp_ stays empty
       // Cheap keys (quadric cost of the best-looking neighbour) for vertices whose
       // neighbourhood changed; the full legality check waits until a vertex is selected.
       work.swap(dirty_list_);
@@ -415,31 +434,53 @@ class Simplifier {
     }
   }
 
-  // Step 1 with an estimated bound: every block of space on its own, in parallel, cheapest
-  // collapse first (a heap per block), with both ends of each collapse inside the block (no
-  // neighbour in another block). A collapse writes the faces around v0, the survivor's
-  // position, quadric and row, and the rows of v0's neighbours, and reads the rings of its two
-  // ends: all of it belongs to the block, and a vertex inside a block stays inside (it only
-  // gains neighbours of the block). So blocks never see each other's changes, each is
-  // sequential in itself, and the result does not depend on the thread count. The passes then
-  // take the blocks' seams and whatever the order left. The face points of a verified bound
-  // are per pass (fp_), so there the passes do everything.
+  // Step 1 on big meshes: every block of space on its own, in parallel, cheapest collapse first
+  // (a heap per block), with both ends of each collapse inside the block (no neighbour in
+  // another block). A collapse writes the faces around v0, the points attached to them (and,
+  // moving the survivor, to its faces), the survivor's position, quadric and row, and the rows
+  // of v0's neighbours, and reads the rings of its two ends: all of it belongs to the block, and
+  // a vertex inside a block stays inside (it only gains neighbours of the block). So blocks
+  // never see each other's changes, each is sequential in itself, and the result does not
+  // depend on the thread count. A triangle floor is shared out: each block stops at
+  // kBlockFloorShare times the floor's share of its faces, so the passes, which take the seams
+  // and whatever the order left, still choose the last collapses cheapest first over the whole.
   void simplify_blocks(double shift, std::size_t& collapses) {
     const std::vector<std::vector<Index>> blocks = block_insides(shift);
     std::vector<std::size_t> removed(blocks.size(), 0), done(blocks.size(), 0);
-    block_arenas_.resize(blocks.size());
+    std::vector<std::size_t> budget(blocks.size(), std::numeric_limits<std::size_t>::max());
+    if (opts_.min_triangles > 0) {
+      // A face with a vertex inside a block lies in it (all its vertices are that one's
+      // neighbours).
+      std::vector<std::size_t> faces(blocks.size(), 0);
+      for (std::size_t f = 0; f < faces_.size(); ++f)
+        if (face_alive_[f])
+          for (Index v : faces_[f])
+            if (inside_[v] != kNone) {
+              ++faces[inside_[v]];
+              break;
+            }
+      const double share = std::min(1.0, kBlockFloorShare * double(opts_.min_triangles) /
+                                             double(std::max<std::size_t>(alive_faces_, 1)));
+      for (std::size_t b = 0; b < blocks.size(); ++b)
+        budget[b] = faces[b] - std::size_t(std::ceil(share * double(faces[b])));
+    }
+    block_vf_arenas_.resize(blocks.size());
+    block_fp_arenas_.resize(blocks.size());
     in_blocks_ = true;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t b = r.begin(); b != r.end(); ++b)
-                          simplify_block(blocks[b], Index(b), block_arenas_[b], removed[b], done[b]);
+                          simplify_block(blocks[b], Index(b), budget[b], removed[b], done[b]);
                       });
     in_blocks_ = false;
     for (std::size_t b = 0; b < blocks.size(); ++b) {
       alive_faces_ -= removed[b];
       collapses += done[b];
     }
-    build_vertex_faces();  // contiguous again; every vertex is still dirty, so the passes key all
+    // Contiguous again (this drops the blocks' arenas); every vertex is still dirty, so the
+    // passes key all.
+    build_vertex_faces();
+    build_face_points();
   }
 
   // The vertices inside each block of space (cubes of kBlockEdges mean input edges, moved by
@@ -497,12 +538,13 @@ class Simplifier {
 
   // One block's collapses, cheapest first: after each, the survivor's ring is keyed again and
   // stuck vertices next to it are tried again (as mark_changed() does between passes).
-  void simplify_block(const std::vector<Index>& verts, Index b, Arena& arena, std::size_t& removed,
+  void simplify_block(const std::vector<Index>& verts, Index b, std::size_t budget, std::size_t& removed,
                       std::size_t& done) {
     using Item = std::pair<double, Index>;
     std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
     Scratch s;
     std::vector<Index> row, ring, again;
+    std::vector<std::pair<Index, Index>> moved;
     auto push = [&](Index v) {
       stuck_[v] = 0;
       if (key_[v] < kNoKey) heap.push({key_[v], v});
@@ -511,7 +553,7 @@ class Simplifier {
       key_[v] = cheapest(v, s, &best_[v]);
       push(v);
     }
-    while (!heap.empty()) {
+    while (!heap.empty() && removed + 2 <= budget) {
       const Item top = heap.top();
       heap.pop();
       const Index v0 = top.second;
@@ -520,7 +562,8 @@ class Simplifier {
       key_[v0] = kNoKey;
       removed += removed_faces_[v0];
       ++done;
-      update_vertex_faces(v0, v1, row, arena);
+      if (opts_.verify_bound) update_face_points(v0, v1, moved, row, block_fp_arenas_[b]);
+      update_vertex_faces(v0, v1, row, block_vf_arenas_[b]);
       // Keys: v1's quadric, position and ring changed; a neighbour's only through its edges to
       // v0 (gone) and v1, as every other edge's cost reads the same quadrics and positions. So
       // a neighbour whose cheapest edge went elsewhere needs that one edge only, for the very
@@ -695,27 +738,13 @@ class Simplifier {
   static bool contains(const std::array<Index, 3>& f, Index v) { return f[0] == v || f[1] == v || f[2] == v; }
 
   void build_vertex_faces() {
-    const std::size_t nv = pos_.size();
-    vf_.count.assign(nv, 0);
-    for (std::size_t f = 0; f < faces_.size(); ++f)
-      if (face_alive_[f])
-        for (Index v : faces_[f]) ++vf_.count[v];
-    std::vector<Index> start(nv);
-    Index total = 0;
-    for (std::size_t v = 0; v < nv; ++v) {
-      start[v] = total;
-      total += vf_.count[v];
-    }
-    vf_.cap = vf_.count;
-    vf_.items.resize(total);
-    std::vector<Index> fill(start);
-    for (std::size_t f = 0; f < faces_.size(); ++f)
-      if (face_alive_[f])
-        for (Index v : faces_[f]) vf_.items[fill[v]++] = Index(f);
-    vf_.row.resize(nv);
-    for (std::size_t v = 0; v < nv; ++v) vf_.row[v] = vf_.items.data() + start[v];
-    arena_ = Arena();
-    block_arenas_.clear();
+    build_rows(vf_, pos_.size(), [&](auto&& add) {
+      for (std::size_t f = 0; f < faces_.size(); ++f)
+        if (face_alive_[f])
+          for (Index v : faces_[f]) add(v, Index(f));
+    });
+    vf_arena_ = Arena();
+    block_vf_arenas_.clear();
   }
 
   // vf_ after the collapses v0 -> target_[v0] of `selected` (faces_ and face_alive_ updated).
@@ -724,9 +753,34 @@ class Simplifier {
   // everything here).
   void update_vertex_faces(const std::vector<Index>& selected) {
     std::vector<Index> row;
+    std::vector<std::pair<Index, Index>> moved;
     for (Index v0 : selected)
-      if (target_[v0] != kNone) update_vertex_faces(v0, target_[v0], row, arena_);
-    if (arena_.used() > 3 * alive_faces_ + (std::size_t(1) << 16)) build_vertex_faces();
+      if (target_[v0] != kNone) {
+        if (opts_.verify_bound) update_face_points(v0, target_[v0], moved, row, fp_arena_);
+        update_vertex_faces(v0, target_[v0], row, vf_arena_);
+      }
+    if (vf_arena_.used() > 3 * alive_faces_ + (std::size_t(1) << 16)) build_vertex_faces();
+    if (fp_arena_.used() > owner_.size() + (std::size_t(1) << 16)) build_face_points();
+  }
+
+  // fp_ after the collapse v0 -> v1 (before vf_'s update): the points collapse() re-homed are
+  // attached to faces around v0 or v1, and stay there, so those faces' rows are filled again
+  // from owner_ (ascending).
+  void update_face_points(Index v0, Index v1, std::vector<std::pair<Index, Index>>& moved,
+                          std::vector<Index>& row, Arena& arena) {
+    moved.clear();
+    for (Index v : {v0, v1})
+      for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f) {
+        for (const Index* p = fp_.begin(*f); p != fp_.end(*f); ++p) moved.push_back({owner_[*p], *p});
+        fp_.count[*f] = 0;
+      }
+    std::sort(moved.begin(), moved.end());
+    for (std::size_t i = 0; i < moved.size();) {
+      const Index f = moved[i].first;
+      row.clear();
+      for (; i < moved.size() && moved[i].first == f; ++i) row.push_back(moved[i].second);
+      fp_.assign(f, row, arena);
+    }
   }
 
   // vf_ after the collapse v0 -> v1: v1's row becomes the ascending merge of its own and v0's
@@ -746,15 +800,12 @@ class Simplifier {
   }
 
   void build_face_points() {
-    const std::size_t nf = faces_.size();
-    fp_.offset.assign(nf + 1, 0);
-    for (Index o : owner_)
-      if (o != kNone) ++fp_.offset[o + 1];
-    for (std::size_t f = 0; f < nf; ++f) fp_.offset[f + 1] += fp_.offset[f];
-    fp_.items.resize(fp_.offset[nf]);
-    std::vector<Index> fill(fp_.offset.begin(), fp_.offset.end() - 1);
-    for (Index p = 0; p < Index(owner_.size()); ++p)
-      if (owner_[p] != kNone) fp_.items[fill[owner_[p]]++] = p;
+    build_rows(fp_, faces_.size(), [&](auto&& add) {
+      for (Index p = 0; p < Index(owner_.size()); ++p)
+        if (owner_[p] != kNone) add(owner_[p], p);
+    });
+    fp_arena_ = Arena();
+    block_fp_arenas_.clear();
   }
 
   void neighbours(Index v, std::vector<Neighbour>& out) const {
@@ -1141,15 +1192,18 @@ class Simplifier {
   std::vector<std::size_t> removed_faces_;
   // Step 1 (simplify_blocks): the blocks' cube edge in mean input edge lengths.
   static constexpr double kBlockEdges = 48;
-  std::vector<Index> inside_;        // per vertex: its block, kNone on a block's border
-  std::vector<Index> best_;          // per vertex inside a block: the neighbour giving its key
-  bool in_blocks_ = false;           // collapses stay inside the blocks
-  double cell_ = 0;                  // the blocks' edge
-  Vec3 lo_;                          // the corner of the blocks' grid
-  Rows vf_;                          // vertex -> alive faces, ascending
-  Arena arena_;                      // rows moved by the passes
-  std::vector<Arena> block_arenas_;  // rows moved by the blocks' collapses
-  Csr fp_;                           // face -> attached points, ascending
+  // Meshes from this many triangles start with the blocks (smaller ones take a second or less).
+  static constexpr std::size_t kBlocksFrom = 100000;
+  static constexpr double kBlockFloorShare = 1.5;
+  std::vector<Index> inside_;  // per vertex: its block, kNone on a block's border
+  std::vector<Index> best_;    // per vertex inside a block: the neighbour giving its key
+  bool in_blocks_ = false;     // collapses stay inside the blocks
+  double cell_ = 0;            // the blocks' edge
+  Vec3 lo_;                    // the corner of the blocks' grid
+  Rows vf_;                    // vertex -> alive faces, ascending
+  Arena vf_arena_, fp_arena_;  // rows moved by the passes
+  std::vector<Arena> block_vf_arenas_, block_fp_arenas_;  // rows moved by the blocks' collapses
+  Rows fp_;                                               // face -> attached points, ascending
 };
 
 }  // namespace
