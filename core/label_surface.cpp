@@ -12,6 +12,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -312,38 +313,34 @@ void classified_neighbours(const LabelInterfaces& x, const VertexTriangles& vt, 
 // vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
 // label's closed surface onto a closed surface, so closed stays closed and shared stays shared.
 //
-// Two passes over a fixed partition of space into blocks: first every block on its own (in
-// parallel), collapsing only edges whose ends and all their neighbours lie in the block, then
-// the whole complex. A block's collapses touch nothing outside it (see run()), and each pass is
-// sequential in itself, so the result does not depend on the thread count; and a block's few
-// thousand vertices stay in cache, where the collapse over the whole complex at once waits on
-// memory for every triangle list it reads.
+// Three passes: first every block of a fixed partition of space into small blocks on its own
+// (in parallel), collapsing only edges whose ends and all their neighbours lie in the block and
+// only the cheap merges; then the two halves of the complex, below and above the median height
+// of its vertices, the same way (one at a time per thread) up to the tolerance; then the whole
+// complex, where the halves meet. A part's collapses touch nothing outside it (see
+// decimate_parts), and each part's pass is sequential in itself, so the result does not depend
+// on the thread count; a block's few thousand vertices stay in cache, and the halves share the
+// collapse over the complex, which waits on memory for every triangle list it reads, between
+// two threads. One seam across the complex costs nothing measurable (bench/RESULTS.md); many
+// (the small blocks at the full tolerance) show in the distances.
 class ComplexDecimator {
  public:
   ComplexDecimator(LabelInterfaces& x, double tolerance) : x_(x), tol2_(tolerance * tolerance) {}
 
   void run() {
-    // Step 1: vertex kinds, triangle lists and quadrics.
+    // Step 1: vertices numbered block by block; kinds, triangle lists and quadrics.
+    order_by_block();
     vertex_triangles();
     classify();
     init_quadrics();
     // Step 2: each block's inside alone, the cheap merges only (where the order hardly
-    // matters). A collapse of u into v writes u's and v's triangle lists, their triangles, v's
-    // position and quadric, and reads their neighbours; with both ends inside a block (no
-    // neighbour in another block: a collapse inside a block never adds one, so this stays
-    // true), all of that belongs to the block.
-    const std::vector<std::vector<std::uint32_t>> blocks = block_insides();
-    tbb::enumerable_thread_specific<Queue> queues;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        Queue& q = queues.local();
-                        q.limit2 = tol2_ * kBlockShare * kBlockShare;
-                        for (std::size_t b = r.begin(); b != r.end(); ++b)
-                          decimate(blocks[b], std::uint32_t(b), q);
-                      });
-    // Step 3: the whole complex up to the tolerance, cheapest first (the blocks' borders, and
-    // the merges that shape the result).
+    // matters).
+    decimate_parts(block_insides(cell_), tol2_ * kBlockShare * kBlockShare);
+    // Step 3: each half of the complex alone (below and above its vertices' median height), up
+    // to the tolerance: the merges that shape the result, both halves at once.
     renumber_alive();
+    decimate_parts(block_insides(halves()), tol2_);
+    // Step 4: the whole complex, for the seam between the halves.
     std::vector<std::uint32_t> all(x_.positions.size());
     std::iota(all.begin(), all.end(), 0u);
     Queue q;
@@ -383,7 +380,7 @@ class ComplexDecimator {
     double limit2 = 0;  // the pass's largest cost
     std::vector<std::uint32_t> nu, nv, common, apex;
   };
-  // Blocks of kBlock³ voxels; a pass's scope is a block's number or the whole complex. The
+  // Blocks of kBlock³ voxels; a pass's scope is a part's number or the whole complex. The
   // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
   // 73 % at 0.2, with distances within the spread that reordering near-equal merges of one
   // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
@@ -483,22 +480,11 @@ class ComplexDecimator {
         });
   }
 
-  // The vertices inside each non-empty block (no neighbour in another block), ascending; every
-  // vertex's scope_ is its block's number in that list, or kBorder.
-  std::vector<std::vector<std::uint32_t>> block_insides() {
+  // The parts of a partition of the live vertices (by `cell`, per vertex): the vertices inside
+  // each non-empty part (no neighbour in another part), ascending, parts in the order of their
+  // cells; every vertex's scope_ is its part's number in that list, or kBorder.
+  std::vector<std::vector<std::uint32_t>> block_insides(const std::vector<std::uint64_t>& cell) {
     const std::size_t nv = x_.positions.size();
-    std::vector<std::uint64_t> cell(nv);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                          std::uint64_t key = 0;
-                          for (int c = 0; c < 3; ++c) {
-                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
-                            key = key << 21 | std::uint64_t(std::clamp(s, 0.0, double((1 << 21) - 1)));
-                          }
-                          cell[v] = key;
-                        }
-                      });
     scope_.assign(nv, kBorder);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
@@ -523,6 +509,71 @@ class ComplexDecimator {
       blocks[scope_[v]].push_back(v);
     }
     return blocks;
+  }
+
+  // The block of every vertex (its cell of kBlock³ voxels), and the vertices numbered by block,
+  // in their order within a block: a block's pass then reads contiguous memory. Within a block
+  // the order is the same as before, so are the collapses; original_[v] is v's number before,
+  // the order renumber_alive restores for the pass over the whole complex.
+  void order_by_block() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          std::uint64_t key = 0;
+                          for (int c = 0; c < 3; ++c) {
+                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
+                            key = key << 21 | std::uint64_t(std::clamp(s, 0.0, double((1 << 21) - 1)));
+                          }
+                          keyed[v] = {key, std::uint32_t(v)};
+                        }
+                      });
+    tbb::parallel_sort(keyed.begin(), keyed.end());  // keys unique: one order
+    std::vector<std::uint32_t> where(nv);
+    std::vector<V3> positions(nv);
+    cell_.resize(nv);
+    original_.resize(nv);
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      const std::uint32_t o = keyed[v].second;
+      cell_[v] = keyed[v].first, original_[v] = o, where[o] = v;
+      positions[v] = x_.positions[o];
+    }
+    x_.positions.swap(positions);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, x_.triangles.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t)
+                          for (auto& v : x_.triangles[t]) v = where[v];
+                      });
+  }
+
+  // Every part's vertices decimated alone, up to cost `limit2`, parts in parallel (scope_ holds
+  // each vertex's part, see block_insides). A collapse of u into v writes u's and v's triangle
+  // lists, their triangles, v's position and quadric, and reads their neighbours; with both ends
+  // inside a part (no neighbour in another part: a collapse inside a part never adds one, so
+  // this stays true), all of that belongs to the part.
+  void decimate_parts(const std::vector<std::vector<std::uint32_t>>& parts, double limit2) {
+    tbb::enumerable_thread_specific<Queue> queues;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, parts.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        Queue& q = queues.local();
+                        q.limit2 = limit2;
+                        for (std::size_t b = r.begin(); b != r.end(); ++b)
+                          decimate(parts[b], std::uint32_t(b), q);
+                      });
+  }
+
+  // Per vertex its half of the complex: 1 at or above the median height of the vertices.
+  std::vector<std::uint64_t> halves() const {
+    const std::size_t n = x_.positions.size();
+    std::vector<std::uint64_t> half(n);
+    if (n == 0) return half;
+    std::vector<double> z(n);
+    for (std::size_t v = 0; v < n; ++v) z[v] = x_.positions[v][2];
+    std::nth_element(z.begin(), z.begin() + n / 2, z.end());
+    const double split = z[n / 2];
+    for (std::size_t v = 0; v < n; ++v) half[v] = x_.positions[v][2] >= split;
+    return half;
   }
 
   bool in_scope(std::uint32_t v, std::uint32_t scope) const {
@@ -734,18 +785,24 @@ class ComplexDecimator {
   // that compares numbers or follows their order is the same), for a smaller working set.
   void renumber_alive() {
     const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
-    std::vector<std::uint32_t> vmap(nv, ~0u), tmap(nt, ~0u);
-    std::uint32_t n = 0;
-    for (std::size_t v = 0; v < nv; ++v)
-      if (alive_[v]) {
-        vmap[v] = n;
-        x_.positions[n] = x_.positions[v], q_[n] = q_[v], kind_[n] = kind_[v];
-        tris_of_[n].swap(tris_of_[v]);
-        ++n;
-      }
-    x_.positions.resize(n), q_.resize(n), kind_.resize(n), tris_of_.resize(n);
-    x_.positions.shrink_to_fit(), q_.shrink_to_fit(), tris_of_.shrink_to_fit();
+    std::vector<std::uint32_t> at(nv), vmap(nv, ~0u), tmap(nt, ~0u);
+    for (std::uint32_t v = 0; v < nv; ++v) at[original_[v]] = v;
+    std::vector<std::uint32_t> survivors;
+    for (std::size_t o = 0; o < nv; ++o)
+      if (alive_[at[o]]) vmap[at[o]] = std::uint32_t(survivors.size()), survivors.push_back(at[o]);
+    const std::size_t n = survivors.size();
+    std::vector<V3> positions(n);
+    std::vector<Quadric> q(n);
+    std::vector<Kind> kind(n);
+    std::vector<std::vector<std::uint32_t>> tris_of(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t v = survivors[i];
+      positions[i] = x_.positions[v], q[i] = q_[v], kind[i] = kind_[v];
+      tris_of[i].swap(tris_of_[v]);
+    }
+    x_.positions.swap(positions), q_.swap(q), kind_.swap(kind), tris_of_.swap(tris_of);
     alive_.assign(n, 1);
+    original_.clear(), cell_.clear();
     std::uint32_t m = 0;
     for (std::size_t t = 0; t < nt; ++t)
       if (tri_alive_[t]) {
@@ -798,6 +855,8 @@ class ComplexDecimator {
   std::vector<std::vector<std::uint32_t>> tris_of_;
   std::vector<Quadric> q_;
   std::vector<std::uint32_t> scope_;
+  std::vector<std::uint64_t> cell_;
+  std::vector<std::uint32_t> original_;
 };
 
 }  // namespace
