@@ -83,6 +83,27 @@ std::vector<std::pair<std::uint64_t, int>> boundary_chain(
   return out;
 }
 
+// Numbers the items i < n for which kept(i) holds in their order (number[i]; ~0u for the
+// others) and returns how many: counted per chunk in parallel, then numbered per chunk from
+// the chunk's offset.
+template <class Kept>
+std::uint32_t number_kept(std::size_t n, Kept kept, std::vector<std::uint32_t>& number) {
+  constexpr std::size_t kChunk = 1 << 14;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<std::uint32_t> offset(chunks + 1, 0);
+  number.resize(n);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) offset[c + 1] += kept(i);
+  });
+  std::partial_sum(offset.begin(), offset.end(), offset.begin());
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    std::uint32_t next = offset[c];
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+      number[i] = kept(i) ? next++ : ~0u;
+  });
+  return offset[chunks];
+}
+
 std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::size_t vertex_count) {
   UnionFind uf(vertex_count);
   std::vector<char> used(vertex_count, 0);
@@ -387,15 +408,17 @@ class ComplexDecimator {
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
 
+  // Per vertex its triangles in triangle order: listed once (compressed rows), then copied
+  // into each vertex's own list in parallel (the lists grow as vertices merge).
   void vertex_triangles() {
     const std::size_t nv = x_.positions.size();
-    std::vector<std::uint32_t> count(nv, 0);
-    for (const auto& t : x_.triangles)
-      for (auto v : t) ++count[v];
+    const VertexTriangles vt(x_);
     tris_of_.resize(nv);
-    for (std::size_t v = 0; v < nv; ++v) tris_of_[v].reserve(count[v]);
-    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
-      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v)
+            tris_of_[v].assign(vt.tris.begin() + vt.start[v], vt.tris.begin() + vt.start[v + 1]);
+        });
     tri_alive_.assign(x_.triangles.size(), 1);
     alive_.assign(nv, 1);
   }
@@ -517,28 +540,42 @@ class ComplexDecimator {
   // the order renumber_alive restores for the pass over the whole complex.
   void order_by_block() {
     const std::size_t nv = x_.positions.size();
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(nv);
+    std::vector<std::array<std::uint32_t, 3>> at(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          for (int c = 0; c < 3; ++c) {
+                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
+                            at[v][c] = std::uint32_t(std::clamp(s, 0.0, double(1 << 20)));
+                          }
+                      });
+    std::array<std::uint64_t, 3> dims{1, 1, 1};
+    for (const auto& b : at)
+      for (int c = 0; c < 3; ++c) dims[c] = std::max(dims[c], std::uint64_t(b[c]) + 1);
+    // Counting sort by block: stable, so each block keeps its vertices' order.
+    std::vector<std::uint32_t> first(dims[0] * dims[1] * dims[2] + 1, 0);
+    cell_.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) {
+      cell_[v] = (at[v][0] * dims[1] + at[v][1]) * dims[2] + at[v][2];
+      ++first[cell_[v] + 1];
+    }
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    original_.resize(nv);
+    std::vector<std::uint64_t> cell(nv);
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      const std::uint32_t to = first[cell_[v]]++;
+      original_[to] = v, cell[to] = cell_[v];
+    }
+    cell_.swap(cell);
+    std::vector<std::uint32_t> where(nv);
+    std::vector<V3> positions(nv);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                          std::uint64_t key = 0;
-                          for (int c = 0; c < 3; ++c) {
-                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
-                            key = key << 21 | std::uint64_t(std::clamp(s, 0.0, double((1 << 21) - 1)));
-                          }
-                          keyed[v] = {key, std::uint32_t(v)};
+                          where[original_[v]] = std::uint32_t(v);
+                          positions[v] = x_.positions[original_[v]];
                         }
                       });
-    tbb::parallel_sort(keyed.begin(), keyed.end());  // keys unique: one order
-    std::vector<std::uint32_t> where(nv);
-    std::vector<V3> positions(nv);
-    cell_.resize(nv);
-    original_.resize(nv);
-    for (std::uint32_t v = 0; v < nv; ++v) {
-      const std::uint32_t o = keyed[v].second;
-      cell_[v] = keyed[v].first, original_[v] = o, where[o] = v;
-      positions[v] = x_.positions[o];
-    }
     x_.positions.swap(positions);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, x_.triangles.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
@@ -785,34 +822,45 @@ class ComplexDecimator {
   // that compares numbers or follows their order is the same), for a smaller working set.
   void renumber_alive() {
     const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
-    std::vector<std::uint32_t> at(nv), vmap(nv, ~0u), tmap(nt, ~0u);
-    for (std::uint32_t v = 0; v < nv; ++v) at[original_[v]] = v;
-    std::vector<std::uint32_t> survivors;
-    for (std::size_t o = 0; o < nv; ++o)
-      if (alive_[at[o]]) vmap[at[o]] = std::uint32_t(survivors.size()), survivors.push_back(at[o]);
-    const std::size_t n = survivors.size();
+    // Vertices in their order before order_by_block: at[o] is the vertex numbered o then.
+    std::vector<std::uint32_t> at(nv), rank, vmap(nv), tmap;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          at[original_[v]] = std::uint32_t(v);
+                      });
+    const std::uint32_t n = number_kept(
+        nv, [&](std::size_t o) { return alive_[at[o]] != 0; }, rank);
     std::vector<V3> positions(n);
     std::vector<Quadric> q(n);
     std::vector<Kind> kind(n);
     std::vector<std::vector<std::uint32_t>> tris_of(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::uint32_t v = survivors[i];
-      positions[i] = x_.positions[v], q[i] = q_[v], kind[i] = kind_[v];
-      tris_of[i].swap(tris_of_[v]);
-    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t o = r.begin(); o != r.end(); ++o) {
+                          const std::uint32_t v = at[o], i = rank[o];
+                          vmap[v] = i;
+                          if (i == ~0u) continue;
+                          positions[i] = x_.positions[v], q[i] = q_[v], kind[i] = kind_[v];
+                          tris_of[i].swap(tris_of_[v]);
+                        }
+                      });
     x_.positions.swap(positions), q_.swap(q), kind_.swap(kind), tris_of_.swap(tris_of);
     alive_.assign(n, 1);
     original_.clear(), cell_.clear();
-    std::uint32_t m = 0;
-    for (std::size_t t = 0; t < nt; ++t)
-      if (tri_alive_[t]) {
-        tmap[t] = m;
-        for (int c = 0; c < 3; ++c) x_.triangles[m][c] = vmap[x_.triangles[t][c]];
-        x_.labels[m] = x_.labels[t];
-        ++m;
-      }
-    x_.triangles.resize(m), x_.labels.resize(m);
-    x_.triangles.shrink_to_fit(), x_.labels.shrink_to_fit();
+    const std::uint32_t m = number_kept(
+        nt, [&](std::size_t t) { return tri_alive_[t] != 0; }, tmap);
+    std::vector<std::array<std::uint32_t, 3>> triangles(m);
+    std::vector<std::array<std::uint16_t, 2>> labels(m);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                          if (tmap[t] == ~0u) continue;
+                          for (int c = 0; c < 3; ++c) triangles[tmap[t]][c] = vmap[x_.triangles[t][c]];
+                          labels[tmap[t]] = x_.labels[t];
+                        }
+                      });
+    x_.triangles.swap(triangles), x_.labels.swap(labels);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t v = r.begin(); v != r.end(); ++v) {
