@@ -1002,12 +1002,29 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
   std::vector<std::vector<KuhnTet>> layers(std::size_t(nz + 1));
   tbb::parallel_for(std::int64_t(-1), nz, [&](std::int64_t k) {
     auto& out = layers[std::size_t(k + 1)];
-    for (std::int64_t j = -1; j < ny; ++j)
+    for (std::int64_t j = -1; j < ny; ++j) {
+      // The four rows of voxels along i around this row of cubes (r = dj + 2 dk; null outside
+      // the lattice), read a column (the four labels at one i) at a time.
+      const std::uint16_t* row[4];
+      for (int r = 0; r < 4; ++r) {
+        const std::int64_t jj = j + (r & 1), kk = k + (r >> 1);
+        row[r] = jj >= 0 && jj < ny && kk >= 0 && kk < nz
+                     ? g.labels.data() + static_cast<std::size_t>(nx * (jj + ny * kk))
+                     : nullptr;
+      }
+      std::uint16_t column[2][4];
+      auto read_column = [&](std::int64_t i, std::uint16_t* c) {
+        for (int r = 0; r < 4; ++r) c[r] = row[r] && i >= 0 && i < nx ? row[r][i] : 0;
+      };
+      read_column(-1, column[1]);
       for (std::int64_t i = -1; i < nx; ++i) {
+        std::copy(column[1], column[1] + 4, column[0]);
+        read_column(i + 1, column[1]);
+        // Corner b of the cube: offset bits (i, j, k) = (b & 1, b >> 1 & 1, b >> 2 & 1).
         std::uint16_t c[8];
         bool uniform = true;
         for (int b = 0; b < 8; ++b) {
-          c[b] = g.at(i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1));
+          c[b] = column[b & 1][b >> 1];
           uniform &= c[b] == c[0];
         }
         if (uniform) continue;
@@ -1017,6 +1034,7 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
             out.push_back({std::int32_t(i), std::int32_t(j), std::int32_t(k), o});
         }
       }
+    }
   });
   std::size_t total = 0;
   for (const auto& l : layers) total += l.size();
@@ -1050,6 +1068,11 @@ LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<K
   // between them, found by key) keeps that number; the others are numbered in the order they
   // were made, so the numbering is the one a single pass over all tetrahedra gives.
   LabelInterfaces out;
+  std::size_t points = 0, triangles = 0;
+  for (const auto& piece : pieces) points += piece.x.positions.size(), triangles += piece.x.triangles.size();
+  out.positions.reserve(points);  // at most: the runs share the points between them
+  out.triangles.reserve(triangles);
+  out.labels.reserve(triangles);
   PointIds below;  // the previous run's points in its top plane
   for (std::size_t c = 0; c < pieces.size(); ++c) {
     Extractor::Piece& piece = pieces[c];
