@@ -21,6 +21,7 @@
 #include <limits>
 #include <numeric>
 #include <string>
+#include <type_traits>
 #include <unordered_map>
 
 namespace mlfe {
@@ -356,7 +357,9 @@ class ComplexDecimator {
     init_quadrics();
     // Step 2: each block's inside alone, the cheap merges only (where the order hardly
     // matters).
-    decimate_parts(block_insides(cell_), tol2_ * kBlockShare * kBlockShare);
+    const std::vector<std::vector<std::uint32_t>> blocks = block_insides(cell_);
+    std::vector<std::uint64_t>().swap(cell_);
+    decimate_parts(blocks, tol2_ * kBlockShare * kBlockShare);
     // Step 3: each half of the complex alone (below and above its vertices' median height), up
     // to the tolerance: the merges that shape the result, both halves at once.
     renumber_alive();
@@ -408,17 +411,19 @@ class ComplexDecimator {
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
 
-  // Per vertex its triangles in triangle order: listed once (compressed rows), then copied
-  // into each vertex's own list in parallel (the lists grow as vertices merge).
+  // Per vertex its triangles in triangle order, each list reserved at its final size.
   void vertex_triangles() {
     const std::size_t nv = x_.positions.size();
-    const VertexTriangles vt(x_);
+    std::vector<std::uint32_t> count(nv, 0);
+    for (const auto& t : x_.triangles)
+      for (auto v : t) ++count[v];
     tris_of_.resize(nv);
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-          for (std::size_t v = r.begin(); v != r.end(); ++v)
-            tris_of_[v].assign(vt.tris.begin() + vt.start[v], vt.tris.begin() + vt.start[v + 1]);
-        });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) tris_of_[v].reserve(count[v]);
+                      });
+    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
+      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
     tri_alive_.assign(x_.triangles.size(), 1);
     alive_.assign(nv, 1);
   }
@@ -831,21 +836,23 @@ class ComplexDecimator {
                       });
     const std::uint32_t n = number_kept(
         nv, [&](std::size_t o) { return alive_[at[o]] != 0; }, rank);
-    std::vector<V3> positions(n);
-    std::vector<Quadric> q(n);
-    std::vector<Kind> kind(n);
-    std::vector<std::vector<std::uint32_t>> tris_of(n);
+    // One array at a time (the old one freed before the next is made), for the peak.
+    auto keep = [&](auto& array, auto move) {
+      std::remove_reference_t<decltype(array)> kept(n);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t o = r.begin(); o != r.end(); ++o)
+                            if (rank[o] != ~0u) move(kept[rank[o]], array[at[o]]);
+                        });
+      array.swap(kept);
+    };
+    auto copy = [](auto& to, auto& from) { to = from; };
+    keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
+    keep(tris_of_, [](auto& to, auto& from) { to.swap(from); });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t o = r.begin(); o != r.end(); ++o) {
-                          const std::uint32_t v = at[o], i = rank[o];
-                          vmap[v] = i;
-                          if (i == ~0u) continue;
-                          positions[i] = x_.positions[v], q[i] = q_[v], kind[i] = kind_[v];
-                          tris_of[i].swap(tris_of_[v]);
-                        }
+                        for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
                       });
-    x_.positions.swap(positions), q_.swap(q), kind_.swap(kind), tris_of_.swap(tris_of);
     alive_.assign(n, 1);
     original_.clear(), cell_.clear();
     const std::uint32_t m = number_kept(
