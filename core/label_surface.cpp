@@ -848,7 +848,7 @@ class ComplexDecimator {
     };
     auto copy = [](auto& to, auto& from) { to = from; };
     keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
-    keep(tris_of_, [](auto& to, auto& from) { to.swap(from); });
+    keep(tris_of_, copy);  // fresh lists, each part's next to each other
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
