@@ -595,10 +595,9 @@ class ComplexDecimator {
   // inside a part (no neighbour in another part: a collapse inside a part never adds one, so
   // this stays true), all of that belongs to the part.
   void decimate_parts(const std::vector<std::vector<std::uint32_t>>& parts, double limit2) {
-    tbb::enumerable_thread_specific<Queue> queues;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, parts.size(), 1),
                       [&](const tbb::blocked_range<std::size_t>& r) {
-                        Queue& q = queues.local();
+                        Queue& q = queues_.local();
                         q.limit2 = limit2;
                         for (std::size_t b = r.begin(); b != r.end(); ++b)
                           decimate(parts[b], std::uint32_t(b), q);
@@ -912,6 +911,8 @@ class ComplexDecimator {
   std::vector<std::uint32_t> scope_;
   std::vector<std::uint64_t> cell_;
   std::vector<std::uint32_t> original_;
+  // Per thread the pass's queue, kept for the next pass (its buckets' storage).
+  tbb::enumerable_thread_specific<Queue> queues_;
 };
 
 }  // namespace
