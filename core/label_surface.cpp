@@ -12,6 +12,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
@@ -20,6 +21,7 @@
 #include <limits>
 #include <numeric>
 #include <string>
+#include <type_traits>
 #include <unordered_map>
 
 namespace mlfe {
@@ -80,6 +82,27 @@ std::vector<std::pair<std::uint64_t, int>> boundary_chain(
     i = j;
   }
   return out;
+}
+
+// Numbers the items i < n for which kept(i) holds in their order (number[i]; ~0u for the
+// others) and returns how many: counted per chunk in parallel, then numbered per chunk from
+// the chunk's offset.
+template <class Kept>
+std::uint32_t number_kept(std::size_t n, Kept kept, std::vector<std::uint32_t>& number) {
+  constexpr std::size_t kChunk = 1 << 14;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<std::uint32_t> offset(chunks + 1, 0);
+  number.resize(n);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) offset[c + 1] += kept(i);
+  });
+  std::partial_sum(offset.begin(), offset.end(), offset.begin());
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    std::uint32_t next = offset[c];
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+      number[i] = kept(i) ? next++ : ~0u;
+  });
+  return offset[chunks];
 }
 
 std::size_t pieces(const std::vector<std::array<std::uint32_t, 3>>& tris, std::size_t vertex_count) {
@@ -312,38 +335,36 @@ void classified_neighbours(const LabelInterfaces& x, const VertexTriangles& vt, 
 // vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
 // label's closed surface onto a closed surface, so closed stays closed and shared stays shared.
 //
-// Two passes over a fixed partition of space into blocks: first every block on its own (in
-// parallel), collapsing only edges whose ends and all their neighbours lie in the block, then
-// the whole complex. A block's collapses touch nothing outside it (see run()), and each pass is
-// sequential in itself, so the result does not depend on the thread count; and a block's few
-// thousand vertices stay in cache, where the collapse over the whole complex at once waits on
-// memory for every triangle list it reads.
+// Three passes: first every block of a fixed partition of space into small blocks on its own
+// (in parallel), collapsing only edges whose ends and all their neighbours lie in the block and
+// only the cheap merges; then the two halves of the complex, below and above the median height
+// of its vertices, the same way (one at a time per thread) up to the tolerance; then the whole
+// complex, where the halves meet. A part's collapses touch nothing outside it (see
+// decimate_parts), and each part's pass is sequential in itself, so the result does not depend
+// on the thread count; a block's few thousand vertices stay in cache, and the halves share the
+// collapse over the complex, which waits on memory for every triangle list it reads, between
+// two threads. One seam across the complex costs nothing measurable (bench/RESULTS.md); many
+// (the small blocks at the full tolerance) show in the distances.
 class ComplexDecimator {
  public:
   ComplexDecimator(LabelInterfaces& x, double tolerance) : x_(x), tol2_(tolerance * tolerance) {}
 
   void run() {
-    // Step 1: vertex kinds, triangle lists and quadrics.
+    // Step 1: vertices numbered block by block; kinds, triangle lists and quadrics.
+    order_by_block();
     vertex_triangles();
     classify();
     init_quadrics();
     // Step 2: each block's inside alone, the cheap merges only (where the order hardly
-    // matters). A collapse of u into v writes u's and v's triangle lists, their triangles, v's
-    // position and quadric, and reads their neighbours; with both ends inside a block (no
-    // neighbour in another block: a collapse inside a block never adds one, so this stays
-    // true), all of that belongs to the block.
-    const std::vector<std::vector<std::uint32_t>> blocks = block_insides();
-    tbb::enumerable_thread_specific<Queue> queues;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        Queue& q = queues.local();
-                        q.limit2 = tol2_ * kBlockShare * kBlockShare;
-                        for (std::size_t b = r.begin(); b != r.end(); ++b)
-                          decimate(blocks[b], std::uint32_t(b), q);
-                      });
-    // Step 3: the whole complex up to the tolerance, cheapest first (the blocks' borders, and
-    // the merges that shape the result).
+    // matters).
+    const std::vector<std::vector<std::uint32_t>> blocks = block_insides(cell_);
+    std::vector<std::uint64_t>().swap(cell_);
+    decimate_parts(blocks, tol2_ * kBlockShare * kBlockShare);
+    // Step 3: each half of the complex alone (below and above its vertices' median height), up
+    // to the tolerance: the merges that shape the result, both halves at once.
     renumber_alive();
+    decimate_parts(block_insides(halves()), tol2_);
+    // Step 4: the whole complex, for the seam between the halves.
     std::vector<std::uint32_t> all(x_.positions.size());
     std::iota(all.begin(), all.end(), 0u);
     Queue q;
@@ -383,20 +404,24 @@ class ComplexDecimator {
     double limit2 = 0;  // the pass's largest cost
     std::vector<std::uint32_t> nu, nv, common, apex;
   };
-  // Blocks of kBlock³ voxels; a pass's scope is a block's number or the whole complex. The
+  // Blocks of kBlock³ voxels; a pass's scope is a part's number or the whole complex. The
   // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
   // 73 % at 0.2, with distances within the spread that reordering near-equal merges of one
   // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
 
+  // Per vertex its triangles in triangle order, each list reserved at its final size.
   void vertex_triangles() {
     const std::size_t nv = x_.positions.size();
     std::vector<std::uint32_t> count(nv, 0);
     for (const auto& t : x_.triangles)
       for (auto v : t) ++count[v];
     tris_of_.resize(nv);
-    for (std::size_t v = 0; v < nv; ++v) tris_of_[v].reserve(count[v]);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) tris_of_[v].reserve(count[v]);
+                      });
     for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
       for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
     tri_alive_.assign(x_.triangles.size(), 1);
@@ -483,22 +508,11 @@ class ComplexDecimator {
         });
   }
 
-  // The vertices inside each non-empty block (no neighbour in another block), ascending; every
-  // vertex's scope_ is its block's number in that list, or kBorder.
-  std::vector<std::vector<std::uint32_t>> block_insides() {
+  // The parts of a partition of the live vertices (by `cell`, per vertex): the vertices inside
+  // each non-empty part (no neighbour in another part), ascending, parts in the order of their
+  // cells; every vertex's scope_ is its part's number in that list, or kBorder.
+  std::vector<std::vector<std::uint32_t>> block_insides(const std::vector<std::uint64_t>& cell) {
     const std::size_t nv = x_.positions.size();
-    std::vector<std::uint64_t> cell(nv);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                          std::uint64_t key = 0;
-                          for (int c = 0; c < 3; ++c) {
-                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
-                            key = key << 21 | std::uint64_t(std::clamp(s, 0.0, double((1 << 21) - 1)));
-                          }
-                          cell[v] = key;
-                        }
-                      });
     scope_.assign(nv, kBorder);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
@@ -523,6 +537,84 @@ class ComplexDecimator {
       blocks[scope_[v]].push_back(v);
     }
     return blocks;
+  }
+
+  // The block of every vertex (its cell of kBlock³ voxels), and the vertices numbered by block,
+  // in their order within a block: a block's pass then reads contiguous memory. Within a block
+  // the order is the same as before, so are the collapses; original_[v] is v's number before,
+  // the order renumber_alive restores for the pass over the whole complex.
+  void order_by_block() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::array<std::uint32_t, 3>> at(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          for (int c = 0; c < 3; ++c) {
+                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
+                            at[v][c] = std::uint32_t(std::clamp(s, 0.0, double(1 << 20)));
+                          }
+                      });
+    std::array<std::uint64_t, 3> dims{1, 1, 1};
+    for (const auto& b : at)
+      for (int c = 0; c < 3; ++c) dims[c] = std::max(dims[c], std::uint64_t(b[c]) + 1);
+    // Counting sort by block: stable, so each block keeps its vertices' order.
+    std::vector<std::uint32_t> first(dims[0] * dims[1] * dims[2] + 1, 0);
+    cell_.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) {
+      cell_[v] = (at[v][0] * dims[1] + at[v][1]) * dims[2] + at[v][2];
+      ++first[cell_[v] + 1];
+    }
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    original_.resize(nv);
+    std::vector<std::uint64_t> cell(nv);
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      const std::uint32_t to = first[cell_[v]]++;
+      original_[to] = v, cell[to] = cell_[v];
+    }
+    cell_.swap(cell);
+    std::vector<std::uint32_t> where(nv);
+    std::vector<V3> positions(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          where[original_[v]] = std::uint32_t(v);
+                          positions[v] = x_.positions[original_[v]];
+                        }
+                      });
+    x_.positions.swap(positions);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, x_.triangles.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t)
+                          for (auto& v : x_.triangles[t]) v = where[v];
+                      });
+  }
+
+  // Every part's vertices decimated alone, up to cost `limit2`, parts in parallel (scope_ holds
+  // each vertex's part, see block_insides). A collapse of u into v writes u's and v's triangle
+  // lists, their triangles, v's position and quadric, and reads their neighbours; with both ends
+  // inside a part (no neighbour in another part: a collapse inside a part never adds one, so
+  // this stays true), all of that belongs to the part.
+  void decimate_parts(const std::vector<std::vector<std::uint32_t>>& parts, double limit2) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, parts.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        Queue& q = queues_.local();
+                        q.limit2 = limit2;
+                        for (std::size_t b = r.begin(); b != r.end(); ++b)
+                          decimate(parts[b], std::uint32_t(b), q);
+                      });
+  }
+
+  // Per vertex its half of the complex: 1 at or above the median height of the vertices.
+  std::vector<std::uint64_t> halves() const {
+    const std::size_t n = x_.positions.size();
+    std::vector<std::uint64_t> half(n);
+    if (n == 0) return half;
+    std::vector<double> z(n);
+    for (std::size_t v = 0; v < n; ++v) z[v] = x_.positions[v][2];
+    std::nth_element(z.begin(), z.begin() + n / 2, z.end());
+    const double split = z[n / 2];
+    for (std::size_t v = 0; v < n; ++v) half[v] = x_.positions[v][2] >= split;
+    return half;
   }
 
   bool in_scope(std::uint32_t v, std::uint32_t scope) const {
@@ -734,28 +826,47 @@ class ComplexDecimator {
   // that compares numbers or follows their order is the same), for a smaller working set.
   void renumber_alive() {
     const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
-    std::vector<std::uint32_t> vmap(nv, ~0u), tmap(nt, ~0u);
-    std::uint32_t n = 0;
-    for (std::size_t v = 0; v < nv; ++v)
-      if (alive_[v]) {
-        vmap[v] = n;
-        x_.positions[n] = x_.positions[v], q_[n] = q_[v], kind_[n] = kind_[v];
-        tris_of_[n].swap(tris_of_[v]);
-        ++n;
-      }
-    x_.positions.resize(n), q_.resize(n), kind_.resize(n), tris_of_.resize(n);
-    x_.positions.shrink_to_fit(), q_.shrink_to_fit(), tris_of_.shrink_to_fit();
+    // Vertices in their order before order_by_block: at[o] is the vertex numbered o then.
+    std::vector<std::uint32_t> at(nv), rank, vmap(nv), tmap;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          at[original_[v]] = std::uint32_t(v);
+                      });
+    const std::uint32_t n = number_kept(
+        nv, [&](std::size_t o) { return alive_[at[o]] != 0; }, rank);
+    // One array at a time (the old one freed before the next is made), for the peak.
+    auto keep = [&](auto& array, auto move) {
+      std::remove_reference_t<decltype(array)> kept(n);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t o = r.begin(); o != r.end(); ++o)
+                            if (rank[o] != ~0u) move(kept[rank[o]], array[at[o]]);
+                        });
+      array.swap(kept);
+    };
+    auto copy = [](auto& to, auto& from) { to = from; };
+    keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
+    keep(tris_of_, copy);  // fresh lists, each part's next to each other
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
+                      });
     alive_.assign(n, 1);
-    std::uint32_t m = 0;
-    for (std::size_t t = 0; t < nt; ++t)
-      if (tri_alive_[t]) {
-        tmap[t] = m;
-        for (int c = 0; c < 3; ++c) x_.triangles[m][c] = vmap[x_.triangles[t][c]];
-        x_.labels[m] = x_.labels[t];
-        ++m;
-      }
-    x_.triangles.resize(m), x_.labels.resize(m);
-    x_.triangles.shrink_to_fit(), x_.labels.shrink_to_fit();
+    original_.clear(), cell_.clear();
+    const std::uint32_t m = number_kept(
+        nt, [&](std::size_t t) { return tri_alive_[t] != 0; }, tmap);
+    std::vector<std::array<std::uint32_t, 3>> triangles(m);
+    std::vector<std::array<std::uint16_t, 2>> labels(m);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                          if (tmap[t] == ~0u) continue;
+                          for (int c = 0; c < 3; ++c) triangles[tmap[t]][c] = vmap[x_.triangles[t][c]];
+                          labels[tmap[t]] = x_.labels[t];
+                        }
+                      });
+    x_.triangles.swap(triangles), x_.labels.swap(labels);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t v = r.begin(); v != r.end(); ++v) {
@@ -798,6 +909,10 @@ class ComplexDecimator {
   std::vector<std::vector<std::uint32_t>> tris_of_;
   std::vector<Quadric> q_;
   std::vector<std::uint32_t> scope_;
+  std::vector<std::uint64_t> cell_;
+  std::vector<std::uint32_t> original_;
+  // Per thread the pass's queue, kept for the next pass (its buckets' storage).
+  tbb::enumerable_thread_specific<Queue> queues_;
 };
 
 }  // namespace
@@ -895,12 +1010,29 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
   std::vector<std::vector<KuhnTet>> layers(std::size_t(nz + 1));
   tbb::parallel_for(std::int64_t(-1), nz, [&](std::int64_t k) {
     auto& out = layers[std::size_t(k + 1)];
-    for (std::int64_t j = -1; j < ny; ++j)
+    for (std::int64_t j = -1; j < ny; ++j) {
+      // The four rows of voxels along i around this row of cubes (r = dj + 2 dk; null outside
+      // the lattice), read a column (the four labels at one i) at a time.
+      const std::uint16_t* row[4];
+      for (int r = 0; r < 4; ++r) {
+        const std::int64_t jj = j + (r & 1), kk = k + (r >> 1);
+        row[r] = jj >= 0 && jj < ny && kk >= 0 && kk < nz
+                     ? g.labels.data() + static_cast<std::size_t>(nx * (jj + ny * kk))
+                     : nullptr;
+      }
+      std::uint16_t column[2][4];
+      auto read_column = [&](std::int64_t i, std::uint16_t* c) {
+        for (int r = 0; r < 4; ++r) c[r] = row[r] && i >= 0 && i < nx ? row[r][i] : 0;
+      };
+      read_column(-1, column[1]);
       for (std::int64_t i = -1; i < nx; ++i) {
+        std::copy(column[1], column[1] + 4, column[0]);
+        read_column(i + 1, column[1]);
+        // Corner b of the cube: offset bits (i, j, k) = (b & 1, b >> 1 & 1, b >> 2 & 1).
         std::uint16_t c[8];
         bool uniform = true;
         for (int b = 0; b < 8; ++b) {
-          c[b] = g.at(i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1));
+          c[b] = column[b & 1][b >> 1];
           uniform &= c[b] == c[0];
         }
         if (uniform) continue;
@@ -910,6 +1042,7 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
             out.push_back({std::int32_t(i), std::int32_t(j), std::int32_t(k), o});
         }
       }
+    }
   });
   std::size_t total = 0;
   for (const auto& l : layers) total += l.size();
@@ -943,6 +1076,11 @@ LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<K
   // between them, found by key) keeps that number; the others are numbered in the order they
   // were made, so the numbering is the one a single pass over all tetrahedra gives.
   LabelInterfaces out;
+  std::size_t points = 0, triangles = 0;
+  for (const auto& piece : pieces) points += piece.x.positions.size(), triangles += piece.x.triangles.size();
+  out.positions.reserve(points);  // at most: the runs share the points between them
+  out.triangles.reserve(triangles);
+  out.labels.reserve(triangles);
   PointIds below;  // the previous run's points in its top plane
   for (std::size_t c = 0; c < pieces.size(); ++c) {
     Extractor::Piece& piece = pieces[c];

@@ -190,6 +190,94 @@ V3 sample_gradient(const ScalarGrid& g, std::int64_t i, std::int64_t j, std::int
   return grad;
 }
 
+// Crossings of a plane of cubes: triangles (centre vertices flagged kCentre, numbered per plane)
+// and the centre vertices' positions and gradients.
+struct Plane {
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  std::vector<V3> centres, centre_grads;
+};
+
+// One cube's loops, fanned (or around a centre vertex) into the plane's triangles. `a`: the
+// corners' values - iso; `vertex(e)`: the id of the crossing on cube edge e.
+template <class VertexOf>
+void polygonise_cube(const float (&a)[8], VertexOf&& vertex, const std::vector<V3>& local,
+                     const std::vector<V3>& grad, Plane& plane) {
+  const CubeLoops loops = trace_loops(a);
+  for (int l = 0; l < loops.count; ++l) {
+    const int* e = loops.edge[l];
+    const int n = loops.size[l];
+    const int origin = fan_origin(e, n);
+    if (origin >= 0) {
+      for (int s = 1; s + 1 < n; ++s)
+        plane.tris.push_back(
+            {vertex(e[origin]), vertex(e[(origin + s) % n]), vertex(e[(origin + s + 1) % n])});
+      continue;
+    }
+    // No fan stays off the faces: a vertex at the loop's centre, numbered after the edges'.
+    V3 c{0, 0, 0}, cg{0, 0, 0};
+    for (int s = 0; s < n; ++s)
+      for (int x = 0; x < 3; ++x) {
+        c[x] += local[vertex(e[s])][x] / n;
+        cg[x] += grad[vertex(e[s])][x] / n;
+      }
+    const std::uint32_t centre = kCentre | std::uint32_t(plane.centres.size());
+    plane.centres.push_back(c);
+    plane.centre_grads.push_back(cg);
+    for (int s = 0; s < n; ++s) plane.tris.push_back({centre, vertex(e[s]), vertex(e[(s + 1) % n])});
+  }
+}
+
+// The plane of cubes between sample planes k and k + 1, row by row. `first`: each sample row's
+// first vertex id (count_crossings).
+Plane polygonise_plane(const Lattice& L, std::int64_t k, const std::vector<std::uint32_t>& first,
+                       const std::vector<V3>& local, const std::vector<V3>& grad) {
+  Plane plane;
+  const auto row = [&](std::int64_t j, std::int64_t kk) { return std::size_t(j + L.ny * kk); };
+  // ids of the four sample rows around a row of cubes: [dj + 2 dk][3 i + axis].
+  std::vector<std::uint32_t> ids[4];
+  for (auto& v : ids) v.resize(std::size_t(3 * L.nx));
+  for (std::int64_t j = 0; j + 1 < L.ny; ++j) {
+    bool any = false;
+    for (int q = 0; q < 4; ++q) {
+      const std::size_t r = row(j + (q & 1), k + (q >> 1));
+      any = any || first[r + 1] > first[r];
+    }
+    if (!any) continue;
+    for (int q = 0; q < 4; ++q) {
+      const std::int64_t jj = j + (q & 1), kk = k + (q >> 1);
+      std::fill(ids[q].begin(), ids[q].end(), kNoVertex);
+      L.scan_row(jj, kk, first[row(jj, kk)],
+                 [&](std::int64_t i, int axis, std::uint32_t id) { ids[q][std::size_t(3 * i + axis)] = id; });
+    }
+    for (std::int64_t i = 0; i + 1 < L.nx; ++i) {
+      float a[8];
+      bool any_up = false, any_down = false;
+      for (int c = 0; c < 8; ++c) {
+        const double v = double(L.at(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2)));
+        a[c] = float(v - L.iso);
+        // The classification must be the one the rows used: value > iso.
+        if (v > L.iso) {
+          any_up = true;
+          if (!(a[c] > 0)) a[c] = std::numeric_limits<float>::min();
+        } else {
+          any_down = true;
+          if (a[c] > 0) a[c] = 0;
+        }
+      }
+      if (!any_up || !any_down) continue;
+      auto vertex = [&](int e) {
+        const int c = kEdgeFrom[e];
+        const std::uint32_t id =
+            ids[((c >> 1) & 1) + 2 * (c >> 2)][std::size_t(3 * (i + (c & 1)) + kEdgeAxis[e])];
+        MLFE_CHECK(id != kNoVertex);
+        return id;
+      };
+      polygonise_cube(a, vertex, local, grad, plane);
+    }
+  }
+  return plane;
+}
+
 }  // namespace
 
 TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts) {
@@ -230,80 +318,11 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
       });
   });
 
-  // 3. Polygons: cubes row by row, each cube's loops fanned; triangles per plane of cubes,
-  // joined in plane order, so the order does not depend on the threads.
-  struct Plane {
-    std::vector<std::array<std::uint32_t, 3>> tris;
-    std::vector<V3> centres, centre_grads;
-  };
+  // 3. Polygons: planes of cubes in parallel, joined in plane order (centre vertices numbered
+  // after the edges'), so the order does not depend on the threads.
   std::vector<Plane> per_plane(std::size_t(std::max<std::int64_t>(0, L.nz - 1)));
   tbb::parallel_for(std::int64_t(0), L.nz - 1, [&](std::int64_t k) {
-    Plane& plane = per_plane[std::size_t(k)];
-    auto& tris = plane.tris;
-    // ids of the four sample rows around a row of cubes: [dj + 2 dk][3 i + axis].
-    std::vector<std::uint32_t> ids[4];
-    for (auto& v : ids) v.resize(std::size_t(3 * L.nx));
-    for (std::int64_t j = 0; j + 1 < L.ny; ++j) {
-      bool any = false;
-      for (int q = 0; q < 4; ++q) {
-        const std::int64_t jj = j + (q & 1), kk = k + (q >> 1);
-        any = any || first[row(jj, kk) + 1] > first[row(jj, kk)];
-      }
-      if (!any) continue;
-      for (int q = 0; q < 4; ++q) {
-        const std::int64_t jj = j + (q & 1), kk = k + (q >> 1);
-        std::fill(ids[q].begin(), ids[q].end(), kNoVertex);
-        L.scan_row(jj, kk, first[row(jj, kk)], [&](std::int64_t i, int axis, std::uint32_t id) {
-          ids[q][std::size_t(3 * i + axis)] = id;
-        });
-      }
-      for (std::int64_t i = 0; i + 1 < L.nx; ++i) {
-        float a[8];
-        bool any_up = false, any_down = false;
-        for (int c = 0; c < 8; ++c) {
-          a[c] = float(double(L.at(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2))) - iso);
-          // The classification must be the one the rows used: value > iso.
-          if (double(L.at(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2))) > iso) {
-            any_up = true;
-            if (!(a[c] > 0)) a[c] = std::numeric_limits<float>::min();
-          } else {
-            any_down = true;
-            if (a[c] > 0) a[c] = 0;
-          }
-        }
-        if (!any_up || !any_down) continue;
-        const CubeLoops loops = trace_loops(a);
-        auto vertex = [&](int e) {
-          const int c = kEdgeFrom[e];
-          const int q = ((c >> 1) & 1) + 2 * (c >> 2);
-          const std::uint32_t id = ids[q][std::size_t(3 * (i + (c & 1)) + kEdgeAxis[e])];
-          MLFE_CHECK(id != kNoVertex);
-          return id;
-        };
-        for (int l = 0; l < loops.count; ++l) {
-          const int* e = loops.edge[l];
-          const int n = loops.size[l];
-          const int origin = fan_origin(e, n);
-          if (origin >= 0) {
-            for (int s = 1; s + 1 < n; ++s)
-              tris.push_back(
-                  {vertex(e[origin]), vertex(e[(origin + s) % n]), vertex(e[(origin + s + 1) % n])});
-            continue;
-          }
-          // No fan stays off the faces: a vertex at the loop's centre, numbered after the edges'.
-          V3 c{0, 0, 0}, cg{0, 0, 0};
-          for (int s = 0; s < n; ++s)
-            for (int x = 0; x < 3; ++x) {
-              c[x] += local[vertex(e[s])][x] / n;
-              cg[x] += grad[vertex(e[s])][x] / n;
-            }
-          const std::uint32_t centre = kCentre | std::uint32_t(plane.centres.size());
-          plane.centres.push_back(c);
-          plane.centre_grads.push_back(cg);
-          for (int s = 0; s < n; ++s) tris.push_back({centre, vertex(e[s]), vertex(e[(s + 1) % n])});
-        }
-      }
-    }
+    per_plane[std::size_t(k)] = polygonise_plane(L, k, first, local, grad);
   });
   TriangleMesh mesh;
   std::size_t nt = 0;

@@ -398,6 +398,37 @@ TriangleMesh merge(const std::vector<GltfSurface>& surfaces) {
   return m;
 }
 
+// One surface through --simplifier's choice. auto: up to 200 000 triangles, the verified bound
+// (about a second or two at ~10 µs per triangle). Above, first the same topology-preserving
+// collapses with the error estimated from the quadrics to a third of the tolerance (most of the
+// collapses, cheaply), then the verified bound to the tolerance and the ratio on what is left:
+// a full head's 1.45 M triangles in about the time the estimate alone takes, with the thin parts
+// kept that area-weighted quadrics let retract (Hausdorff 1.0 against 2.5 voxels,
+// bench/RESULTS.md). Below a 5 % ratio the verified bound's late passes take minutes, so the
+// estimate goes all the way (meshoptimizer is faster still, but pinches the surface into
+// thousands of non-manifold edges and keeps twice the triangles). Decided from the surface's
+// size and the options alone, so the bytes do not depend on the thread count.
+TriangleMesh simplify_surface(const TriangleMesh& m, const SimplifyOptions& so, Simplifier simplifier,
+                              double ratio) {
+  if (simplifier == Simplifier::kMeshopt) return simplify_fast(m, so.tolerance);
+  constexpr std::size_t kBoundedUpTo = 200000;
+  constexpr double kBoundedDownTo = 0.05;
+  SimplifyOptions o = so;
+  o.min_triangles = std::size_t(ratio * double(m.triangles.size()));
+  o.verify_bound = simplifier == Simplifier::kBounded;
+  if (simplifier != Simplifier::kAuto) return simplify_within(m, o);
+  if (m.triangles.size() <= kBoundedUpTo) {
+    o.verify_bound = true;
+    return simplify_within(m, o);
+  }
+  if (ratio < kBoundedDownTo) return simplify_within(m, o);
+  SimplifyOptions first = o;
+  first.tolerance = o.tolerance / 3;
+  const TriangleMesh pre = simplify_within(m, first);
+  o.verify_bound = true;
+  return simplify_within(pre, o);
+}
+
 // The voxel size tolerances are expressed in: the smallest spacing of the data's axes (mm).
 double smallest_spacing(const GridTransform& t, int dim) {
   double s = 1e300;
@@ -510,29 +541,9 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     if (!(p.ratio >= 0 && p.ratio <= 1)) throw Error(fmt::format("ratio: expected 0..1, got {}", p.ratio));
     // Surfaces are independent: one task each, and each simplification is parallel inside.
-    // auto: the verified bound, unless a surface of over 200 000 triangles is to go below 5 % of
-    // them: the verified bound's late passes (~10 µs per triangle) then take minutes, and the
-    // same topology-preserving collapses with the bound estimated from the quadrics take
-    // seconds (meshoptimizer takes 1-2 s there but pinches the surface into thousands of
-    // non-manifold edges and keeps twice the triangles, bench/RESULTS.md). Down to the default
-    // ratio of 10 % the verified bound costs about what the estimate does and keeps thin parts
-    // the quadrics let retract (a full head: Hausdorff 0.87 against 2.46 voxels). Decided per
-    // surface from its size and the options alone, so the bytes do not depend on the threads.
-    constexpr std::size_t kBoundedUpTo = 200000;
-    constexpr double kBoundedDownTo = 0.05;
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (m.triangles.empty()) return;
-      if (p.simplifier == Simplifier::kMeshopt) {
-        m = simplify_fast(m, so.tolerance);
-        return;
-      }
-      SimplifyOptions o = so;
-      o.min_triangles = std::size_t(p.ratio * double(m.triangles.size()));
-      o.verify_bound = p.simplifier == Simplifier::kBounded ||
-                       (p.simplifier == Simplifier::kAuto &&
-                        (m.triangles.size() <= kBoundedUpTo || p.ratio >= kBoundedDownTo));
-      m = simplify_within(m, o);
+      if (!m.triangles.empty()) m = simplify_surface(m, so, p.simplifier, p.ratio);
     });
   }
   if (p.decimate > 0)

@@ -134,8 +134,10 @@ void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& op
 /// piece and three vertices per junction loop keep every label's surface closed, consistently
 /// oriented and its islands present, and the interfaces shared. The cheap merges (within a fifth
 /// of the tolerance) go first inside fixed blocks of 16³ voxels, in parallel, away from the
-/// blocks' borders; then the whole complex, cheapest first. The blocks do not interact and each
-/// pass is sequential in itself, so the same result for any thread count. Returns the number of
+/// blocks' borders; then the two halves below and above the vertices' median height, at once,
+/// cheapest first up to the tolerance, away from the other half; then the whole complex (the
+/// seam). Parts do not interact and each part's pass is sequential in itself, so the same
+/// result for any thread count. Returns the number of
 /// vertices removed. Throws mlfe::Error unless `tolerance` is positive and finite.
 std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
 
