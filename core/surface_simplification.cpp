@@ -162,7 +162,7 @@ struct Rows {
   std::size_t size(Index r) const { return count[r]; }
   const Index* begin(Index r) const { return row[r]; }
   const Index* end(Index r) const { return row[r] + count[r]; }
-  // Row r := `items`, in place when it fits (else in `arena`, with some room to grow).
+  // Row r := `list`, in place when it fits (else in `arena`, with some room to grow).
   void assign(Index r, const std::vector<Index>& list, Arena& arena) {
     if (list.size() > cap[r]) {
       cap[r] = Index(list.size() + 4);
