@@ -419,6 +419,22 @@ Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector
   return d;
 }
 
+void to_physical(TriangleMesh& mesh, const std::vector<V3>& local, const std::vector<V3>& grad,
+                 const GridTransform& transform, bool normals_toward_higher) {
+  const double sign = normals_toward_higher ? 1.0 : -1.0;
+  mesh.positions.resize(local.size());
+  mesh.normals.resize(local.size());
+  tbb::parallel_for(std::size_t(0), local.size(), [&](std::size_t i) {
+    const V3 p = transform.local_to_physical(local[i]);
+    mesh.positions[i] = {float(p[0]), float(p[1]), float(p[2])};
+    const V3 n{sign * grad[i][0], sign * grad[i][1], sign * grad[i][2]};
+    mesh.normals[i] = to_float_unit(transform.rotate(n));
+  });
+  // A reflecting transform (det < 0) turns counter-clockwise into clockwise.
+  if (det3(transform.direction) < 0)
+    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+}
+
 }  // namespace detail
 
 IsoExtractor::IsoExtractor(const Hierarchy<3>& h, const std::vector<double>& values)
@@ -564,18 +580,7 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   }
 
   // 5. Physical positions and normals.
-  const double sign = opts.normals_toward_higher ? 1.0 : -1.0;
-  mesh.positions.reserve(local.size());
-  mesh.normals.reserve(local.size());
-  for (std::size_t i = 0; i < local.size(); ++i) {
-    const V3 p = transform.local_to_physical(local[i]);
-    mesh.positions.push_back({float(p[0]), float(p[1]), float(p[2])});
-    const V3 n{sign * grad[i][0], sign * grad[i][1], sign * grad[i][2]};
-    mesh.normals.push_back(to_float_unit(transform.rotate(n)));
-  }
-  // A reflecting transform (det < 0) turns counter-clockwise into clockwise.
-  if (det3(transform.direction) < 0)
-    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+  detail::to_physical(mesh, local, grad, transform, opts.normals_toward_higher);
   return mesh;
 }
 

@@ -348,26 +348,11 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
     if (opts.dropped) *opts.dropped = d;
   }
 
-  // 5. Physical positions and normals (the samples' gradients, toward lower values by default).
-  const double sign = opts.normals_toward_higher ? 1.0 : -1.0;
-  mesh.positions.resize(local.size());
-  mesh.normals.resize(local.size());
-  tbb::parallel_for(std::size_t(0), local.size(), [&](std::size_t v) {
-    const V3 p = grid.transform.local_to_physical(local[v]);
-    mesh.positions[v] = {float(p[0]), float(p[1]), float(p[2])};
-    V3 n = grid.transform.rotate({sign * grad[v][0], sign * grad[v][1], sign * grad[v][2]});
-    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    if (len > 0)
-      for (double& x : n) x /= len;
-    mesh.normals[v] = {float(n[0]), float(n[1]), float(n[2])};
-  });
-  // A reflecting transform (det < 0) turns counter-clockwise into clockwise; loops are traced
-  // with normals toward lower values.
-  const auto& m = grid.transform.direction;
-  const double det = m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
-                     m[2] * (m[3] * m[7] - m[4] * m[6]);
-  if ((det < 0) != opts.normals_toward_higher)
+  // 5. Physical positions and normals (the samples' gradients). Loops are traced with normals
+  // toward lower values, so toward higher ones reverses them.
+  if (opts.normals_toward_higher)
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+  detail::to_physical(mesh, local, grad, grid.transform, opts.normals_toward_higher);
   return mesh;
 }
 

@@ -18,4 +18,12 @@ Dropped drop_small_parts(TriangleMesh& mesh, std::vector<std::array<double, 3>>&
                          std::vector<std::array<double, 3>>& grad, const std::array<double, 3>& spacing,
                          std::size_t min_cells);
 
+/// Fills mesh.positions and mesh.normals from `local` (the grid-aligned local frame) and `grad`
+/// (gradients there), mapped through `transform`: unit normals toward lower values, or higher
+/// with normals_toward_higher (a zero gradient gives +z). A reflecting transform (det < 0)
+/// reverses every triangle, so counter-clockwise still faces the normals' side.
+void to_physical(TriangleMesh& mesh, const std::vector<std::array<double, 3>>& local,
+                 const std::vector<std::array<double, 3>>& grad, const GridTransform& transform,
+                 bool normals_toward_higher);
+
 }  // namespace mlfe::detail

@@ -90,6 +90,21 @@ void check_build_options(const BuildOptions& p, int dim) {
                                  corners, p.max_vertices));
 }
 
+// Iso-values and no global target: the build refines for the surfaces alone (unless it is an
+// error-bounded one, --max-error, which build() then makes global).
+bool without_global_target(const BuildOptions& p, const std::vector<double>& isos) {
+  return !isos.empty() && !p.rms && p.threshold <= 0 && p.max_vertices == 0;
+}
+
+// --surface: the samples' surfaces for a surface-driven build (which exists to carry the data's
+// surfaces, and the samples give them exactly) with the volume at hand at the finest level; a
+// global target (--rms, --max-vertices, ...) asks for the approximation's. extract() decides
+// with the build, convert() before it (to skip the build).
+bool surfaces_from_samples(const AssetOptions& a, bool have_samples, bool surface_driven) {
+  return have_samples && a.level < 0 &&
+         (a.surface == SurfaceSource::kSamples || (a.surface == SurfaceSource::kAuto && surface_driven));
+}
+
 // An iso-value the data never crosses gives an empty asset, which looks like success.
 void check_iso_in_range(const std::vector<double>& isos, double lo, double hi, const std::string& source) {
   for (double v : isos)
@@ -174,7 +189,7 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
 
   ApproximationOptions o;
   // With surfaces to extract and no global target, refine for the surfaces alone.
-  o.surface_driven = !iso_values.empty() && !p.rms && p.threshold <= 0 && p.max_vertices == 0;
+  o.surface_driven = without_global_target(p, iso_values);
   if (p.threshold > 0) {
     o.threshold = p.threshold;
   } else if (!o.surface_driven) {
@@ -460,13 +475,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       throw Error("--surface samples: needs the volume's samples (a hierarchy file has none)");
     if (p.surface == SurfaceSource::kSamples && p.level >= 0)
       throw UsageError("--surface samples extracts on the finest level; --level asks for another");
-    // auto: a build without a global target (surface-driven) exists to carry the data's surfaces,
-    // which the samples give exactly; a global target (--rms, --max-vertices, ...) asks for the
-    // approximation's.
-    out.source = p.surface == SurfaceSource::kSamples || (p.surface == SurfaceSource::kAuto && have_samples &&
-                                                          p.level < 0 && b.surface_driven)
-                     ? SurfaceSource::kSamples
-                     : SurfaceSource::kHierarchy;
+    out.source = surfaces_from_samples(p, have_samples, b.surface_driven) ? SurfaceSource::kSamples
+                                                                          : SurfaceSource::kHierarchy;
     const bool from_samples = out.source == SurfaceSource::kSamples;
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
@@ -679,11 +689,8 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   }
   // Surfaces from the samples (extract()'s choice, made here before the build) need no hierarchy:
   // unless an output holds it (the file, u, LODs), the build stops at T0.
-  const bool surface_driven =
-      !p.rms && p.threshold <= 0 && p.max_vertices == 0 && !isos.empty() && p.max_sample_error < 0;
-  const bool from_samples = grid && grid->dim == 3 && c.asset.level < 0 &&
-                            (c.asset.surface == SurfaceSource::kSamples ||
-                             (c.asset.surface == SurfaceSource::kAuto && surface_driven));
+  const bool surface_driven = without_global_target(p, isos) && p.max_sample_error < 0;  // as build()
+  const bool from_samples = surfaces_from_samples(c.asset, grid && grid->dim == 3, surface_driven);
   const bool hierarchy_needed = !from_samples || !c.hierarchy.empty() || c.keep_u || c.asset.lod > 0;
   if (!hierarchy_needed) {
     check_build_options(p, f.dim());  // what the build would refuse, refused all the same
