@@ -100,6 +100,16 @@ bool without_global_target(const BuildOptions& p, const std::vector<double>& iso
 // surfaces, and the samples give them exactly) with the volume at hand at the finest level; a
 // global target (--rms, --max-vertices, ...) asks for the approximation's. extract() decides
 // with the build, convert() before it (to skip the build).
+// --surface samples asks for what only a volume's finest level has: refused before any work
+// otherwise (an option that cannot apply, like a conflicting pair).
+void check_surface_option(const AssetOptions& a, bool have_samples) {
+  if (a.surface != SurfaceSource::kSamples) return;
+  if (!have_samples)
+    throw UsageError("--surface samples needs the volume's samples (a hierarchy file has none)");
+  if (a.level >= 0)
+    throw UsageError("--surface samples extracts on the finest level; --level asks for another");
+}
+
 bool surfaces_from_samples(const AssetOptions& a, bool have_samples, bool surface_driven) {
   return have_samples && a.level < 0 &&
          (a.surface == SurfaceSource::kSamples || (a.surface == SurfaceSource::kAuto && surface_driven));
@@ -471,10 +481,7 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     isos = p.iso;
     std::sort(isos.begin(), isos.end());
     const bool have_samples = grid && grid->dim == 3;
-    if (p.surface == SurfaceSource::kSamples && !have_samples)
-      throw Error("--surface samples: needs the volume's samples (a hierarchy file has none)");
-    if (p.surface == SurfaceSource::kSamples && p.level >= 0)
-      throw UsageError("--surface samples extracts on the finest level; --level asks for another");
+    check_surface_option(p, have_samples);
     out.source = surfaces_from_samples(p, have_samples, b.surface_driven) ? SurfaceSource::kSamples
                                                                           : SurfaceSource::kHierarchy;
     const bool from_samples = out.source == SurfaceSource::kSamples;
@@ -690,6 +697,7 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   // Surfaces from the samples (extract()'s choice, made here before the build) need no hierarchy:
   // unless an output holds it (the file, u, LODs), the build stops at T0.
   const bool surface_driven = without_global_target(p, isos) && p.max_sample_error < 0;  // as build()
+  if (f.dim() == 3) check_surface_option(c.asset, grid && grid->dim == 3);
   const bool from_samples = surfaces_from_samples(c.asset, grid && grid->dim == 3, surface_driven);
   const bool hierarchy_needed = !from_samples || !c.hierarchy.empty() || c.keep_u || c.asset.lod > 0;
   if (!hierarchy_needed) {

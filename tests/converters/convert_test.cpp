@@ -198,6 +198,7 @@ TEST(Convert, UsageErrorsExitWith1) {
   for (const std::string& args :
        {"convert " + kSkull + " --iso 3 --snap 100 -o " + out,
         "convert " + kSkull + " --iso 3 --simplify -1 -o " + out,
+        "convert " + kSkull + " --iso 3 --surface samples --level 2 -o " + out,
         "convert " + kSkull + " --iso 3 --bogus -o " + out, std::string("frobnicate"), std::string()}) {
     const RunResult r = run(args);
     EXPECT_EQ(r.status, 1) << args << "\n" << r.err;
@@ -654,6 +655,10 @@ TEST(Convert, SurfaceDrivenConvertSolvesOnlyWhenAnOutputNeedsU) {
   EXPECT_EQ(js["vertices"].get<int>(), 8);
   EXPECT_NE(js["stop_reason"].get<std::string>().find("samples"), std::string::npos);
   EXPECT_EQ(js["asset"]["surface"].get<std::string>(), "samples");
+  // A hierarchy file has no samples to take them from.
+  const std::string none = scratch() + "/nosamples.ply";
+  EXPECT_EQ(run("iso " + h + " --iso 1.5 --surface samples --quiet -o " + none).status, 1);
+  EXPECT_FALSE(fs::exists(none));
 }
 
 // --max-memory: a build that would not fit stops refining with a message, and still writes.
