@@ -147,18 +147,15 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
   return std::min({1.0 - l1 - l2 - l3, l1, l2, l3});
 }
 
-// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, written straight
-// into the step records' `next` (4 × neighbour index + the local index of the shared face in
-// it). Faces are bucketed by their lowest vertex id (a counting sort, linear and parallel:
-// several times faster than comparison-sorting all faces on a million tetrahedra), then
-// matched within each bucket (a few dozen faces) by their other two vertex ids. Within a bucket
-// the faces are put in (key, slot) order before matching, so the result does not depend on the
-// order the threads filled it in.
-// Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
-// are left as boundary faces).
-std::size_t face_adjacency(
-    const Hierarchy<3>& h, const std::vector<ElemId>& elems,
-    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
+// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
+// records' `next` holds them (4 × neighbour index + the local index of the shared face in it). Faces are
+// bucketed by their lowest vertex id (a counting sort, linear and parallel: several times faster than
+// comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a few dozen faces)
+// by their other two vertex ids. Within a bucket the faces are put in (key, slot) order before matching, so
+// the result does not depend on the order the threads filled it in. Returns how many faces more than two
+// elements share (0 on a conforming mesh; the extra ones are left as boundary faces).
+template <class Next>
+std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems, Next& next) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
   const std::size_t nv = h.vertex_count();
   struct Face {
@@ -204,12 +201,12 @@ std::size_t face_adjacency(
         const bool shared = q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2;
         const std::uint32_t a = q->slot;
         if (!shared) {
-          records[a / 4].next[a % 4] = kNo;
+          next[a / 4][a % 4] = kNo;
           continue;
         }
         const std::uint32_t b = q[1].slot;
-        records[a / 4].next[a % 4] = b;
-        records[b / 4].next[b % 4] = a;
+        next[a / 4][a % 4] = b;
+        next[b / 4][b % 4] = a;
         ++q;
         if (q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2) overshared.fetch_add(1);
       }
@@ -425,34 +422,21 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   render_of_.assign(h.element_count(), kNone);
   lo_.assign(h.element_count(), std::numeric_limits<float>::infinity());
   hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
-  records_.resize(elems_.size());  // not initialised: every field is set below
+  // Records: address space only until build_chunk() writes them.
+  records_.resize(elems_.size());
   advise_huge_pages(records_);
-  const std::size_t overshared = face_adjacency(h, elems_, records_);
+  const std::size_t chunks = (elems_.size() >> kChunkBits) + 1;
+  built_.reset(new std::atomic<bool>[chunks]);
+  for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
+  build_once_.reset(new std::once_flag[chunks]);
+  next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
+  advise_huge_pages(next_);
+  const std::size_t overshared = face_adjacency(h, elems_, next_);
   if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
     throw Error("render: " + std::to_string(overshared) +
                 " faces are shared by more than two tetrahedra (not a conforming mesh)");
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
-    Vec3 p[4];
-    for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
-    StepRecord& R = records_[r];
-    Vec3 g{0, 0, 0};
-    for (int i = 0; i < 4; ++i) {
-      // The face's vertices in id order, so both elements sharing it compute the same normal.
-      int f[3] = {kFaceVerts[i][0], kFaceVerts[i][1], kFaceVerts[i][2]};
-      std::sort(f, f + 3, [&](int x, int y) { return c[x] < c[y]; });
-      Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
-      if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
-      const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
-      for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
-      R.h[i] = dot(nf, p[f[0]]);
-      // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
-      const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
-      for (int a = 0; a < 3; ++a) g[a] += w * n[a];
-    }
-    for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
-    const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
-    R.b = (*u_)[c[0].value] - dot(gf, p[0]);
     const std::uint32_t e = elems_[r].value;
     render_of_[e] = std::uint32_t(r);
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -526,6 +510,41 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
 
+// One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.
+void TetRenderMesh::fill_record(std::uint32_t r) const {
+  const auto& c = h_.cell(elems_[r]);
+  Vec3 p[4];
+  for (int i = 0; i < 4; ++i) p[i] = h_.point(c[i]);
+  StepRecord& R = records_[r];
+  Vec3 g{0, 0, 0};
+  for (int i = 0; i < 4; ++i) {
+    // The face's vertices in id order, so both elements sharing it compute the same normal.
+    int f[3] = {kFaceVerts[i][0], kFaceVerts[i][1], kFaceVerts[i][2]};
+    std::sort(f, f + 3, [&](int x, int y) { return c[x] < c[y]; });
+    Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
+    if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
+    const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
+    for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
+    R.h[i] = dot(nf, p[f[0]]);
+    // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
+    const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
+    for (int a = 0; a < 3; ++a) g[a] += w * n[a];
+  }
+  for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
+  const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
+  R.b = (*u_)[c[0].value] - dot(gf, p[0]);
+  for (int f = 0; f < 4; ++f) R.next[f] = next_[r][f];
+}
+
+void TetRenderMesh::build_chunk(std::uint32_t chunk) const {
+  std::call_once(build_once_[chunk], [&] {
+    const std::size_t first = std::size_t(chunk) << kChunkBits;
+    const std::size_t last = std::min(records_.size(), first + (std::size_t(1) << kChunkBits));
+    for (std::size_t r = first; r < last; ++r) fill_record(std::uint32_t(r));
+    built_[chunk].store(true, std::memory_order_release);
+  });
+}
+
 int TetRenderMesh::grid_index(int a, double x) const {
   return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
 }
@@ -588,7 +607,7 @@ void TetRenderMesh::build_boundary_grid() {
   // 1. the faces without a neighbour, in render order.
   for (std::size_t r = 0; r < records_.size(); ++r)
     for (int f = 0; f < 4; ++f) {
-      if (records_[r].next[f] != kNoNeighbor) continue;
+      if (next_[r][f] != kNoNeighbor) continue;
       const auto& c = h_.cell(elems_[r]);
       VertexId v[3] = {c[kFaceVerts[f][0]], c[kFaceVerts[f][1]], c[kFaceVerts[f][2]]};
       std::sort(v, v + 3);
@@ -680,7 +699,7 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
       const BoundaryGrid::Face& face = g.faces[g.list[k]];
       if (face.slot == skip[0] || face.slot == skip[1]) continue;
       // The plane as record_exit sees it.
-      const StepRecord& R = records_[face.slot / 4];
+      const StepRecord& R = record(face.slot / 4);
       const int f = int(face.slot % 4);
       const double nx = R.n[0][f], ny = R.n[1][f], nz = R.n[2][f];
       const double den = nx * d[0] + ny * d[1] + nz * d[2];
@@ -704,7 +723,7 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
   hit.tet = best_slot / 4;
   hit.face = int(best_slot % 4);
   hit.t = best_t;
-  const StepRecord& R = records_[hit.tet];
+  const StepRecord& R = record(hit.tet);
   hit.inward =
       double(R.n[0][hit.face]) * d[0] + double(R.n[1][hit.face]) * d[1] + double(R.n[2][hit.face]) * d[2] < 0;
   return true;
@@ -712,8 +731,9 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
 
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
-         records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
-         (lo_.capacity() + hi_.capacity()) * sizeof(float) + (boundary_ ? boundary_->bytes() : 0);
+         records_.capacity() * sizeof(StepRecord) + next_.capacity() * sizeof(next_[0]) +
+         render_of_.capacity() * sizeof(std::uint32_t) + (lo_.capacity() + hi_.capacity()) * sizeof(float) +
+         (boundary_ ? boundary_->bytes() : 0);
 }
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
@@ -764,7 +784,7 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
     const double l[4] = {1.0 - l1 - l2 - l3, l1, l2, l3};
     const int f = int(std::min_element(l, l + 4) - l);
     if (l[f] >= 0) return r;
-    const std::uint32_t next = records_[r].next[f];
+    const std::uint32_t next = next_[r][f];
     if (next == kNoNeighbor) break;
     r = next >> 2;
   }
@@ -926,7 +946,7 @@ inline bool walk_step(const TetRenderMesh& m, const CompiledTransferFunction* sk
   // instead of stalling the next one.
   for (int i = 0; i < 4; ++i)
     if (i != w.entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
-      const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
+      const char* q = reinterpret_cast<const char*>(m.record_address(R.next[i] >> 2));
       __builtin_prefetch(q);
       __builtin_prefetch(q + 64);
     }
