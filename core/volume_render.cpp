@@ -148,47 +148,72 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
 }
 
 // Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
-// records' `next` holds them (4 × neighbour index + the local index of the shared face in it). Faces are
-// bucketed by their lowest vertex id (a counting sort, linear and parallel: several times faster than
-// comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a few dozen faces)
-// by their other two vertex ids. Within a bucket the faces are put in (key, slot) order before matching, so
-// the result does not depend on the order the threads filled it in. Returns how many faces more than two
-// elements share (0 on a conforming mesh; the extra ones are left as boundary faces).
+// records' `next` holds them (4 × render index + the local index of the shared face in it);
+// render_of gives each hierarchy element's render index (kNone: not rendered). Faces are
+// bucketed by their lowest vertex id (a counting sort, linear and parallel: several times faster
+// than comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a
+// few dozen faces) by their other two vertex ids. Within a bucket the faces are put in
+// (key, slot) order before matching, so the result does not depend on the order the buckets
+// were filled in. The counting passes read the elements in the hierarchy's order (contiguous
+// cells; render order is spatial and would read them at random) in fixed chunks, each with its
+// own counters, so that the threads share no counter.
+// Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
+// are left as boundary faces).
 template <class Next>
-std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<ElemId>& elems, Next& next) {
+std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_t>& render_of,
+                           std::size_t rendered, Next& next) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
-  const std::size_t nv = h.vertex_count();
+  const std::size_t nv = h.vertex_count(), ne = h.element_count();
   struct Face {
     std::uint32_t v1, v2;  // the face's two higher vertex ids
-    std::uint32_t slot;    // 4 * element index + local face
+    std::uint32_t slot;    // 4 * render index + local face
   };
-  const auto face_of = [&](std::size_t i, int f, std::uint32_t& low) {
-    const auto& c = h.cell(elems[i]);
-    std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
-    std::sort(v, v + 3);
-    low = v[0];
-    return std::array<std::uint32_t, 2>{v[1], v[2]};
+  // Calls visit(low, v1, v2, slot) for the four faces of rendered element e, face vertex ids
+  // ascending.
+  const auto faces_of = [&](std::size_t e, auto&& visit) {
+    const std::uint32_t r = render_of[e];
+    if (r == kNone) return;
+    const auto& c = h.cell(ElemId(std::uint32_t(e)));
+    for (int f = 0; f < 4; ++f) {
+      std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
+      if (v[0] > v[1]) std::swap(v[0], v[1]);
+      if (v[1] > v[2]) std::swap(v[1], v[2]);
+      if (v[0] > v[1]) std::swap(v[0], v[1]);
+      visit(v[0], v[1], v[2], 4 * r + std::uint32_t(f));
+    }
   };
-  // 1. faces per lowest vertex, then bucket offsets; 2. faces into their buckets (sequential:
-  // atomic counters shared by the threads measured slower).
+  // 1. faces per (chunk, lowest vertex); 2. bucket offsets, chunk after chunk within a bucket;
+  // 3. faces into their buckets, chunks in parallel.
+  constexpr std::size_t kChunks = 16;
+  const std::size_t per_chunk = (ne + kChunks - 1) / kChunks;
+  std::vector<std::uint32_t> at(kChunks * nv, 0);
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* count = at.data() + k * nv;
+    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
+      faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
+  });
   std::vector<std::uint32_t> start(nv + 1, 0);
-  for (std::size_t i = 0; i < elems.size(); ++i)
-    for (int f = 0; f < 4; ++f) {
-      std::uint32_t low;
-      face_of(i, f, low);
-      ++start[low + 1];
+  std::uint32_t sum = 0;
+  for (std::size_t v = 0; v < nv; ++v) {
+    start[v] = sum;
+    for (std::size_t k = 0; k < kChunks; ++k) {
+      const std::uint32_t n = at[k * nv + v];
+      at[k * nv + v] = sum;
+      sum += n;
     }
-  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-  std::unique_ptr<Face[]> faces(new Face[elems.size() * 4]);
-  advise_huge_pages(faces.get(), elems.size() * 4 * sizeof(Face));
-  for (std::size_t i = 0; i < elems.size(); ++i)
-    for (int f = 0; f < 4; ++f) {
-      std::uint32_t low;
-      const auto key = face_of(i, f, low);
-      faces[fill[low]++] = {key[0], key[1], std::uint32_t(4 * i + f)};
-    }
-  // 3. per bucket: equal keys are the two sides of one face.
+  }
+  start[nv] = sum;
+  MLFE_CHECK(sum == 4 * rendered);
+  std::unique_ptr<Face[]> faces(new Face[rendered * 4]);
+  advise_huge_pages(faces.get(), rendered * 4 * sizeof(Face));
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* fill = at.data() + k * nv;
+    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
+      faces_of(e, [&](std::uint32_t low, std::uint32_t v1, std::uint32_t v2, std::uint32_t slot) {
+        faces[fill[low]++] = {v1, v2, slot};
+      });
+  });
+  // 4. per bucket: equal keys are the two sides of one face.
   std::atomic<std::size_t> overshared{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
@@ -429,12 +454,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
-  next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
-  advise_huge_pages(next_);
-  const std::size_t overshared = face_adjacency(h, elems_, next_);
-  if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
-    throw Error("render: " + std::to_string(overshared) +
-                " faces are shared by more than two tetrahedra (not a conforming mesh)");
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
     const std::uint32_t e = elems_[r].value;
@@ -447,6 +466,12 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
     hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
   });
+  next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
+  advise_huge_pages(next_);
+  const std::size_t overshared = face_adjacency(h, render_of_, elems_.size(), next_);
+  if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
+    throw Error("render: " + std::to_string(overshared) +
+                " faces are shared by more than two tetrahedra (not a conforming mesh)");
   // 3. ranges: rendered elements from their vertices (set with the records above), coarser
   // ones as the union of their children (children have larger ids than their parent, so one
   // backward sweep).
@@ -483,29 +508,45 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
   grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
   const double pad = 1e-6 * longest;
-  for (std::size_t i = 0; i < h.element_count(); ++i) {
-    if (render_of_[i] == kNone) continue;
-    Vec3 blo, bhi;
-    blo.fill(std::numeric_limits<double>::infinity());
-    bhi.fill(-std::numeric_limits<double>::infinity());
-    for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
-      for (int a = 0; a < 3; ++a) {
-        blo[a] = std::min(blo[a], h.point(v)[a]);
-        bhi[a] = std::max(bhi[a], h.point(v)[a]);
-      }
-    int c0[3], c1[3];
-    for (int a = 0; a < 3; ++a) {
-      c0[a] = grid_index(a, blo[a] - pad);
-      c1[a] = grid_index(a, bhi[a] + pad);
-    }
-    for (int z = c0[2]; z <= c1[2]; ++z)
-      for (int y = c0[1]; y <= c1[1]; ++y)
-        for (int x = c0[0]; x <= c1[0]; ++x) {
-          const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
-          grid_lo_[c] = std::min(grid_lo_[c], lo_[i]);
-          grid_hi_[c] = std::max(grid_hi_[c], hi_[i]);
+  // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
+  // so the grid does not depend on the split.
+  constexpr std::size_t kChunks = 4;
+  const std::size_t ne = h.element_count(), per_chunk = (ne + kChunks - 1) / kChunks;
+  std::vector<std::vector<float>> part_lo(kChunks), part_hi(kChunks);
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::vector<float>& glo = part_lo[k];
+    std::vector<float>& ghi = part_hi[k];
+    glo.assign(cells, std::numeric_limits<float>::infinity());
+    ghi.assign(cells, -std::numeric_limits<float>::infinity());
+    for (std::size_t i = k * per_chunk, end = std::min(ne, i + per_chunk); i < end; ++i) {
+      if (render_of_[i] == kNone) continue;
+      Vec3 blo, bhi;
+      blo.fill(std::numeric_limits<double>::infinity());
+      bhi.fill(-std::numeric_limits<double>::infinity());
+      for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
+        for (int a = 0; a < 3; ++a) {
+          blo[a] = std::min(blo[a], h.point(v)[a]);
+          bhi[a] = std::max(bhi[a], h.point(v)[a]);
         }
-  }
+      int c0[3], c1[3];
+      for (int a = 0; a < 3; ++a) {
+        c0[a] = grid_index(a, blo[a] - pad);
+        c1[a] = grid_index(a, bhi[a] + pad);
+      }
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) {
+            const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
+            glo[c] = std::min(glo[c], lo_[i]);
+            ghi[c] = std::max(ghi[c], hi_[i]);
+          }
+    }
+  });
+  for (std::size_t k = 0; k < kChunks; ++k)
+    for (std::size_t c = 0; c < cells; ++c) {
+      grid_lo_[c] = std::min(grid_lo_[c], part_lo[k][c]);
+      grid_hi_[c] = std::max(grid_hi_[c], part_hi[k][c]);
+    }
   // 6. unstructured meshes: the boundary faces in their bucket grid.
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
