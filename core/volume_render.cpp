@@ -416,6 +416,12 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 
 TetRenderMesh::~TetRenderMesh() = default;
 
+// Defined ahead of its callers so that it is inlined (the range grid calls it six times per
+// element).
+inline int TetRenderMesh::grid_index(int a, double x) const {
+  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
+}
+
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
                              const std::array<double, 3>* clip_to, RayEntry entry)
     : h_(h), entry_(entry) {
@@ -584,10 +590,6 @@ void TetRenderMesh::build_chunk(std::uint32_t chunk) const {
     for (std::size_t r = first; r < last; ++r) fill_record(std::uint32_t(r));
     built_[chunk].store(true, std::memory_order_release);
   });
-}
-
-int TetRenderMesh::grid_index(int a, double x) const {
-  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
 }
 
 double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0,
