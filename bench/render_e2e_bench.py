@@ -74,7 +74,7 @@ def run_once(mlfe, args):
 
 def interleaved(a, builds, view):
     """--rounds: every command once per round, in turn; minimum and median per command."""
-    cmds = [("reference", builds[0][1], a.volume, ["--reference"])]
+    cmds = [("reference/%s" % bname, binary, a.volume, ["--reference"]) for bname, binary in builds]
     for H in a.hierarchies:
         for bname, binary in builds:
             cmds.append(("%s/%s" % (os.path.basename(H), bname), binary, H, []))
