@@ -184,7 +184,7 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
   };
   // 1. faces per (chunk, lowest vertex); 2. bucket offsets, chunk after chunk within a bucket;
   // 3. faces into their buckets, chunks in parallel.
-  constexpr std::size_t kChunks = 16;
+  constexpr std::size_t kChunks = 4;
   const std::size_t per_chunk = (ne + kChunks - 1) / kChunks;
   std::vector<std::uint32_t> at(kChunks * nv, 0);
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
