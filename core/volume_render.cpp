@@ -583,6 +583,14 @@ void TetRenderMesh::fill_record(std::uint32_t r) const {
   for (int f = 0; f < 4; ++f) R.next[f] = next_[r][f];
 }
 
+void TetRenderMesh::build_all_records() const {
+  const std::size_t chunks = (records_.size() >> kChunkBits) + 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 4), [&](const auto& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c)
+      if (!built_[c].load(std::memory_order_acquire)) build_chunk(std::uint32_t(c));
+  });
+}
+
 void TetRenderMesh::build_chunk(std::uint32_t chunk) const {
   std::call_once(build_once_[chunk], [&] {
     const std::size_t first = std::size_t(chunk) << kChunkBits;
@@ -1126,6 +1134,10 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
   const CompiledTransferFunction ctf(tf);
   const CameraRays rays(camera);
   const ToLocal to_local(transform);
+  // An image whose rays will cross most elements (a ray crosses some 50-100 on the meshes
+  // measured) builds all step records first, in parallel: built on first touch instead, its
+  // threads wait on each other's chunks.
+  if (std::size_t(camera.width) * std::size_t(camera.height) * 64 >= m.size()) m.build_all_records();
   // What skipping does with each element, for this transfer function: once per image rather
   // than per element crossed.
   std::vector<std::uint8_t> state;

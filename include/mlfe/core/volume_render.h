@@ -213,6 +213,8 @@ class TetRenderMesh {
     if (!built_[chunk].load(std::memory_order_acquire)) build_chunk(chunk);
     return records_[r];
   }
+  /// Builds every step record not built yet, in parallel (record() then only reads).
+  void build_all_records() const;
   /// Where record(r) is or will be, without building it (for prefetching).
   const StepRecord* record_address(std::uint32_t r) const { return records_.data() + r; }
   /// Where the ray o + t d, t in [t0, t1], may start for transfer function tf: a little before
