@@ -18,9 +18,14 @@ In one run, on one volume VOL and its hierarchies H1, H2, ... (built beforehand 
     and half a voxel: per-frame time (best after the first render).
 PSNR: RGBA premultiplied against `mlfe render VOL --reference`, peak 1 (render_bench psnr).
 The machine may be shared: compare ratios within one run, not across runs.
+With --rounds N, instead: N interleaved rounds of the set-up and end-to-end commands of the
+reference, every hierarchy with this build and (with --base-build) the base, one process each
+in turn, reporting per command the minimum and median wall time, the median CPU time (user +
+system, from the process's own rusage: less sensitive to other load than wall time) and the
+peak resident memory; `cmp` of each hierarchy's image against the base's.
 
 usage: bench/render_e2e_bench.py VOL H1.mlfeh [H2.mlfeh ...] [--base-build DIR] [--size WxH]
-       [--repeat N] [--no-vtk] [--no-levels] [--work DIR] [--json OUT]
+       [--repeat N] [--rounds N] [--no-vtk] [--no-levels] [--work DIR] [--json OUT]
 """
 import argparse
 import json
@@ -52,6 +57,60 @@ def run_mlfe(mlfe, args, repeat):
     return {"wall_s": best, "frame_s": frame, "stats": stats}
 
 
+def run_once(mlfe, args):
+    """Wall time, CPU time (user + system) and peak RSS (MB) of one process."""
+    t0 = time.perf_counter()
+    p = subprocess.Popen([mlfe, "--threads", "2"] + args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    err = p.stderr.read().decode()
+    _, status, ru = os.wait4(p.pid, 0)
+    p.returncode = os.waitstatus_to_exitcode(status)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError("mlfe %s failed: %s" % (" ".join(args), err[-2000:]))
+    m = re.search(r"in ([0-9.]+) s, ", err)
+    return {"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "rss_mb": ru.ru_maxrss / 1024.0,
+            "frame_s": float(m.group(1)) if m else None}
+
+
+def interleaved(a, builds, view):
+    """--rounds: every command once per round, in turn; minimum and median per command."""
+    cmds = [("reference/%s" % bname, binary, a.volume, ["--reference"]) for bname, binary in builds]
+    for H in a.hierarchies:
+        for bname, binary in builds:
+            cmds.append(("%s/%s" % (os.path.basename(H), bname), binary, H, []))
+    samples = {}
+    for rnd in range(a.rounds):
+        for tag, binary, src, extra in cmds:
+            for size in ("1x1", a.size):
+                out = os.path.join(a.work, "%s_%s.exr" % (tag.replace("/", "_"), size))
+                r = run_once(binary, ["render", src, "-o", out, "--size", size] + view + extra)
+                samples.setdefault((tag, size), []).append(r)
+        print("round %d done" % (rnd + 1), file=sys.stderr, flush=True)
+    med = lambda xs: sorted(xs)[len(xs) // 2]
+    res = {}
+    for (tag, size), rs in samples.items():
+        res["%s %s" % (tag, size)] = {
+            "wall_min_s": min(r["wall_s"] for r in rs), "wall_median_s": med([r["wall_s"] for r in rs]),
+            "cpu_median_s": med([r["cpu_s"] for r in rs]), "rss_mb": max(r["rss_mb"] for r in rs),
+            "frame_min_s": min(r["frame_s"] for r in rs) if rs[0]["frame_s"] is not None else None}
+    for H in a.hierarchies:
+        name = os.path.basename(H)
+        if len(builds) > 1:
+            files = [os.path.join(a.work, "%s_%s_%s.exr" % (name, b, a.size)) for b, _ in builds[:2]]
+            same = subprocess.run(["cmp", "-s"] + files).returncode == 0
+            res["%s image identical to base" % name] = same
+    print("%-34s %10s %10s %10s %8s %10s" % ("command, size", "wall min", "wall med", "cpu med", "RSS MB",
+                                              "frame min"))
+    for k, v in res.items():
+        if isinstance(v, dict):
+            print("%-34s %10.3f %10.3f %10.3f %8.0f %10s" % (k, v["wall_min_s"], v["wall_median_s"], v["cpu_median_s"],
+                                                         v["rss_mb"], "%.3f" % v["frame_min_s"]
+                                                         if v["frame_min_s"] is not None else "-"))
+        else:
+            print(k, v)
+    return res
+
+
 def psnr(helper, a, b):
     out = subprocess.run([helper, "psnr", a, b], capture_output=True, text=True, check=True).stdout
     return json.loads(out)["psnr_db"]
@@ -80,6 +139,7 @@ def main():
     ap.add_argument("--size", default="500x500")
     ap.add_argument("--tf", default="grey")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=0)
     ap.add_argument("--no-vtk", action="store_true")
     ap.add_argument("--no-levels", action="store_true")
     ap.add_argument("--json", default="")
@@ -93,6 +153,12 @@ def main():
     w, h = [int(x) for x in a.size.lower().split("x")]
     view = ["--azimuth", "0", "--elevation", "0", "--tf", a.tf]
     res = {"volume": a.volume, "size": a.size, "runs": {}}
+    if a.rounds > 0:
+        res["interleaved"] = interleaved(a, builds, view)
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump(res, f, indent=1)
+        return
 
     def render(tag, binary, src, extra, size):
         out = os.path.join(a.work, tag + ".exr")

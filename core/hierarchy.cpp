@@ -559,7 +559,7 @@ template <int D>
 class Hierarchy<D>::RedRounds {
  public:
   RedRounds(Hierarchy& h, std::size_t old_count, bool keep_undo)
-      : h_(h), old_count_(old_count), keep_undo_(keep_undo), leaf_list_(h.leaves()) {
+      : h_(h), old_count_(old_count), keep_undo_(keep_undo) {
     dead.assign(h.el_.cells.size(), 0);
     touched.assign(h.vx_.points.size(), 0);
     dirty_.assign(h.vx_.points.size(), 0);
@@ -576,10 +576,7 @@ class Hierarchy<D>::RedRounds {
       decide(candidates, round_first_elem, to_red, to_regreen);
       for (VertexId v : dirty_list_) dirty_[v.value] = 0;
       dirty_list_.clear();
-      if (!use_incidence_) {
-        leaf_list_.swap(candidates);
-        if (!to_red.empty() || !to_regreen.empty()) switch_to_incidence();
-      }
+      if (!use_incidence_ && (!to_red.empty() || !to_regreen.empty())) switch_to_incidence();
     }
   }
 
@@ -614,10 +611,13 @@ class Hierarchy<D>::RedRounds {
   void switch_to_incidence() {
     use_incidence_ = true;
     inc_head_.assign(h_.vx_.points.size(), kNone);
-    inc_elem_.reserve(leaf_list_.size());
-    inc_next_.reserve(leaf_list_.size() * (D + 1));
-    for (ElemId e : leaf_list_) add_incidence(e);
-    std::vector<ElemId>().swap(leaf_list_);
+    // The alive leaves after the first round (its decisions are not applied yet), in id order.
+    std::vector<ElemId> leaves;
+    for (std::size_t i = 0; i < h_.el_.cells.size(); ++i)
+      if (alive_leaf(elem_id(i))) leaves.push_back(elem_id(i));
+    inc_elem_.reserve(leaves.size());
+    inc_next_.reserve(leaves.size() * (D + 1));
+    for (ElemId e : leaves) add_incidence(e);
   }
 
   // Alive leaves incident to any vertex of `verts` with ≥ 2 vertices flagged in `flag`
@@ -699,18 +699,14 @@ class Hierarchy<D>::RedRounds {
       // e is a leaf again, with midpoints from earlier calls on its edges: flag its corners so
       // hanging_mask(e, &touched) probes all of its edges.
       for (VertexId v : h_.el_.cells[e]) touched[v.value] = 1;
-      if (use_incidence_)
-        add_incidence(e);
-      else
-        leaf_list_.push_back(e);
+      // Re-greening comes from a round's decisions, so the incidence is in use by then.
+      MLFE_CHECK(use_incidence_);
+      add_incidence(e);
     }
     for (ElemId e : to_red) {
       if (!h_.is_leaf(e)) drop_green_children(e);  // e's green children go; e is refined red instead
       if (keep_undo_ && e.value < old_count_) undo_links.push_back({e, ElemId::invalid(), 0});
       h_.red_refine(e);
-      if (!use_incidence_)
-        for (int i = 0; i < h_.num_children(e); ++i)
-          leaf_list_.push_back(ElemId(h_.first_child(e).value + i));
     }
     dead.resize(h_.el_.cells.size(), 0);
     dirty_.resize(h_.vx_.points.size(), 0);
@@ -756,11 +752,14 @@ class Hierarchy<D>::RedRounds {
       for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
         candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {
-      // Drop refined and removed elements from the leaf list.
-      leaf_list_.erase(
-          std::remove_if(leaf_list_.begin(), leaf_list_.end(), [&](ElemId e) { return !alive_leaf(e); }),
-          leaf_list_.end());
-      candidates.swap(leaf_list_);  // borrowed; given back by run()
+      // The first round: older leaves with ≥ 2 dirty vertices (the others decide() would pass
+      // over) by one parallel pass, and the elements it created. A list of every leaf, kept up
+      // to date and handed to decide() whole, cost O(leaves) in allocations and copies per
+      // call, however little the call refines (rebuilding the levels of a file, whose last
+      // steps add a few hundred vertices to a million elements).
+      candidates = leaves_with_two_flagged(dirty_, round_first_elem);
+      for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
+        candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     }
     return candidates;
   }
@@ -816,7 +815,6 @@ class Hierarchy<D>::RedRounds {
   const bool keep_undo_;
   std::vector<std::uint8_t> dirty_;  // endpoints of edges split in this round
   std::vector<VertexId> dirty_list_;
-  std::vector<ElemId> leaf_list_;  // the first round's candidates (before the incidence)
   bool use_incidence_ = false;
   std::vector<std::uint32_t> inc_head_;  // per vertex: first slot or kNone
   std::vector<std::uint32_t> inc_next_;  // per slot (= element index * (D + 1) + corner)

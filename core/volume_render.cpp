@@ -147,51 +147,73 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
   return std::min({1.0 - l1 - l2 - l3, l1, l2, l3});
 }
 
-// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, written straight
-// into the step records' `next` (4 × neighbour index + the local index of the shared face in
-// it). Faces are bucketed by their lowest vertex id (a counting sort, linear and parallel:
-// several times faster than comparison-sorting all faces on a million tetrahedra), then
-// matched within each bucket (a few dozen faces) by their other two vertex ids. Within a bucket
-// the faces are put in (key, slot) order before matching, so the result does not depend on the
-// order the threads filled it in.
+// Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
+// records' `next` holds them (4 × render index + the local index of the shared face in it);
+// render_of gives each hierarchy element's render index (kNone: not rendered). Faces are
+// bucketed by their lowest vertex id (a counting sort, linear and parallel: several times faster
+// than comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a
+// few dozen faces) by their other two vertex ids. Within a bucket the faces are put in
+// (key, slot) order before matching, so the result does not depend on the order the buckets
+// were filled in. The counting passes read the elements in the hierarchy's order (contiguous
+// cells; render order is spatial and would read them at random) in fixed chunks, each with its
+// own counters, so that the threads share no counter.
 // Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
 // are left as boundary faces).
-std::size_t face_adjacency(
-    const Hierarchy<3>& h, const std::vector<ElemId>& elems,
-    std::vector<TetRenderMesh::StepRecord, DefaultInit<TetRenderMesh::StepRecord>>& records) {
+template <class Next>
+std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_t>& render_of,
+                           std::size_t rendered, Next& next) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
-  const std::size_t nv = h.vertex_count();
+  const std::size_t nv = h.vertex_count(), ne = h.element_count();
   struct Face {
     std::uint32_t v1, v2;  // the face's two higher vertex ids
-    std::uint32_t slot;    // 4 * element index + local face
+    std::uint32_t slot;    // 4 * render index + local face
   };
-  const auto face_of = [&](std::size_t i, int f, std::uint32_t& low) {
-    const auto& c = h.cell(elems[i]);
-    std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
-    std::sort(v, v + 3);
-    low = v[0];
-    return std::array<std::uint32_t, 2>{v[1], v[2]};
+  // Calls visit(low, v1, v2, slot) for the four faces of rendered element e, face vertex ids
+  // ascending.
+  const auto faces_of = [&](std::size_t e, auto&& visit) {
+    const std::uint32_t r = render_of[e];
+    if (r == kNone) return;
+    const auto& c = h.cell(ElemId(std::uint32_t(e)));
+    for (int f = 0; f < 4; ++f) {
+      std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
+      if (v[0] > v[1]) std::swap(v[0], v[1]);
+      if (v[1] > v[2]) std::swap(v[1], v[2]);
+      if (v[0] > v[1]) std::swap(v[0], v[1]);
+      visit(v[0], v[1], v[2], 4 * r + std::uint32_t(f));
+    }
   };
-  // 1. faces per lowest vertex, then bucket offsets; 2. faces into their buckets (sequential:
-  // atomic counters shared by the threads measured slower).
+  // 1. faces per (chunk, lowest vertex); 2. bucket offsets, chunk after chunk within a bucket;
+  // 3. faces into their buckets, chunks in parallel.
+  constexpr std::size_t kChunks = 4;
+  const std::size_t per_chunk = (ne + kChunks - 1) / kChunks;
+  std::vector<std::uint32_t> at(kChunks * nv, 0);
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* count = at.data() + k * nv;
+    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
+      faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
+  });
   std::vector<std::uint32_t> start(nv + 1, 0);
-  for (std::size_t i = 0; i < elems.size(); ++i)
-    for (int f = 0; f < 4; ++f) {
-      std::uint32_t low;
-      face_of(i, f, low);
-      ++start[low + 1];
+  std::uint32_t sum = 0;
+  for (std::size_t v = 0; v < nv; ++v) {
+    start[v] = sum;
+    for (std::size_t k = 0; k < kChunks; ++k) {
+      const std::uint32_t n = at[k * nv + v];
+      at[k * nv + v] = sum;
+      sum += n;
     }
-  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-  std::unique_ptr<Face[]> faces(new Face[elems.size() * 4]);
-  advise_huge_pages(faces.get(), elems.size() * 4 * sizeof(Face));
-  for (std::size_t i = 0; i < elems.size(); ++i)
-    for (int f = 0; f < 4; ++f) {
-      std::uint32_t low;
-      const auto key = face_of(i, f, low);
-      faces[fill[low]++] = {key[0], key[1], std::uint32_t(4 * i + f)};
-    }
-  // 3. per bucket: equal keys are the two sides of one face.
+  }
+  start[nv] = sum;
+  MLFE_CHECK(sum == 4 * rendered);
+  std::unique_ptr<Face[]> faces(new Face[rendered * 4]);
+  advise_huge_pages(faces.get(), rendered * 4 * sizeof(Face));
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* fill = at.data() + k * nv;
+    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
+      faces_of(e, [&](std::uint32_t low, std::uint32_t v1, std::uint32_t v2, std::uint32_t slot) {
+        faces[fill[low]++] = {v1, v2, slot};
+      });
+  });
+  // 4. per bucket: equal keys are the two sides of one face.
   std::atomic<std::size_t> overshared{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
@@ -204,12 +226,12 @@ std::size_t face_adjacency(
         const bool shared = q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2;
         const std::uint32_t a = q->slot;
         if (!shared) {
-          records[a / 4].next[a % 4] = kNo;
+          next[a / 4][a % 4] = kNo;
           continue;
         }
         const std::uint32_t b = q[1].slot;
-        records[a / 4].next[a % 4] = b;
-        records[b / 4].next[b % 4] = a;
+        next[a / 4][a % 4] = b;
+        next[b / 4][b % 4] = a;
         ++q;
         if (q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2) overshared.fetch_add(1);
       }
@@ -394,6 +416,12 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 
 TetRenderMesh::~TetRenderMesh() = default;
 
+// Defined ahead of its callers so that it is inlined (the range grid calls it six times per
+// element).
+inline int TetRenderMesh::grid_index(int a, double x) const {
+  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
+}
+
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
                              const std::array<double, 3>* clip_to, RayEntry entry)
     : h_(h), entry_(entry) {
@@ -425,34 +453,15 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   render_of_.assign(h.element_count(), kNone);
   lo_.assign(h.element_count(), std::numeric_limits<float>::infinity());
   hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
-  records_.resize(elems_.size());  // not initialised: every field is set below
+  // Records: address space only until build_chunk() writes them.
+  records_.resize(elems_.size());
   advise_huge_pages(records_);
-  const std::size_t overshared = face_adjacency(h, elems_, records_);
-  if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
-    throw Error("render: " + std::to_string(overshared) +
-                " faces are shared by more than two tetrahedra (not a conforming mesh)");
+  const std::size_t chunks = (elems_.size() >> kChunkBits) + 1;
+  built_.reset(new std::atomic<bool>[chunks]);
+  for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
+  build_once_.reset(new std::once_flag[chunks]);
   tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
     const auto& c = h.cell(elems_[r]);
-    Vec3 p[4];
-    for (int i = 0; i < 4; ++i) p[i] = h.point(c[i]);
-    StepRecord& R = records_[r];
-    Vec3 g{0, 0, 0};
-    for (int i = 0; i < 4; ++i) {
-      // The face's vertices in id order, so both elements sharing it compute the same normal.
-      int f[3] = {kFaceVerts[i][0], kFaceVerts[i][1], kFaceVerts[i][2]};
-      std::sort(f, f + 3, [&](int x, int y) { return c[x] < c[y]; });
-      Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
-      if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
-      const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
-      for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
-      R.h[i] = dot(nf, p[f[0]]);
-      // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
-      const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
-      for (int a = 0; a < 3; ++a) g[a] += w * n[a];
-    }
-    for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
-    const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
-    R.b = (*u_)[c[0].value] - dot(gf, p[0]);
     const std::uint32_t e = elems_[r].value;
     render_of_[e] = std::uint32_t(r);
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -463,6 +472,12 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
     hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
   });
+  next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
+  advise_huge_pages(next_);
+  const std::size_t overshared = face_adjacency(h, render_of_, elems_.size(), next_);
+  if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
+    throw Error("render: " + std::to_string(overshared) +
+                " faces are shared by more than two tetrahedra (not a conforming mesh)");
   // 3. ranges: rendered elements from their vertices (set with the records above), coarser
   // ones as the union of their children (children have larger ids than their parent, so one
   // backward sweep).
@@ -499,35 +514,90 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
   grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
   const double pad = 1e-6 * longest;
-  for (std::size_t i = 0; i < h.element_count(); ++i) {
-    if (render_of_[i] == kNone) continue;
-    Vec3 blo, bhi;
-    blo.fill(std::numeric_limits<double>::infinity());
-    bhi.fill(-std::numeric_limits<double>::infinity());
-    for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
-      for (int a = 0; a < 3; ++a) {
-        blo[a] = std::min(blo[a], h.point(v)[a]);
-        bhi[a] = std::max(bhi[a], h.point(v)[a]);
-      }
-    int c0[3], c1[3];
-    for (int a = 0; a < 3; ++a) {
-      c0[a] = grid_index(a, blo[a] - pad);
-      c1[a] = grid_index(a, bhi[a] + pad);
-    }
-    for (int z = c0[2]; z <= c1[2]; ++z)
-      for (int y = c0[1]; y <= c1[1]; ++y)
-        for (int x = c0[0]; x <= c1[0]; ++x) {
-          const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
-          grid_lo_[c] = std::min(grid_lo_[c], lo_[i]);
-          grid_hi_[c] = std::max(grid_hi_[c], hi_[i]);
+  // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
+  // so the grid does not depend on the split.
+  constexpr std::size_t kChunks = 4;
+  const std::size_t ne = h.element_count(), per_chunk = (ne + kChunks - 1) / kChunks;
+  std::vector<std::vector<float>> part_lo(kChunks), part_hi(kChunks);
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::vector<float>& glo = part_lo[k];
+    std::vector<float>& ghi = part_hi[k];
+    glo.assign(cells, std::numeric_limits<float>::infinity());
+    ghi.assign(cells, -std::numeric_limits<float>::infinity());
+    for (std::size_t i = k * per_chunk, end = std::min(ne, i + per_chunk); i < end; ++i) {
+      if (render_of_[i] == kNone) continue;
+      Vec3 blo, bhi;
+      blo.fill(std::numeric_limits<double>::infinity());
+      bhi.fill(-std::numeric_limits<double>::infinity());
+      for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
+        for (int a = 0; a < 3; ++a) {
+          blo[a] = std::min(blo[a], h.point(v)[a]);
+          bhi[a] = std::max(bhi[a], h.point(v)[a]);
         }
-  }
+      int c0[3], c1[3];
+      for (int a = 0; a < 3; ++a) {
+        c0[a] = grid_index(a, blo[a] - pad);
+        c1[a] = grid_index(a, bhi[a] + pad);
+      }
+      for (int z = c0[2]; z <= c1[2]; ++z)
+        for (int y = c0[1]; y <= c1[1]; ++y)
+          for (int x = c0[0]; x <= c1[0]; ++x) {
+            const std::size_t c = (std::size_t(z) * grid_n_[1] + y) * grid_n_[0] + x;
+            glo[c] = std::min(glo[c], lo_[i]);
+            ghi[c] = std::max(ghi[c], hi_[i]);
+          }
+    }
+  });
+  for (std::size_t k = 0; k < kChunks; ++k)
+    for (std::size_t c = 0; c < cells; ++c) {
+      grid_lo_[c] = std::min(grid_lo_[c], part_lo[k][c]);
+      grid_hi_[c] = std::max(grid_hi_[c], part_hi[k][c]);
+    }
   // 6. unstructured meshes: the boundary faces in their bucket grid.
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
 
-int TetRenderMesh::grid_index(int a, double x) const {
-  return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
+// One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.
+void TetRenderMesh::fill_record(std::uint32_t r) const {
+  const auto& c = h_.cell(elems_[r]);
+  Vec3 p[4];
+  for (int i = 0; i < 4; ++i) p[i] = h_.point(c[i]);
+  StepRecord& R = records_[r];
+  Vec3 g{0, 0, 0};
+  for (int i = 0; i < 4; ++i) {
+    // The face's vertices in id order, so both elements sharing it compute the same normal.
+    int f[3] = {kFaceVerts[i][0], kFaceVerts[i][1], kFaceVerts[i][2]};
+    std::sort(f, f + 3, [&](int x, int y) { return c[x] < c[y]; });
+    Vec3 n = cross(sub(p[f[1]], p[f[0]]), sub(p[f[2]], p[f[0]]));
+    if (dot(n, sub(p[i], p[f[0]])) > 0) n = {-n[0], -n[1], -n[2]};
+    const Vec3 nf{double(float(n[0])), double(float(n[1])), double(float(n[2]))};
+    for (int a = 0; a < 3; ++a) R.n[a][i] = float(nf[a]);
+    R.h[i] = dot(nf, p[f[0]]);
+    // ∇λ_i = n_i / (n_i · (p_i − p_face)), from the exact normal.
+    const double w = (*u_)[c[i].value] / dot(n, sub(p[i], p[f[0]]));
+    for (int a = 0; a < 3; ++a) g[a] += w * n[a];
+  }
+  for (int a = 0; a < 3; ++a) R.g[a] = float(g[a]);
+  const Vec3 gf{double(R.g[0]), double(R.g[1]), double(R.g[2])};
+  R.b = (*u_)[c[0].value] - dot(gf, p[0]);
+  for (int f = 0; f < 4; ++f) R.next[f] = next_[r][f];
+}
+
+void TetRenderMesh::build_all_records() const {
+  const std::size_t chunks = (records_.size() >> kChunkBits) + 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 4), [&](const auto& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c)
+      if (!built_[c].load(std::memory_order_acquire)) build_chunk(std::uint32_t(c));
+  });
+}
+
+void TetRenderMesh::build_chunk(std::uint32_t chunk) const {
+  std::call_once(build_once_[chunk], [&] {
+    const std::size_t first = std::size_t(chunk) << kChunkBits;
+    const std::size_t last = std::min(records_.size(), first + (std::size_t(1) << kChunkBits));
+    for (std::size_t r = first; r < last; ++r) fill_record(std::uint32_t(r));
+    built_[chunk].store(true, std::memory_order_release);
+  });
 }
 
 double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0,
@@ -588,7 +658,7 @@ void TetRenderMesh::build_boundary_grid() {
   // 1. the faces without a neighbour, in render order.
   for (std::size_t r = 0; r < records_.size(); ++r)
     for (int f = 0; f < 4; ++f) {
-      if (records_[r].next[f] != kNoNeighbor) continue;
+      if (next_[r][f] != kNoNeighbor) continue;
       const auto& c = h_.cell(elems_[r]);
       VertexId v[3] = {c[kFaceVerts[f][0]], c[kFaceVerts[f][1]], c[kFaceVerts[f][2]]};
       std::sort(v, v + 3);
@@ -680,7 +750,7 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
       const BoundaryGrid::Face& face = g.faces[g.list[k]];
       if (face.slot == skip[0] || face.slot == skip[1]) continue;
       // The plane as record_exit sees it.
-      const StepRecord& R = records_[face.slot / 4];
+      const StepRecord& R = record(face.slot / 4);
       const int f = int(face.slot % 4);
       const double nx = R.n[0][f], ny = R.n[1][f], nz = R.n[2][f];
       const double den = nx * d[0] + ny * d[1] + nz * d[2];
@@ -704,7 +774,7 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
   hit.tet = best_slot / 4;
   hit.face = int(best_slot % 4);
   hit.t = best_t;
-  const StepRecord& R = records_[hit.tet];
+  const StepRecord& R = record(hit.tet);
   hit.inward =
       double(R.n[0][hit.face]) * d[0] + double(R.n[1][hit.face]) * d[1] + double(R.n[2][hit.face]) * d[2] < 0;
   return true;
@@ -712,8 +782,9 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
 
 std::size_t TetRenderMesh::memory_bytes() const {
   return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
-         records_.capacity() * sizeof(StepRecord) + render_of_.capacity() * sizeof(std::uint32_t) +
-         (lo_.capacity() + hi_.capacity()) * sizeof(float) + (boundary_ ? boundary_->bytes() : 0);
+         records_.capacity() * sizeof(StepRecord) + next_.capacity() * sizeof(next_[0]) +
+         render_of_.capacity() * sizeof(std::uint32_t) + (lo_.capacity() + hi_.capacity()) * sizeof(float) +
+         (boundary_ ? boundary_->bytes() : 0);
 }
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
@@ -764,7 +835,7 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
     const double l[4] = {1.0 - l1 - l2 - l3, l1, l2, l3};
     const int f = int(std::min_element(l, l + 4) - l);
     if (l[f] >= 0) return r;
-    const std::uint32_t next = records_[r].next[f];
+    const std::uint32_t next = next_[r][f];
     if (next == kNoNeighbor) break;
     r = next >> 2;
   }
@@ -926,7 +997,7 @@ inline bool walk_step(const TetRenderMesh& m, const CompiledTransferFunction* sk
   // instead of stalling the next one.
   for (int i = 0; i < 4; ++i)
     if (i != w.entry && R.next[i] != TetRenderMesh::kNoNeighbor) {
-      const char* q = reinterpret_cast<const char*>(&m.record(R.next[i] >> 2));
+      const char* q = reinterpret_cast<const char*>(m.record_address(R.next[i] >> 2));
       __builtin_prefetch(q);
       __builtin_prefetch(q + 64);
     }
@@ -1063,6 +1134,10 @@ RenderImage render_mesh(const TetRenderMesh& m, const GridTransform& transform, 
   const CompiledTransferFunction ctf(tf);
   const CameraRays rays(camera);
   const ToLocal to_local(transform);
+  // An image whose rays will cross most elements (a ray crosses some 50-100 on the meshes
+  // measured) builds all step records first, in parallel: built on first touch instead, its
+  // threads wait on each other's chunks.
+  if (std::size_t(camera.width) * std::size_t(camera.height) * 64 >= m.size()) m.build_all_records();
   // What skipping does with each element, for this transfer function: once per image rather
   // than per element crossed.
   std::vector<std::uint8_t> state;

@@ -42,10 +42,12 @@
 #include <mlfe/core/transfer_function.h>
 
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -162,7 +164,7 @@ class TetRenderMesh {
   std::array<std::int32_t, 4> neighbors(std::uint32_t r) const {
     std::array<std::int32_t, 4> nb;
     for (int f = 0; f < 4; ++f) {
-      const std::uint32_t x = records_[r].next[f];
+      const std::uint32_t x = next_[r][f];
       nb[f] = x == kNoNeighbor ? -1 : std::int32_t(x >> 2);
     }
     return nb;
@@ -195,6 +197,9 @@ class TetRenderMesh {
   /// the face neighbours, each as 4 × render index + the index of the shared face in the
   /// neighbour (kNoNeighbor on the boundary), so a step needs no search for its entry face.
   /// Aligned to cache lines: 120 bytes then touch two lines instead of three.
+  /// Built on first use, a chunk of consecutive render indices at a time (thread-safe; the
+  /// same bytes whichever thread builds them): a small image never pays for the records of the
+  /// elements its rays do not cross, and no pass over all of them precedes the first ray.
   struct alignas(64) StepRecord {
     double h[4];
     double b;
@@ -203,7 +208,15 @@ class TetRenderMesh {
     std::uint32_t next[4];
   };
   static constexpr std::uint32_t kNoNeighbor = 0xFFFFFFFFu;
-  const StepRecord& record(std::uint32_t r) const { return records_[r]; }
+  const StepRecord& record(std::uint32_t r) const {
+    const std::uint32_t chunk = r >> kChunkBits;
+    if (!built_[chunk].load(std::memory_order_acquire)) build_chunk(chunk);
+    return records_[r];
+  }
+  /// Builds every step record not built yet, in parallel (record() then only reads).
+  void build_all_records() const;
+  /// Where record(r) is or will be, without building it (for prefetching).
+  const StepRecord* record_address(std::uint32_t r) const { return records_.data() + r; }
   /// Where the ray o + t d, t in [t0, t1], may start for transfer function tf: a little before
   /// the first cell of a coarse grid over the box (about one cell per 8 elements) whose value
   /// range — the union of those of the elements overlapping it — is not transparent; t1 when
@@ -237,7 +250,15 @@ class TetRenderMesh {
   std::vector<double> coarse_values_;
   const std::vector<double>* u_;
   std::vector<ElemId> elems_;
-  std::vector<StepRecord, DefaultInit<StepRecord>> records_;
+  // Records are built lazily in chunks of 2^kChunkBits (record()); the neighbours, which need
+  // the whole mesh, are found up front (next_).
+  static constexpr int kChunkBits = 9;
+  mutable std::vector<StepRecord, DefaultInit<StepRecord>> records_;
+  std::vector<std::array<std::uint32_t, 4>, DefaultInit<std::array<std::uint32_t, 4>>> next_;
+  std::unique_ptr<std::atomic<bool>[]> built_;
+  std::unique_ptr<std::once_flag[]> build_once_;
+  void build_chunk(std::uint32_t chunk) const;
+  void fill_record(std::uint32_t r) const;
   std::vector<std::uint32_t> render_of_;
   std::vector<float> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
