@@ -452,7 +452,9 @@ TriangleMesh simplify_surface(const TriangleMesh& m, const SimplifyOptions& so, 
   SimplifyOptions first = o;
   first.tolerance = o.tolerance / 2;
   first.flip_edges = false;  // the second stage flips; flips are sequential
-  const TriangleMesh pre = simplify_within(m, first);
+  // The first stage keeps the extraction's vertex order (slices); the second walks one-rings
+  // in cost order, and runs faster (σ 3 head: 1.3x) on vertices in spatial order.
+  const TriangleMesh pre = spatially_ordered(simplify_within(m, first));
   o.verify_bound = true;
   return simplify_within(pre, o);
 }
