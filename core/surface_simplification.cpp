@@ -237,17 +237,19 @@ class Simplifier {
       : opts_(opts), optimal_(opts.placement == Placement::kOptimal) {
     const std::size_t nv = mesh.positions.size();
     if (nv >= kNone) throw Error("simplification: too many vertices");
+    faces_.reserve(mesh.triangles.size());
     for (const auto& t : mesh.triangles) {
       if (t[0] >= nv || t[1] >= nv || t[2] >= nv) throw Error("simplification: triangle index out of range");
       if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
       faces_.push_back({t[0], t[1], t[2]});
     }
     if (faces_.size() >= kNone) throw Error("simplification: too many triangles");
-    if (optimal_) input_faces_ = faces_;
+    // The input surface is only read by the verified bound's checks.
+    if (optimal_ && opts.verify_bound) input_faces_ = faces_;
     pos_.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
       pos_[i] = Vec3(mesh.positions[i][0], mesh.positions[i][1], mesh.positions[i][2]);
-    points_ = pos_;
+    if (opts.verify_bound) points_ = pos_;
     for (const auto& f : faces_)
       for (Index v : f)
         if (!pos_[v].allFinite()) throw Error("simplification: non-finite vertex position");
@@ -261,16 +263,21 @@ class Simplifier {
     tol2_ = opts.tolerance * opts.tolerance;
     cos_max_turn_ = std::cos(opts.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
 
-    quadric_.resize(nv);
-    for (const auto& f : faces_) {
-      const Vec3 n = normal_of(f);
-      const double len = n.norm();
-      if (!(len > 0)) continue;
-      const Vec3 u = n / len;
-      for (Index v : f) quadric_[v].add_plane(u, -u.dot(pos_[f[0]]), 0.5 * len);
-    }
     build_vertex_faces();
-    if (optimal_) {
+    // Each vertex sums the planes of its faces in face order, in parallel.
+    quadric_.resize(nv);
+    tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 4096), [&](const tbb::blocked_range<Index>& r) {
+      for (Index v = r.begin(); v != r.end(); ++v)
+        for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f) {
+          const auto& face = faces_[*f];
+          const Vec3 n = normal_of(face);
+          const double len = n.norm();
+          if (!(len > 0)) continue;
+          const Vec3 u = n / len;
+          quadric_[v].add_plane(u, -u.dot(pos_[face[0]]), 0.5 * len);
+        }
+    });
+    if (optimal_ && opts.verify_bound) {
       input_vf_.offset.assign(1, 0);
       for (Index v = 0; v < Index(nv); ++v)
         input_vf_.offset.push_back(input_vf_.offset.back() + vf_.count[v]);
