@@ -99,7 +99,9 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
                   "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
-                  "(quadric minimum near the surface: fewer triangles at the same tolerance) or auto "
+                  "(quadric minimum near the surface, then every vertex refit to the extracted surface by "
+                  "least squares: "
+                  "fewer triangles at the same tolerance, closer to the data) or auto "
                   "(optimal, input with --normals gradient)")
       ->check(CLI::IsMember(pipeline::enum_name_list<VertexPlacement>()))
       ->capture_default_str();

@@ -26,56 +26,6 @@ V3 cross(const V3& a, const V3& b) {
 }
 V3 to_v3(const std::array<float, 3>& p) { return {p[0], p[1], p[2]}; }
 
-/// Closest point on triangle (a, b, c) to p with its barycentric weights (Ericson, Real-Time
-/// Collision Detection 5.1.5): the region tests avoid a division for the common vertex/edge cases
-/// and stay exact for degenerate triangles.
-V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c, V3& bary) {
-  const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
-  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
-  if (d1 <= 0 && d2 <= 0) {
-    bary = {1, 0, 0};
-    return a;
-  }
-  const V3 bp = sub(p, b);
-  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
-  if (d3 >= 0 && d4 <= d3) {
-    bary = {0, 1, 0};
-    return b;
-  }
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double v = d1 / (d1 - d3);
-    bary = {1 - v, v, 0};
-    return add(a, scale(ab, v));
-  }
-  const V3 cp = sub(p, c);
-  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
-  if (d6 >= 0 && d5 <= d6) {
-    bary = {0, 0, 1};
-    return c;
-  }
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double w = d2 / (d2 - d6);
-    bary = {1 - w, 0, w};
-    return add(a, scale(ac, w));
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    bary = {0, 1 - w, w};
-    return add(b, scale(sub(c, b), w));
-  }
-  const double denom = va + vb + vc;
-  if (!(denom > 0)) {  // degenerate triangle whose corners tests above did not catch
-    bary = {1, 0, 0};
-    return a;
-  }
-  const double v = vb / denom, w = vc / denom;
-  bary = {1 - v - w, v, w};
-  return add(a, add(scale(ab, v), scale(ac, w)));
-}
-
 double box_distance2(const V3& lo, const V3& hi, const V3& p) {
   double d2 = 0;
   for (int k = 0; k < 3; ++k) {
@@ -136,6 +86,55 @@ std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& sample
 }
 
 }  // namespace
+
+// Ericson, Real-Time Collision Detection 5.1.5: the region tests avoid a division for the
+// common vertex/edge cases and stay exact for degenerate triangles.
+V3 closest_point_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c, V3& bary) {
+  const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) {
+    bary = {1, 0, 0};
+    return a;
+  }
+  const V3 bp = sub(p, b);
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) {
+    bary = {0, 1, 0};
+    return b;
+  }
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    bary = {1 - v, v, 0};
+    return add(a, scale(ab, v));
+  }
+  const V3 cp = sub(p, c);
+  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) {
+    bary = {0, 0, 1};
+    return c;
+  }
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    bary = {1 - w, 0, w};
+    return add(a, scale(ac, w));
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    bary = {0, 1 - w, w};
+    return add(b, scale(sub(c, b), w));
+  }
+  const double denom = va + vb + vc;
+  if (!(denom > 0)) {  // degenerate triangle whose corners tests above did not catch
+    bary = {1, 0, 0};
+    return a;
+  }
+  const double v = vb / denom, w = vc / denom;
+  bary = {1 - v - w, v, w};
+  return add(a, add(scale(ab, v), scale(ac, w)));
+}
 
 TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
   const std::size_t nt = mesh.triangles.size();
@@ -240,7 +239,7 @@ TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
     if (node.count > 0) {
       for (std::uint32_t s = node.first; s < node.first + node.count; ++s) {
         V3 bary;
-        const V3 q = closest_on_triangle(p, tri_[s][0], tri_[s][1], tri_[s][2], bary);
+        const V3 q = closest_point_on_triangle(p, tri_[s][0], tri_[s][1], tri_[s][2], bary);
         const V3 d = sub(p, q);
         const double d2 = dot(d, d);
         if (d2 < best2 || (d2 == best2 && id_[s] < best_tri)) {

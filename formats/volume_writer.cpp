@@ -3,7 +3,6 @@
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/volume_writer.h>
 #include <nifti2_io.h>
-#include <openvdb/openvdb.h>
 #include <teem/nrrd.h>
 
 #include <algorithm>
@@ -33,13 +32,6 @@ const volume_detail::VolumeFormatRow* writer_of(const std::string& path) {
 }
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw Error(path + ": " + what); }
-
-// What openvdb::io::File::write does, on the shared writer's stream: File writes to its own
-// std::ofstream and never looks at its state, so a full disk went unnoticed.
-class VdbArchive : public openvdb::io::Archive {
- public:
-  using openvdb::io::Archive::write;
-};
 
 // Physical step of index axis a: spacing[a] times column a of the direction matrix.
 std::array<double, 3> axis_step(const GridTransform& t, int a) {
@@ -170,34 +162,6 @@ void write_raw(const std::string& path, const ScalarGrid& g) {
     if (!OutputBatch::active()) std::remove(path.c_str());
     throw;
   }
-}
-
-void write_vdb(const std::string& path, const ScalarGrid& g) {
-  openvdb::initialize();
-  auto grid = openvdb::FloatGrid::create(0.0f);
-  grid->setName("density");
-  grid->setGridClass(openvdb::GRID_FOG_VOLUME);
-  openvdb::Mat4d m = openvdb::Mat4d::identity();
-  // OpenVDB maps row vectors (world = ijk · M): row a is the step of index axis a.
-  for (int a = 0; a < 3; ++a) {
-    const auto s = axis_step(g.transform, a);
-    for (int r = 0; r < 3; ++r) m(a, r) = s[r];
-  }
-  for (int r = 0; r < 3; ++r) m(3, r) = g.transform.origin[r];
-  grid->setTransform(openvdb::math::Transform::createLinearTransform(m));
-  auto acc = grid->getAccessor();
-  std::size_t idx = 0;
-  for (int k = 0; k < g.dims[2]; ++k)
-    for (int j = 0; j < g.dims[1]; ++j)
-      for (int i = 0; i < g.dims[0]; ++i) acc.setValueOn(openvdb::Coord(i, j, k), g.values[idx++]);
-  if (!g.space.empty()) grid->insertMeta("space", openvdb::StringMetadata(g.space));
-  write_file_atomically(path, [&](std::ostream& out) {
-    try {
-      VdbArchive().write(out, openvdb::GridCPtrVec{grid}, /*seekable=*/true);
-    } catch (const openvdb::Exception& e) {
-      fail(path, std::string("OpenVDB cannot write it: ") + e.what());
-    }
-  });
 }
 
 }  // namespace volume_detail

@@ -3,6 +3,7 @@
 #include <mlfe/core/field.h>
 #include <mlfe/core/iso_surface.h>
 #include <mlfe/core/noise_estimate.h>
+#include <mlfe/core/surface_fitting.h>
 #include <mlfe/core/surface_simplification.h>
 #include <mlfe/core/usage_error.h>
 #include <mlfe/formats/atomic_file.h>
@@ -562,10 +563,22 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     if (!(p.ratio >= 0 && p.ratio <= 1)) throw Error(fmt::format("ratio: expected 0..1, got {}", p.ratio));
+    // Optimal placement ends with the least-squares refit of the simplified surface to the
+    // extracted one (the greedy collapses leave each vertex where its last merge put it).
+    const bool refit = so.placement == Placement::kOptimal && p.simplifier != Simplifier::kMeshopt;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (!m.triangles.empty()) m = simplify_surface(m, so, p.simplifier, p.ratio);
+      if (m.triangles.empty()) return;
+      if (!refit) {
+        m = simplify_surface(m, so, p.simplifier, p.ratio);
+        return;
+      }
+      const TriangleMesh extracted = m;
+      m = simplify_surface(extracted, so, p.simplifier, p.ratio);
+      SurfaceFitOptions fo;
+      fo.tolerance = so.tolerance;
+      fit_surface(m, extracted, fo);
     });
   }
   if (p.decimate > 0)

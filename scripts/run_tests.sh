@@ -40,10 +40,12 @@ cmake --build "$ROOT/build/consumer" -j "$JOBS"
 "$ROOT/build/consumer/mlfe_consumer" "$ROOT/samples/ct_skull_64.nrrd" "$ROOT/build/consumer/ct_skull.glb"
 node "$ROOT/tools/validate_gltf.js" "$ROOT/build/consumer/ct_skull.glb" >/dev/null
 echo "consumer: ct_skull.glb accepted by the glTF validator"
-# The installed Python module loads (its RPATH finds the installed libmlfe_formats).
+# The installed Python module loads (its RPATH finds the installed libmlfe_formats) and reads
+# OpenVDB through the module installed beside that library.
 PYSITE="$(sed -n 's/^MLFE_PYTHON_INSTALL_DIR:STRING=//p' "$ROOT/build/CMakeCache.txt")"
 if [ -n "$PYSITE" ]; then
-  PYTHONPATH="$PREFIX/$PYSITE" /usr/bin/python3 -c "import mlfe; print('installed python module: mlfe', mlfe.__version__)"
+  PYTHONPATH="$PREFIX/$PYSITE" /usr/bin/python3 -c "import mlfe, sys; g = mlfe.info(sys.argv[1])['grids']; \
+print('installed python module: mlfe', mlfe.__version__, 'reads', g[0])" "$ROOT/tests/data/small_sphere.vdb"
 fi
 
 echo "== pip install . into a temporary venv"
@@ -55,7 +57,7 @@ VENV_DIR="$(mktemp -d)"
 # fresh build-pip/ would compile the libraries again (minutes on 2 cores without ccache).
 MLFE_PIP_BUILD_DIR="$ROOT/build" CMAKE_BUILD_PARALLEL_LEVEL="$JOBS" \
   "$VENV_DIR/venv/bin/pip" install --quiet --no-build-isolation "$ROOT"
-(cd "$VENV_DIR" && "$VENV_DIR/venv/bin/python" - "$VENV_DIR" <<'PY'
+(cd "$VENV_DIR" && "$VENV_DIR/venv/bin/python" - "$VENV_DIR" "$ROOT/tests/data/small_sphere.vdb" <<'PY'
 import os, sys
 import numpy as np
 import mlfe, mlfe.batch
@@ -64,7 +66,8 @@ d = np.linalg.norm(np.mgrid[0:12, 0:12, 0:12].T - 5.5, axis=-1).astype(np.float3
 out = os.path.join(sys.argv[1], "sphere.ply")
 s = mlfe.convert(d, out, iso=4, affine=np.diag([0.5, 0.5, 0.5, 1]))
 assert s["triangles"] > 0 and os.path.getsize(out) == s["bytes"], s
-print("pip-installed mlfe", mlfe.__version__, "converts:", s["triangles"], "triangles")
+assert mlfe.info(sys.argv[2])["format"] == "vdb"  # the OpenVDB module came along
+print("pip-installed mlfe", mlfe.__version__, "converts:", s["triangles"], "triangles; reads .vdb")
 PY
 )
 rm -rf "$VENV_DIR"

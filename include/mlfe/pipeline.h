@@ -270,9 +270,10 @@ struct AssetOptions {
   /// surface normals.
   Normals normals = Normals::kAuto;
   /// simplify's vertex placement: kInput (half-edge collapses: every vertex an extracted,
-  /// snapped one), kOptimal (quadric minimum near the surface: fewer triangles at the same
-  /// bound, smoother, slower) or kAuto (optimal, but input with gradient normals, which hold
-  /// only at extracted vertices).
+  /// snapped one), kOptimal (quadric minimum near the surface, then the least-squares refit of
+  /// every vertex to the extracted surface, core/surface_fitting.h: fewer triangles at the same
+  /// bound, closer to the data, smoother, slower) or kAuto (optimal, but input with gradient normals, which
+  /// hold only at extracted vertices).
   VertexPlacement placement = VertexPlacement::kAuto;
   double z_scale = 1.0;  ///< 2D height fields: height per data unit
   int level = -1;        ///< extract on this level (-1 finest)

@@ -16,6 +16,12 @@
 
 namespace mlfe {
 
+/// The closest point of triangle (a, b, c) to p, with its barycentric weights in `bary`.
+std::array<double, 3> closest_point_on_triangle(const std::array<double, 3>& p,
+                                                const std::array<double, 3>& a,
+                                                const std::array<double, 3>& b,
+                                                const std::array<double, 3>& c, std::array<double, 3>& bary);
+
 /// A closest-point acceleration structure over the triangles of a mesh (binary BVH of
 /// axis-aligned boxes, median split on the longest axis, a few triangles per leaf).
 /// Keeps a reference to nothing: positions and triangles are copied at construction.
