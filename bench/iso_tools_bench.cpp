@@ -350,13 +350,14 @@ int main(int argc, char** argv) {
       write_mesh_file(args[3], m);
       out = {{"method", "kuhn marching tetrahedra"}, {"seconds", secs}, {"triangles", m.triangles.size()}};
     } else if (mode == "simplify" && args.size() >= 4) {
-      // simplify IN.ply TOLERANCE OUT.ply [MIN_TRIANGLES [optimal|input [verify|estimate]]]
+      // simplify IN.ply TOLERANCE OUT.ply [MIN_TRIANGLES [optimal|input [verify|estimate [flip|noflip]]]]
       const TriangleMesh in = read_mesh_file(args[1]);
       SimplifyOptions so;
       so.tolerance = std::atof(args[2].c_str());
       if (args.size() > 4) so.min_triangles = std::strtoull(args[4].c_str(), nullptr, 10);
       so.placement = args.size() > 5 && args[5] == "input" ? Placement::kInputVertex : Placement::kOptimal;
       so.verify_bound = args.size() > 6 && args[6] == "verify";
+      so.flip_edges = !(args.size() > 7 && args[7] == "noflip");
       const auto t0 = Clock::now();
       SimplifyStats st;
       const TriangleMesh m = simplify_within(in, so, &st);

@@ -215,10 +215,18 @@ struct Move {
   Vec3 p;
 };
 
+// A neighbour a vertex may move onto: the collapse's key and where the survivor goes.
+struct Target {
+  double cost;
+  Index w;
+  Vec3 p;
+};
+
 // Per-task scratch, reused across the vertices of a chunk.
 struct Scratch {
   std::vector<Neighbour> n0, n1;
-  std::vector<std::pair<double, Index>> order;
+  std::vector<Target> order;
+  Vec3 p;                                 // the last placement evaluated
   std::vector<Index> targets;             // faces around v1 after the collapse
   Move move{kNone, kNone, Vec3::Zero()};  // the last legal move found
 };
@@ -229,17 +237,19 @@ class Simplifier {
       : opts_(opts), optimal_(opts.placement == Placement::kOptimal) {
     const std::size_t nv = mesh.positions.size();
     if (nv >= kNone) throw Error("simplification: too many vertices");
+    faces_.reserve(mesh.triangles.size());
     for (const auto& t : mesh.triangles) {
       if (t[0] >= nv || t[1] >= nv || t[2] >= nv) throw Error("simplification: triangle index out of range");
       if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
       faces_.push_back({t[0], t[1], t[2]});
     }
     if (faces_.size() >= kNone) throw Error("simplification: too many triangles");
-    if (optimal_) input_faces_ = faces_;
+    // The input surface is only read by the verified bound's checks.
+    if (optimal_ && opts.verify_bound) input_faces_ = faces_;
     pos_.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
       pos_[i] = Vec3(mesh.positions[i][0], mesh.positions[i][1], mesh.positions[i][2]);
-    points_ = pos_;
+    if (opts.verify_bound) points_ = pos_;
     for (const auto& f : faces_)
       for (Index v : f)
         if (!pos_[v].allFinite()) throw Error("simplification: non-finite vertex position");
@@ -253,16 +263,21 @@ class Simplifier {
     tol2_ = opts.tolerance * opts.tolerance;
     cos_max_turn_ = std::cos(opts.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
 
-    quadric_.resize(nv);
-    for (const auto& f : faces_) {
-      const Vec3 n = normal_of(f);
-      const double len = n.norm();
-      if (!(len > 0)) continue;
-      const Vec3 u = n / len;
-      for (Index v : f) quadric_[v].add_plane(u, -u.dot(pos_[f[0]]), 0.5 * len);
-    }
     build_vertex_faces();
-    if (optimal_) {
+    // Each vertex sums the planes of its faces in face order, in parallel.
+    quadric_.resize(nv);
+    tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 4096), [&](const tbb::blocked_range<Index>& r) {
+      for (Index v = r.begin(); v != r.end(); ++v)
+        for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f) {
+          const auto& face = faces_[*f];
+          const Vec3 n = normal_of(face);
+          const double len = n.norm();
+          if (!(len > 0)) continue;
+          const Vec3 u = n / len;
+          quadric_[v].add_plane(u, -u.dot(pos_[face[0]]), 0.5 * len);
+        }
+    });
+    if (optimal_ && opts.verify_bound) {
       input_vf_.offset.assign(1, 0);
       for (Index v = 0; v < Index(nv); ++v)
         input_vf_.offset.push_back(input_vf_.offset.back() + vf_.count[v]);
@@ -292,6 +307,8 @@ class Simplifier {
     stuck_.assign(nv, 0);
     screened_.assign(nv, 0);
     keyed_.assign(nv, 0);
+    found_.assign(nv, kNone);
+    found_in_.assign(nv, 0);
     dirty_.assign(nv, 1);
     dirty_list_.resize(nv);
     for (Index v = 0; v < Index(nv); ++v) dirty_list_[v] = v;
@@ -329,7 +346,7 @@ class Simplifier {
     std::vector<std::pair<double, Index>> fresh, kept;
     bool screen = false;
     while (alive_faces_ > opts_.min_triangles) {
-      ++passes;
+      pass_ = Index(++passes);
       if (opts_.verify_bound) build_face_points();
       // Cheap keys (quadric cost of the best-looking neighbour) for vertices whose
       // neighbourhood changed; the full legality check waits until a vertex is selected.
@@ -360,49 +377,13 @@ class Simplifier {
           kept.push_back(c);
       sorted_.resize(kept.size() + fresh.size());
       std::merge(kept.begin(), kept.end(), fresh.begin(), fresh.end(), sorted_.begin());
-      // Late on, most cheap candidates fail the checks and a selected failure blocks its ring
-      // for the pass; then sorting the stuck ones out first (in parallel) keeps passes full.
-      if (screen) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted_.size(), 64),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-                            Scratch s;
-                            for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                              const Index v = sorted_[i].second;
-                              if (screened_[v]) continue;
-                              if (find_target(v, s) == kNone)
-                                stuck_[v] = 1;
-                              else
-                                screened_[v] = 1;
-                            }
-                          });
-        sorted_.erase(
-            std::remove_if(sorted_.begin(), sorted_.end(),
-                           [&](const std::pair<double, Index>& c) { return stuck_[c.second] != 0; }),
-            sorted_.end());
-      }
       if (sorted_.empty()) break;
-      // Greedy independent set: closed one-rings pairwise disjoint.
-      const Index stamp = ++stamp_counter_;
-      selected.clear();
-      for (const auto& c : sorted_) {
-        const Index v0 = c.second;
-        if (stamp_[v0] == stamp) continue;  // v0 is in its own closed ring
-        bool free = true;
-        for (const Index* f = vf_.begin(v0); f != vf_.end(v0) && free; ++f)
-          for (Index v : faces_[*f]) free = free && stamp_[v] != stamp;
-        if (!free) continue;
-        // With optimal placement the survivor (a neighbour) moves too, changing its own star,
-        // so the stamped region is the closed two-ring: selected vertices are then at least
-        // four edges apart and no collapse reads what another writes.
-        for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
-          for (Index v : faces_[*f]) {
-            stamp_[v] = stamp;
-            if (optimal_)
-              for (const Index* g = vf_.begin(v); g != vf_.end(v); ++g)
-                for (Index w : faces_[*g]) stamp_[w] = stamp;
-          }
-        selected.push_back(v0);
-      }
+      // Late on, most cheap candidates fail the checks and a selected failure blocks its ring
+      // for the pass; then the candidates are checked before they are picked.
+      if (screen)
+        select_screened(Index(passes), selected);
+      else
+        select_independent(selected);
       // Each collapse removes at most two faces: far from the floor, all selected collapses
       // run at once; near it, one by one in cost order until the floor is reached.
       if (alive_faces_ > opts_.min_triangles + 2 * selected.size()) {
@@ -433,6 +414,86 @@ class Simplifier {
         }
       mark_changed(survivors);
     }
+  }
+
+  // v0's closed one-ring (two-ring when survivors move) holds no vertex stamped with `stamp`.
+  bool ring_free(Index v0, Index stamp) const {
+    if (stamp_[v0] == stamp) return false;
+    for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
+      for (Index v : faces_[*f])
+        if (stamp_[v] == stamp) return false;
+    return true;
+  }
+
+  // Stamps v0's closed one-ring, or with optimal placement its closed two-ring: the survivor (a
+  // neighbour) moves too, changing its own star, so selected vertices are then at least four
+  // edges apart and no collapse reads what another writes.
+  void stamp_ring(Index v0, Index stamp) {
+    for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
+      for (Index v : faces_[*f]) {
+        stamp_[v] = stamp;
+        if (optimal_)
+          for (const Index* g = vf_.begin(v); g != vf_.end(v); ++g)
+            for (Index w : faces_[*g]) stamp_[w] = stamp;
+      }
+  }
+
+  // Greedy independent set over the sorted candidates: closed rings pairwise disjoint.
+  void select_independent(std::vector<Index>& selected) {
+    const Index stamp = ++stamp_counter_;
+    selected.clear();
+    for (const auto& c : sorted_)
+      if (ring_free(c.second, stamp)) {
+        stamp_ring(c.second, stamp);
+        selected.push_back(c.second);
+      }
+  }
+
+  // The same greedy set without the candidates that fail the checks, which are marked stuck and
+  // leave the sorted list. Only a candidate whose ring is still free when its turn comes is
+  // checked: the list is walked in windows of fixed size, the free unchecked candidates of a
+  // window are checked in parallel, then the window is picked from in order. (Checking every
+  // candidate up front checked four to ten times more.) A pure function of the mesh: the
+  // windows do not depend on the thread count, and a check's result on the state the pass
+  // started from. Each check that finds a target keeps it for collapse() in the same pass.
+  void select_screened(Index pass, std::vector<Index>& selected) {
+    constexpr std::size_t kWindow = 2048;
+    const Index stamp = ++stamp_counter_;
+    selected.clear();
+    std::vector<Index> todo;
+    for (std::size_t begin = 0; begin < sorted_.size(); begin += kWindow) {
+      const std::size_t end = std::min(sorted_.size(), begin + kWindow);
+      todo.clear();
+      for (std::size_t i = begin; i < end; ++i) {
+        const Index v = sorted_[i].second;
+        if (!screened_[v] && ring_free(v, stamp)) todo.push_back(v);
+      }
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 32),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          Scratch s;
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                            const Index v = todo[i];
+                            const Index t = find_target(v, s);
+                            if (t == kNone) {
+                              stuck_[v] = 1;
+                            } else {
+                              screened_[v] = 1;
+                              found_[v] = t;
+                              found_in_[v] = pass;
+                            }
+                          }
+                        });
+      for (std::size_t i = begin; i < end; ++i) {
+        const Index v = sorted_[i].second;
+        if (!stuck_[v] && ring_free(v, stamp)) {
+          stamp_ring(v, stamp);
+          selected.push_back(v);
+        }
+      }
+    }
+    sorted_.erase(std::remove_if(sorted_.begin(), sorted_.end(),
+                                 [&](const std::pair<double, Index>& c) { return stuck_[c.second] != 0; }),
+                  sorted_.end());
   }
 
   // Step 1 on big meshes with an estimated bound: every block of space on its own, in parallel,
@@ -580,7 +641,7 @@ class Simplifier {
           if (a == v1 || best_[a] == v0 || best_[a] == v1) {
             key_[a] = cheapest(a, s, &best_[a]);
           } else {  // also when no other edge qualified (best_[a] == kNone)
-            auto lower = [&](double cost, Index w) {
+            auto lower = [&](double cost, Index w, const Vec3&) {
               if (cost < key_[a]) {
                 key_[a] = cost;
                 best_[a] = w;
@@ -589,7 +650,7 @@ class Simplifier {
             if (boundary_[a])  // the edge's face count matters
               for_each_target(a, s, lower, v1);
             else
-              lower(edge_cost(a, v1, false), v1);
+              lower(edge_cost(a, v1, false, s.p), v1, s.p);
           }
           if (key_[a] != old || stuck_[a]) again.push_back(a);
         }
@@ -840,9 +901,9 @@ class Simplifier {
     return 0;
   }
 
-  // Calls each(cost, w) for every neighbour w that v0 may move onto (cost: the quadric error
-  // with a tiny length term breaking ties); returns whether v0 is on the boundary. Fills s.n0.
-  // `only` (if not kNone): that neighbour alone is considered.
+  // Calls each(cost, w, p) for every neighbour w that v0 may move onto (cost: the quadric error
+  // with a tiny length term breaking ties; p: where the survivor goes); returns whether v0 is on the
+  // boundary. Fills s.n0. `only` (if not kNone): that neighbour alone is considered.
   template <class Each>
   bool for_each_target(Index v0, Scratch& s, Each&& each, Index only = kNone) const {
     neighbours(v0, s.n0);
@@ -850,17 +911,17 @@ class Simplifier {
     for (const auto& x : s.n0) {
       if (only != kNone && x.v != only) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
-      const double cost = edge_cost(v0, x.v, boundary0);
-      if (cost < kNoKey) each(cost, x.v);
+      const double cost = edge_cost(v0, x.v, boundary0, s.p);
+      if (cost < kNoKey) each(cost, x.v, s.p);
     }
     return boundary0;
   }
 
   // The key of moving v0 onto its neighbour w (kNoKey: not allowed), the edge's face count
-  // aside (see for_each_target).
-  double edge_cost(Index v0, Index w, bool boundary0) const {
+  // aside (see for_each_target); p := place(v0, w, boundary0) when allowed.
+  double edge_cost(Index v0, Index w, bool boundary0, Vec3& p) const {
     if (locked_[w] || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
-    const Vec3 p = place(v0, w, boundary0);
+    p = place(v0, w, boundary0);
     const double cost = eval_sum(quadric_[v0], quadric_[w], p);
     // The estimated bound: the merged planes' mean squared distance.
     if (!opts_.verify_bound && cost > tol2_ * (quadric_[v0].weight() + quadric_[w].weight())) return kNoKey;
@@ -870,10 +931,12 @@ class Simplifier {
   // Neighbours v0 may move onto, cheapest first (ties by index).
   bool ordered_targets(Index v0, Scratch& s) const {
     s.order.clear();
-    const bool boundary0 = for_each_target(v0, s, [&](double cost, Index w) {
-      s.order.push_back({cost, w});
+    const bool boundary0 = for_each_target(v0, s, [&](double cost, Index w, const Vec3& p) {
+      s.order.push_back({cost, w, p});
     });
-    std::sort(s.order.begin(), s.order.end());
+    std::sort(s.order.begin(), s.order.end(), [](const Target& a, const Target& b) {
+      return a.cost < b.cost || (a.cost == b.cost && a.w < b.w);
+    });
     return boundary0;
   }
 
@@ -882,7 +945,7 @@ class Simplifier {
     if (locked_[v0] || vf_.size(v0) == 0) return kNoKey;
     double best = kNoKey;
     Index at = kNone;
-    for_each_target(v0, s, [&](double cost, Index w) {
+    for_each_target(v0, s, [&](double cost, Index w, const Vec3&) {
       if (cost < best) {
         best = cost;
         at = w;
@@ -896,7 +959,7 @@ class Simplifier {
   Index find_target(Index v0, Scratch& s) const {
     const bool boundary0 = ordered_targets(v0, s);
     for (const auto& c : s.order)
-      if (passes(v0, c.second, boundary0, s)) return c.second;
+      if (passes(v0, c.w, boundary0, c.p, s)) return c.w;
     return kNone;
   }
 
@@ -905,16 +968,16 @@ class Simplifier {
   Index find_target_from(Index v0, Index first, Scratch& s) const {
     if (first != kNone) {
       neighbours(v0, s.n0);
-      if (passes(v0, first, on_boundary(s.n0), s)) return first;
+      const bool boundary0 = on_boundary(s.n0);
+      if (passes(v0, first, boundary0, place(v0, first, boundary0), s)) return first;
     }
     return find_target(v0, s);
   }
 
-  // v0 may move onto v1 under all checks (s.n0: v0's neighbours).
-  bool passes(Index v0, Index v1, bool boundary0, Scratch& s) const {
+  // v0 may move onto v1 under all checks (s.n0: v0's neighbours; p: place(v0, v1, boundary0)).
+  bool passes(Index v0, Index v1, bool boundary0, const Vec3& p, Scratch& s) const {
     const int edge_faces = keeps_topology(v0, v1, boundary0, s);
     if (edge_faces < 0) return false;
-    const Vec3 p = place(v0, v1, boundary0);
     if (keeps_geometry(v0, v1, edge_faces, p, s)) return true;
     // Where the quadric minimum leaves the surface (tight tolerances on curved parts), the
     // half-edge collapse may still pass.
@@ -929,20 +992,26 @@ class Simplifier {
     Quadric q = quadric_[v0];
     q.add(quadric_[v1]);
     const auto& a = q.q;
-    Eigen::Matrix3d m;
-    m << a[0], a[1], a[2], a[1], a[4], a[5], a[2], a[5], a[7];
     const Vec3 b(a[3], a[6], a[8]);
     const Vec3 e = pos_[v1] - pos_[v0];
     const double len2 = e.squaredNorm();
-    const double scale = m.trace();
-    Eigen::Matrix3d inverse;
-    bool invertible = false;
-    m.computeInverseWithCheck(inverse, invertible, 1e-6 * scale * scale * scale);
-    if (scale > 0 && invertible) {
-      const Vec3 p = inverse * (-b);
+    const double scale = a[0] + a[4] + a[7];
+    // The symmetric matrix's adjugate (six cofactors) and determinant: the minimum is
+    // -adj b / det (a general 3x3 inverse did half again as much arithmetic, in the hottest
+    // function of the checks).
+    const double c00 = a[4] * a[7] - a[5] * a[5], c01 = a[2] * a[5] - a[1] * a[7],
+                 c02 = a[1] * a[5] - a[2] * a[4], c11 = a[0] * a[7] - a[2] * a[2],
+                 c12 = a[1] * a[2] - a[0] * a[5], c22 = a[0] * a[4] - a[1] * a[1];
+    const double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+    if (scale > 0 && std::abs(det) > 1e-6 * scale * scale * scale) {
+      const Vec3 p = Vec3(c00 * b.x() + c01 * b.y() + c02 * b.z(), c01 * b.x() + c11 * b.y() + c12 * b.z(),
+                          c02 * b.x() + c12 * b.y() + c22 * b.z()) /
+                     -det;
       const Vec3 mid = 0.5 * (pos_[v0] + pos_[v1]);
       if (p.allFinite() && (p - mid).squaredNorm() <= len2) return p;
     }
+    Eigen::Matrix3d m;
+    m << a[0], a[1], a[2], a[1], a[4], a[5], a[2], a[5], a[7];
     // Along the edge: cost(t) = (p0 + t e)^T m (p0 + t e) + 2 b.(p0 + t e) + c.
     const double qa = e.dot(m * e), qb = e.dot(m * pos_[v0] + b);
     if (qa > 1e-12 * scale * len2) {
@@ -960,7 +1029,11 @@ class Simplifier {
     target_[v0] = kNone;
     removed_faces_[v0] = 0;
     // (Both leave the move in s.move and the faces around v1 in s.targets.)
-    const Index v1 = in_blocks_ ? find_target_from(v0, best_[v0], s) : find_target(v0, s);
+    // In the blocks the key's neighbour comes first; after a check in this pass, its target
+    // (the state is the one it saw: the pass's collapses are independent).
+    const Index v1 = in_blocks_               ? find_target_from(v0, best_[v0], s)
+                     : found_in_[v0] == pass_ ? find_target_from(v0, found_[v0], s)
+                                              : find_target(v0, s);
     if (v1 == kNone) {
       stuck_[v0] = 1;
       return false;
@@ -1156,6 +1229,8 @@ class Simplifier {
   std::vector<Index> dirty_list_;                 // the vertices with dirty_ set
   std::vector<uint8_t> screened_;                 // passed the full checks since its last key
   std::vector<Index> keyed_;                      // pass in which the key was last computed
+  std::vector<Index> found_, found_in_;           // the target a check found, and its pass
+  Index pass_ = 0;                                // the current pass (from 1)
   std::vector<std::pair<double, Index>> sorted_;  // candidates by (key, vertex)
   std::size_t alive_faces_ = 0;
   std::vector<Quadric> quadric_;

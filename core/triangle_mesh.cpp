@@ -7,13 +7,82 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <numeric>
+#include <string>
 #include <tuple>
 #include <vector>
 
 namespace mlfe {
 
 using Vec3 = Eigen::Vector3d;
+
+namespace {
+
+// The 10 low bits of x spread to every third bit (Morton interleaving).
+std::uint32_t spread_bits(std::uint32_t x) {
+  x &= 0x3ffu;
+  x = (x | (x << 16)) & 0x30000ffu;
+  x = (x | (x << 8)) & 0x300f00fu;
+  x = (x | (x << 4)) & 0x30c30c3u;
+  x = (x | (x << 2)) & 0x9249249u;
+  return x;
+}
+
+}  // namespace
+
+TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
+  const std::size_t nv = mesh.positions.size();
+  for (const auto& t : mesh.triangles)
+    if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
+      throw Error("spatial order: a triangle refers to a vertex beyond the " + std::to_string(nv) +
+                  " positions");
+  std::array<float, 3> lo{}, hi{};
+  for (int c = 0; c < 3; ++c) {
+    lo[c] = std::numeric_limits<float>::infinity();
+    hi[c] = -std::numeric_limits<float>::infinity();
+  }
+  for (const auto& p : mesh.positions)
+    for (int c = 0; c < 3; ++c)
+      if (std::isfinite(p[c])) {
+        lo[c] = std::min(lo[c], p[c]);
+        hi[c] = std::max(hi[c], p[c]);
+      }
+  double extent = 0;
+  for (int c = 0; c < 3; ++c) extent = std::max(extent, double(hi[c]) - double(lo[c]));
+  const double scale = extent > 0 ? 1023.0 / extent : 0.0;
+  std::vector<std::uint32_t> code(nv, 0);
+  for (std::size_t v = 0; v < nv; ++v)
+    for (int c = 0; c < 3; ++c) {
+      const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
+      const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
+      code[v] |= spread_bits(q) << c;
+    }
+  std::vector<std::uint32_t> order(nv);  // new -> old
+  std::iota(order.begin(), order.end(), 0u);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return code[a] < code[b]; });
+  std::vector<std::uint32_t> index(nv);  // old -> new
+  for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
+  TriangleMesh out;
+  out.positions.resize(nv);
+  for (std::size_t i = 0; i < nv; ++i) out.positions[i] = mesh.positions[order[i]];
+  if (mesh.normals.size() == nv) {
+    out.normals.resize(nv);
+    for (std::size_t i = 0; i < nv; ++i) out.normals[i] = mesh.normals[order[i]];
+  } else {
+    out.normals = mesh.normals;
+  }
+  out.triangles.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) out.triangles.push_back({index[t[0]], index[t[1]], index[t[2]]});
+  auto first = [](const std::array<std::uint32_t, 3>& t) { return std::min({t[0], t[1], t[2]}); };
+  std::stable_sort(out.triangles.begin(), out.triangles.end(),
+                   [&](const std::array<std::uint32_t, 3>& a, const std::array<std::uint32_t, 3>& b) {
+                     return first(a) < first(b);
+                   });
+  return out;
+}
 
 void compute_area_weighted_normals(TriangleMesh& mesh) {
   // Cross products are twice the area times the unit normal: summing them weights by area.

@@ -1,8 +1,12 @@
-// mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone.
+// mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone;
+// spatially_ordered keeps the surface.
 #include <gtest/gtest.h>
+#include <mlfe/core/error.h>
 #include <mlfe/core/triangle_mesh.h>
 
+#include <algorithm>
 #include <array>
+#include <set>
 #include <vector>
 
 namespace mlfe {
@@ -87,6 +91,52 @@ TEST(MeshTopology, BoundaryEdgesOffTheBoxAreCounted) {
   // One end on a face is not enough: the edge must lie on it.
   inside.positions[0] = {0, 0.25f, 0.5f};
   EXPECT_EQ(mesh_topology(inside, &lo, &hi, 1e-6).boundary_edges_off_box, 4u);
+}
+
+// A strip of quads along x whose vertices are listed back to front and shuffled: the order
+// puts them front to back, each triangle is the same corner positions in the same cyclic
+// order, normals travel with their vertices, and the output is a function of the input.
+TEST(SpatiallyOrdered, KeepsEveryTriangleAndItsOrientation) {
+  TriangleMesh m;
+  const int n = 50;
+  for (int i = n - 1; i >= 0; --i)
+    for (int j = 0; j < 2; ++j) {
+      m.positions.push_back({float(i), float(j), 0.f});
+      m.normals.push_back({0.f, 0.f, float(i)});
+    }
+  auto at = [&](int i, int j) { return std::uint32_t(2 * (n - 1 - i) + j); };
+  for (int i = 0; i + 1 < n; ++i) {
+    m.triangles.push_back({at(i, 0), at(i + 1, 0), at(i + 1, 1)});
+    m.triangles.push_back({at(i, 0), at(i + 1, 1), at(i, 1)});
+  }
+  std::reverse(m.triangles.begin(), m.triangles.end());
+  const TriangleMesh o = spatially_ordered(m);
+  ASSERT_EQ(o.positions.size(), m.positions.size());
+  ASSERT_EQ(o.normals.size(), m.normals.size());
+  ASSERT_EQ(o.triangles.size(), m.triangles.size());
+  EXPECT_EQ(o.positions.front()[0], 0.f);
+  EXPECT_EQ(o.positions.back()[0], float(n - 1));
+  for (std::size_t v = 0; v < o.positions.size(); ++v) EXPECT_EQ(o.normals[v][2], o.positions[v][0]);
+  // Triangles as corner positions, rotated to start at their smallest corner (orientation kept).
+  using Corners = std::array<std::array<float, 3>, 3>;
+  auto corners = [](const TriangleMesh& x) {
+    std::multiset<Corners> out;
+    for (const auto& t : x.triangles) {
+      Corners c{x.positions[t[0]], x.positions[t[1]], x.positions[t[2]]};
+      std::rotate(c.begin(), std::min_element(c.begin(), c.end()), c.end());
+      out.insert(c);
+    }
+    return out;
+  };
+  EXPECT_EQ(corners(o), corners(m));
+  const TriangleMesh again = spatially_ordered(m);
+  EXPECT_EQ(again.positions, o.positions);
+  EXPECT_EQ(again.triangles, o.triangles);
+  for (std::size_t f = 1; f < o.triangles.size(); ++f)
+    EXPECT_LE(*std::min_element(o.triangles[f - 1].begin(), o.triangles[f - 1].end()),
+              *std::min_element(o.triangles[f].begin(), o.triangles[f].end()));
+  m.triangles.push_back({0, 1, std::uint32_t(m.positions.size())});
+  EXPECT_THROW(spatially_ordered(m), Error);
 }
 
 }  // namespace

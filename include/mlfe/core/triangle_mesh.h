@@ -23,6 +23,15 @@ struct TriangleMesh {
 /// triangle indices out of range.
 void compute_area_weighted_normals(TriangleMesh& mesh);
 
+/// The same surface with its vertices in Morton (Z-curve) order of their positions on a 1024³
+/// grid over the bounding box (ties in input order) and its triangles ordered by their first
+/// vertex in that order (ties in input order); each triangle keeps its corners' cyclic order,
+/// so orientation is kept, and normals follow their vertices. Neighbouring vertices then lie
+/// near each other in memory: algorithms that walk one-rings in random order (the verified
+/// simplification) run faster. A function of the mesh alone. Throws mlfe::Error for triangle
+/// indices out of range.
+TriangleMesh spatially_ordered(const TriangleMesh& mesh);
+
 /// What makes an indexed triangle mesh one welded, manifold surface, counted (for tests and
 /// reports). Vertices are first welded by exact position, since a writer or viewer sees a seam
 /// wherever two vertices share a position but not their triangles.
