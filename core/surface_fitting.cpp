@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -311,39 +312,77 @@ V3 at(const std::vector<V3>& x, const std::array<std::uint32_t, 3>& t, const V3&
 std::size_t guard(const TriangleMesh& coarse, const std::vector<Sample>& samples, const TriangleGrid& dense,
                   const std::vector<V3>& x0, std::vector<V3>& x, const SurfaceFitOptions& o) {
   const double min_cos = std::cos(o.max_normal_turn_degrees * M_PI / 180.0);
-  std::vector<char> back(x.size(), 0);
-  std::size_t count = 0;
-  auto put_back = [&](const std::array<std::uint32_t, 3>& t) {
-    bool changed = false;
-    for (auto v : t)
-      if (!back[v] && x[v] != x0[v]) back[v] = 1, x[v] = x0[v], ++count, changed = true;
-    return changed;
+  const std::size_t nt = coarse.triangles.size(), nv = x.size();
+  // Per triangle its samples and per vertex its triangles: after the first round only the
+  // triangles around the vertices put back are looked at again.
+  std::vector<std::uint32_t> by_tri(nt + 1, 0), tri_samples(samples.size()), by_vertex(nv + 1, 0),
+      vertex_tris(3 * nt);
+  for (const auto& s : samples) ++by_tri[s.triangle + 1];
+  for (const auto& t : coarse.triangles)
+    for (auto v : t) ++by_vertex[v + 1];
+  std::partial_sum(by_tri.begin(), by_tri.end(), by_tri.begin());
+  std::partial_sum(by_vertex.begin(), by_vertex.end(), by_vertex.begin());
+  {
+    std::vector<std::uint32_t> fill(by_tri.begin(), by_tri.end() - 1);
+    for (std::uint32_t i = 0; i < samples.size(); ++i) tri_samples[fill[samples[i].triangle]++] = i;
+    fill.assign(by_vertex.begin(), by_vertex.end() - 1);
+    for (std::uint32_t t = 0; t < nt; ++t)
+      for (auto v : coarse.triangles[t]) vertex_tris[fill[v]++] = t;
+  }
+  // A triangle that turns too far or leaves one of its samples beyond the bound.
+  auto bad = [&](std::uint32_t ti) {
+    const auto& t = coarse.triangles[ti];
+    const V3 n0 = cross(sub(x0[t[1]], x0[t[0]]), sub(x0[t[2]], x0[t[0]]));
+    const V3 n1 = cross(sub(x[t[1]], x[t[0]]), sub(x[t[2]], x[t[0]]));
+    const double l0 = dot(n0, n0), l1 = dot(n1, n1);
+    if (!(l1 > 0 && dot(n0, n1) >= min_cos * std::sqrt(l0 * l1)) && !(l0 == 0 && l1 == 0)) return true;
+    for (std::uint32_t k = by_tri[ti]; k < by_tri[ti + 1]; ++k) {
+      const Sample& s = samples[tri_samples[k]];
+      if (distance(at(x, t, s.bary), s.p) > std::max(o.tolerance, s.distance)) return true;
+    }
+    return false;
   };
-  for (bool changed = true; changed;) {
-    changed = false;
-    for (const auto& t : coarse.triangles) {
-      const V3 n0 = cross(sub(x0[t[1]], x0[t[0]]), sub(x0[t[2]], x0[t[0]]));
-      const V3 n1 = cross(sub(x[t[1]], x[t[0]]), sub(x[t[2]], x[t[0]]));
-      const double l0 = dot(n0, n0), l1 = dot(n1, n1);
-      if (l1 > 0 && dot(n0, n1) >= min_cos * std::sqrt(l0 * l1)) continue;
-      if (l0 == 0 && l1 == 0) continue;
-      changed |= put_back(t);
-    }
-    for (const auto& s : samples) {
-      const auto& t = coarse.triangles[s.triangle];
-      if (distance(at(x, t, s.bary), s.p) <= std::max(o.tolerance, s.distance)) continue;
-      changed |= put_back(t);
-    }
-    // The bound the other way: a moved vertex within the tolerance of the dense surface, as the
-    // simplifier's optimal placement keeps it.
-    for (std::size_t v = 0; v < x.size(); ++v) {
-      if (back[v] || x[v] == x0[v]) continue;
-      std::uint32_t tri = 0;
-      V3 bary;
-      double d = 0;
-      if (dense.closest(x[v], tri, bary, d) && d <= o.tolerance) continue;
-      back[v] = 1, x[v] = x0[v], ++count, changed = true;
-    }
+  std::size_t count = 0;
+  std::vector<std::uint32_t> reverted;
+  auto put_back = [&](std::uint32_t v) {
+    if (x[v] == x0[v]) return;
+    x[v] = x0[v], ++count;
+    reverted.push_back(v);
+  };
+  // Round 1, flags computed in parallel on one state and applied in order: the bound the other
+  // way (a moved vertex within the tolerance of the dense surface, as the simplifier's optimal
+  // placement keeps it; it depends on the vertex alone), then every triangle.
+  std::vector<char> flag(std::max(nv, nt), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                        std::uint32_t tri = 0;
+                        V3 bary;
+                        double d = 0;
+                        flag[v] = x[v] != x0[v] && !(dense.closest(x[v], tri, bary, d) && d <= o.tolerance);
+                      }
+                    });
+  for (std::uint32_t v = 0; v < nv; ++v)
+    if (flag[v]) put_back(v);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t t = r.begin(); t != r.end(); ++t) flag[t] = bad(std::uint32_t(t));
+                    });
+  for (std::uint32_t t = 0; t < nt; ++t)
+    if (flag[t])
+      for (auto v : coarse.triangles[t]) put_back(v);
+  // Later rounds: the triangles around the vertices the round before put back, in order.
+  std::vector<std::uint32_t> around;
+  while (!reverted.empty()) {
+    around.clear();
+    for (auto v : reverted)
+      around.insert(around.end(), vertex_tris.begin() + by_vertex[v], vertex_tris.begin() + by_vertex[v + 1]);
+    reverted.clear();
+    std::sort(around.begin(), around.end());
+    around.erase(std::unique(around.begin(), around.end()), around.end());
+    for (auto t : around)
+      if (bad(t))
+        for (auto v : coarse.triangles[t]) put_back(v);
   }
   return count;
 }
