@@ -177,56 +177,48 @@ std::vector<Sample> match(const TriangleMesh& coarse, const TriangleMesh& dense,
   return samples;
 }
 
-// The vertices on a boundary edge (an edge in one triangle): they hold the surface to the
-// volume's faces and stay.
-std::vector<char> boundary_vertices(const TriangleMesh& m) {
-  std::vector<std::pair<std::uint64_t, int>> edges;
-  edges.reserve(3 * m.triangles.size());
+// The unique edges of a mesh (lower vertex first, sorted) and its boundary vertices, those on
+// an edge of one triangle: they hold the surface to the volume's faces and stay.
+struct Edges {
+  std::vector<std::array<std::uint32_t, 2>> unique;
+  std::vector<char> boundary;  // per vertex
+};
+
+Edges edges_of(const TriangleMesh& m) {
+  std::vector<std::array<std::uint32_t, 2>> all;
+  all.reserve(3 * m.triangles.size());
   for (const auto& t : m.triangles)
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
-      edges.emplace_back(std::uint64_t(std::min(a, b)) << 32 | std::max(a, b), 1);
-    }
-  std::sort(edges.begin(), edges.end());
-  std::vector<char> fixed(m.positions.size(), 0);
-  for (std::size_t i = 0; i < edges.size();) {
+    for (int k = 0; k < 3; ++k)
+      all.push_back({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
+  std::sort(all.begin(), all.end());
+  Edges e;
+  e.boundary.assign(m.positions.size(), 0);
+  for (std::size_t i = 0; i < all.size();) {
     std::size_t j = i;
-    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
-    if (j - i == 1) fixed[edges[i].first >> 32] = fixed[edges[i].first & 0xffffffffu] = 1;
+    while (j < all.size() && all[j] == all[i]) ++j;
+    if (j - i == 1) e.boundary[all[i][0]] = e.boundary[all[i][1]] = 1;
+    e.unique.push_back(all[i]);
     i = j;
   }
-  return fixed;
-}
-
-// The unique edges of `m`, lower vertex first, sorted.
-std::vector<std::array<std::uint32_t, 2>> unique_edges(const TriangleMesh& m) {
-  std::vector<std::array<std::uint32_t, 2>> e;
-  e.reserve(3 * m.triangles.size());
-  for (const auto& t : m.triangles)
-    for (int k = 0; k < 3; ++k) e.push_back({std::min(t[k], t[(k + 1) % 3]), std::max(t[k], t[(k + 1) % 3])});
-  std::sort(e.begin(), e.end());
-  e.erase(std::unique(e.begin(), e.end()), e.end());
   return e;
 }
 
 // Steps 2 and 3: the normal equations of sum_s w_s |A_s x - p_s|^2 + k sum_(a,b) |x_a - x_b -
-// (x0_a - x0_b)|^2 over the free vertices (fixed ones moved to the right-hand side), solved per
-// axis by conjugate gradients from x0. Returns the new positions.
-std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& samples,
-                      const std::vector<char>& fixed, double spring) {
-  const std::size_t n = coarse.positions.size();
-  std::vector<V3> x0(n);
-  for (std::size_t v = 0; v < n; ++v) x0[v] = to_v3(coarse.positions[v]);
+// (x0_a - x0_b)|^2 over the free vertices (boundary ones moved to the right-hand side), solved
+// per axis by conjugate gradients from x0 (the current positions). Returns the new positions.
+std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& samples, const Edges& mesh_edges,
+                      const std::vector<V3>& x0, double spring) {
+  const std::size_t n = x0.size();
   // Free vertices numbered 0..f-1.
   std::vector<int> slot(n, -1);
   int f = 0;
   for (std::size_t v = 0; v < n; ++v)
-    if (!fixed[v]) slot[v] = f++;
+    if (!mesh_edges.boundary[v]) slot[v] = f++;
   if (f == 0) return x0;
   // The spring's weight is per unit of the data's area, so it means the same at any resolution.
   double area = 0;
   for (const auto& s : samples) area += s.weight;
-  const auto edges = unique_edges(coarse);
+  const auto& edges = mesh_edges.unique;
   const double k = spring * area / double(std::max<std::size_t>(1, edges.size()));
   // The data term couples the corners of each matched triangle only: summed per triangle
   // first (a 3x3 block and three right-hand sides), then scattered.
@@ -408,10 +400,9 @@ SurfaceFitReport fit_surface(TriangleMesh& coarse, const TriangleMesh& dense, co
     for (auto v : t) MLFE_CHECK(v < coarse.positions.size());
   const std::vector<Sample> samples = match(coarse, dense, o.tolerance);
   report.samples = samples.size();
-  const std::vector<char> fixed = boundary_vertices(coarse);
   std::vector<V3> x0(coarse.positions.size());
   for (std::size_t v = 0; v < x0.size(); ++v) x0[v] = to_v3(coarse.positions[v]);
-  std::vector<V3> x = solve(coarse, samples, fixed, o.spring);
+  std::vector<V3> x = solve(coarse, samples, edges_of(coarse), x0, o.spring);
   // Positions are stored as floats: the guard checks what will be written.
   for (auto& p : x)
     for (auto& c : p) c = double(float(c));

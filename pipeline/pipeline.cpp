@@ -570,12 +570,9 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      if (!refit) {
-        m = simplify_surface(m, so, p.simplifier, p.ratio);
-        return;
-      }
-      const TriangleMesh extracted = m;
-      m = simplify_surface(extracted, so, p.simplifier, p.ratio);
+      const TriangleMesh extracted = refit ? m : TriangleMesh{};
+      m = simplify_surface(m, so, p.simplifier, p.ratio);
+      if (!refit) return;
       SurfaceFitOptions fo;
       fo.tolerance = so.tolerance;
       fit_surface(m, extracted, fo);
