@@ -417,6 +417,33 @@ TEST(Approximation, VertexBudgetIsNeverExceeded) {
   EXPECT_EQ(a.stop_reason, "vertex budget");
 }
 
+TEST(Approximation, TheBudgetIsReachedInTwoStepsWithASolveBetween) {
+  // A sharp edge plus smooth variation: more marks than the budget holds.
+  const auto g = make_grid(2, 129, 1.0, [](double x, double y, double) {
+    return (std::hypot(x - 60, y - 70) < 35 ? 80.0 : 0.0) + 10 * std::sin(x / 9.0);
+  });
+  GridField f(g);
+  ApproximationOptions o;
+  o.target_rms = 1e-3;
+  o.max_vertices = 3000;
+  o.start_level = 0;
+  const auto a = approximate<2>(f, o);
+  EXPECT_EQ(a.stop_reason, "vertex budget");
+  // The first refinement that takes a large share of the room (the budget cuts it) leaves a
+  // good part of it to a refinement after one more solve (one ranking spent 97 % at once here).
+  const std::size_t budget = o.max_vertices;
+  bool cut = false;
+  for (std::size_t i = 0; i + 1 < a.iterations.size() && !cut; ++i) {
+    const std::size_t before = a.iterations[i].vertices, after = a.iterations[i + 1].vertices;
+    if (after - before <= (budget - before) / 3) continue;
+    cut = true;
+    EXPECT_GE(budget - after, (budget - before) / 10) << "iteration " << i;
+  }
+  EXPECT_TRUE(cut);
+  EXPECT_GE(a.hierarchy.vertex_count(), budget * 95 / 100);
+  EXPECT_LE(a.hierarchy.vertex_count(), budget);
+}
+
 TEST(HierarchicalBasis, DecompositionRoundTripsAndTruncationInterpolates) {
   const auto g =
       make_grid(3, 17, 1.0, [](double x, double y, double z) { return std::sin(x / 3) + y * z / 50; });
