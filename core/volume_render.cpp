@@ -524,17 +524,21 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
-  tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
-    const auto& c = h.cell(elems_[r]);
-    const std::uint32_t e = elems_[r].value;
-    render_of_[e] = std::uint32_t(r);
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (VertexId v : c) {
-      lo = std::min(lo, (*u_)[v.value]);
-      hi = std::max(hi, (*u_)[v.value]);
+  // Render indices scattered (elems_ is in Morton order), then the value ranges in the
+  // hierarchy's order: contiguous cells and range entries instead of random ones.
+  tbb::parallel_for(std::size_t(0), elems_.size(),
+                    [&](std::size_t r) { render_of_[elems_[r].value] = std::uint32_t(r); });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 4096), [&](const auto& range) {
+    for (std::size_t e = range.begin(); e != range.end(); ++e) {
+      if (render_of_[e] == kNone) continue;
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (VertexId v : h.cell(ElemId(std::uint32_t(e)))) {
+        lo = std::min(lo, (*u_)[v.value]);
+        hi = std::max(hi, (*u_)[v.value]);
+      }
+      lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
+      hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
     }
-    lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
-    hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
   });
   next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
   advise_huge_pages(next_);
