@@ -583,6 +583,20 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
   grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
   const double pad = 1e-6 * longest;
+  // An element's cell range per axis is grid_index of its box's padded ends; grid_index and
+  // x ∓ pad are monotone in x, so that is the min (max) of its vertices' padded cells, found
+  // once per vertex here instead of six divisions per element.
+  for (int a = 0; a < 3; ++a) MLFE_CHECK(grid_n_[a] <= 256);
+  std::vector<std::array<std::uint8_t, 6>> vertex_cells(h.vertex_count());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.vertex_count(), 4096), [&](const auto& range) {
+    for (std::size_t v = range.begin(); v != range.end(); ++v) {
+      const auto& q = h.point(VertexId(std::uint32_t(v)));
+      for (int a = 0; a < 3; ++a) {
+        vertex_cells[v][a] = std::uint8_t(grid_index(a, q[a] - pad));
+        vertex_cells[v][3 + a] = std::uint8_t(grid_index(a, q[a] + pad));
+      }
+    }
+  });
   // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
   // so the grid does not depend on the split.
   constexpr std::size_t kChunks = 4;
@@ -595,19 +609,12 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     ghi.assign(cells, -std::numeric_limits<float>::infinity());
     for (std::size_t i = k * per_chunk, end = std::min(ne, i + per_chunk); i < end; ++i) {
       if (render_of_[i] == kNone) continue;
-      Vec3 blo, bhi;
-      blo.fill(std::numeric_limits<double>::infinity());
-      bhi.fill(-std::numeric_limits<double>::infinity());
+      int c0[3] = {255, 255, 255}, c1[3] = {0, 0, 0};
       for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
         for (int a = 0; a < 3; ++a) {
-          blo[a] = std::min(blo[a], h.point(v)[a]);
-          bhi[a] = std::max(bhi[a], h.point(v)[a]);
+          c0[a] = std::min<int>(c0[a], vertex_cells[v.value][a]);
+          c1[a] = std::max<int>(c1[a], vertex_cells[v.value][3 + a]);
         }
-      int c0[3], c1[3];
-      for (int a = 0; a < 3; ++a) {
-        c0[a] = grid_index(a, blo[a] - pad);
-        c1[a] = grid_index(a, bhi[a] + pad);
-      }
       for (int z = c0[2]; z <= c1[2]; ++z)
         for (int y = c0[1]; y <= c1[1]; ++y)
           for (int x = c0[0]; x <= c1[0]; ++x) {
