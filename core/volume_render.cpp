@@ -147,11 +147,53 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
   return std::min({1.0 - l1 - l2 - l3, l1, l2, l3});
 }
 
+// For each red child and face: the sibling sharing that face and the face's index there, or -1
+// for a face on the parent's boundary. Every red refinement stores its children in one pattern
+// (Bey's, Hierarchy::red_children; from_arrays checks files against it) and its ten vertices
+// are distinct, so the table is read off the first red-refined element by matching vertex sets.
+struct RedFacePairs {
+  std::int8_t child[8][4];
+  std::int8_t face[8][4];
+};
+
+RedFacePairs red_face_pairs(const Hierarchy<3>& h) {
+  RedFacePairs t;
+  for (int k = 0; k < 8; ++k)
+    for (int f = 0; f < 4; ++f) t.child[k][f] = t.face[k][f] = -1;
+  for (std::uint32_t e = 0; e < h.element_count(); ++e) {
+    if (h.is_leaf(ElemId(e)) || h.kind(h.first_child(ElemId(e))) != ElemKind::kRed) continue;
+    const std::uint32_t first = h.first_child(ElemId(e)).value;
+    MLFE_CHECK(h.num_children(ElemId(e)) == 8);
+    const auto face = [&](int k, int f) {
+      const auto& c = h.cell(ElemId(first + std::uint32_t(k)));
+      std::array<std::uint32_t, 3> v = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value,
+                                        c[kFaceVerts[f][2]].value};
+      std::sort(v.begin(), v.end());
+      return v;
+    };
+    for (int k = 0; k < 8; ++k)
+      for (int f = 0; f < 4; ++f)
+        for (int j = 0; j < 8; ++j)
+          for (int g = 0; g < 4; ++g)
+            if (j != k && face(j, g) == face(k, f)) {
+              t.child[k][f] = std::int8_t(j);
+              t.face[k][f] = std::int8_t(g);
+            }
+    break;
+  }
+  return t;
+}
+
 // Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
 // records' `next` holds them (4 × render index + the local index of the shared face in it);
-// render_of gives each hierarchy element's render index (kNone: not rendered). Faces are
-// bucketed by their lowest vertex id (a counting sort, linear and parallel: several times faster
-// than comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a
+// render_of gives each hierarchy element's render index (kNone: not rendered). With `siblings`,
+// a face between two rendered red children of one element (half of a red refinement's faces)
+// is matched within the parent by the red pattern's table: on a conforming mesh no third
+// element has that face, so the global match below would pair the same two. (Green siblings
+// have no fixed pattern; comparing their faces cost more than the global match of them.) The
+// other faces are bucketed by their
+// lowest vertex id (a counting sort, linear and parallel: several times faster than
+// comparison-sorting all faces on a million tetrahedra), then matched within each bucket (a
 // few dozen faces) by their other two vertex ids. Within a bucket the faces are put in
 // (key, slot) order before matching, so the result does not depend on the order the buckets
 // were filled in. The counting passes read the elements in the hierarchy's order (contiguous
@@ -161,20 +203,24 @@ double min_barycentric(const Vec3 (&p)[4], const Vec3& q) {
 // are left as boundary faces).
 template <class Next>
 std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_t>& render_of,
-                           std::size_t rendered, Next& next) {
+                           std::size_t rendered, Next& next, bool siblings) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
   struct Face {
     std::uint32_t v1, v2;  // the face's two higher vertex ids
     std::uint32_t slot;    // 4 * render index + local face
   };
-  // Calls visit(low, v1, v2, slot) for the four faces of rendered element e, face vertex ids
-  // ascending.
+  // Per element: bit f set when face f is left to the global match (set by the counting pass).
+  std::vector<std::uint8_t> global(ne, 0);
+  const RedFacePairs pairs = siblings ? red_face_pairs(h) : RedFacePairs{};
+  // Calls visit(low, v1, v2, slot) for the faces of rendered element e in the global match,
+  // face vertex ids ascending.
   const auto faces_of = [&](std::size_t e, auto&& visit) {
     const std::uint32_t r = render_of[e];
     if (r == kNone) return;
     const auto& c = h.cell(ElemId(std::uint32_t(e)));
     for (int f = 0; f < 4; ++f) {
+      if (!(global[e] >> f & 1)) continue;
       std::uint32_t v[3] = {c[kFaceVerts[f][0]].value, c[kFaceVerts[f][1]].value, c[kFaceVerts[f][2]].value};
       if (v[0] > v[1]) std::swap(v[0], v[1]);
       if (v[1] > v[2]) std::swap(v[1], v[2]);
@@ -189,8 +235,26 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
   std::vector<std::uint32_t> at(kChunks * nv, 0);
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* count = at.data() + k * nv;
-    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
+    for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e) {
+      const std::uint32_t r = render_of[e];
+      if (r == kNone) continue;
+      // Faces shared with a rendered red sibling (the table), the rest to the global match.
+      unsigned left = 15;
+      const ElemId p = h.parent(ElemId(std::uint32_t(e)));
+      if (siblings && p.valid() && h.kind(ElemId(std::uint32_t(e))) == ElemKind::kRed) {
+        const std::uint32_t first = h.first_child(p).value;
+        const std::uint32_t k = std::uint32_t(e) - first;
+        for (int f = 0; f < 4; ++f) {
+          if (pairs.child[k][f] < 0) continue;
+          const std::uint32_t s = render_of[first + std::uint32_t(pairs.child[k][f])];
+          if (s == kNone) continue;
+          next[r][f] = 4 * s + std::uint32_t(pairs.face[k][f]);
+          left &= ~(1u << f);
+        }
+      }
+      global[e] = std::uint8_t(left);
       faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
+    }
   });
   std::vector<std::uint32_t> start(nv + 1, 0);
   std::uint32_t sum = 0;
@@ -203,9 +267,9 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
     }
   }
   start[nv] = sum;
-  MLFE_CHECK(sum == 4 * rendered);
-  std::unique_ptr<Face[]> faces(new Face[rendered * 4]);
-  advise_huge_pages(faces.get(), rendered * 4 * sizeof(Face));
+  MLFE_CHECK(sum <= 4 * rendered);
+  std::unique_ptr<Face[]> faces(new Face[std::max<std::size_t>(sum, 1)]);
+  advise_huge_pages(faces.get(), sum * sizeof(Face));
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* fill = at.data() + k * nv;
     for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
@@ -460,21 +524,26 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
-  tbb::parallel_for(std::size_t(0), elems_.size(), [&](std::size_t r) {
-    const auto& c = h.cell(elems_[r]);
-    const std::uint32_t e = elems_[r].value;
-    render_of_[e] = std::uint32_t(r);
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (VertexId v : c) {
-      lo = std::min(lo, (*u_)[v.value]);
-      hi = std::max(hi, (*u_)[v.value]);
+  // Render indices scattered (elems_ is in Morton order), then the value ranges in the
+  // hierarchy's order: contiguous cells and range entries instead of random ones.
+  tbb::parallel_for(std::size_t(0), elems_.size(),
+                    [&](std::size_t r) { render_of_[elems_[r].value] = std::uint32_t(r); });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 4096), [&](const auto& range) {
+    for (std::size_t e = range.begin(); e != range.end(); ++e) {
+      if (render_of_[e] == kNone) continue;
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (VertexId v : h.cell(ElemId(std::uint32_t(e)))) {
+        lo = std::min(lo, (*u_)[v.value]);
+        hi = std::max(hi, (*u_)[v.value]);
+      }
+      lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
+      hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
     }
-    lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
-    hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
   });
   next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
   advise_huge_pages(next_);
-  const std::size_t overshared = face_adjacency(h, render_of_, elems_.size(), next_);
+  const std::size_t overshared =
+      face_adjacency(h, render_of_, elems_.size(), next_, entry_ == RayEntry::kHierarchy);
   if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
     throw Error("render: " + std::to_string(overshared) +
                 " faces are shared by more than two tetrahedra (not a conforming mesh)");
@@ -514,6 +583,20 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
   grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
   const double pad = 1e-6 * longest;
+  // An element's cell range per axis is grid_index of its box's padded ends; grid_index and
+  // x ∓ pad are monotone in x, so that is the min (max) of its vertices' padded cells, found
+  // once per vertex here instead of six divisions per element.
+  for (int a = 0; a < 3; ++a) MLFE_CHECK(grid_n_[a] <= 256);
+  std::vector<std::array<std::uint8_t, 6>> vertex_cells(h.vertex_count());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.vertex_count(), 4096), [&](const auto& range) {
+    for (std::size_t v = range.begin(); v != range.end(); ++v) {
+      const auto& q = h.point(VertexId(std::uint32_t(v)));
+      for (int a = 0; a < 3; ++a) {
+        vertex_cells[v][a] = std::uint8_t(grid_index(a, q[a] - pad));
+        vertex_cells[v][3 + a] = std::uint8_t(grid_index(a, q[a] + pad));
+      }
+    }
+  });
   // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
   // so the grid does not depend on the split.
   constexpr std::size_t kChunks = 4;
@@ -526,19 +609,12 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     ghi.assign(cells, -std::numeric_limits<float>::infinity());
     for (std::size_t i = k * per_chunk, end = std::min(ne, i + per_chunk); i < end; ++i) {
       if (render_of_[i] == kNone) continue;
-      Vec3 blo, bhi;
-      blo.fill(std::numeric_limits<double>::infinity());
-      bhi.fill(-std::numeric_limits<double>::infinity());
+      int c0[3] = {255, 255, 255}, c1[3] = {0, 0, 0};
       for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
         for (int a = 0; a < 3; ++a) {
-          blo[a] = std::min(blo[a], h.point(v)[a]);
-          bhi[a] = std::max(bhi[a], h.point(v)[a]);
+          c0[a] = std::min<int>(c0[a], vertex_cells[v.value][a]);
+          c1[a] = std::max<int>(c1[a], vertex_cells[v.value][3 + a]);
         }
-      int c0[3], c1[3];
-      for (int a = 0; a < 3; ++a) {
-        c0[a] = grid_index(a, blo[a] - pad);
-        c1[a] = grid_index(a, bhi[a] + pad);
-      }
       for (int z = c0[2]; z <= c1[2]; ++z)
         for (int y = c0[1]; y <= c1[1]; ++y)
           for (int x = c0[0]; x <= c1[0]; ++x) {

@@ -3,6 +3,7 @@
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/formats/hierarchy_levels.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -67,9 +68,22 @@ void match_children(const Hierarchy<D>& h, const Hierarchy<D>& rebuilt,
 template <int D>
 std::vector<ElemId> refinement_candidates(const Hierarchy<D>& h, int level) {
   MLFE_CHECK(level >= 1);
+  // Chunks in parallel, concatenated in order (a reader calls this once per level over the
+  // whole hierarchy so far).
+  constexpr std::size_t kChunk = 1 << 16;
+  const std::size_t ne = h.element_count(), nchunks = (ne + kChunk - 1) / kChunk;
+  std::vector<std::vector<ElemId>> found(nchunks);
+  tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
+    for (std::size_t e = k * kChunk, end = std::min(ne, e + kChunk); e < end; ++e) {
+      const ElemId id(static_cast<std::uint32_t>(e));
+      if (h.level(id) == level - 1 && h.kind(id) != ElemKind::kGreen) found[k].push_back(id);
+    }
+  });
+  std::size_t n = 0;
+  for (const auto& f : found) n += f.size();
   std::vector<ElemId> out;
-  for (std::uint32_t e = 0; e < h.element_count(); ++e)
-    if (h.level(ElemId(e)) == level - 1 && h.kind(ElemId(e)) != ElemKind::kGreen) out.push_back(ElemId(e));
+  out.reserve(n);
+  for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
   return out;
 }
 
