@@ -178,41 +178,23 @@ struct Rows {
   }
 };
 
-// Rows built contiguous, in parallel, from items 0..m-1: rows_of(i, add) calls add(r) for every
-// row r that holds item i. Counted and placed with atomic slots, then each row sorted, so
-// every row is ascending whatever the thread count. (The verified stage rebuilds its rows
-// every pass; built serially they held back its second thread.)
-template <class RowsOf>
-void build_rows(Rows& rows, std::size_t n, std::size_t m, RowsOf&& rows_of) {
-  constexpr std::size_t kGrain = 16384;
+// Rows built contiguous from (row, item) pairs given in item order: each(add) calls add(r, i)
+// for every item, twice (once to count, once to fill), in the same order.
+template <class Each>
+void build_rows(Rows& rows, std::size_t n, Each&& each) {
   rows.count.assign(n, 0);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, m, kGrain), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i)
-          rows_of(i, [&](Index row) { __atomic_fetch_add(&rows.count[row], 1, __ATOMIC_RELAXED); });
-      });
-  std::vector<Index> fill(n);
+  each([&](Index r, Index) { ++rows.count[r]; });
+  std::vector<Index> start(n);
   Index total = 0;
   for (std::size_t r = 0; r < n; ++r) {
-    fill[r] = total;
+    start[r] = total;
     total += rows.count[r];
   }
   rows.cap = rows.count;
   rows.items.resize(total);
   rows.row.resize(n);
-  for (std::size_t r = 0; r < n; ++r) rows.row[r] = rows.items.data() + fill[r];
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, kGrain),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i)
-                        rows_of(i, [&](Index row) {
-                          rows.items[__atomic_fetch_add(&fill[row], 1, __ATOMIC_RELAXED)] = Index(i);
-                        });
-                    });
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t row = r.begin(); row != r.end(); ++row)
-                        std::sort(rows.row[row], rows.row[row] + rows.count[row]);
-                    });
+  for (std::size_t r = 0; r < n; ++r) rows.row[r] = rows.items.data() + start[r];
+  each([&](Index r, Index i) { rows.items[start[r]++] = i; });
 }
 
 // A neighbour of a vertex and the number of its faces that contain the edge to it
@@ -834,9 +816,10 @@ class Simplifier {
   static bool contains(const std::array<Index, 3>& f, Index v) { return f[0] == v || f[1] == v || f[2] == v; }
 
   void build_vertex_faces() {
-    build_rows(vf_, pos_.size(), faces_.size(), [&](std::size_t f, auto&& add) {
-      if (face_alive_[f])
-        for (Index v : faces_[f]) add(v);
+    build_rows(vf_, pos_.size(), [&](auto&& add) {
+      for (std::size_t f = 0; f < faces_.size(); ++f)
+        if (face_alive_[f])
+          for (Index v : faces_[f]) add(v, Index(f));
     });
     vf_arena_ = Arena();
     block_vf_arenas_.clear();
@@ -883,8 +866,9 @@ class Simplifier {
 
   void build_face_points() {
     if (!opts_.verify_bound) return;
-    build_rows(fp_, faces_.size(), owner_.size(), [&](std::size_t p, auto&& add) {
-      if (owner_[p] != kNone) add(owner_[p]);
+    build_rows(fp_, faces_.size(), [&](auto&& add) {
+      for (Index p = 0; p < Index(owner_.size()); ++p)
+        if (owner_[p] != kNone) add(owner_[p], p);
     });
   }
 
