@@ -19,6 +19,7 @@
 #include <mlfe/core/surface_fitting.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <Eigen/IterativeLinearSolvers>
 #include <Eigen/SparseCore>
@@ -27,6 +28,7 @@
 #include <cstdint>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -144,8 +146,8 @@ class TriangleGrid {
 };
 
 // Step 1: every dense vertex on a triangle, with its area weight, matched to the closest point
-// of the coarse surface.
-std::vector<Sample> match(const TriangleMesh& coarse, const TriangleMesh& dense, double tolerance) {
+// of the coarse surface (`grid` and `bvh` of its triangles).
+std::vector<Sample> match(const TriangleMesh& dense, const TriangleGrid& grid, const TriangleBvh& bvh) {
   std::vector<double> weight(dense.positions.size(), 0.0);
   for (const auto& t : dense.triangles) {
     for (auto v : t) MLFE_CHECK(v < dense.positions.size());
@@ -158,10 +160,6 @@ std::vector<Sample> match(const TriangleMesh& coarse, const TriangleMesh& dense,
   std::vector<Sample> samples;
   for (std::size_t v = 0; v < dense.positions.size(); ++v)
     if (weight[v] > 0) samples.push_back({to_v3(dense.positions[v]), weight[v]});
-  // The simplifier kept the dense vertices within the tolerance of the coarse surface: triangles
-  // binned with that margin settle almost every match in the vertex's own cube.
-  const TriangleGrid grid = TriangleGrid::within(coarse, tolerance);
-  const TriangleBvh bvh(coarse);
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 2048),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -398,7 +396,16 @@ SurfaceFitReport fit_surface(TriangleMesh& coarse, const TriangleMesh& dense, co
   if (coarse.triangles.empty() || dense.triangles.empty()) return report;
   for (const auto& t : coarse.triangles)
     for (auto v : t) MLFE_CHECK(v < coarse.positions.size());
-  const std::vector<Sample> samples = match(coarse, dense, o.tolerance);
+  // The searches the steps need, built at once (each is a sequential pass over its mesh). The
+  // simplifier kept the dense vertices within the tolerance of the coarse surface: triangles
+  // binned with that margin settle almost every match in the vertex's own cube; the guard
+  // looks for moved vertices near the dense surface the same way.
+  std::optional<TriangleGrid> coarse_grid, dense_grid;
+  std::optional<TriangleBvh> coarse_bvh;
+  tbb::parallel_invoke([&] { coarse_grid.emplace(TriangleGrid::within(coarse, o.tolerance)); },
+                       [&] { coarse_bvh.emplace(coarse); },
+                       [&] { dense_grid.emplace(TriangleGrid::within(dense, o.tolerance)); });
+  const std::vector<Sample> samples = match(dense, *coarse_grid, *coarse_bvh);
   report.samples = samples.size();
   std::vector<V3> x0(coarse.positions.size());
   for (std::size_t v = 0; v < x0.size(); ++v) x0[v] = to_v3(coarse.positions[v]);
@@ -406,7 +413,7 @@ SurfaceFitReport fit_surface(TriangleMesh& coarse, const TriangleMesh& dense, co
   // Positions are stored as floats: the guard checks what will be written.
   for (auto& p : x)
     for (auto& c : p) c = double(float(c));
-  report.kept = guard(coarse, samples, TriangleGrid::within(dense, o.tolerance), x0, x, o);
+  report.kept = guard(coarse, samples, *dense_grid, x0, x, o);
   report.rms_before = rms(samples, coarse, nullptr);
   report.rms_after = rms(samples, coarse, &x);
   for (std::size_t v = 0; v < x.size(); ++v) {

@@ -229,6 +229,11 @@ struct Scratch {
   Vec3 p;                                 // the last placement evaluated
   std::vector<Index> targets;             // faces around v1 after the collapse
   Move move{kNone, kNone, Vec3::Zero()};  // the last legal move found
+  // The costs of the edges of vertex `from` (the blocks' last survivor) whose placement is the
+  // same from either end, for its neighbours' keys (see edge_cost()).
+  Index from = kNone;
+  std::vector<Target> from_costs;
+  bool record = false;  // for_each_target() fills from_costs
 };
 
 class Simplifier {
@@ -586,14 +591,17 @@ class Simplifier {
     std::vector<std::uint64_t> cells;
     for (std::size_t v = 0; v < nv; ++v)
       if (inside_[v] != kNone) cells.push_back(key[v]);
-    std::sort(cells.begin(), cells.end());
+    tbb::parallel_sort(cells.begin(), cells.end());  // plain numbers: one order for any thread count
     cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v)
+            if (inside_[v] != kNone)
+              inside_[v] = Index(std::lower_bound(cells.begin(), cells.end(), key[v]) - cells.begin());
+        });
     std::vector<std::vector<Index>> blocks(cells.size());
     for (std::size_t v = 0; v < nv; ++v)
-      if (inside_[v] != kNone) {
-        inside_[v] = Index(std::lower_bound(cells.begin(), cells.end(), key[v]) - cells.begin());
-        blocks[inside_[v]].push_back(Index(v));
-      }
+      if (inside_[v] != kNone) blocks[inside_[v]].push_back(Index(v));
     return blocks;
   }
 
@@ -633,12 +641,19 @@ class Simplifier {
       std::sort(ring.begin(), ring.end());
       ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
       // Pushed again: changed keys (a heap entry whose key is unchanged is still valid) and
-      // stuck vertices next to a changed one, which are tried again.
+      // stuck vertices next to a changed one, which are tried again. v1's edges are costed
+      // first, and its neighbours take the costs of their edges to v1 from there.
       again.clear();
+      const double v1_old = key_[v1];
+      s.record = true;
+      key_[v1] = cheapest(v1, s, &best_[v1]);
+      s.record = false;
       for (Index a : ring) {
         if (inside_[a] == b) {
-          const double old = key_[a];
-          if (a == v1 || best_[a] == v0 || best_[a] == v1) {
+          const double old = a == v1 ? v1_old : key_[a];
+          if (a == v1) {
+            // keyed above
+          } else if (best_[a] == v0 || best_[a] == v1) {
             key_[a] = cheapest(a, s, &best_[a]);
           } else {  // also when no other edge qualified (best_[a] == kNone)
             auto lower = [&](double cost, Index w, const Vec3&) {
@@ -647,8 +662,11 @@ class Simplifier {
                 best_[a] = w;
               }
             };
+            double cost;
             if (boundary_[a])  // the edge's face count matters
               for_each_target(a, s, lower, v1);
+            else if (known_cost(a, s, cost))
+              lower(cost, v1, s.p);
             else
               lower(edge_cost(a, v1, false, s.p), v1, s.p);
           }
@@ -658,6 +676,7 @@ class Simplifier {
           for (Index w : faces_[*g])
             if (inside_[w] == b && stuck_[w]) again.push_back(w);
       }
+      s.from = kNone;
       std::sort(again.begin(), again.end());
       again.erase(std::unique(again.begin(), again.end()), again.end());
       for (Index a : again) push(a);
@@ -752,11 +771,11 @@ class Simplifier {
           bool bound =
               opts_.verify_bound || segment_distance2(0.5 * (pos_[a] + pos_[b]), pos_[c], pos_[d]) <= tol2_;
           for (Index face : {f, g})
-            for (const Index* p = fp_.begin(face); p != fp_.end(face) && bound; ++p)
+            for (const Index* p = points_begin(face); p != points_end(face) && bound; ++p)
               bound = std::min(distance2(*p, nf), distance2(*p, ng)) <= tol2_;
           if (!bound) continue;
           for (Index face : {f, g})
-            for (const Index* p = fp_.begin(face); p != fp_.end(face); ++p)
+            for (const Index* p = points_begin(face); p != points_end(face); ++p)
               owner_[*p] = distance2(*p, nf) <= distance2(*p, ng) ? f : g;
           faces_[f] = nf;
           faces_[g] = ng;
@@ -840,7 +859,13 @@ class Simplifier {
     vf_.count[v0] = 0;
   }
 
+  // The points attached to face f (none with an estimated bound, which attaches none and
+  // leaves fp_ unbuilt: on the full heads' first stage its rows took a tenth of a second).
+  const Index* points_begin(Index f) const { return opts_.verify_bound ? fp_.begin(f) : nullptr; }
+  const Index* points_end(Index f) const { return opts_.verify_bound ? fp_.end(f) : nullptr; }
+
   void build_face_points() {
+    if (!opts_.verify_bound) return;
     build_rows(fp_, faces_.size(), [&](auto&& add) {
       for (Index p = 0; p < Index(owner_.size()); ++p)
         if (owner_[p] != kNone) add(owner_[p], p);
@@ -908,24 +933,62 @@ class Simplifier {
   bool for_each_target(Index v0, Scratch& s, Each&& each, Index only = kNone) const {
     neighbours(v0, s.n0);
     const bool boundary0 = on_boundary(s.n0);
+    // Each cost reads the neighbour's quadric (two cache lines) and position, far apart in
+    // memory in the extraction's order: asked for all at once, their misses overlap.
+    for (const auto& x : s.n0) {
+      const char* q = reinterpret_cast<const char*>(&quadric_[x.v]);
+      __builtin_prefetch(q);
+      __builtin_prefetch(q + sizeof(Quadric) - 1);
+      __builtin_prefetch(&pos_[x.v]);
+    }
+    const bool record = s.record;
+    s.record = false;
+    if (record) {
+      s.from = v0;
+      s.from_costs.clear();
+    }
     for (const auto& x : s.n0) {
       if (only != kNone && x.v != only) continue;
       if (boundary0 && x.faces != 1) continue;  // a boundary vertex only slides along the boundary
-      const double cost = edge_cost(v0, x.v, boundary0, s.p);
+      double cost;
+      if (!boundary0 && x.v == s.from && !record && known_cost(v0, s, cost)) {
+        if (cost < kNoKey) each(cost, x.v, s.p);
+        continue;
+      }
+      bool symmetric = false;
+      cost = edge_cost(v0, x.v, boundary0, s.p, &symmetric);
+      if (record && symmetric) s.from_costs.push_back({cost, x.v, s.p});
       if (cost < kNoKey) each(cost, x.v, s.p);
     }
     return boundary0;
   }
 
   // The key of moving v0 onto its neighbour w (kNoKey: not allowed), the edge's face count
-  // aside (see for_each_target); p := place(v0, w, boundary0) when allowed.
-  double edge_cost(Index v0, Index w, bool boundary0, Vec3& p) const {
+  // aside (see for_each_target); p := place(v0, w, boundary0) when allowed. *symmetric: the
+  // key and p are bit for bit those of moving w onto v0 (the quadric minimum of two interior
+  // vertices, both unlocked, the key's sums commutative), so one evaluation serves both ends.
+  double edge_cost(Index v0, Index w, bool boundary0, Vec3& p, bool* symmetric = nullptr) const {
+    if (symmetric) *symmetric = false;
     if (locked_[w] || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
-    p = place(v0, w, boundary0);
+    p = place(v0, w, boundary0, symmetric);
+    if (symmetric) *symmetric = *symmetric && !locked_[v0];
     const double cost = eval_sum(quadric_[v0], quadric_[w], p);
     // The estimated bound: the merged planes' mean squared distance.
     if (!opts_.verify_bound && cost > tol2_ * (quadric_[v0].weight() + quadric_[w].weight())) return kNoKey;
     return cost + 1e-12 * (pos_[w] - pos_[v0]).squaredNorm();
+  }
+
+  // The cost of v0's edge to s.from, recorded from s.from's end (false: not recorded, or not
+  // the same from v0's end, v0 being interior); s.p := its placement.
+  bool known_cost(Index v0, Scratch& s, double& cost) const {
+    if (boundary_[v0] || boundary_[s.from]) return false;
+    for (const auto& t : s.from_costs)
+      if (t.w == v0) {
+        cost = t.cost;
+        s.p = t.p;
+        return true;
+      }
+    return false;
   }
 
   // Neighbours v0 may move onto, cheapest first (ties by index).
@@ -987,7 +1050,9 @@ class Simplifier {
   // Where the merged vertex goes: the minimum of the summed quadrics (Garland & Heckbert) when
   // it is well defined and near the edge, else the cheapest point of the edge; on the boundary
   // (and in input-vertex mode) v1's own position, so boundaries stay where they are.
-  Vec3 place(Index v0, Index v1, bool boundary0) const {
+  // *symmetric: the minimum of the summed quadrics was taken (the same for place(v1, v0)).
+  Vec3 place(Index v0, Index v1, bool boundary0, bool* symmetric = nullptr) const {
+    if (symmetric) *symmetric = false;
     if (!optimal_ || boundary0 || boundary_[v1]) return pos_[v1];
     Quadric q = quadric_[v0];
     q.add(quadric_[v1]);
@@ -1008,7 +1073,10 @@ class Simplifier {
                           c02 * b.x() + c12 * b.y() + c22 * b.z()) /
                      -det;
       const Vec3 mid = 0.5 * (pos_[v0] + pos_[v1]);
-      if (p.allFinite() && (p - mid).squaredNorm() <= len2) return p;
+      if (p.allFinite() && (p - mid).squaredNorm() <= len2) {
+        if (symmetric) *symmetric = true;
+        return p;
+      }
     }
     Eigen::Matrix3d m;
     m << a[0], a[1], a[2], a[1], a[4], a[5], a[2], a[5], a[7];
@@ -1040,12 +1108,12 @@ class Simplifier {
     }
     const Move& m = s.move;
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f)
-      for (const Index* p = fp_.begin(*f); p != fp_.end(*f); ++p)
+      for (const Index* p = points_begin(*f); p != points_end(*f); ++p)
         owner_[*p] = nearest(*p, m, s.targets).second;
     if (optimal_)
       for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
         if (!contains(faces_[*g], v0))
-          for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
+          for (const Index* p = points_begin(*g); p != points_end(*g); ++p)
             owner_[*p] = nearest(*p, m, s.targets).second;
     pos_[v1] = m.p;
     std::size_t removed = 0;
@@ -1119,13 +1187,13 @@ class Simplifier {
     // The bound: every point attached to a face around v0 must find a face around v1.
     for (const Index* f = vf_.begin(v0); f != vf_.end(v0); ++f) {
       const Index first = contains(faces_[*f], v1) ? kNone : *f;  // its own face, moved, if kept
-      for (const Index* p = fp_.begin(*f); p != fp_.end(*f); ++p)
+      for (const Index* p = points_begin(*f); p != points_end(*f); ++p)
         if (!within(*p, first, m, s.targets)) return false;
     }
     if (moves)
       for (const Index* g = vf_.begin(v1); g != vf_.end(v1); ++g)
         if (!contains(faces_[*g], v0))
-          for (const Index* p = fp_.begin(*g); p != fp_.end(*g); ++p)
+          for (const Index* p = points_begin(*g); p != points_end(*g); ++p)
             if (!within(*p, *g, m, s.targets)) return false;
     // Last: when the quadric minimum is off the surface this scans every candidate triangle.
     if (moves && opts_.verify_bound && !near_input(m.p, v0, v1)) return false;
@@ -1155,7 +1223,7 @@ class Simplifier {
     if (near(v1) || near(v0)) return true;
     for (Index v : {v1, v0})
       for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
-        for (const Index* q = fp_.begin(*f); q != fp_.end(*f); ++q)
+        for (const Index* q = points_begin(*f); q != points_end(*f); ++q)
           if (near(*q)) return true;
     return false;
   }

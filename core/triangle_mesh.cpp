@@ -2,6 +2,9 @@
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/triangle_mesh.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -52,17 +55,25 @@ TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   double extent = 0;
   for (int c = 0; c < 3; ++c) extent = std::max(extent, double(hi[c]) - double(lo[c]));
   const double scale = extent > 0 ? 1023.0 / extent : 0.0;
-  std::vector<std::uint32_t> code(nv, 0);
-  for (std::size_t v = 0; v < nv; ++v)
-    for (int c = 0; c < 3; ++c) {
-      const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
-      const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
-      code[v] |= spread_bits(q) << c;
-    }
+  // Sorted as (code, index) pairs: unique keys, so the parallel sort gives the one order a
+  // stable sort by code would, whatever the thread count.
+  std::vector<std::uint64_t> key(nv);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 8192),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                        std::uint32_t code = 0;
+                        for (int c = 0; c < 3; ++c) {
+                          const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
+                          const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
+                          code |= spread_bits(q) << c;
+                        }
+                        key[v] = std::uint64_t(code) << 32 | v;
+                      }
+                    });
+  tbb::parallel_sort(key.begin(), key.end());
   std::vector<std::uint32_t> order(nv);  // new -> old
-  std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::uint32_t a, std::uint32_t b) { return code[a] < code[b]; });
+  for (std::size_t i = 0; i < nv; ++i) order[i] = std::uint32_t(key[i]);
+  std::vector<std::uint64_t>().swap(key);
   std::vector<std::uint32_t> index(nv);  // old -> new
   for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
   TriangleMesh out;
@@ -74,13 +85,27 @@ TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   } else {
     out.normals = mesh.normals;
   }
-  out.triangles.reserve(mesh.triangles.size());
-  for (const auto& t : mesh.triangles) out.triangles.push_back({index[t[0]], index[t[1]], index[t[2]]});
-  auto first = [](const std::array<std::uint32_t, 3>& t) { return std::min({t[0], t[1], t[2]}); };
-  std::stable_sort(out.triangles.begin(), out.triangles.end(),
-                   [&](const std::array<std::uint32_t, 3>& a, const std::array<std::uint32_t, 3>& b) {
-                     return first(a) < first(b);
-                   });
+  // Triangles by their first new vertex, ties in input order: (first vertex, input position)
+  // pairs, unique again.
+  const std::size_t nt = mesh.triangles.size();
+  if (nt > std::numeric_limits<std::uint32_t>::max()) throw Error("spatial order: more than 2^32 triangles");
+  std::vector<std::uint64_t> by_first(nt);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nt, 8192), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const auto& t = mesh.triangles[i];
+          by_first[i] = std::uint64_t(std::min({index[t[0]], index[t[1]], index[t[2]]})) << 32 | i;
+        }
+      });
+  tbb::parallel_sort(by_first.begin(), by_first.end());
+  out.triangles.resize(nt);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 8192),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        const auto& t = mesh.triangles[std::uint32_t(by_first[i])];
+                        out.triangles[i] = {index[t[0]], index[t[1]], index[t[2]]};
+                      }
+                    });
   return out;
 }
 

@@ -570,12 +570,13 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
       if (m.triangles.empty()) return;
-      const TriangleMesh extracted = refit ? m : TriangleMesh{};
-      m = simplify_surface(m, so, p.simplifier, p.ratio);
-      if (!refit) return;
-      SurfaceFitOptions fo;
-      fo.tolerance = so.tolerance;
-      fit_surface(m, extracted, fo);
+      TriangleMesh simplified = simplify_surface(m, so, p.simplifier, p.ratio);
+      if (refit) {  // to the extracted surface, still in m
+        SurfaceFitOptions fo;
+        fo.tolerance = so.tolerance;
+        fit_surface(simplified, m, fo);
+      }
+      m = std::move(simplified);
     });
   }
   if (p.decimate > 0)
