@@ -12,6 +12,8 @@
 #include <optional>
 #include <random>
 
+#include "morton.h"
+
 namespace mlfe {
 namespace {
 
@@ -47,16 +49,6 @@ V3 interpolated_normal(const TriangleMesh& m, std::uint32_t t, const V3& bary) {
   return len > 0 ? scale(n, 1.0 / len) : V3{0, 0, 0};
 }
 
-/// Spreads the low 10 bits of x so that two zero bits follow each (for a 30-bit Morton code).
-std::uint32_t spread_bits(std::uint32_t x) {
-  x &= 0x3ff;
-  x = (x | (x << 16)) & 0x030000ff;
-  x = (x | (x << 8)) & 0x0300f00f;
-  x = (x | (x << 4)) & 0x030c30c3;
-  x = (x | (x << 2)) & 0x09249249;
-  return x;
-}
-
 /// Sample indices sorted by the Morton code of their point on a 1024^3 grid over their box
 /// (ties by index, so the order is unique).
 std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& samples) {
@@ -75,7 +67,7 @@ std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& sample
     for (int k = 0; k < 3; ++k) {
       const double extent = hi[k] - lo[k];
       const double q = extent > 0 ? (samples[i].point[k] - lo[k]) / extent * 1023.0 : 0.0;
-      c |= spread_bits(std::uint32_t(std::clamp(q, 0.0, 1023.0))) << k;
+      c |= detail::spread_bits(std::uint32_t(std::clamp(q, 0.0, 1023.0))) << k;
     }
     code[i] = c;
   }

@@ -1,4 +1,5 @@
-// Area-weighted vertex normals of an indexed triangle mesh, and its topology counted.
+// Area-weighted vertex normals of an indexed triangle mesh, its spatial (Morton) order, and its
+// topology counted.
 #include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/triangle_mesh.h>
@@ -17,23 +18,11 @@
 #include <tuple>
 #include <vector>
 
+#include "morton.h"
+
 namespace mlfe {
 
 using Vec3 = Eigen::Vector3d;
-
-namespace {
-
-// The 10 low bits of x spread to every third bit (Morton interleaving).
-std::uint32_t spread_bits(std::uint32_t x) {
-  x &= 0x3ffu;
-  x = (x | (x << 16)) & 0x30000ffu;
-  x = (x | (x << 8)) & 0x300f00fu;
-  x = (x | (x << 4)) & 0x30c30c3u;
-  x = (x | (x << 2)) & 0x9249249u;
-  return x;
-}
-
-}  // namespace
 
 TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   const std::size_t nv = mesh.positions.size();
@@ -65,7 +54,7 @@ TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
                         for (int c = 0; c < 3; ++c) {
                           const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
                           const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
-                          code |= spread_bits(q) << c;
+                          code |= detail::spread_bits(q) << c;
                         }
                         key[v] = std::uint64_t(code) << 32 | v;
                       }
