@@ -749,9 +749,6 @@ class Hierarchy<D>::RedRounds {
         candidates = leaves_with_two_flagged(dirty_, round_first_elem);
       else
         candidates = incident_candidates(dirty_list_, dirty_, round_first_elem);
-      candidates.reserve(candidates.size() + h_.el_.cells.size() - round_first_elem);
-      for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
-        candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     } else {
       // The first round: older leaves with ≥ 2 dirty vertices (the others decide() would pass
       // over) by one parallel pass, and the elements it created. A list of every leaf, kept up
@@ -759,10 +756,10 @@ class Hierarchy<D>::RedRounds {
       // call, however little the call refines (rebuilding the levels of a file, whose last
       // steps add a few hundred vertices to a million elements).
       candidates = leaves_with_two_flagged(dirty_, round_first_elem);
-      candidates.reserve(candidates.size() + h_.el_.cells.size() - round_first_elem);
-      for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
-        candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     }
+    candidates.reserve(candidates.size() + h_.el_.cells.size() - round_first_elem);
+    for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
+      candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     return candidates;
   }
 

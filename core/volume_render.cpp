@@ -243,12 +243,12 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
       const ElemId p = h.parent(ElemId(std::uint32_t(e)));
       if (siblings && p.valid() && h.kind(ElemId(std::uint32_t(e))) == ElemKind::kRed) {
         const std::uint32_t first = h.first_child(p).value;
-        const std::uint32_t k = std::uint32_t(e) - first;
+        const std::uint32_t child = std::uint32_t(e) - first;
         for (int f = 0; f < 4; ++f) {
-          if (pairs.child[k][f] < 0) continue;
-          const std::uint32_t s = render_of[first + std::uint32_t(pairs.child[k][f])];
+          if (pairs.child[child][f] < 0) continue;
+          const std::uint32_t s = render_of[first + std::uint32_t(pairs.child[child][f])];
           if (s == kNone) continue;
-          next[r][f] = 4 * s + std::uint32_t(pairs.face[k][f]);
+          next[r][f] = 4 * s + std::uint32_t(pairs.face[child][f]);
           left &= ~(1u << f);
         }
       }
