@@ -93,8 +93,8 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "result, topology kept; ~10 microseconds per triangle), fast (the same collapses and topology "
          "checks, the error estimated from quadrics; about twice as fast), meshopt (meshoptimizer, error "
          "estimated, seconds for millions of triangles, but it may pinch the surface: non-manifold edges, "
-         "counted in the report) or auto (bounded, but fast for surfaces of over 200000 extracted "
-         "triangles with --ratio below 0.05)")
+         "counted in the report) or auto (bounded up to 200000 extracted triangles; above, fast to half "
+         "the tolerance and then bounded, or fast all the way with --ratio below 0.05)")
       ->check(CLI::IsMember(pipeline::enum_name_list<Simplifier>()))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
