@@ -944,6 +944,13 @@ void Hierarchy<D>::refine_uniform() {
 template <int D>
 std::vector<ElemId> Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead, std::size_t old_count) {
   MLFE_CHECK(dead.size() == el_.cells.size());
+  // Nothing removed (most calls): ids unchanged, without the id table (a fresh array of every
+  // element's id, whose page faults cost more than the scan for a dead flag).
+  if (std::find(dead.begin(), dead.end(), std::uint8_t(1)) == dead.end()) {
+    std::vector<ElemId> same(old_count);
+    for (std::size_t i = 0; i < old_count; ++i) same[i] = elem_id(i);
+    return same;
+  }
   std::vector<std::uint32_t> new_id(el_.cells.size(), ElemId::kInvalidValue);
   std::uint32_t n = 0;
   for (std::size_t i = 0; i < el_.cells.size(); ++i)

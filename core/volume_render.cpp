@@ -10,7 +10,6 @@
 #include <mlfe/core/volume_render.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -307,6 +306,10 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
 // Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
 // neighbours, and the pixels of a tile cross neighbouring elements, so records close in space
 // should be close in memory (the hierarchy's order follows refinement, not space).
+// The order is that of the (key, element id) pairs. They are bucketed by the key's top 16 bits
+// (a counting sort in fixed chunks, each with its own counters, as face_adjacency's), then each
+// bucket (a few dozen pairs) is sorted on its own, buckets in parallel: the same order as a
+// comparison sort of all pairs, without its log n passes over them.
 void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
   Vec3 lo, hi;
   lo.fill(std::numeric_limits<double>::infinity());
@@ -326,20 +329,53 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
     x = (x | x << 2) & 0x1249249249249249ull;
     return x;
   };
-  std::vector<std::pair<std::uint64_t, ElemId>> keyed(elems.size());
-  tbb::parallel_for(std::size_t(0), elems.size(), [&](std::size_t i) {
-    const auto& c = h.cell(elems[i]);
-    std::uint64_t key = 0;
-    for (int a = 0; a < 3; ++a) {
-      double m = 0;
-      for (VertexId v : c) m += h.point(v)[a];
-      const double f = hi[a] > lo[a] ? (0.25 * m - lo[a]) / (hi[a] - lo[a]) : 0.0;
-      key |= spread(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
+  using Keyed = std::pair<std::uint64_t, ElemId>;
+  constexpr int kBucketBits = 16, kKeyBits = 63;
+  constexpr std::size_t kBuckets = std::size_t(1) << kBucketBits, kChunks = 4;
+  const std::size_t n = elems.size(), per_chunk = (n + kChunks - 1) / kChunks;
+  std::vector<std::uint64_t, DefaultInit<std::uint64_t>> keys(n);
+  std::vector<Keyed, DefaultInit<Keyed>> sorted(n);
+  std::vector<std::uint32_t> at(kChunks * kBuckets, 0);
+  // 1. keys, and elements per (chunk, bucket).
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* count = at.data() + k * kBuckets;
+    for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i) {
+      const auto& c = h.cell(elems[i]);
+      std::uint64_t key = 0;
+      for (int a = 0; a < 3; ++a) {
+        double m = 0;
+        for (VertexId v : c) m += h.point(v)[a];
+        const double f = hi[a] > lo[a] ? (0.25 * m - lo[a]) / (hi[a] - lo[a]) : 0.0;
+        key |= spread(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
+      }
+      keys[i] = key;
+      ++count[key >> (kKeyBits - kBucketBits)];
     }
-    keyed[i] = {key, elems[i]};
   });
-  tbb::parallel_sort(keyed.begin(), keyed.end());
-  for (std::size_t i = 0; i < elems.size(); ++i) elems[i] = keyed[i].second;
+  // 2. bucket offsets, chunk after chunk within a bucket; 3. pairs into their buckets.
+  std::vector<std::uint32_t> start(kBuckets + 1);
+  std::uint32_t sum = 0;
+  for (std::size_t b = 0; b < kBuckets; ++b) {
+    start[b] = sum;
+    for (std::size_t k = 0; k < kChunks; ++k) {
+      const std::uint32_t count = at[k * kBuckets + b];
+      at[k * kBuckets + b] = sum;
+      sum += count;
+    }
+  }
+  start[kBuckets] = sum;
+  tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
+    std::uint32_t* fill = at.data() + k * kBuckets;
+    for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i)
+      sorted[fill[keys[i] >> (kKeyBits - kBucketBits)]++] = {keys[i], elems[i]};
+  });
+  // 4. each bucket in (key, id) order, written back.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kBuckets, 256), [&](const auto& range) {
+    for (std::size_t b = range.begin(); b != range.end(); ++b) {
+      std::sort(sorted.begin() + start[b], sorted.begin() + start[b + 1]);
+      for (std::size_t i = start[b]; i < start[b + 1]; ++i) elems[i] = sorted[i].second;
+    }
+  });
 }
 
 }  // namespace
