@@ -733,6 +733,10 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
   // converge by themselves, and the paper's threshold rule runs to its end.
   const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
 
+  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
+  AssemblyWorkspace workspace;
+  SparseMatrix m;
+  Vector rhs;
   for (int it = 0;; ++it) {
     IterationStats st;
     st.iteration = it;
@@ -742,8 +746,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    SparseMatrix m = assemble_matrix(h, leaves, gw, &cache, kById);
-    Vector rhs = assemble_load(h, leaves, cache, gw, kById);
+    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs);
     if (lattice) regularize_padding(h, f, *lattice, m, rhs);
     st.assembly_seconds = since(ta);
 

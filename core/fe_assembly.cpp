@@ -51,54 +51,232 @@ std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h
   return out;
 }
 
-template <int D>
-SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
-                             const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index) {
-  // Row by row from a vertex → incident-element table instead of (D+1)² triplets per element:
-  // 16 bytes per element instead of 256, and every row is summed by one thread in element
-  // order, so the values do not depend on the thread count.
+namespace {
+constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+constexpr std::size_t kBlock = 2048;  // rows per task of the row pass
+
+// The vertex → incidence table (ws.start, ws.inc): per vertex, key(i) * (D+1) + corner for the
+// leaves i it is a corner of, in leaf order. A counting sort over contiguous chunks of leaves,
+// each counted and filled by one task with its own counters; a vertex's incidences come chunk
+// by chunk, so their order (the leaves') does not depend on the chunking or the thread count.
+template <int D, class Key>
+void build_incidences(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, Key key,
+                      AssemblyWorkspace& ws) {
   const std::size_t nv = h.vertex_count(), ne = leaves.size();
-  MLFE_CHECK(ne * (D + 1) < std::size_t(std::numeric_limits<std::uint32_t>::max()));
-  std::vector<std::uint32_t> start(nv + 1, 0);
-  for (ElemId e : leaves)
-    for (VertexId v : h.cell(e)) ++start[v.value + 1];
-  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-  std::vector<std::uint32_t> inc(start[nv]);  // leaf index * (D+1) + local corner
-  {
-    std::vector<std::uint32_t> pos(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < ne; ++i) {
-      const auto& c = h.cell(leaves[i]);
-      for (int a = 0; a <= D; ++a) inc[pos[c[a].value]++] = static_cast<std::uint32_t>(i * (D + 1) + a);
+  const std::size_t chunks = std::clamp<std::size_t>(ne / 65536, 1, 4);
+  const std::size_t per = (ne + chunks - 1) / chunks;
+  ws.counts.resize(chunks * nv);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    std::uint32_t* cnt = ws.counts.data() + c * nv;
+    std::fill(cnt, cnt + nv, 0u);
+    for (std::size_t i = c * per, end = std::min(ne, i + per); i < end; ++i)
+      for (VertexId v : h.cell(leaves[i])) ++cnt[v.value];
+  });
+  // Per vertex, chunk by chunk: the counts become each chunk's first slot.
+  ws.start.resize(nv + 1);
+  std::uint32_t at = 0;
+  for (std::size_t v = 0; v < nv; ++v) {
+    ws.start[v] = at;
+    for (std::size_t c = 0; c < chunks; ++c) {
+      const std::uint32_t n = ws.counts[c * nv + v];
+      ws.counts[c * nv + v] = at;
+      at += n;
     }
   }
-  // Element data once per element (not once per corner row), in leaf order so the row pass
-  // reads it without going through the hierarchy: the corners, and for the pure mass matrix
-  // only |T|, with a gradient term the (D+1)² entries.
+  ws.start[nv] = at;
+  if (ws.inc.capacity() < at) {
+    ws.inc = AssemblyWorkspace::Array<std::uint32_t>();
+    ws.inc.reserve(2 * std::size_t(at));  // the next iteration's table in the same pages
+  }
+  ws.inc.resize(at);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    std::uint32_t* pos = ws.counts.data() + c * nv;
+    for (std::size_t i = c * per, end = std::min(ne, i + per); i < end; ++i) {
+      const auto& cell = h.cell(leaves[i]);
+      for (int a = 0; a <= D; ++a)
+        ws.inc[pos[cell[a].value]++] = static_cast<std::uint32_t>(key(i) * (D + 1) + std::size_t(a));
+    }
+  });
+}
+
+// Sorts a short row by column (insertion sort: rows hold 7-30 entries; columns are distinct,
+// so the result is the same as any sort's).
+void sort_row(std::vector<std::pair<int, double>>& row) {
+  for (std::size_t j = 1; j < row.size(); ++j) {
+    const auto x = row[j];
+    std::size_t k = j;
+    for (; k > 0 && row[k - 1].first > x.first; --k) row[k] = row[k - 1];
+    row[k] = x;
+  }
+}
+
+// The rows of M (and of F when rhs is given) from the incidence table, in blocks of kBlock
+// vertices, one pass: a per-thread slot array maps a column to its place in the current row
+// (no sort of all incidences, no binary search per entry), and each row is summed by one
+// thread in leaf order, so the values do not depend on the thread count. `src` gives an
+// incidence key's corners, entries and load, and prefetches them a few incidences ahead (the
+// element data is read at random; waiting for it was most of this pass).
+template <int D, class Source>
+void row_pass(std::size_t nv, const Source& src, AssemblyWorkspace& ws, double* rhs) {
+  const std::size_t nblocks = (nv + kBlock - 1) / kBlock;
+  ws.blocks.resize(nblocks);
+  ws.row_len.resize(nv);
+  tbb::enumerable_thread_specific<std::vector<std::uint32_t>> slots_tls;
+  const std::uint32_t* start = ws.start.data();
+  const std::uint32_t* inc = ws.inc.data();
+  constexpr std::uint32_t kAhead = 6;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nblocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        auto& slot = slots_tls.local();
+        if (slot.size() != nv) slot.assign(nv, kNone);
+        std::vector<std::pair<int, double>> row;
+        for (std::size_t b = r.begin(); b != r.end(); ++b) {
+          auto& blk = ws.blocks[b];
+          blk.cols.clear();
+          blk.vals.clear();
+          const std::size_t vend = std::min(nv, (b + 1) * kBlock);
+          const std::uint32_t kend = start[vend];
+          for (std::uint32_t k = start[b * kBlock]; k < std::min(kend, start[b * kBlock] + kAhead); ++k)
+            src.prefetch(inc[k] / (D + 1));
+          for (std::size_t v = b * kBlock; v < vend; ++v) {
+            row.clear();
+            double load = 0;
+            for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
+              if (k + kAhead < kend) src.prefetch(inc[k + kAhead] / (D + 1));
+              const std::uint32_t key = inc[k] / (D + 1);
+              const int a = static_cast<int>(inc[k] % (D + 1));
+              const auto& c = src.corners(key);
+              if (rhs) load += src.load(key, a);
+              for (int bb = 0; bb <= D; ++bb) {
+                const double x = src.entry(key, a, bb);
+                std::uint32_t& s = slot[c[bb].value];
+                if (s == kNone) {
+                  s = static_cast<std::uint32_t>(row.size());
+                  row.emplace_back(int(c[bb].value), x);
+                } else {
+                  row[s].second += x;
+                }
+              }
+            }
+            for (const auto& e : row) slot[e.first] = kNone;
+            sort_row(row);
+            for (const auto& e : row) {
+              blk.cols.push_back(e.first);
+              blk.vals.push_back(e.second);
+            }
+            ws.row_len[v] = static_cast<int>(row.size());
+            if (rhs) rhs[v] = load;
+          }
+        }
+      });
+}
+
+// The blocks' rows copied into m, whose storage is reused when it has room.
+void fill_matrix(std::size_t nv, AssemblyWorkspace& ws, SparseMatrix& m) {
+  const int n = static_cast<int>(nv);
+  m.resize(n, n);  // keeps the non-zeros' storage
+  int* outer = m.outerIndexPtr();
+  outer[0] = 0;
+  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] = outer[v] + ws.row_len[v];
+  const auto nnz = static_cast<Eigen::Index>(outer[nv]);
+  if (m.data().allocatedSize() < nnz) m.data().reserve(2 * nnz);  // next time in the same pages
+  m.resizeNonZeros(nnz);
+  int* inner = m.innerIndexPtr();
+  double* val = m.valuePtr();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ws.blocks.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                        const int at = outer[b * kBlock];
+                        std::copy(ws.blocks[b].cols.begin(), ws.blocks[b].cols.end(), inner + at);
+                        std::copy(ws.blocks[b].vals.begin(), ws.blocks[b].vals.end(), val + at);
+                      }
+                    });
+  m.finalize();
+}
+
+// Row pass sources. Sampled: the element's sampled mass and load read from the integrals in
+// place (by element id: keys are element ids and the leaves are not looked up; by leaf order:
+// keys are leaf indices).
+template <int D, bool kById>
+struct SampledSource {
+  const Hierarchy<D>& h;
+  const std::vector<ElemId>& leaves;
+  const ElementIntegrals<D>* in;
+  ElemId elem(std::uint32_t key) const { return kById ? ElemId(key) : leaves[key]; }
+  const typename Hierarchy<D>::Cell& corners(std::uint32_t key) const {
+    MLFE_CHECK(in[key].sampled);  // every leaf's, not only the first's
+    return h.cell(elem(key));
+  }
+  double entry(std::uint32_t key, int a, int b) const { return in[key].mass_at(a, b); }
+  double load(std::uint32_t key, int a) const { return in[key].fphi[a]; }
+  void prefetch(std::uint32_t key) const {
+    __builtin_prefetch(&h.cell(elem(key)));
+    __builtin_prefetch(&in[key].fphi[0]);
+    __builtin_prefetch(&in[key].mass[0]);
+    __builtin_prefetch(&in[key].mass.back());
+  }
+};
+
+// Exact P1 matrices, keys are leaf indices: `local` holds |T| per leaf (pure mass) or its
+// (D+1)² entries; the load, if any, comes from the integrals.
+template <int D, bool kMeasureOnly>
+struct LocalSource {
+  static constexpr int kLocal = (D + 1) * (D + 1);
+  const Hierarchy<D>& h;
+  const std::vector<ElemId>& leaves;
+  const std::vector<double>& local;
+  const std::vector<ElementIntegrals<D>>* integrals;
+  IntegralIndex index;
+  const typename Hierarchy<D>::Cell& corners(std::uint32_t key) const { return h.cell(leaves[key]); }
+  double entry(std::uint32_t key, int a, int b) const {
+    return kMeasureOnly ? P1Element<D>::mass_of(local[key], a, b)
+                        : local[std::size_t(key) * kLocal + std::size_t(a * (D + 1) + b)];
+  }
+  double load(std::uint32_t key, int a) const {
+    return (*integrals)[index == IntegralIndex::kLeafOrder ? key : leaves[key].value].fphi[a];
+  }
+  void prefetch(std::uint32_t key) const { __builtin_prefetch(&h.cell(leaves[key])); }
+};
+
+// Assembly from the element data: the sampled integrals in place, or the exact P1 matrices
+// (with the gradient term and/or sampled masses copied per leaf).
+template <int D>
+void assemble_rows(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                   const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index,
+                   AssemblyWorkspace& ws, SparseMatrix& m, double* rhs) {
+  const std::size_t nv = h.vertex_count(), ne = leaves.size();
+  MLFE_CHECK(ne * (D + 1) < std::size_t(std::numeric_limits<std::uint32_t>::max()));
   constexpr int kLocal = (D + 1) * (D + 1);
   // Least squares at the samples: the element matrices are the sampled ones.
-  const bool sampled =
-      integrals && !leaves.empty() &&
-      (index == IntegralIndex::kLeafOrder ? (*integrals)[0] : (*integrals)[leaves[0].value]).sampled;
+  const bool by_id = index == IntegralIndex::kElementId;
+  const bool sampled = integrals && !leaves.empty() && (*integrals)[by_id ? leaves[0].value : 0].sampled;
   auto sampled_at = [&](std::size_t i) -> const ElementIntegrals<D>& {
-    return index == IntegralIndex::kLeafOrder ? (*integrals)[i] : (*integrals)[leaves[i].value];
+    return by_id ? (*integrals)[leaves[i].value] : (*integrals)[i];
   };
-  // Sampled mass without a gradient term is read from the integrals in place (a copy would
-  // be 128 bytes per leaf).
-  const bool in_place = sampled && gradient_weight == 0;
+  if (sampled && gradient_weight == 0) {
+    // Sampled mass without a gradient term, read in place (a copy would be 128 bytes per leaf).
+    if (by_id) {
+      MLFE_CHECK(h.element_count() * (D + 1) < std::size_t(std::numeric_limits<std::uint32_t>::max()));
+      build_incidences(
+          h, leaves, [&](std::size_t i) { return std::size_t(leaves[i].value); }, ws);
+      row_pass<D>(nv, SampledSource<D, true>{h, leaves, integrals->data()}, ws, rhs);
+    } else {
+      build_incidences(
+          h, leaves, [](std::size_t i) { return i; }, ws);
+      row_pass<D>(nv, SampledSource<D, false>{h, leaves, integrals->data()}, ws, rhs);
+    }
+    fill_matrix(nv, ws, m);
+    return;
+  }
+  // Element data once per element (not once per corner row), in leaf order: for the pure mass
+  // matrix only |T|, with a gradient term (or sampled masses) the (D+1)² entries.
   const bool with_grad = gradient_weight != 0 || sampled;
-  std::vector<double> local(in_place ? 0 : with_grad ? ne * kLocal : ne);
-  std::vector<std::array<std::uint32_t, D + 1>> corners(ne);
+  std::vector<double> local(with_grad ? ne * kLocal : ne);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, ne, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
-          const auto& c = h.cell(leaves[i]);
-          for (int a = 0; a <= D; ++a) corners[i][a] = c[a].value;
           if (!with_grad) {
             local[i] = P1Element<D>::measure_of(element_points(h, leaves[i]));
-            continue;
-          }
-          if (in_place) {
-            MLFE_CHECK(sampled_at(i).sampled);
             continue;
           }
           const P1Element<D> el(element_points(h, leaves[i]));
@@ -108,75 +286,37 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
                                                     gradient_weight * el.stiffness(a, b);
         }
       });
-  // Rows in blocks, one pass: a per-thread slot array maps a column to its place in the
-  // current row (no sort of all incidences, no binary search per entry); the blocks' rows are
-  // then copied into the matrix in order.
-  constexpr std::size_t kBlock = 2048;
-  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
-  const std::size_t nblocks = (nv + kBlock - 1) / kBlock;
-  struct Block {
-    std::vector<int> cols;
-    std::vector<double> vals;
-  };
-  std::vector<Block> blocks(nblocks);
-  std::vector<int> row_len(nv, 0);
-  tbb::enumerable_thread_specific<std::vector<std::uint32_t>> slots_tls;
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, nblocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-        auto& slot = slots_tls.local();
-        if (slot.size() != nv) slot.assign(nv, kNone);
-        std::vector<std::pair<int, double>> row;
-        for (std::size_t b = r.begin(); b != r.end(); ++b) {
-          auto& blk = blocks[b];
-          for (std::size_t v = b * kBlock, vend = std::min(nv, v + kBlock); v < vend; ++v) {
-            row.clear();
-            for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
-              const std::size_t i = inc[k] / (D + 1);
-              const int a = static_cast<int>(inc[k] % (D + 1));
-              const auto& c = corners[i];
-              for (int bb = 0; bb <= D; ++bb) {
-                const double x = in_place    ? sampled_at(i).mass_at(a, bb)
-                                 : with_grad ? local[i * kLocal + a * (D + 1) + bb]
-                                             : P1Element<D>::mass_of(local[i], a, bb);
-                std::uint32_t& s = slot[c[bb]];
-                if (s == kNone) {
-                  s = static_cast<std::uint32_t>(row.size());
-                  row.emplace_back(int(c[bb]), x);
-                } else {
-                  row[s].second += x;
-                }
-              }
-            }
-            for (const auto& e : row) slot[e.first] = kNone;
-            std::sort(row.begin(), row.end(), [](const auto& p, const auto& q) { return p.first < q.first; });
-            for (const auto& e : row) {
-              blk.cols.push_back(e.first);
-              blk.vals.push_back(e.second);
-            }
-            row_len[v] = static_cast<int>(row.size());
-          }
-        }
-      });
-  const int n = static_cast<int>(nv);
-  SparseMatrix m(n, n);
-  int* outer = m.outerIndexPtr();
-  outer[0] = 0;
-  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] = outer[v] + row_len[v];
-  m.resizeNonZeros(outer[nv]);
-  int* inner = m.innerIndexPtr();
-  double* val = m.valuePtr();
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nblocks, 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t b = r.begin(); b != r.end(); ++b) {
-                        const int at = outer[b * kBlock];
-                        std::copy(blocks[b].cols.begin(), blocks[b].cols.end(), inner + at);
-                        std::copy(blocks[b].vals.begin(), blocks[b].vals.end(), val + at);
-                        std::vector<int>().swap(blocks[b].cols);
-                        std::vector<double>().swap(blocks[b].vals);
-                      }
-                    });
-  m.finalize();
+  build_incidences(
+      h, leaves, [](std::size_t i) { return i; }, ws);
+  if (with_grad)
+    row_pass<D>(nv, LocalSource<D, false>{h, leaves, local, integrals, index}, ws, rhs);
+  else
+    row_pass<D>(nv, LocalSource<D, true>{h, leaves, local, integrals, index}, ws, rhs);
+  fill_matrix(nv, ws, m);
+}
+}  // namespace
+
+template <int D>
+SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                             const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index) {
+  AssemblyWorkspace ws;
+  SparseMatrix m;
+  assemble_rows(h, leaves, gradient_weight, integrals, index, ws, m, nullptr);
   return m;
+}
+
+template <int D>
+void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                     const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
+                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs) {
+  if (index == IntegralIndex::kLeafOrder)
+    MLFE_CHECK(integrals.size() == leaves.size());
+  else
+    MLFE_CHECK(integrals.size() >= h.element_count());
+  const bool load_in_rows = gradient_weight == 0;
+  if (load_in_rows) rhs.resize(static_cast<Eigen::Index>(h.vertex_count()));
+  assemble_rows(h, leaves, gradient_weight, &integrals, index, ws, m, load_in_rows ? rhs.data() : nullptr);
+  if (!load_in_rows) rhs = assemble_load(h, leaves, integrals, gradient_weight, index);
 }
 
 namespace {
@@ -280,6 +420,12 @@ template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<
                                          const std::vector<ElementIntegrals<2>>*, IntegralIndex);
 template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,
                                          const std::vector<ElementIntegrals<3>>*, IntegralIndex);
+template void assemble_system<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double,
+                                 const std::vector<ElementIntegrals<2>>&, IntegralIndex, AssemblyWorkspace&,
+                                 SparseMatrix&, Vector&);
+template void assemble_system<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,
+                                 const std::vector<ElementIntegrals<3>>&, IntegralIndex, AssemblyWorkspace&,
+                                 SparseMatrix&, Vector&);
 template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                  const std::vector<ElementIntegrals<2>>&, double, IntegralIndex);
 template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,

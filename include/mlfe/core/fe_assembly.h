@@ -7,11 +7,13 @@
 // All functions are TBB-parallel and bitwise deterministic: per-element results go to fixed
 // slots and are summed in element order.
 #pragma once
+#include <mlfe/core/default_init.h>
 #include <mlfe/core/element_integrals.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
 #include <mlfe/core/sample_lattice.h>
 
+#include <cstdint>
 #include <vector>
 
 namespace mlfe {
@@ -44,6 +46,31 @@ template <int D>
 SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
                              const std::vector<ElementIntegrals<D>>* integrals = nullptr,
                              IntegralIndex index = IntegralIndex::kLeafOrder);
+
+/// What the assembly keeps from one call to the next (the refine-solve loop's): the vertex →
+/// incidence table and the rows' blocks keep their capacity, so an iteration writes the pages
+/// the previous one used instead of having fresh ones zero-filled by the kernel. Holds no
+/// results; any workspace gives the same values.
+struct AssemblyWorkspace {
+  template <class T>
+  using Array = std::vector<T, DefaultInit<T>>;
+  Array<std::uint32_t> start, inc, counts;  // CSR of incidences, per-chunk counts
+  Array<int> row_len;
+  struct Block {
+    std::vector<int> cols;
+    std::vector<double> vals;
+  };
+  std::vector<Block> blocks;  // the rows of kBlock vertices each, before the copy into M
+};
+
+/// assemble_matrix into `m` and, for gradient_weight = 0, assemble_load into `rhs` in the same
+/// pass (else assemble_load itself): bit-identical to the two, every row and entry summed in
+/// leaf order. The storage of m's non-zeros is reused when it has room (a call reserves twice
+/// what it needs when it has to grow it: address space, untouched pages cost nothing).
+template <int D>
+void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                     const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
+                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs);
 
 /// Load vector F_j = (f, φ_j) + gradient_weight (∇f, ∇φ_j).
 template <int D>
