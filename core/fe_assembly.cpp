@@ -110,17 +110,17 @@ void sort_row(std::vector<std::pair<int, double>>& row) {
   }
 }
 
-// The rows of M (and of F when rhs is given) from the incidence table, in blocks of kBlock
-// vertices, one pass: a per-thread slot array maps a column to its place in the current row
-// (no sort of all incidences, no binary search per entry), and each row is summed by one
-// thread in leaf order, so the values do not depend on the thread count. `src` gives an
-// incidence key's corners, entries and load, and prefetches them a few incidences ahead (the
-// element data is read at random; waiting for it was most of this pass).
-template <int D, class Source>
-void row_pass(std::size_t nv, const Source& src, AssemblyWorkspace& ws, double* rhs) {
+// One pass over the rows from the incidence table, in blocks of kBlock vertices. A
+// per-thread slot array maps a column to its place in the current row (no sort of all
+// incidences, no binary search per entry). kValues false: each row's length into outer[v + 1].
+// kValues true: each row summed in leaf order by one thread (the values do not depend on the
+// thread count), sorted by column and written at outer[v]. `src` gives an incidence key's
+// corners, entries and load, and prefetches them a few incidences ahead (the element data is
+// read at random; waiting for it was most of this pass).
+template <bool kValues, int D, class Source>
+void row_pass(std::size_t nv, const Source& src, const AssemblyWorkspace& ws, int* outer, int* inner,
+              double* val, double* rhs) {
   const std::size_t nblocks = (nv + kBlock - 1) / kBlock;
-  ws.blocks.resize(nblocks);
-  ws.row_len.resize(nv);
   tbb::enumerable_thread_specific<std::vector<std::uint32_t>> slots_tls;
   const std::uint32_t* start = ws.start.data();
   const std::uint32_t* inc = ws.inc.data();
@@ -129,68 +129,65 @@ void row_pass(std::size_t nv, const Source& src, AssemblyWorkspace& ws, double* 
       tbb::blocked_range<std::size_t>(0, nblocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
         auto& slot = slots_tls.local();
         if (slot.size() != nv) slot.assign(nv, kNone);
-        std::vector<std::pair<int, double>> row;
+        std::vector<std::pair<int, double>> row;  // (column, value); only the columns in pass 1
         for (std::size_t b = r.begin(); b != r.end(); ++b) {
-          auto& blk = ws.blocks[b];
-          blk.cols.clear();
-          blk.vals.clear();
           const std::size_t vend = std::min(nv, (b + 1) * kBlock);
           const std::uint32_t kend = start[vend];
           for (std::uint32_t k = start[b * kBlock]; k < std::min(kend, start[b * kBlock] + kAhead); ++k)
-            src.prefetch(inc[k] / (D + 1));
+            src.prefetch(inc[k] / (D + 1), kValues);
           for (std::size_t v = b * kBlock; v < vend; ++v) {
             row.clear();
             double load = 0;
             for (std::uint32_t k = start[v]; k < start[v + 1]; ++k) {
-              if (k + kAhead < kend) src.prefetch(inc[k + kAhead] / (D + 1));
+              if (k + kAhead < kend) src.prefetch(inc[k + kAhead] / (D + 1), kValues);
               const std::uint32_t key = inc[k] / (D + 1);
               const int a = static_cast<int>(inc[k] % (D + 1));
               const auto& c = src.corners(key);
-              if (rhs) load += src.load(key, a);
+              if (kValues && rhs) load += src.load(key, a);
               for (int bb = 0; bb <= D; ++bb) {
-                const double x = src.entry(key, a, bb);
+                const double x = kValues ? src.entry(key, a, bb) : 0.0;
                 std::uint32_t& s = slot[c[bb].value];
                 if (s == kNone) {
                   s = static_cast<std::uint32_t>(row.size());
                   row.emplace_back(int(c[bb].value), x);
-                } else {
+                } else if (kValues) {
                   row[s].second += x;
                 }
               }
             }
             for (const auto& e : row) slot[e.first] = kNone;
-            sort_row(row);
-            for (const auto& e : row) {
-              blk.cols.push_back(e.first);
-              blk.vals.push_back(e.second);
+            if (!kValues) {
+              outer[v + 1] = static_cast<int>(row.size());
+              continue;
             }
-            ws.row_len[v] = static_cast<int>(row.size());
+            sort_row(row);
+            MLFE_CHECK(row.size() == std::size_t(outer[v + 1] - outer[v]));
+            for (std::size_t j = 0; j < row.size(); ++j) {
+              inner[std::size_t(outer[v]) + j] = row[j].first;
+              val[std::size_t(outer[v]) + j] = row[j].second;
+            }
             if (rhs) rhs[v] = load;
           }
         }
       });
 }
 
-// The blocks' rows copied into m, whose storage is reused when it has room.
-void fill_matrix(std::size_t nv, AssemblyWorkspace& ws, SparseMatrix& m) {
+// M (and F when rhs is given) in two row passes: the first counts each row's columns, the
+// second, with the rows' places known, writes them into m's storage directly (no copy of the
+// whole matrix in between). m's storage is reused when it has room.
+template <int D, class Source>
+void row_passes(std::size_t nv, const Source& src, const AssemblyWorkspace& ws, SparseMatrix& m,
+                double* rhs) {
   const int n = static_cast<int>(nv);
   m.resize(n, n);  // keeps the non-zeros' storage
   int* outer = m.outerIndexPtr();
+  row_pass<false, D>(nv, src, ws, outer, nullptr, nullptr, nullptr);
   outer[0] = 0;
-  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] = outer[v] + ws.row_len[v];
+  for (std::size_t v = 0; v < nv; ++v) outer[v + 1] += outer[v];
   const auto nnz = static_cast<Eigen::Index>(outer[nv]);
   if (m.data().allocatedSize() < nnz) m.data().reserve(2 * nnz);  // next time in the same pages
   m.resizeNonZeros(nnz);
-  int* inner = m.innerIndexPtr();
-  double* val = m.valuePtr();
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ws.blocks.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t b = r.begin(); b != r.end(); ++b) {
-                        const int at = outer[b * kBlock];
-                        std::copy(ws.blocks[b].cols.begin(), ws.blocks[b].cols.end(), inner + at);
-                        std::copy(ws.blocks[b].vals.begin(), ws.blocks[b].vals.end(), val + at);
-                      }
-                    });
+  row_pass<true, D>(nv, src, ws, outer, m.innerIndexPtr(), m.valuePtr(), rhs);
   m.finalize();
 }
 
@@ -203,14 +200,15 @@ struct SampledSource {
   const std::vector<ElemId>& leaves;
   const ElementIntegrals<D>* in;
   ElemId elem(std::uint32_t key) const { return kById ? ElemId(key) : leaves[key]; }
-  const typename Hierarchy<D>::Cell& corners(std::uint32_t key) const {
-    MLFE_CHECK(in[key].sampled);  // every leaf's, not only the first's
-    return h.cell(elem(key));
+  const typename Hierarchy<D>::Cell& corners(std::uint32_t key) const { return h.cell(elem(key)); }
+  double entry(std::uint32_t key, int a, int b) const {
+    MLFE_CHECK(b != 0 || in[key].sampled);  // every leaf's, not only the first's
+    return in[key].mass_at(a, b);
   }
-  double entry(std::uint32_t key, int a, int b) const { return in[key].mass_at(a, b); }
   double load(std::uint32_t key, int a) const { return in[key].fphi[a]; }
-  void prefetch(std::uint32_t key) const {
+  void prefetch(std::uint32_t key, bool values) const {
     __builtin_prefetch(&h.cell(elem(key)));
+    if (!values) return;
     __builtin_prefetch(&in[key].fphi[0]);
     __builtin_prefetch(&in[key].mass[0]);
     __builtin_prefetch(&in[key].mass.back());
@@ -235,7 +233,7 @@ struct LocalSource {
   double load(std::uint32_t key, int a) const {
     return (*integrals)[index == IntegralIndex::kLeafOrder ? key : leaves[key].value].fphi[a];
   }
-  void prefetch(std::uint32_t key) const { __builtin_prefetch(&h.cell(leaves[key])); }
+  void prefetch(std::uint32_t key, bool) const { __builtin_prefetch(&h.cell(leaves[key])); }
 };
 
 // Assembly from the element data: the sampled integrals in place, or the exact P1 matrices
@@ -259,13 +257,12 @@ void assemble_rows(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, dou
       MLFE_CHECK(h.element_count() * (D + 1) < std::size_t(std::numeric_limits<std::uint32_t>::max()));
       build_incidences(
           h, leaves, [&](std::size_t i) { return std::size_t(leaves[i].value); }, ws);
-      row_pass<D>(nv, SampledSource<D, true>{h, leaves, integrals->data()}, ws, rhs);
+      row_passes<D>(nv, SampledSource<D, true>{h, leaves, integrals->data()}, ws, m, rhs);
     } else {
       build_incidences(
           h, leaves, [](std::size_t i) { return i; }, ws);
-      row_pass<D>(nv, SampledSource<D, false>{h, leaves, integrals->data()}, ws, rhs);
+      row_passes<D>(nv, SampledSource<D, false>{h, leaves, integrals->data()}, ws, m, rhs);
     }
-    fill_matrix(nv, ws, m);
     return;
   }
   // Element data once per element (not once per corner row), in leaf order: for the pure mass
@@ -289,10 +286,9 @@ void assemble_rows(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, dou
   build_incidences(
       h, leaves, [](std::size_t i) { return i; }, ws);
   if (with_grad)
-    row_pass<D>(nv, LocalSource<D, false>{h, leaves, local, integrals, index}, ws, rhs);
+    row_passes<D>(nv, LocalSource<D, false>{h, leaves, local, integrals, index}, ws, m, rhs);
   else
-    row_pass<D>(nv, LocalSource<D, true>{h, leaves, local, integrals, index}, ws, rhs);
-  fill_matrix(nv, ws, m);
+    row_passes<D>(nv, LocalSource<D, true>{h, leaves, local, integrals, index}, ws, m, rhs);
 }
 }  // namespace
 

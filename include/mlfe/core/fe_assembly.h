@@ -48,19 +48,13 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
                              IntegralIndex index = IntegralIndex::kLeafOrder);
 
 /// What the assembly keeps from one call to the next (the refine-solve loop's): the vertex →
-/// incidence table and the rows' blocks keep their capacity, so an iteration writes the pages
-/// the previous one used instead of having fresh ones zero-filled by the kernel. Holds no
-/// results; any workspace gives the same values.
+/// incidence table keeps its capacity, so an iteration writes the pages the previous one used
+/// instead of having fresh ones zero-filled by the kernel. Holds no results; any workspace
+/// gives the same values.
 struct AssemblyWorkspace {
   template <class T>
   using Array = std::vector<T, DefaultInit<T>>;
   Array<std::uint32_t> start, inc, counts;  // CSR of incidences, per-chunk counts
-  Array<int> row_len;
-  struct Block {
-    std::vector<int> cols;
-    std::vector<double> vals;
-  };
-  std::vector<Block> blocks;  // the rows of kBlock vertices each, before the copy into M
 };
 
 /// assemble_matrix into `m` and, for gradient_weight = 0, assemble_load into `rhs` in the same
