@@ -209,8 +209,8 @@ struct SampledSource {
   void prefetch(std::uint32_t key, bool values) const {
     __builtin_prefetch(&h.cell(elem(key)));
     if (!values) return;
-    __builtin_prefetch(&in[key].fphi[0]);
-    __builtin_prefetch(&in[key].mass[0]);
+    __builtin_prefetch(&in[key].fphi[0]);  // the 112 bytes of fphi and mass: 2-3 lines
+    __builtin_prefetch(&in[key].mass[3]);
     __builtin_prefetch(&in[key].mass.back());
   }
 };
