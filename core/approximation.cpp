@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <new>
@@ -518,11 +519,29 @@ void reserve_build_arrays(const Field& f, const ApproximationOptions& opts, Hier
   }
 }
 
+// Writes zeros over v's storage from v.size() up to n elements, in parallel, when its capacity
+// holds them. Before a resize(n) that value-initialises them in one thread: on fresh pages the
+// kernel's zero-fill at each page's first touch was most of that resize (1.4 of 2.0 s of an
+// iteration of colin27's build); this way all threads take a share, and resize() then writes
+// pages already there.
+template <class V>
+void first_touch_in_parallel(V& v, std::size_t n) {
+  if (n <= v.size() || n > v.capacity()) return;  // nothing new, or a reallocation anyway
+  auto* bytes = reinterpret_cast<unsigned char*>(v.data());
+  constexpr std::size_t kChunk = std::size_t(1) << 21;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(v.size() * sizeof(typename V::value_type),
+                                                    n * sizeof(typename V::value_type), kChunk),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::memset(bytes + r.begin(), 0, r.end() - r.begin());
+                    });
+}
+
 // The integrals of the leaves not cached yet (cache and have are indexed by element id).
 template <int D>
 void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Field& f,
                            double qedge, const ApproximationOptions& opts, const SampleLattice* lattice,
                            std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
+  first_touch_in_parallel(cache, h.element_count());
   cache.resize(h.element_count());
   have.resize(h.element_count(), 0);
   {
