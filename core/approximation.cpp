@@ -447,9 +447,10 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   const double gw = gradient_weight<D>(f, opts);
   const double qedge = default_quadrature_edge(f, opts);
   const auto leaves = h.leaves();
-  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1, lattice);
+  std::vector<ElementGradients<D>> grads;
+  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1 ? &grads : nullptr, lattice);
   SparseMatrix m = assemble_matrix(h, leaves, gw, &integrals);
-  Vector rhs = assemble_load(h, leaves, integrals, gw);
+  Vector rhs = assemble_load(h, leaves, integrals, gw, IntegralIndex::kLeafOrder, &grads);
   if (lattice) regularize_padding(h, f, *lattice, m, rhs);
   Vector start = Vector::Zero(rhs.size());
   if (warm.size() == h.vertex_count())
@@ -536,20 +537,23 @@ void first_touch_in_parallel(V& v, std::size_t n) {
                     });
 }
 
-// The integrals of the leaves not cached yet (cache and have are indexed by element id).
+// The integrals of the leaves not cached yet (cache, grads and have are indexed by element id;
+// grads, the H1 sums, only in H1).
 template <int D>
 void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Field& f,
                            double qedge, const ApproximationOptions& opts, const SampleLattice* lattice,
-                           std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
+                           std::vector<ElementIntegrals<D>>& cache, std::vector<ElementGradients<D>>& grads,
+                           std::vector<std::uint8_t>& have) {
   first_touch_in_parallel(cache, h.element_count());
   cache.resize(h.element_count());
+  if (opts.h1) grads.resize(h.element_count());
   have.resize(h.element_count(), 0);
   {
     std::vector<ElemId> todo;
     for (ElemId e : leaves)
       if (!have[e.value]) todo.push_back(e);
     // In place: a separate result would hold another ~170 bytes per new element at the peak.
-    compute_element_integrals_into(h, todo, f, qedge, opts.h1, lattice, cache.data(),
+    compute_element_integrals_into(h, todo, f, qedge, opts.h1 ? grads.data() : nullptr, lattice, cache.data(),
                                    IntegralIndex::kElementId);
     for (ElemId e : todo) have[e.value] = 1;
   }
@@ -595,12 +599,13 @@ std::string loop_stop(const Hierarchy<D>& h, const ApproximationOptions& opts, c
 // get the ids 0..kept-1 in order, everything after is new.
 template <int D>
 void remap_integral_cache(const std::vector<ElemId>& remap, std::vector<ElementIntegrals<D>>& cache,
-                          std::vector<std::uint8_t>& have) {
+                          std::vector<ElementGradients<D>>& grads, std::vector<std::uint8_t>& have) {
   std::size_t kept = 0;
   for (std::size_t i = 0; i < remap.size(); ++i) {
     if (!remap[i].valid()) continue;
     MLFE_CHECK(remap[i].value == kept);
     if (have[i]) cache[kept] = cache[i];
+    if (have[i] && !grads.empty()) grads[kept] = grads[i];
     have[kept++] = have[i];
   }
   std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
@@ -743,6 +748,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
 
   // Integrals cached per element id (valid for leaves); refinement remaps them.
   std::vector<ElementIntegrals<D>> cache;
+  std::vector<ElementGradients<D>> grads;  // H1 only
   std::vector<std::uint8_t> have;
   reserve_build_arrays(f, opts, h, cache, have);
   std::vector<double> values;
@@ -761,11 +767,11 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     st.iteration = it;
     auto ta = Clock::now();
     const auto leaves = h.leaves();
-    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, have);
+    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, grads, have);
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs);
+    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs, &grads);
     if (lattice) regularize_padding(h, f, *lattice, m, rhs);
     st.assembly_seconds = since(ta);
 
@@ -775,7 +781,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
-    const auto err = element_errors(h, leaves, cache, x, gw, kById);
+    const auto err = element_errors(h, leaves, cache, x, gw, kById, &grads);
     const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
 
     // Mark.
@@ -824,7 +830,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
       out.leaf_errors = err;
       break;
     }
-    remap_integral_cache(remap, cache, have);
+    remap_integral_cache(remap, cache, grads, have);
   }
   out.values = std::move(values);
   if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added

@@ -27,27 +27,32 @@ std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, E
 
 template <int D>
 void compute_element_integrals_into(const Hierarchy<D>& h, const std::vector<ElemId>& elems, const Field& f,
-                                    double max_sub_edge, bool gradients, const SampleLattice* lattice,
-                                    ElementIntegrals<D>* out, IntegralIndex index) {
+                                    double max_sub_edge, ElementGradients<D>* gradients,
+                                    const SampleLattice* lattice, ElementIntegrals<D>* out,
+                                    IntegralIndex index) {
   const ScalarGrid* grid = lattice ? f.samples() : nullptr;
   MLFE_CHECK(!lattice || grid);
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, elems.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i)
-          out[index == IntegralIndex::kLeafOrder ? i : elems[i].value] =
-              grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, gradients)
-                   : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, gradients);
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const std::size_t at = index == IntegralIndex::kLeafOrder ? i : elems[i].value;
+          ElementGradients<D>* g = gradients ? gradients + at : nullptr;
+          out[at] = grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, g)
+                         : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, g);
+        }
       });
 }
 
 template <int D>
 std::vector<ElementIntegrals<D>> compute_element_integrals(const Hierarchy<D>& h,
                                                            const std::vector<ElemId>& elems, const Field& f,
-                                                           double max_sub_edge, bool gradients,
+                                                           double max_sub_edge,
+                                                           std::vector<ElementGradients<D>>* gradients,
                                                            const SampleLattice* lattice) {
   std::vector<ElementIntegrals<D>> out(elems.size());
-  compute_element_integrals_into(h, elems, f, max_sub_edge, gradients, lattice, out.data(),
-                                 IntegralIndex::kLeafOrder);
+  if (gradients) gradients->assign(elems.size(), ElementGradients<D>());
+  compute_element_integrals_into(h, elems, f, max_sub_edge, gradients ? gradients->data() : nullptr, lattice,
+                                 out.data(), IntegralIndex::kLeafOrder);
   return out;
 }
 
@@ -304,7 +309,8 @@ SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& l
 template <int D>
 void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
                      const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
-                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs) {
+                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs,
+                     const std::vector<ElementGradients<D>>* gradients) {
   if (index == IntegralIndex::kLeafOrder)
     MLFE_CHECK(integrals.size() == leaves.size());
   else
@@ -312,7 +318,7 @@ void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, d
   const bool load_in_rows = gradient_weight == 0;
   if (load_in_rows) rhs.resize(static_cast<Eigen::Index>(h.vertex_count()));
   assemble_rows(h, leaves, gradient_weight, &integrals, index, ws, m, load_in_rows ? rhs.data() : nullptr);
-  if (!load_in_rows) rhs = assemble_load(h, leaves, integrals, gradient_weight, index);
+  if (!load_in_rows) rhs = assemble_load(h, leaves, integrals, gradient_weight, index, gradients);
 }
 
 namespace {
@@ -333,23 +339,33 @@ struct IntegralAccess {
   const ElementIntegrals<D>& operator[](std::size_t i) const {
     return integrals[index == IntegralIndex::kLeafOrder ? i : leaves[i].value];
   }
+  // The H1 sums of leaves[i], from `gradients` (indexed like the integrals; CHECKed to be there).
+  static const ElementGradients<D>* gradients_of(const std::vector<ElementGradients<D>>* gradients,
+                                                 const std::vector<ElementIntegrals<D>>& in) {
+    MLFE_CHECK_MSG(gradients && gradients->size() == in.size(), "the H1 term needs the gradient sums");
+    return gradients->data();
+  }
+  std::size_t at(std::size_t i) const { return index == IntegralIndex::kLeafOrder ? i : leaves[i].value; }
 };
 }  // namespace
 
 template <int D>
 Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                      const std::vector<ElementIntegrals<D>>& integrals_in, double gradient_weight,
-                     IntegralIndex index) {
+                     IntegralIndex index, const std::vector<ElementGradients<D>>* gradients) {
   const IntegralAccess<D> integrals(integrals_in, leaves, index, h.element_count());
+  const ElementGradients<D>* grads =
+      gradient_weight != 0 ? IntegralAccess<D>::gradients_of(gradients, integrals_in) : nullptr;
   Vector f = Vector::Zero(static_cast<Eigen::Index>(h.vertex_count()));
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     const auto& c = h.cell(leaves[i]);
     const auto& in = integrals[i];
     if (gradient_weight != 0) {
       const P1Element<D> el(element_points(h, leaves[i]));
+      const auto& gs = grads[integrals.at(i)];
       for (int a = 0; a <= D; ++a) {
         double g = 0;
-        for (int k = 0; k < D; ++k) g += el.grad[a][k] * in.grad[k];
+        for (int k = 0; k < D; ++k) g += el.grad[a][k] * gs.grad[k];
         f[c[a].value] += in.fphi[a] + gradient_weight * g;
       }
     } else {
@@ -362,8 +378,11 @@ Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
 template <int D>
 std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
                                    const std::vector<ElementIntegrals<D>>& integrals_in, const Vector& u,
-                                   double gradient_weight, IntegralIndex index) {
+                                   double gradient_weight, IntegralIndex index,
+                                   const std::vector<ElementGradients<D>>* gradients) {
   const IntegralAccess<D> integrals(integrals_in, leaves, index, h.element_count());
+  const ElementGradients<D>* grads =
+      gradient_weight != 0 ? IntegralAccess<D>::gradients_of(gradients, integrals_in) : nullptr;
   std::vector<double> err(leaves.size());
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, leaves.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
@@ -388,8 +407,9 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
             double gu[D] = {};
             for (int a = 0; a <= D; ++a)
               for (int k = 0; k < D; ++k) gu[k] += uu[a] * el.grad[a][k];
-            double g = in.grad2;
-            for (int k = 0; k < D; ++k) g += -2 * gu[k] * in.grad[k] + gu[k] * gu[k] * el.measure;
+            const auto& gs = grads[integrals.at(i)];
+            double g = gs.grad2;
+            for (int k = 0; k < D; ++k) g += -2 * gu[k] * gs.grad[k] + gu[k] * gu[k] * el.measure;
             e += gradient_weight * std::max(g, 0.0);
           }
           err[i] = std::max(e, 0.0);
@@ -400,37 +420,41 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
 
 template std::vector<ElementIntegrals<2>> compute_element_integrals<2>(const Hierarchy<2>&,
                                                                        const std::vector<ElemId>&,
-                                                                       const Field&, double, bool,
+                                                                       const Field&, double,
+                                                                       std::vector<ElementGradients<2>>*,
                                                                        const SampleLattice*);
 template std::vector<ElementIntegrals<3>> compute_element_integrals<3>(const Hierarchy<3>&,
                                                                        const std::vector<ElemId>&,
-                                                                       const Field&, double, bool,
+                                                                       const Field&, double,
+                                                                       std::vector<ElementGradients<3>>*,
                                                                        const SampleLattice*);
 template void compute_element_integrals_into<2>(const Hierarchy<2>&, const std::vector<ElemId>&, const Field&,
-                                                double, bool, const SampleLattice*, ElementIntegrals<2>*,
-                                                IntegralIndex);
+                                                double, ElementGradients<2>*, const SampleLattice*,
+                                                ElementIntegrals<2>*, IntegralIndex);
 template void compute_element_integrals_into<3>(const Hierarchy<3>&, const std::vector<ElemId>&, const Field&,
-                                                double, bool, const SampleLattice*, ElementIntegrals<3>*,
-                                                IntegralIndex);
+                                                double, ElementGradients<3>*, const SampleLattice*,
+                                                ElementIntegrals<3>*, IntegralIndex);
 template SparseMatrix assemble_matrix<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double,
                                          const std::vector<ElementIntegrals<2>>*, IntegralIndex);
 template SparseMatrix assemble_matrix<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,
                                          const std::vector<ElementIntegrals<3>>*, IntegralIndex);
 template void assemble_system<2>(const Hierarchy<2>&, const std::vector<ElemId>&, double,
                                  const std::vector<ElementIntegrals<2>>&, IntegralIndex, AssemblyWorkspace&,
-                                 SparseMatrix&, Vector&);
+                                 SparseMatrix&, Vector&, const std::vector<ElementGradients<2>>*);
 template void assemble_system<3>(const Hierarchy<3>&, const std::vector<ElemId>&, double,
                                  const std::vector<ElementIntegrals<3>>&, IntegralIndex, AssemblyWorkspace&,
-                                 SparseMatrix&, Vector&);
+                                 SparseMatrix&, Vector&, const std::vector<ElementGradients<3>>*);
 template Vector assemble_load<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
-                                 const std::vector<ElementIntegrals<2>>&, double, IntegralIndex);
+                                 const std::vector<ElementIntegrals<2>>&, double, IntegralIndex,
+                                 const std::vector<ElementGradients<2>>*);
 template Vector assemble_load<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
-                                 const std::vector<ElementIntegrals<3>>&, double, IntegralIndex);
+                                 const std::vector<ElementIntegrals<3>>&, double, IntegralIndex,
+                                 const std::vector<ElementGradients<3>>*);
 template std::vector<double> element_errors<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                                const std::vector<ElementIntegrals<2>>&, const Vector&, double,
-                                               IntegralIndex);
+                                               IntegralIndex, const std::vector<ElementGradients<2>>*);
 template std::vector<double> element_errors<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                                const std::vector<ElementIntegrals<3>>&, const Vector&, double,
-                                               IntegralIndex);
+                                               IntegralIndex, const std::vector<ElementGradients<3>>*);
 
 }  // namespace mlfe
