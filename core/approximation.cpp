@@ -552,7 +552,7 @@ void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& lea
     std::vector<ElemId> todo;
     for (ElemId e : leaves)
       if (!have[e.value]) todo.push_back(e);
-    // In place: a separate result would hold another ~170 bytes per new element at the peak.
+    // In place: a separate result would hold another ~140 bytes per new element at the peak.
     compute_element_integrals_into(h, todo, f, qedge, opts.h1 ? grads.data() : nullptr, lattice, cache.data(),
                                    IntegralIndex::kElementId);
     for (ElemId e : todo) have[e.value] = 1;
