@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <new>
@@ -446,9 +447,10 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   const double gw = gradient_weight<D>(f, opts);
   const double qedge = default_quadrature_edge(f, opts);
   const auto leaves = h.leaves();
-  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1, lattice);
+  std::vector<ElementGradients<D>> grads;
+  const auto integrals = compute_element_integrals(h, leaves, f, qedge, opts.h1 ? &grads : nullptr, lattice);
   SparseMatrix m = assemble_matrix(h, leaves, gw, &integrals);
-  Vector rhs = assemble_load(h, leaves, integrals, gw);
+  Vector rhs = assemble_load(h, leaves, integrals, gw, IntegralIndex::kLeafOrder, &grads);
   if (lattice) regularize_padding(h, f, *lattice, m, rhs);
   Vector start = Vector::Zero(rhs.size());
   if (warm.size() == h.vertex_count())
@@ -518,19 +520,40 @@ void reserve_build_arrays(const Field& f, const ApproximationOptions& opts, Hier
   }
 }
 
-// The integrals of the leaves not cached yet (cache and have are indexed by element id).
+// Writes zeros over v's storage from v.size() up to n elements, in parallel, when its capacity
+// holds them. Before a resize(n) that value-initialises them in one thread: on fresh pages the
+// kernel's zero-fill at each page's first touch was most of that resize (1.4 of 2.0 s of an
+// iteration of colin27's build); this way all threads take a share, and resize() then writes
+// pages already there.
+template <class V>
+void first_touch_in_parallel(V& v, std::size_t n) {
+  if (n <= v.size() || n > v.capacity()) return;  // nothing new, or a reallocation anyway
+  auto* bytes = reinterpret_cast<unsigned char*>(v.data());
+  constexpr std::size_t kChunk = std::size_t(1) << 21;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(v.size() * sizeof(typename V::value_type),
+                                                    n * sizeof(typename V::value_type), kChunk),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::memset(bytes + r.begin(), 0, r.end() - r.begin());
+                    });
+}
+
+// The integrals of the leaves not cached yet (cache, grads and have are indexed by element id;
+// grads, the H1 sums, only in H1).
 template <int D>
 void update_integral_cache(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Field& f,
                            double qedge, const ApproximationOptions& opts, const SampleLattice* lattice,
-                           std::vector<ElementIntegrals<D>>& cache, std::vector<std::uint8_t>& have) {
+                           std::vector<ElementIntegrals<D>>& cache, std::vector<ElementGradients<D>>& grads,
+                           std::vector<std::uint8_t>& have) {
+  first_touch_in_parallel(cache, h.element_count());
   cache.resize(h.element_count());
+  if (opts.h1) grads.resize(h.element_count());
   have.resize(h.element_count(), 0);
   {
     std::vector<ElemId> todo;
     for (ElemId e : leaves)
       if (!have[e.value]) todo.push_back(e);
-    // In place: a separate result would hold another ~170 bytes per new element at the peak.
-    compute_element_integrals_into(h, todo, f, qedge, opts.h1, lattice, cache.data(),
+    // In place: a separate result would hold another ~140 bytes per new element at the peak.
+    compute_element_integrals_into(h, todo, f, qedge, opts.h1 ? grads.data() : nullptr, lattice, cache.data(),
                                    IntegralIndex::kElementId);
     for (ElemId e : todo) have[e.value] = 1;
   }
@@ -576,12 +599,13 @@ std::string loop_stop(const Hierarchy<D>& h, const ApproximationOptions& opts, c
 // get the ids 0..kept-1 in order, everything after is new.
 template <int D>
 void remap_integral_cache(const std::vector<ElemId>& remap, std::vector<ElementIntegrals<D>>& cache,
-                          std::vector<std::uint8_t>& have) {
+                          std::vector<ElementGradients<D>>& grads, std::vector<std::uint8_t>& have) {
   std::size_t kept = 0;
   for (std::size_t i = 0; i < remap.size(); ++i) {
     if (!remap[i].valid()) continue;
     MLFE_CHECK(remap[i].value == kept);
     if (have[i]) cache[kept] = cache[i];
+    if (have[i] && !grads.empty()) grads[kept] = grads[i];
     have[kept++] = have[i];
   }
   std::fill(have.begin() + static_cast<std::ptrdiff_t>(kept), have.end(), 0);
@@ -724,6 +748,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
 
   // Integrals cached per element id (valid for leaves); refinement remaps them.
   std::vector<ElementIntegrals<D>> cache;
+  std::vector<ElementGradients<D>> grads;  // H1 only
   std::vector<std::uint8_t> have;
   reserve_build_arrays(f, opts, h, cache, have);
   std::vector<double> values;
@@ -733,17 +758,20 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
   // converge by themselves, and the paper's threshold rule runs to its end.
   const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
 
+  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
+  AssemblyWorkspace workspace;
+  SparseMatrix m;
+  Vector rhs;
   for (int it = 0;; ++it) {
     IterationStats st;
     st.iteration = it;
     auto ta = Clock::now();
     const auto leaves = h.leaves();
-    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, have);
+    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, grads, have);
     // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
     // every iteration.
     constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    SparseMatrix m = assemble_matrix(h, leaves, gw, &cache, kById);
-    Vector rhs = assemble_load(h, leaves, cache, gw, kById);
+    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs, &grads);
     if (lattice) regularize_padding(h, f, *lattice, m, rhs);
     st.assembly_seconds = since(ta);
 
@@ -753,7 +781,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
-    const auto err = element_errors(h, leaves, cache, x, gw, kById);
+    const auto err = element_errors(h, leaves, cache, x, gw, kById, &grads);
     const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
 
     // Mark.
@@ -802,7 +830,7 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
       out.leaf_errors = err;
       break;
     }
-    remap_integral_cache(remap, cache, have);
+    remap_integral_cache(remap, cache, grads, have);
   }
   out.values = std::move(values);
   if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added

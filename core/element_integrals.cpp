@@ -120,6 +120,7 @@ struct Integrator {
   double weight;  // measure of a sub-simplex / number of points
   bool gradients;
   ElementIntegrals<D> out;
+  ElementGradients<D> grads;
 
   // Evaluates f at the points lam[0..n) (n <= kBatchPoints) in one batch, then adds them to the
   // sums in order, with the same operations per point as a point-by-point loop.
@@ -148,13 +149,15 @@ struct Integrator {
     if (gradients) {
       std::array<double, 3> g[kBatchPoints<D>];
       f.gradients(x, g, n);
+      ElementGradients<D> sg = grads;
       for (std::size_t j = 0; j < n; ++j) {
         for (int c = 0; c < D; ++c) {
           const double wg = weight * g[j][c];
-          s.grad[c] += wg;
-          s.grad2 += wg * g[j][c];
+          sg.grad[c] += wg;
+          sg.grad2 += wg * g[j][c];
         }
       }
+      grads = sg;
     }
     s.points += static_cast<std::uint32_t>(n);
     out = s;
@@ -188,26 +191,27 @@ int integration_depth(double size, double max_sub_size) {
 
 template <int D>
 ElementIntegrals<D> integrate_element(const std::array<std::array<double, D>, D + 1>& p, const Field& f,
-                                      double max_sub_edge, bool gradients) {
+                                      double max_sub_edge, ElementGradients<D>* gradients) {
   // Size = side of the cube that D! copies of the simplex would fill (Kuhn simplices of a
   // voxel-sized cube have size one voxel), so sub-simplices hold ~D! samples per voxel.
   const double measure = P1Element<D>(p).measure;
   const double size = std::pow(measure * (D == 2 ? 2.0 : 6.0), 1.0 / D);
   const int depth = integration_depth(size, max_sub_edge);
   const double subs = std::pow(double(1 << D), depth);
-  Integrator<D> it{p, f, measure / subs / (D + 1), gradients, {}};
+  Integrator<D> it{p, f, measure / subs / (D + 1), gradients != nullptr, {}, {}};
   if (depth <= kBatchLevels<D>) {
     const auto& lam = root_points<D>(depth);
     it.integrate_points(lam.data(), lam.size());
   } else {
     it.recurse(root_simplex<D>(), depth);
   }
+  if (gradients) *gradients = it.grads;
   return it.out;
 }
 
 template ElementIntegrals<2> integrate_element<2>(const std::array<std::array<double, 2>, 3>&, const Field&,
-                                                  double, bool);
+                                                  double, ElementGradients<2>*);
 template ElementIntegrals<3> integrate_element<3>(const std::array<std::array<double, 3>, 4>&, const Field&,
-                                                  double, bool);
+                                                  double, ElementGradients<3>*);
 
 }  // namespace mlfe

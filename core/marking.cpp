@@ -146,12 +146,15 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
           decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
         }
       });
+  // Counted first: growing by doubling held the old and the new array at once and copied them.
   std::vector<Mark> marked;
+  marked.reserve(static_cast<std::size_t>(
+      std::count_if(decision.begin(), decision.end(), [](std::uint8_t d) { return d != 0; })));
   *surface_marks = 0;
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     if (!decision[i]) continue;
     const bool surface = decision[i] & 2;
-    marked.push_back({surface, err[i], leaves[i]});
+    marked.push_back({err[i], leaves[i], surface});
     *surface_marks += surface;
   }
   return marked;

@@ -220,8 +220,9 @@ void for_each_owned_sample(const std::array<std::array<I64, D>, D + 1>& c, const
 template <int D>
 ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
                                      const SampleLattice& lat, const ScalarGrid& grid, const Field& f,
-                                     bool gradients) {
+                                     ElementGradients<D>* gradients) {
   ElementIntegrals<D> out;
+  ElementGradients<D> gs;
   out.sampled = true;
   const auto c = index_corners<D>(p, lat);
   const Numerators<D> num = numerators<D>(c);
@@ -246,8 +247,8 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
       for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
       const auto g = f.gradient(xl);
       for (int a = 0; a < D; ++a) {
-        out.grad[a] += w * g[a];
-        out.grad2 += w * g[a] * g[a];
+        gs.grad[a] += w * g[a];
+        gs.grad2 += w * g[a] * g[a];
       }
     }
     if (!any || fv < fmin) fmin = fv;
@@ -258,6 +259,7 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
   });
   out.fmin = fmin;
   out.fmax = fmax;
+  if (gradients) *gradients = gs;
   return out;
 }
 
@@ -320,9 +322,11 @@ std::vector<ElemId> leaves_in_data(Hierarchy<D>& h, std::vector<double>& values,
 template std::vector<ElemId> leaves_in_data<2>(Hierarchy<2>&, std::vector<double>&, const SampleLattice&);
 template std::vector<ElemId> leaves_in_data<3>(Hierarchy<3>&, std::vector<double>&, const SampleLattice&);
 template ElementIntegrals<2> sample_integrals<2>(const std::array<std::array<double, 2>, 3>&,
-                                                 const SampleLattice&, const ScalarGrid&, const Field&, bool);
+                                                 const SampleLattice&, const ScalarGrid&, const Field&,
+                                                 ElementGradients<2>*);
 template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<double, 3>, 4>&,
-                                                 const SampleLattice&, const ScalarGrid&, const Field&, bool);
+                                                 const SampleLattice&, const ScalarGrid&, const Field&,
+                                                 ElementGradients<3>*);
 template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
                                              const SampleLattice&, const ScalarGrid&,
                                              const std::array<double, 3>&, double);

@@ -51,7 +51,7 @@ Hierarchy<D> box_for(const Field& f) {
 template <int D>
 double l2_error(const Hierarchy<D>& h, const Field& f, const std::vector<double>& u) {
   const auto leaves = h.leaves();
-  const auto in = compute_element_integrals(h, leaves, f, f.resolution(), false);
+  const auto in = compute_element_integrals<D>(h, leaves, f, f.resolution(), nullptr);
   Vector uv = Eigen::Map<const Vector>(u.data(), u.size());
   const auto err = element_errors(h, leaves, in, uv, 0.0);
   double s = 0;
@@ -63,7 +63,7 @@ template <int D>
 double l2_norm(const Hierarchy<D>& h, const Field& f) {  // ∫ f²
   const auto leaves = h.leaves();
   double s = 0;
-  for (const auto& in : compute_element_integrals(h, leaves, f, f.resolution(), false)) s += in.f2;
+  for (const auto& in : compute_element_integrals<D>(h, leaves, f, f.resolution(), nullptr)) s += in.f2;
   return s;
 }
 
@@ -116,7 +116,7 @@ TEST(Approximation, GalerkinOrthogonalityHoldsToSolverTolerance) {
   EXPECT_GT(st.cg_iterations, 0);
   const auto leaves = h.leaves();
   // The same discrete integrals as the solver (default quadrature size: 2 voxels).
-  const auto in = compute_element_integrals(h, leaves, f, 2.0 * f.voxel_size(), false);
+  const auto in = compute_element_integrals<3>(h, leaves, f, 2.0 * f.voxel_size(), nullptr);
   const SparseMatrix m = assemble_matrix(h, leaves, 0.0);
   const Vector rhs = assemble_load(h, leaves, in, 0.0);
   const Vector uv = Eigen::Map<const Vector>(u.data(), u.size());

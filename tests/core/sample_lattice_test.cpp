@@ -65,7 +65,7 @@ void expect_each_sample_owned_once(unsigned seed) {
   const Approximation<D> a = approximate<D>(f, o);
   ASSERT_TRUE(a.on_lattice);
   const auto leaves = a.hierarchy.leaves();
-  const auto in = compute_element_integrals(a.hierarchy, leaves, f, 1.0, false, &a.lattice);
+  const auto in = compute_element_integrals<D>(a.hierarchy, leaves, f, 1.0, nullptr, &a.lattice);
   std::int64_t owned = 0;
   for (const auto& i : in) owned += i.points;
   EXPECT_EQ(owned, g.voxel_count());

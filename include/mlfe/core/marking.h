@@ -16,10 +16,11 @@ namespace mlfe {
 
 /// A leaf marked for refinement: by a surface rule (ranked first: an asset's accuracy is its
 /// surfaces'), and its error E_T (then worst first: most error removed per new vertex).
+/// (16 bytes: a full head's last solve marks ~10 M leaves.)
 struct Mark {
-  bool surface;
   double error;
   ElemId id;
+  bool surface;
 };
 
 /// The marks after a solve, in leaf order: the paper's threshold rule (sqrt(E_T/|T|) >

@@ -67,12 +67,12 @@ SampleLattice sample_lattice(int dim, const std::array<std::int64_t, 3>& dims,
 
 /// Least-squares integrals of the samples an element owns (see above): f2 = Σ w f², fphi[j] =
 /// Σ w f λ_j, mass = Σ w λ_i λ_j (upper triangle, row major), points = samples owned, fmin/fmax
-/// over them; with `gradients`, grad and grad2 from the field's gradient at the samples. The
+/// over them; with `gradients`, its grad and grad2 from the field's gradient at the samples. The
 /// corners p (local frame) must be lattice points (CHECKed).
 template <int D>
 ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D + 1>& p,
                                      const SampleLattice& lattice, const ScalarGrid& grid, const Field& f,
-                                     bool gradients);
+                                     ElementGradients<D>* gradients = nullptr);
 
 /// How far the samples an element owns (the rule above) are from the linear interpolant of
 /// the corner values v: the largest |f_s − Σ λ_i v_i|, the sum of squares and the count. At a

@@ -37,6 +37,7 @@
 // Exit test: the parametric form of the face-crossing test (as in Bunyk et al.) with the
 // entry-face exclusion as tie-break, not Plücker coordinates (Platis & Theoharis 2003).
 #pragma once
+#include <mlfe/core/default_init.h>
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/scalar_grid.h>
 #include <mlfe/core/transfer_function.h>
@@ -53,28 +54,6 @@
 #include <vector>
 
 namespace mlfe {
-
-/// An allocator whose value-less construct() default-initialises: resize() of a vector of
-/// trivial records leaves them unwritten (no zeroing pass), so their pages are first touched
-/// by the parallel loop that fills them.
-template <class T>
-struct DefaultInit : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = DefaultInit<U>;
-  };
-  DefaultInit() = default;
-  template <class U>
-  DefaultInit(const DefaultInit<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept(std::is_nothrow_default_constructible<U>::value) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
 
 /// A pinhole or orthographic camera in the world (physical) frame. Image row 0 is the top;
 /// the ray of pixel (x, y) goes through its centre (x + 0.5, y + 0.5).
