@@ -18,6 +18,8 @@
 #include <limits>
 #include <memory>
 
+#include "morton.h"
+
 namespace mlfe {
 
 namespace {
@@ -183,6 +185,26 @@ RedFacePairs red_face_pairs(const Hierarchy<3>& h) {
   return t;
 }
 
+// Counting-sort offsets over buckets counted in fixed chunks: `at` holds chunk k's count of
+// bucket b at [k * buckets + b] and becomes where that chunk's first item of b goes (bucket
+// after bucket, chunk after chunk within one, so the order does not depend on the threads).
+// Returns each bucket's start, and the total at [buckets].
+std::vector<std::uint32_t> chunked_offsets(std::vector<std::uint32_t>& at, std::size_t chunks,
+                                           std::size_t buckets) {
+  std::vector<std::uint32_t> start(buckets + 1);
+  std::uint32_t sum = 0;
+  for (std::size_t b = 0; b < buckets; ++b) {
+    start[b] = sum;
+    for (std::size_t k = 0; k < chunks; ++k) {
+      const std::uint32_t count = at[k * buckets + b];
+      at[k * buckets + b] = sum;
+      sum += count;
+    }
+  }
+  start[buckets] = sum;
+  return start;
+}
+
 // Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
 // records' `next` holds them (4 × render index + the local index of the shared face in it);
 // render_of gives each hierarchy element's render index (kNone: not rendered). With `siblings`,
@@ -255,17 +277,8 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
       faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
     }
   });
-  std::vector<std::uint32_t> start(nv + 1, 0);
-  std::uint32_t sum = 0;
-  for (std::size_t v = 0; v < nv; ++v) {
-    start[v] = sum;
-    for (std::size_t k = 0; k < kChunks; ++k) {
-      const std::uint32_t n = at[k * nv + v];
-      at[k * nv + v] = sum;
-      sum += n;
-    }
-  }
-  start[nv] = sum;
+  const std::vector<std::uint32_t> start = chunked_offsets(at, kChunks, nv);
+  const std::uint32_t sum = start[nv];
   MLFE_CHECK(sum <= 4 * rendered);
   std::unique_ptr<Face[]> faces(new Face[std::max<std::size_t>(sum, 1)]);
   advise_huge_pages(faces.get(), sum * sizeof(Face));
@@ -319,16 +332,6 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
       lo[a] = std::min(lo[a], q[a]);
       hi[a] = std::max(hi[a], q[a]);
     }
-  // Spreads the low 21 bits of x to every third bit.
-  const auto spread = [](std::uint64_t x) {
-    x &= 0x1FFFFF;
-    x = (x | x << 32) & 0x1F00000000FFFFull;
-    x = (x | x << 16) & 0x1F0000FF0000FFull;
-    x = (x | x << 8) & 0x100F00F00F00F00Full;
-    x = (x | x << 4) & 0x10C30C30C30C30C3ull;
-    x = (x | x << 2) & 0x1249249249249249ull;
-    return x;
-  };
   using Keyed = std::pair<std::uint64_t, ElemId>;
   constexpr int kBucketBits = 16, kKeyBits = 63;
   constexpr std::size_t kBuckets = std::size_t(1) << kBucketBits, kChunks = 4;
@@ -346,24 +349,14 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
         double m = 0;
         for (VertexId v : c) m += h.point(v)[a];
         const double f = hi[a] > lo[a] ? (0.25 * m - lo[a]) / (hi[a] - lo[a]) : 0.0;
-        key |= spread(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
+        key |= detail::spread_bits(std::uint64_t(std::clamp(f, 0.0, 1.0) * double(0x1FFFFF))) << a;
       }
       keys[i] = key;
       ++count[key >> (kKeyBits - kBucketBits)];
     }
   });
   // 2. bucket offsets, chunk after chunk within a bucket; 3. pairs into their buckets.
-  std::vector<std::uint32_t> start(kBuckets + 1);
-  std::uint32_t sum = 0;
-  for (std::size_t b = 0; b < kBuckets; ++b) {
-    start[b] = sum;
-    for (std::size_t k = 0; k < kChunks; ++k) {
-      const std::uint32_t count = at[k * kBuckets + b];
-      at[k * kBuckets + b] = sum;
-      sum += count;
-    }
-  }
-  start[kBuckets] = sum;
+  const std::vector<std::uint32_t> start = chunked_offsets(at, kChunks, kBuckets);
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* fill = at.data() + k * kBuckets;
     for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i)
