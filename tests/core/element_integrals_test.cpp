@@ -127,7 +127,9 @@ void expect_matches_reference(const std::array<std::array<double, D>, D + 1>& p,
   expect_bitwise_equal<D>(a, b);
   for (int c = 0; c < D; ++c) EXPECT_EQ(bits(ga.grad[c]), bits(gb.grad[c])) << c;
   EXPECT_EQ(bits(ga.grad2), bits(gb.grad2));
-  if (gradients) EXPECT_NE(ga.grad2, 0.0);  // the sums did arrive
+  if (gradients) {
+    EXPECT_NE(ga.grad2, 0.0);  // the sums did arrive
+  }
 }
 
 ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::array<double, 3> spacing) {
