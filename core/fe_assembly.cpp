@@ -13,6 +13,8 @@
 #include <limits>
 #include <utility>
 
+#include "counting_sort.h"
+
 namespace mlfe {
 
 namespace {
@@ -79,16 +81,7 @@ void build_incidences(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, 
   });
   // Per vertex, chunk by chunk: the counts become each chunk's first slot.
   ws.start.resize(nv + 1);
-  std::uint32_t at = 0;
-  for (std::size_t v = 0; v < nv; ++v) {
-    ws.start[v] = at;
-    for (std::size_t c = 0; c < chunks; ++c) {
-      const std::uint32_t n = ws.counts[c * nv + v];
-      ws.counts[c * nv + v] = at;
-      at += n;
-    }
-  }
-  ws.start[nv] = at;
+  const std::uint32_t at = detail::chunked_offsets(ws.counts.data(), chunks, nv, ws.start.data());
   if (ws.inc.capacity() < at) {
     ws.inc = AssemblyWorkspace::Array<std::uint32_t>();
     ws.inc.reserve(2 * std::size_t(at));  // the next iteration's table in the same pages
@@ -295,33 +288,7 @@ void assemble_rows(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, dou
   else
     row_passes<D>(nv, LocalSource<D, true>{h, leaves, local, integrals, index}, ws, m, rhs);
 }
-}  // namespace
 
-template <int D>
-SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
-                             const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index) {
-  AssemblyWorkspace ws;
-  SparseMatrix m;
-  assemble_rows(h, leaves, gradient_weight, integrals, index, ws, m, nullptr);
-  return m;
-}
-
-template <int D>
-void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
-                     const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
-                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs,
-                     const std::vector<ElementGradients<D>>* gradients) {
-  if (index == IntegralIndex::kLeafOrder)
-    MLFE_CHECK(integrals.size() == leaves.size());
-  else
-    MLFE_CHECK(integrals.size() >= h.element_count());
-  const bool load_in_rows = gradient_weight == 0;
-  if (load_in_rows) rhs.resize(static_cast<Eigen::Index>(h.vertex_count()));
-  assemble_rows(h, leaves, gradient_weight, &integrals, index, ws, m, load_in_rows ? rhs.data() : nullptr);
-  if (!load_in_rows) rhs = assemble_load(h, leaves, integrals, gradient_weight, index, gradients);
-}
-
-namespace {
 // integrals[i] or integrals[leaves[i]], after checking that every index is in range.
 template <int D>
 struct IntegralAccess {
@@ -348,6 +315,27 @@ struct IntegralAccess {
   std::size_t at(std::size_t i) const { return index == IntegralIndex::kLeafOrder ? i : leaves[i].value; }
 };
 }  // namespace
+
+template <int D>
+SparseMatrix assemble_matrix(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                             const std::vector<ElementIntegrals<D>>* integrals, IntegralIndex index) {
+  AssemblyWorkspace ws;
+  SparseMatrix m;
+  assemble_rows(h, leaves, gradient_weight, integrals, index, ws, m, nullptr);
+  return m;
+}
+
+template <int D>
+void assemble_system(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, double gradient_weight,
+                     const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
+                     AssemblyWorkspace& ws, SparseMatrix& m, Vector& rhs,
+                     const std::vector<ElementGradients<D>>* gradients) {
+  const IntegralAccess<D> checked(integrals, leaves, index, h.element_count());  // CHECKs the indices
+  const bool load_in_rows = gradient_weight == 0;
+  if (load_in_rows) rhs.resize(static_cast<Eigen::Index>(h.vertex_count()));
+  assemble_rows(h, leaves, gradient_weight, &integrals, index, ws, m, load_in_rows ? rhs.data() : nullptr);
+  if (!load_in_rows) rhs = assemble_load(h, leaves, integrals, gradient_weight, index, gradients);
+}
 
 template <int D>
 Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,

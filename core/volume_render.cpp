@@ -18,6 +18,7 @@
 #include <limits>
 #include <memory>
 
+#include "counting_sort.h"
 #include "morton.h"
 
 namespace mlfe {
@@ -185,26 +186,6 @@ RedFacePairs red_face_pairs(const Hierarchy<3>& h) {
   return t;
 }
 
-// Counting-sort offsets over buckets counted in fixed chunks: `at` holds chunk k's count of
-// bucket b at [k * buckets + b] and becomes where that chunk's first item of b goes (bucket
-// after bucket, chunk after chunk within one, so the order does not depend on the threads).
-// Returns each bucket's start, and the total at [buckets].
-std::vector<std::uint32_t> chunked_offsets(std::vector<std::uint32_t>& at, std::size_t chunks,
-                                           std::size_t buckets) {
-  std::vector<std::uint32_t> start(buckets + 1);
-  std::uint32_t sum = 0;
-  for (std::size_t b = 0; b < buckets; ++b) {
-    start[b] = sum;
-    for (std::size_t k = 0; k < chunks; ++k) {
-      const std::uint32_t count = at[k * buckets + b];
-      at[k * buckets + b] = sum;
-      sum += count;
-    }
-  }
-  start[buckets] = sum;
-  return start;
-}
-
 // Face neighbours of a conforming element set, as Hierarchy::face_neighbors, as the step
 // records' `next` holds them (4 × render index + the local index of the shared face in it);
 // render_of gives each hierarchy element's render index (kNone: not rendered). With `siblings`,
@@ -277,8 +258,8 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
       faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
     }
   });
-  const std::vector<std::uint32_t> start = chunked_offsets(at, kChunks, nv);
-  const std::uint32_t sum = start[nv];
+  std::vector<std::uint32_t> start(nv + 1);
+  const std::uint32_t sum = detail::chunked_offsets(at.data(), kChunks, nv, start.data());
   MLFE_CHECK(sum <= 4 * rendered);
   std::unique_ptr<Face[]> faces(new Face[std::max<std::size_t>(sum, 1)]);
   advise_huge_pages(faces.get(), sum * sizeof(Face));
@@ -356,7 +337,8 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
     }
   });
   // 2. bucket offsets, chunk after chunk within a bucket; 3. pairs into their buckets.
-  const std::vector<std::uint32_t> start = chunked_offsets(at, kChunks, kBuckets);
+  std::vector<std::uint32_t> start(kBuckets + 1);
+  detail::chunked_offsets(at.data(), kChunks, kBuckets, start.data());
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* fill = at.data() + k * kBuckets;
     for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i)
