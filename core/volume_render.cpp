@@ -14,16 +14,29 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <memory>
 
 #include "counting_sort.h"
 #include "morton.h"
-
 namespace mlfe {
 
 namespace {
+struct PhaseTimer {
+  bool on = std::getenv("MLFE_PHASES") != nullptr;
+  std::chrono::steady_clock::time_point t = std::chrono::steady_clock::now();
+  void operator()(const char* name) {
+    if (!on) return;
+    const auto n = std::chrono::steady_clock::now();
+    std::fprintf(stderr, "  %-24s %7.2f ms\n", name,
+                 std::chrono::duration<double, std::milli>(n - t).count());
+    t = n;
+  }
+};
 
 using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
@@ -204,9 +217,10 @@ RedFacePairs red_face_pairs(const Hierarchy<3>& h) {
 // Returns how many faces more than two elements share (0 on a conforming mesh; the extra ones
 // are left as boundary faces).
 template <class Next>
-std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_t>& render_of,
-                           std::size_t rendered, Next& next, bool siblings) {
+std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of, std::size_t rendered,
+                           Next& next, bool siblings) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
+  PhaseTimer T;
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
   struct Face {
     std::uint32_t v1, v2;  // the face's two higher vertex ids
@@ -258,11 +272,13 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
       faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
     }
   });
+  T("fa count");
   std::vector<std::uint32_t> start(nv + 1);
   const std::uint32_t sum = detail::chunked_offsets(at.data(), kChunks, nv, start.data());
   MLFE_CHECK(sum <= 4 * rendered);
   std::unique_ptr<Face[]> faces(new Face[std::max<std::size_t>(sum, 1)]);
   advise_huge_pages(faces.get(), sum * sizeof(Face));
+  T("fa offsets+alloc");
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* fill = at.data() + k * nv;
     for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
@@ -270,6 +286,7 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
         faces[fill[low]++] = {v1, v2, slot};
       });
   });
+  T("fa fill");
   // 4. per bucket: equal keys are the two sides of one face.
   std::atomic<std::size_t> overshared{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
@@ -294,7 +311,100 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::vector<std::uint32_
       }
     }
   });
+  T("fa match");
   return overshared.load();
+}
+
+// Whether T_k renders element e: e is of level k, or a leaf above it.
+inline bool rendered_at(const Hierarchy<3>& h, ElemId e, int k) {
+  const int l = h.level(e);
+  return l == k || (l < k && h.is_leaf(e));
+}
+
+// Value ranges of the rendered elements from their vertices, as floats rounded outward, and
+// count[e] = 1 for them; 0 and the empty range [inf, -inf] for every other element. In the
+// hierarchy's element order: contiguous cells and entries.
+void rendered_ranges(const Hierarchy<3>& h, int k, const std::vector<double>& u, std::uint32_t* count,
+                     float* lo_out, float* hi_out) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 4096), [&](const auto& range) {
+    for (std::size_t e = range.begin(); e != range.end(); ++e) {
+      if (!rendered_at(h, ElemId(std::uint32_t(e)), k)) {
+        count[e] = 0;
+        lo_out[e] = kInf;
+        hi_out[e] = -kInf;
+        continue;
+      }
+      count[e] = 1;
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (VertexId v : h.cell(ElemId(std::uint32_t(e)))) {
+        lo = std::min(lo, u[v.value]);
+        hi = std::max(hi, u[v.value]);
+      }
+      lo_out[e] = std::nextafter(float(lo), -kInf);
+      hi_out[e] = std::nextafter(float(hi), kInf);
+    }
+  });
+}
+
+// One backward sweep over the elements of level ≤ k (children have larger ids than their
+// parent): each parent's range becomes the union of its children's, and count[e] the number
+// of rendered elements in e's subtree. Returns how many elements T_k has.
+std::size_t sweep_up(const Hierarchy<3>& h, int k, std::uint32_t* count, float* lo, float* hi) {
+  for (std::size_t i = h.element_count(); i-- > 0;) {
+    const ElemId e(static_cast<std::uint32_t>(i));
+    if (h.level(e) > k) continue;
+    const ElemId p = h.parent(e);
+    if (!p.valid()) continue;
+    count[p.value] += count[i];
+    lo[p.value] = std::min(lo[p.value], lo[i]);
+    hi[p.value] = std::max(hi[p.value], hi[i]);
+  }
+  std::size_t n = 0;
+  for (std::size_t e = 0; e < h.coarse_count(); ++e) n += count[e];
+  return n;
+}
+
+// The rendered elements in the depth-first order of the refinement tree (T0's elements in id
+// order, children in their stored order): a ray steps to face neighbours and the pixels of a
+// tile cross neighbouring elements, so records close in space should be close in memory, and a
+// subtree is a compact piece of space (a red child lies inside its parent) — the locality of a
+// Z-order curve (an octree's depth-first order) from two linear sweeps instead of sorting keys
+// read at random points. On entry count[e] holds the rendered elements under e (sweep_up); on
+// exit render_of[e] (the same array) is e's render index, kNone when e is not rendered.
+// Parents come before their children in id order, so one forward sweep hands each element its
+// first index: a rendered element keeps it, an inner one passes consecutive ranges to its
+// children.
+void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t n,
+                std::vector<ElemId>& elems) {
+  std::uint32_t* const render_of = count;
+  std::uint32_t next = 0;
+  for (std::size_t e = 0; e < h.coarse_count(); ++e) {
+    const std::uint32_t c = count[e];
+    render_of[e] = next;
+    next += c;
+  }
+  MLFE_CHECK(next == n);
+  elems.resize(n);
+  for (std::size_t i = 0; i < h.element_count(); ++i) {
+    const ElemId e(static_cast<std::uint32_t>(i));
+    if (h.level(e) > k) {
+      render_of[i] = kNone;
+      continue;
+    }
+    if (rendered_at(h, e, k)) {
+      elems[render_of[i]] = e;
+      continue;
+    }
+    std::uint32_t first = render_of[i];
+    const std::uint32_t child = h.first_child(e).value;
+    for (int j = 0; j < h.num_children(e); ++j) {
+      const std::uint32_t c = count[child + std::uint32_t(j)];
+      render_of[child + std::uint32_t(j)] = first;
+      first += c;
+    }
+    render_of[i] = kNone;
+  }
 }
 
 // Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
@@ -317,6 +427,7 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
   constexpr int kBucketBits = 16, kKeyBits = 63;
   constexpr std::size_t kBuckets = std::size_t(1) << kBucketBits, kChunks = 4;
   const std::size_t n = elems.size(), per_chunk = (n + kChunks - 1) / kChunks;
+  PhaseTimer T;
   std::vector<std::uint64_t, DefaultInit<std::uint64_t>> keys(n);
   std::vector<Keyed, DefaultInit<Keyed>> sorted(n);
   std::vector<std::uint32_t> at(kChunks * kBuckets, 0);
@@ -336,6 +447,7 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
       ++count[key >> (kKeyBits - kBucketBits)];
     }
   });
+  T("mo keys");
   // 2. bucket offsets, chunk after chunk within a bucket; 3. pairs into their buckets.
   std::vector<std::uint32_t> start(kBuckets + 1);
   detail::chunked_offsets(at.data(), kChunks, kBuckets, start.data());
@@ -344,6 +456,7 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
     for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i)
       sorted[fill[keys[i] >> (kKeyBits - kBucketBits)]++] = {keys[i], elems[i]};
   });
+  T("mo scatter");
   // 4. each bucket in (key, id) order, written back.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kBuckets, 256), [&](const auto& range) {
     for (std::size_t b = range.begin(); b != range.end(); ++b) {
@@ -500,6 +613,7 @@ inline int TetRenderMesh::grid_index(int a, double x) const {
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
                              const std::array<double, 3>* clip_to, RayEntry entry)
     : h_(h), entry_(entry) {
+  PhaseTimer T;
   if (values.size() != h.vertex_count())
     throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
                 std::to_string(h.vertex_count()) + " vertices");
@@ -512,22 +626,32 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   } else {
     u_ = &values;
   }
-  // 2. the rendered elements and their face neighbours.
-  elems_ = level_ < finest ? h.level_elements(level_) : h.leaves();
-  // Neighbour records pack 4 × index + face into 32 bits.
-  if (elems_.size() >= (std::size_t(1) << 30))
-    throw Error("render: " + std::to_string(elems_.size()) +
-                " tetrahedra exceed the renderer's limit of 2^30");
-  morton_order(h, elems_);
+  // 2. the rendered elements: their value ranges (elements of level ≤ k), render order and
+  // render indices.
+  const std::size_t ne = h.element_count();
   for (auto* a : {&lo_, &hi_}) {
-    a->reserve(h.element_count());
+    a->reserve(ne);
     advise_huge_pages(*a);
+    a->resize(ne);  // not initialised: rendered_ranges sets every entry
   }
-  render_of_.reserve(h.element_count());
+  render_of_.reserve(ne);
   advise_huge_pages(render_of_);
-  render_of_.assign(h.element_count(), kNone);
-  lo_.assign(h.element_count(), std::numeric_limits<float>::infinity());
-  hi_.assign(h.element_count(), -std::numeric_limits<float>::infinity());
+  render_of_.resize(ne);
+  rendered_ranges(h, level_, *u_, render_of_.data(), lo_.data(), hi_.data());
+  T("rendered ranges");
+  const std::size_t rendered = sweep_up(h, level_, render_of_.data(), lo_.data(), hi_.data());
+  T("sweep up");
+  // Neighbour records pack 4 × index + face into 32 bits.
+  if (rendered >= (std::size_t(1) << 30))
+    throw Error("render: " + std::to_string(rendered) + " tetrahedra exceed the renderer's limit of 2^30");
+  tree_order(h, level_, render_of_.data(), rendered, elems_);
+  T("tree order");
+  if (entry_ == RayEntry::kBoundaryFaces) {
+    // An unstructured mesh has no refinement tree to follow (T0 is the mesh): Z-order.
+    morton_order(h, elems_);
+    tbb::parallel_for(std::size_t(0), elems_.size(),
+                      [&](std::size_t r) { render_of_[elems_[r].value] = std::uint32_t(r); });
+  }
   // Records: address space only until build_chunk() writes them.
   records_.resize(elems_.size());
   advise_huge_pages(records_);
@@ -535,39 +659,15 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
-  // Render indices scattered (elems_ is in Morton order), then the value ranges in the
-  // hierarchy's order: contiguous cells and range entries instead of random ones.
-  tbb::parallel_for(std::size_t(0), elems_.size(),
-                    [&](std::size_t r) { render_of_[elems_[r].value] = std::uint32_t(r); });
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 4096), [&](const auto& range) {
-    for (std::size_t e = range.begin(); e != range.end(); ++e) {
-      if (render_of_[e] == kNone) continue;
-      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-      for (VertexId v : h.cell(ElemId(std::uint32_t(e)))) {
-        lo = std::min(lo, (*u_)[v.value]);
-        hi = std::max(hi, (*u_)[v.value]);
-      }
-      lo_[e] = std::nextafter(float(lo), -std::numeric_limits<float>::infinity());
-      hi_[e] = std::nextafter(float(hi), std::numeric_limits<float>::infinity());
-    }
-  });
+  // 3. face neighbours.
   next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
   advise_huge_pages(next_);
   const std::size_t overshared =
-      face_adjacency(h, render_of_, elems_.size(), next_, entry_ == RayEntry::kHierarchy);
+      face_adjacency(h, render_of_.data(), elems_.size(), next_, entry_ == RayEntry::kHierarchy);
   if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
     throw Error("render: " + std::to_string(overshared) +
                 " faces are shared by more than two tetrahedra (not a conforming mesh)");
-  // 3. ranges: rendered elements from their vertices (set with the records above), coarser
-  // ones as the union of their children (children have larger ids than their parent, so one
-  // backward sweep).
-  for (std::size_t i = h.element_count(); i-- > 0;) {
-    const ElemId e(static_cast<std::uint32_t>(i));
-    const ElemId p = h.parent(e);
-    if (!p.valid() || h.level(e) > level_) continue;
-    lo_[p.value] = std::min(lo_[p.value], lo_[i]);
-    hi_[p.value] = std::max(hi_[p.value], hi_[i]);
-  }
+  T("face_adjacency");
   // 4. the domain box (T0 spans it).
   lo_box_.fill(std::numeric_limits<double>::infinity());
   hi_box_.fill(-std::numeric_limits<double>::infinity());
@@ -598,6 +698,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // x ∓ pad are monotone in x, so that is the min (max) of its vertices' padded cells, found
   // once per vertex here instead of six divisions per element.
   for (int a = 0; a < 3; ++a) MLFE_CHECK(grid_n_[a] <= 256);
+  T("box");
   std::vector<std::array<std::uint8_t, 6>> vertex_cells(h.vertex_count());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.vertex_count(), 4096), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
@@ -608,10 +709,11 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       }
     }
   });
+  T("vertex cells");
   // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
   // so the grid does not depend on the split.
   constexpr std::size_t kChunks = 4;
-  const std::size_t ne = h.element_count(), per_chunk = (ne + kChunks - 1) / kChunks;
+  const std::size_t per_chunk = (ne + kChunks - 1) / kChunks;
   std::vector<std::vector<float>> part_lo(kChunks), part_hi(kChunks);
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::vector<float>& glo = part_lo[k];
@@ -635,13 +737,16 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
           }
     }
   });
+  T("grid chunks");
   for (std::size_t k = 0; k < kChunks; ++k)
     for (std::size_t c = 0; c < cells; ++c) {
       grid_lo_[c] = std::min(grid_lo_[c], part_lo[k][c]);
       grid_hi_[c] = std::max(grid_hi_[c], part_hi[k][c]);
     }
+  T("grid merge");
   // 6. unstructured meshes: the boundary faces in their bucket grid.
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
+  T("boundary grid");
 }
 
 // One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.

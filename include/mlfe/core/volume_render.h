@@ -238,8 +238,8 @@ class TetRenderMesh {
   std::unique_ptr<std::once_flag[]> build_once_;
   void build_chunk(std::uint32_t chunk) const;
   void fill_record(std::uint32_t r) const;
-  std::vector<std::uint32_t> render_of_;
-  std::vector<float> lo_, hi_;
+  std::vector<std::uint32_t, DefaultInit<std::uint32_t>> render_of_;
+  std::vector<float, DefaultInit<float>> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
   double diag_ = 0;
   int grid_n_[3];
