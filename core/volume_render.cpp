@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <limits>
 #include <memory>
 
@@ -29,12 +30,20 @@ namespace {
 struct PhaseTimer {
   bool on = std::getenv("MLFE_PHASES") != nullptr;
   std::chrono::steady_clock::time_point t = std::chrono::steady_clock::now();
+  double cpu = cpu_ms();
+  static double cpu_ms() {
+    timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+  }
   void operator()(const char* name) {
     if (!on) return;
     const auto n = std::chrono::steady_clock::now();
-    std::fprintf(stderr, "  %-24s %7.2f ms\n", name,
-                 std::chrono::duration<double, std::milli>(n - t).count());
+    const double c = cpu_ms();
+    std::fprintf(stderr, "  %-24s %7.2f ms wall %7.2f ms cpu\n", name,
+                 std::chrono::duration<double, std::milli>(n - t).count(), c - cpu);
     t = n;
+    cpu = c;
   }
 };
 
@@ -226,8 +235,9 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
     std::uint32_t v1, v2;  // the face's two higher vertex ids
     std::uint32_t slot;    // 4 * render index + local face
   };
-  // Per element: bit f set when face f is left to the global match (set by the counting pass).
-  std::vector<std::uint8_t> global(ne, 0);
+  // Per rendered element: bit f set when face f is left to the global match (set by the
+  // counting pass; not initialised for the others, which are never read).
+  std::vector<std::uint8_t, DefaultInit<std::uint8_t>> global(ne);
   const RedFacePairs pairs = siblings ? red_face_pairs(h) : RedFacePairs{};
   // Calls visit(low, v1, v2, slot) for the faces of rendered element e in the global match,
   // face vertex ids ascending.
@@ -248,9 +258,10 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
   // 3. faces into their buckets, chunks in parallel.
   constexpr std::size_t kChunks = 4;
   const std::size_t per_chunk = (ne + kChunks - 1) / kChunks;
-  std::vector<std::uint32_t> at(kChunks * nv, 0);
+  std::vector<std::uint32_t, DefaultInit<std::uint32_t>> at(kChunks * nv);  // zeroed by each chunk
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* count = at.data() + k * nv;
+    std::fill(count, count + nv, 0u);
     for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e) {
       const std::uint32_t r = render_of[e];
       if (r == kNone) continue;
@@ -293,8 +304,10 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
       Face* first = faces.get() + start[v];
       Face* last = faces.get() + start[v + 1];
+      // (v1, v2, slot) order, compared as one 64-bit key and the slot: fewer branches.
       std::sort(first, last, [](const Face& x, const Face& y) {
-        return x.v1 != y.v1 ? x.v1 < y.v1 : x.v2 != y.v2 ? x.v2 < y.v2 : x.slot < y.slot;
+        const std::uint64_t kx = std::uint64_t(x.v1) << 32 | x.v2, ky = std::uint64_t(y.v1) << 32 | y.v2;
+        return kx != ky ? kx < ky : x.slot < y.slot;
       });
       for (Face* q = first; q != last; ++q) {
         const bool shared = q + 1 != last && q[1].v1 == q->v1 && q[1].v2 == q->v2;
@@ -347,19 +360,36 @@ void rendered_ranges(const Hierarchy<3>& h, int k, const std::vector<double>& u,
   });
 }
 
-// One backward sweep over the elements of level ≤ k (children have larger ids than their
-// parent): each parent's range becomes the union of its children's, and count[e] the number
-// of rendered elements in e's subtree. Returns how many elements T_k has.
+// Calls visit(e) for every element of level l that has children, in parallel.
+template <class Visit>
+void for_parents_of_level(const Hierarchy<3>& h, int l, Visit&& visit) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 8192), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const ElemId e(static_cast<std::uint32_t>(i));
+      if (h.level(e) == l && !h.is_leaf(e)) visit(e);
+    }
+  });
+}
+
+// Level after level, finest first, each parent of level < k takes the union of its children's
+// ranges and count[e] becomes the number of rendered elements in e's subtree (children are
+// contiguous; a parent reads its own children, so the elements of a level go in parallel).
+// Returns how many elements T_k has.
 std::size_t sweep_up(const Hierarchy<3>& h, int k, std::uint32_t* count, float* lo, float* hi) {
-  for (std::size_t i = h.element_count(); i-- > 0;) {
-    const ElemId e(static_cast<std::uint32_t>(i));
-    if (h.level(e) > k) continue;
-    const ElemId p = h.parent(e);
-    if (!p.valid()) continue;
-    count[p.value] += count[i];
-    lo[p.value] = std::min(lo[p.value], lo[i]);
-    hi[p.value] = std::max(hi[p.value], hi[i]);
-  }
+  for (int l = k - 1; l >= 0; --l)
+    for_parents_of_level(h, l, [&](ElemId p) {
+      const std::uint32_t first = h.first_child(p).value;
+      std::uint32_t n = 0;
+      float a = lo[p.value], b = hi[p.value];
+      for (std::uint32_t c = first, end = first + std::uint32_t(h.num_children(p)); c < end; ++c) {
+        n += count[c];
+        a = std::min(a, lo[c]);
+        b = std::max(b, hi[c]);
+      }
+      count[p.value] = n;
+      lo[p.value] = a;
+      hi[p.value] = b;
+    });
   std::size_t n = 0;
   for (std::size_t e = 0; e < h.coarse_count(); ++e) n += count[e];
   return n;
@@ -369,15 +399,15 @@ std::size_t sweep_up(const Hierarchy<3>& h, int k, std::uint32_t* count, float* 
 // order, children in their stored order): a ray steps to face neighbours and the pixels of a
 // tile cross neighbouring elements, so records close in space should be close in memory, and a
 // subtree is a compact piece of space (a red child lies inside its parent) — the locality of a
-// Z-order curve (an octree's depth-first order) from two linear sweeps instead of sorting keys
-// read at random points. On entry count[e] holds the rendered elements under e (sweep_up); on
-// exit render_of[e] (the same array) is e's render index, kNone when e is not rendered.
-// Parents come before their children in id order, so one forward sweep hands each element its
-// first index: a rendered element keeps it, an inner one passes consecutive ranges to its
+// Z-order curve (an octree's depth-first order) without sorting keys read at random points. On
+// entry count[e] holds the rendered elements under e (sweep_up); on exit render_of[e] (the
+// same array) is e's render index, kNone when e is not rendered. T0's elements get the first
+// index of their ranges, then level after level each parent hands consecutive ranges to its
 // children.
-void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t n,
-                std::vector<ElemId>& elems) {
+template <class Elems>
+void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t n, Elems& elems) {
   std::uint32_t* const render_of = count;
+  PhaseTimer T;
   std::uint32_t next = 0;
   for (std::size_t e = 0; e < h.coarse_count(); ++e) {
     const std::uint32_t c = count[e];
@@ -385,26 +415,31 @@ void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t 
     next += c;
   }
   MLFE_CHECK(next == n);
-  elems.resize(n);
-  for (std::size_t i = 0; i < h.element_count(); ++i) {
-    const ElemId e(static_cast<std::uint32_t>(i));
-    if (h.level(e) > k) {
-      render_of[i] = kNone;
-      continue;
+  for (int l = 0; l < k; ++l)
+    for_parents_of_level(h, l, [&](ElemId p) {
+      std::uint32_t first = render_of[p.value];
+      const std::uint32_t child = h.first_child(p).value;
+      for (std::uint32_t c = child, end = child + std::uint32_t(h.num_children(p)); c < end; ++c) {
+        const std::uint32_t m = count[c];
+        render_of[c] = first;
+        first += m;
+      }
+      render_of[p.value] = kNone;
+    });
+  T("to levels");
+  elems.reserve(n);
+  advise_huge_pages(elems);
+  elems.resize(n);  // not initialised: set below, in parallel
+  T("to resize");
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 8192), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const ElemId e(static_cast<std::uint32_t>(i));
+      if (h.level(e) > k)
+        render_of[i] = kNone;
+      else if (render_of[i] != kNone)
+        elems[render_of[i]] = e.value;
     }
-    if (rendered_at(h, e, k)) {
-      elems[render_of[i]] = e;
-      continue;
-    }
-    std::uint32_t first = render_of[i];
-    const std::uint32_t child = h.first_child(e).value;
-    for (int j = 0; j < h.num_children(e); ++j) {
-      const std::uint32_t c = count[child + std::uint32_t(j)];
-      render_of[child + std::uint32_t(j)] = first;
-      first += c;
-    }
-    render_of[i] = kNone;
-  }
+  });
 }
 
 // Sorts elements along a Z-order (Morton) curve of their centroids: a ray steps to face
@@ -414,7 +449,8 @@ void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t 
 // (a counting sort in fixed chunks, each with its own counters, as face_adjacency's), then each
 // bucket (a few dozen pairs) is sorted on its own, buckets in parallel: the same order as a
 // comparison sort of all pairs, without its log n passes over them.
-void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
+template <class Elems>
+void morton_order(const Hierarchy<3>& h, Elems& elems) {
   Vec3 lo, hi;
   lo.fill(std::numeric_limits<double>::infinity());
   hi.fill(-std::numeric_limits<double>::infinity());
@@ -423,7 +459,7 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
       lo[a] = std::min(lo[a], q[a]);
       hi[a] = std::max(hi[a], q[a]);
     }
-  using Keyed = std::pair<std::uint64_t, ElemId>;
+  using Keyed = std::pair<std::uint64_t, std::uint32_t>;
   constexpr int kBucketBits = 16, kKeyBits = 63;
   constexpr std::size_t kBuckets = std::size_t(1) << kBucketBits, kChunks = 4;
   const std::size_t n = elems.size(), per_chunk = (n + kChunks - 1) / kChunks;
@@ -435,7 +471,7 @@ void morton_order(const Hierarchy<3>& h, std::vector<ElemId>& elems) {
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* count = at.data() + k * kBuckets;
     for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i) {
-      const auto& c = h.cell(elems[i]);
+      const auto& c = h.cell(ElemId(elems[i]));
       std::uint64_t key = 0;
       for (int a = 0; a < 3; ++a) {
         double m = 0;
@@ -650,7 +686,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     // An unstructured mesh has no refinement tree to follow (T0 is the mesh): Z-order.
     morton_order(h, elems_);
     tbb::parallel_for(std::size_t(0), elems_.size(),
-                      [&](std::size_t r) { render_of_[elems_[r].value] = std::uint32_t(r); });
+                      [&](std::size_t r) { render_of_[elems_[r]] = std::uint32_t(r); });
   }
   // Records: address space only until build_chunk() writes them.
   records_.resize(elems_.size());
@@ -751,7 +787,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
 
 // One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.
 void TetRenderMesh::fill_record(std::uint32_t r) const {
-  const auto& c = h_.cell(elems_[r]);
+  const auto& c = h_.cell(ElemId(elems_[r]));
   Vec3 p[4];
   for (int i = 0; i < 4; ++i) p[i] = h_.point(c[i]);
   StepRecord& R = records_[r];
@@ -851,7 +887,7 @@ void TetRenderMesh::build_boundary_grid() {
   for (std::size_t r = 0; r < records_.size(); ++r)
     for (int f = 0; f < 4; ++f) {
       if (next_[r][f] != kNoNeighbor) continue;
-      const auto& c = h_.cell(elems_[r]);
+      const auto& c = h_.cell(ElemId(elems_[r]));
       VertexId v[3] = {c[kFaceVerts[f][0]], c[kFaceVerts[f][1]], c[kFaceVerts[f][2]]};
       std::sort(v, v + 3);
       BoundaryGrid::Face face;
@@ -973,7 +1009,7 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
 }
 
 std::size_t TetRenderMesh::memory_bytes() const {
-  return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(ElemId) +
+  return coarse_values_.capacity() * sizeof(double) + elems_.capacity() * sizeof(elems_[0]) +
          records_.capacity() * sizeof(StepRecord) + next_.capacity() * sizeof(next_[0]) +
          render_of_.capacity() * sizeof(std::uint32_t) + (lo_.capacity() + hi_.capacity()) * sizeof(float) +
          (boundary_ ? boundary_->bytes() : 0);
@@ -1019,7 +1055,7 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
   Vec3 pts[4];
   std::uint32_t r = start;
   for (int step = 0; step < 32; ++step) {
-    load(h_, elems_[r], pts);
+    load(h_, ElemId(elems_[r]), pts);
     const Vec3 a = sub(pts[1], pts[0]), b = sub(pts[2], pts[0]), c = sub(pts[3], pts[0]), x = sub(q, pts[0]);
     const double det = dot(a, cross(b, c));
     const double l1 = dot(x, cross(b, c)) / det, l2 = dot(a, cross(x, c)) / det,
@@ -1031,7 +1067,7 @@ std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<doubl
     if (next == kNoNeighbor) break;
     r = next >> 2;
   }
-  return locate(p, d, elems_[start]);
+  return locate(p, d, ElemId(elems_[start]));
 }
 
 // ---------------------------------------------------------------- traversal

@@ -137,7 +137,7 @@ class TetRenderMesh {
   std::size_t size() const { return elems_.size(); }
   int level() const { return level_; }
   const Hierarchy<3>& hierarchy() const { return h_; }
-  ElemId element(std::uint32_t r) const { return elems_[r]; }
+  ElemId element(std::uint32_t r) const { return ElemId(elems_[r]); }
   /// Face neighbours of element r (render indices; −1 on the boundary), face f opposite local
   /// vertex f.
   std::array<std::int32_t, 4> neighbors(std::uint32_t r) const {
@@ -228,7 +228,7 @@ class TetRenderMesh {
   int level_;
   std::vector<double> coarse_values_;
   const std::vector<double>* u_;
-  std::vector<ElemId> elems_;
+  std::vector<std::uint32_t, DefaultInit<std::uint32_t>> elems_;  // element ids in render order
   // Records are built lazily in chunks of 2^kChunkBits (record()); the neighbours, which need
   // the whole mesh, are found up front (next_).
   static constexpr int kChunkBits = 9;
