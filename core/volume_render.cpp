@@ -14,38 +14,16 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
-#include <ctime>
 #include <limits>
 #include <memory>
 
 #include "counting_sort.h"
 #include "morton.h"
+
 namespace mlfe {
 
 namespace {
-struct PhaseTimer {
-  bool on = std::getenv("MLFE_PHASES") != nullptr;
-  std::chrono::steady_clock::time_point t = std::chrono::steady_clock::now();
-  double cpu = cpu_ms();
-  static double cpu_ms() {
-    timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-  }
-  void operator()(const char* name) {
-    if (!on) return;
-    const auto n = std::chrono::steady_clock::now();
-    const double c = cpu_ms();
-    std::fprintf(stderr, "  %-24s %7.2f ms wall %7.2f ms cpu\n", name,
-                 std::chrono::duration<double, std::milli>(n - t).count(), c - cpu);
-    t = n;
-    cpu = c;
-  }
-};
 
 using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
@@ -229,7 +207,6 @@ template <class Next>
 std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of, std::size_t rendered,
                            Next& next, bool siblings) {
   constexpr std::uint32_t kNo = TetRenderMesh::kNoNeighbor;
-  PhaseTimer T;
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
   struct Face {
     std::uint32_t v1, v2;  // the face's two higher vertex ids
@@ -283,13 +260,11 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
       faces_of(e, [&](std::uint32_t low, std::uint32_t, std::uint32_t, std::uint32_t) { ++count[low]; });
     }
   });
-  T("fa count");
   std::vector<std::uint32_t> start(nv + 1);
   const std::uint32_t sum = detail::chunked_offsets(at.data(), kChunks, nv, start.data());
   MLFE_CHECK(sum <= 4 * rendered);
   std::unique_ptr<Face[]> faces(new Face[std::max<std::size_t>(sum, 1)]);
   advise_huge_pages(faces.get(), sum * sizeof(Face));
-  T("fa offsets+alloc");
   tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t k) {
     std::uint32_t* fill = at.data() + k * nv;
     for (std::size_t e = k * per_chunk, end = std::min(ne, e + per_chunk); e < end; ++e)
@@ -297,7 +272,6 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
         faces[fill[low]++] = {v1, v2, slot};
       });
   });
-  T("fa fill");
   // 4. per bucket: equal keys are the two sides of one face.
   std::atomic<std::size_t> overshared{0};
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1024), [&](const auto& range) {
@@ -324,7 +298,6 @@ std::size_t face_adjacency(const Hierarchy<3>& h, const std::uint32_t* render_of
       }
     }
   });
-  T("fa match");
   return overshared.load();
 }
 
@@ -407,7 +380,6 @@ std::size_t sweep_up(const Hierarchy<3>& h, int k, std::uint32_t* count, float* 
 template <class Elems>
 void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t n, Elems& elems) {
   std::uint32_t* const render_of = count;
-  PhaseTimer T;
   std::uint32_t next = 0;
   for (std::size_t e = 0; e < h.coarse_count(); ++e) {
     const std::uint32_t c = count[e];
@@ -426,11 +398,9 @@ void tree_order(const Hierarchy<3>& h, int k, std::uint32_t* count, std::size_t 
       }
       render_of[p.value] = kNone;
     });
-  T("to levels");
   elems.reserve(n);
   advise_huge_pages(elems);
   elems.resize(n);  // not initialised: set below, in parallel
-  T("to resize");
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.element_count(), 8192), [&](const auto& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const ElemId e(static_cast<std::uint32_t>(i));
@@ -463,7 +433,6 @@ void morton_order(const Hierarchy<3>& h, Elems& elems) {
   constexpr int kBucketBits = 16, kKeyBits = 63;
   constexpr std::size_t kBuckets = std::size_t(1) << kBucketBits, kChunks = 4;
   const std::size_t n = elems.size(), per_chunk = (n + kChunks - 1) / kChunks;
-  PhaseTimer T;
   std::vector<std::uint64_t, DefaultInit<std::uint64_t>> keys(n);
   std::vector<Keyed, DefaultInit<Keyed>> sorted(n);
   std::vector<std::uint32_t> at(kChunks * kBuckets, 0);
@@ -483,7 +452,6 @@ void morton_order(const Hierarchy<3>& h, Elems& elems) {
       ++count[key >> (kKeyBits - kBucketBits)];
     }
   });
-  T("mo keys");
   // 2. bucket offsets, chunk after chunk within a bucket; 3. pairs into their buckets.
   std::vector<std::uint32_t> start(kBuckets + 1);
   detail::chunked_offsets(at.data(), kChunks, kBuckets, start.data());
@@ -492,7 +460,6 @@ void morton_order(const Hierarchy<3>& h, Elems& elems) {
     for (std::size_t i = k * per_chunk, end = std::min(n, i + per_chunk); i < end; ++i)
       sorted[fill[keys[i] >> (kKeyBits - kBucketBits)]++] = {keys[i], elems[i]};
   });
-  T("mo scatter");
   // 4. each bucket in (key, id) order, written back.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, kBuckets, 256), [&](const auto& range) {
     for (std::size_t b = range.begin(); b != range.end(); ++b) {
@@ -649,7 +616,6 @@ inline int TetRenderMesh::grid_index(int a, double x) const {
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
                              const std::array<double, 3>* clip_to, RayEntry entry)
     : h_(h), entry_(entry) {
-  PhaseTimer T;
   if (values.size() != h.vertex_count())
     throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
                 std::to_string(h.vertex_count()) + " vertices");
@@ -674,14 +640,11 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   advise_huge_pages(render_of_);
   render_of_.resize(ne);
   rendered_ranges(h, level_, *u_, render_of_.data(), lo_.data(), hi_.data());
-  T("rendered ranges");
   const std::size_t rendered = sweep_up(h, level_, render_of_.data(), lo_.data(), hi_.data());
-  T("sweep up");
   // Neighbour records pack 4 × index + face into 32 bits.
   if (rendered >= (std::size_t(1) << 30))
     throw Error("render: " + std::to_string(rendered) + " tetrahedra exceed the renderer's limit of 2^30");
   tree_order(h, level_, render_of_.data(), rendered, elems_);
-  T("tree order");
   if (entry_ == RayEntry::kBoundaryFaces) {
     // An unstructured mesh has no refinement tree to follow (T0 is the mesh): Z-order.
     morton_order(h, elems_);
@@ -703,7 +666,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
     throw Error("render: " + std::to_string(overshared) +
                 " faces are shared by more than two tetrahedra (not a conforming mesh)");
-  T("face_adjacency");
   // 4. the domain box (T0 spans it).
   lo_box_.fill(std::numeric_limits<double>::infinity());
   hi_box_.fill(-std::numeric_limits<double>::infinity());
@@ -734,7 +696,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // x ∓ pad are monotone in x, so that is the min (max) of its vertices' padded cells, found
   // once per vertex here instead of six divisions per element.
   for (int a = 0; a < 3; ++a) MLFE_CHECK(grid_n_[a] <= 256);
-  T("box");
   std::vector<std::array<std::uint8_t, 6>> vertex_cells(h.vertex_count());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.vertex_count(), 4096), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
@@ -745,7 +706,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       }
     }
   });
-  T("vertex cells");
   // Chunks of elements in parallel, each into its own grid, then merged: min and max are exact,
   // so the grid does not depend on the split.
   constexpr std::size_t kChunks = 4;
@@ -773,16 +733,13 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
           }
     }
   });
-  T("grid chunks");
   for (std::size_t k = 0; k < kChunks; ++k)
     for (std::size_t c = 0; c < cells; ++c) {
       grid_lo_[c] = std::min(grid_lo_[c], part_lo[k][c]);
       grid_hi_[c] = std::max(grid_hi_[c], part_hi[k][c]);
     }
-  T("grid merge");
   // 6. unstructured meshes: the boundary faces in their bucket grid.
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
-  T("boundary grid");
 }
 
 // One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.

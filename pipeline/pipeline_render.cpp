@@ -16,8 +16,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <memory>
 
@@ -222,11 +220,7 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
   detail::OutputGuard written;
   std::unique_ptr<TetRenderMesh> mesh;
   if (!p.reference) {
-    const auto t0 = std::chrono::steady_clock::now();
     mesh = render_mesh_of(a3, p, entry, source);
-    if (std::getenv("MLFE_PHASES"))
-      std::fprintf(stderr, "render mesh %.2f ms\n",
-                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     r.tetrahedra = mesh->size();
     r.level = mesh->level();
     r.mesh_bytes = mesh->memory_bytes();
@@ -370,11 +364,7 @@ RenderResult render(const std::string& input, const std::string& output, const R
   if (report) o.progress = report.share(0.6, 1).as_progress();
   if (is_hierarchy_file(input)) {
     // level K reads the file's prefix up to level K only (docs/mlfeh-v3.md).
-    const auto t0 = std::chrono::steady_clock::now();
     Built b = built_from_file(input, o.level);
-    if (std::getenv("MLFE_PHASES"))
-      std::fprintf(stderr, "read file %.2f ms\n",
-                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     RenderResult r = render(b, output, o, nullptr, input);
     r.built = std::move(b);
     return r;

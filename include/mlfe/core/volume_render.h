@@ -23,8 +23,9 @@
 //      several leaf steps);
 //   5. a ray that leaves the mesh before the box exit (rounding) is located again, not lost;
 //      a hard bound on steps (number of tetrahedra + 64) ends pathological walks, counted.
-// The rendered elements are kept in Z-order of their centroids, so that the records a tile of
-// rays reads lie close together in memory.
+// The rendered elements are kept in the refinement tree's depth-first order (a subtree is a
+// compact piece of space), so that the records a tile of rays reads lie close together in
+// memory; an unstructured mesh's (no tree) in Z-order of their centroids.
 // Unstructured meshes (RayEntry::kBoundaryFaces: T0 is a given mesh, e.g. a finite-element
 // solution read from .vtu/.msh, which need not fill its box nor be convex): steps 2 and 5 go
 // through the mesh's boundary faces instead, kept in a uniform bucket grid over the box. A ray
