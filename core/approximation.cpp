@@ -9,6 +9,7 @@
 #include <mlfe/core/huge_pages.h>
 #include <mlfe/core/marking.h>
 #include <mlfe/core/p1_element.h>
+#include <mlfe/core/sampled_least_squares.h>
 #include <mlfe/core/surface_estimator.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -100,33 +101,49 @@ double sample_or_value(const ScalarGrid& g, const Field& f, const std::array<dou
 // u at the samples measurably.
 constexpr double kPaddingWeight = 0.01;
 
+// The padding's weight per vertex: kPaddingWeight samples for vertices beyond the data's box,
+// 0 elsewhere.
 template <int D>
-void regularize_padding(const Hierarchy<D>& h, const Field& f, const SampleLattice& lat, SparseMatrix& m,
-                        Vector& rhs) {
+std::vector<double> padding_weights(const Hierarchy<D>& h, const SampleLattice& lat) {
   const auto ext = lat.data_extent();
   const double w = kPaddingWeight * lat.sample_weight;
+  std::vector<double> pad(h.vertex_count(), 0.0);
   for (std::size_t v = 0; v < h.vertex_count(); ++v) {
     const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
     bool outside = false;
     for (int a = 0; a < D; ++a) outside |= p[a] > ext[a] + 0.25 * lat.spacing[a];
-    if (!outside) continue;
-    std::array<double, 3> q{0, 0, 0};
-    for (int a = 0; a < D; ++a) q[a] = p[a];
-    const auto i = static_cast<Eigen::Index>(v);
-    m.coeffRef(i, i) += w;
-    rhs[i] += w * f.value(q);
+    if (outside) pad[v] = w;
   }
+  return pad;
+}
+
+// The padding's pull toward f (the data clamped to its box) in the load.
+template <int D>
+void add_padding_load(const Hierarchy<D>& h, const Field& f, const std::vector<double>& pad, Vector& rhs) {
+  for (std::size_t v = 0; v < pad.size(); ++v) {
+    if (pad[v] == 0) continue;
+    std::array<double, 3> q{0, 0, 0};
+    for (int a = 0; a < D; ++a) q[a] = h.point(VertexId(static_cast<std::uint32_t>(v)))[a];
+    rhs[static_cast<Eigen::Index>(v)] += pad[v] * f.value(q);
+  }
+}
+
+template <int D>
+void regularize_padding(const Hierarchy<D>& h, const Field& f, const SampleLattice& lat, SparseMatrix& m,
+                        Vector& rhs) {
+  const std::vector<double> pad = padding_weights(h, lat);
+  for (std::size_t v = 0; v < pad.size(); ++v)
+    if (pad[v] != 0) m.coeffRef(static_cast<Eigen::Index>(v), static_cast<Eigen::Index>(v)) += pad[v];
+  add_padding_load(h, f, pad, rhs);
 }
 
 std::vector<double> to_std(const Vector& x) { return std::vector<double>(x.data(), x.data() + x.size()); }
 
-// Values of the vertices that no sample sees (padding, sample_lattice.h): they change u at no
-// sample, so they get the value their parents predict (a zero surplus, nothing to store), T0's
-// the field's value there (clamped to the data).
+// The vertices some sample sees: a positive diagonal of the sampled mass on some leaf.
 template <int D>
-void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<ElemId>& leaves,
-                 const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
-                 std::vector<double>& x) {
+std::vector<std::uint8_t> seen_by_integrals(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
+                                            const std::vector<ElementIntegrals<D>>& integrals,
+                                            IntegralIndex index) {
   std::vector<std::uint8_t> seen(h.vertex_count(), 0);
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     const auto& in = integrals[index == IntegralIndex::kLeafOrder ? i : leaves[i].value];
@@ -134,6 +151,15 @@ void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<ElemId
     for (int a = 0; a <= D; ++a)
       if (in.mass_at(a, a) > 0) seen[c[a].value] = 1;
   }
+  return seen;
+}
+
+// Values of the vertices that no sample sees (padding, sample_lattice.h): they change u at no
+// sample, so they get the value their parents predict (a zero surplus, nothing to store), T0's
+// the field's value there (clamped to the data).
+template <int D>
+void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<std::uint8_t>& seen,
+                 std::vector<double>& x) {
   for (std::size_t v = 0; v < x.size(); ++v) {
     if (seen[v]) continue;
     const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
@@ -458,7 +484,7 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   IterationStats local;
   std::vector<double> x =
       to_std(solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local, lattice != nullptr));
-  if (lattice) fill_unseen(h, f, leaves, integrals, IntegralIndex::kLeafOrder, x);
+  if (lattice) fill_unseen(h, f, seen_by_integrals(h, leaves, integrals, IntegralIndex::kLeafOrder), x);
   return x;
 }
 
@@ -662,133 +688,181 @@ double record_errors(IterationStats& st, const Hierarchy<D>& h, std::size_t leaf
   return total;
 }
 
-// Solves the iteration's system for u, starting from the previous mesh's u interpolated (or,
-// first, f's interpolant on a mesh built around the surfaces, else 0); `values` becomes u.
+// The start of an iteration's solve: the previous mesh's u interpolated (or, first, f's
+// interpolant on a mesh built around the surfaces, else 0).
 template <int D>
-Vector solve_iteration(const Hierarchy<D>& h, const Field& f, const SparseMatrix& m, const Vector& rhs,
-                       const ApproximationOptions& opts, double gw, const std::vector<ElemId>& leaves,
-                       const std::vector<ElementIntegrals<D>>& cache, const SampleLattice* lattice,
-                       const Approximation<D>& out, bool surface_driven, std::vector<double>& values,
-                       IterationStats& st) {
-  constexpr IntegralIndex kById = IntegralIndex::kElementId;
+Vector start_values(const Hierarchy<D>& h, const Approximation<D>& out, bool surface_driven,
+                    std::vector<double>& values) {
   if (values.empty() && surface_driven)
     values = out.data_values;  // f's interpolant is close to u on a mesh built around the surfaces
   else if (values.empty())
     values.assign(h.vertex_count(), 0.0);
   else
     prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
-  Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-  Vector x = solve_system(h, m, rhs, start, opts, gw, st, lattice != nullptr);
-  values.assign(x.data(), x.data() + x.size());
-  if (lattice) {
-    fill_unseen(h, f, leaves, cache, kById, values);
-    x = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-  }
-  return x;
+  return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
 }
 
+// What one refine-solve iteration needs of the system, two ways. CachedSystem: the integrals of
+// each leaf cached by element id, assembled into a sparse matrix (any field, H1, the iso-aware
+// estimate, which reads f's range per leaf). SampledSystem: least squares at the samples in L2,
+// applied from the samples (sampled_least_squares.h), no per-element sums and no matrix.
+// Both: prepare() after the mesh changed, solve() from `values` (becomes u), errors() per
+// leaf, refined() with refine()'s remap.
 template <int D>
-Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in) {
-  if (f.dim() != D)
-    throw Error("approximate<" + std::to_string(D) + ">: the field is " + std::to_string(f.dim()) + "D");
-  const auto t0 = Clock::now();
-  Approximation<D> out;
-  ApproximationOptions opts = opts_in;
-  // The samples' lattice (sample_lattice.h): T0 is a cube 2^L samples wide, level L's vertices
-  // are the samples and nothing is refined below them.
-  const ScalarGrid* grid = f.samples();
-  out.on_lattice = opts.lattice && grid != nullptr;
-  const SampleLattice* lattice = nullptr;
-  typename Hierarchy<D>::Point lo, hi;
-  const auto ext = f.extent();
-  out.data_extent = ext;
-  if (out.on_lattice) {
-    out.lattice = sample_lattice(*grid);
-    lattice = &out.lattice;
-    opts.max_level = std::min(opts.max_level, out.lattice.level);
-  }
-  const bool interpolating = opts.max_sample_error >= 0;
-  if (interpolating && (!out.on_lattice || !std::isfinite(opts.max_sample_error)))
-    throw Error(
-        "a maximum error at the samples needs a finite bound and gridded input on the samples' lattice");
-  const auto box_ext = out.on_lattice ? out.lattice.box_extent() : ext;
-  for (int a = 0; a < D; ++a) {
-    lo[a] = 0;
-    hi[a] = box_ext[a];
-  }
-  out.hierarchy = Hierarchy<D>::box(lo, hi);
-  Hierarchy<D>& h = out.hierarchy;
-  out.domain_measure = 1;
-  for (int a = 0; a < D; ++a) out.domain_measure *= ext[a];
-  if (out.on_lattice) out.domain_measure = double(out.lattice.samples()) * out.lattice.sample_weight;
-  const auto range = f.range();
-  out.value_min = range[0];
-  out.value_max = range[1];
-  const double value_span = range[1] > range[0] ? range[1] - range[0] : 1.0;
-  const double gw = gradient_weight<D>(f, opts);
-  const double qedge = default_quadrature_edge(f, opts);
-
-  // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
-  // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
-  // On the lattice: where T0's cube is cut into cubes 16 samples wide, padding left alone.
-  if (interpolating) {
-    // Refinement from T0 where the samples need it: flat regions stay on coarse elements.
-    refine_to_sample_error(h, *grid, opts, t0, out);
-    return out;
-  }
-  refine_to_start_level(h, f, opts, out);
-  const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
-  std::string surface_stop;
-  if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out, lattice);
-  if (surface_driven && !opts.solve) {
-    out.values = out.data_values;
-    out.stop_reason = surface_stop.empty() ? "surfaces within tolerance (u not solved)" : surface_stop;
-    return out;
+class CachedSystem {
+ public:
+  CachedSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice* lattice)
+      : f_(f), opts_(opts), lattice_(lattice), gw_(gradient_weight<D>(f, opts)),
+        qedge_(default_quadrature_edge(f, opts)) {
+    reserve_build_arrays(f, opts, h, cache_, have_);
   }
 
+  void prepare(const Hierarchy<D>& h, const std::vector<ElemId>& leaves) {
+    update_integral_cache(h, leaves, f_, qedge_, opts_, lattice_, cache_, grads_, have_);
+    // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
+    // every iteration.
+    assemble_system(h, leaves, gw_, cache_, kById, workspace_, m_, rhs_, &grads_);
+    if (lattice_) regularize_padding(h, f_, *lattice_, m_, rhs_);
+  }
+
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Vector& start,
+               std::vector<double>& values, IterationStats& st) {
+    Vector x = solve_system(h, m_, rhs_, start, opts_, gw_, st, lattice_ != nullptr);
+    values.assign(x.data(), x.data() + x.size());
+    if (!lattice_) return x;
+    fill_unseen(h, f_, seen_by_integrals(h, leaves, cache_, kById), values);
+    return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  }
+
+  // E_T and E_T per unit measure (over the samples T owns, on the lattice).
+  void errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Vector& x,
+              std::vector<double>& err, std::vector<double>& density) const {
+    err = element_errors(h, leaves, cache_, x, gw_, kById, &grads_);
+    density.resize(leaves.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 4096), [&](const auto& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        const auto& in = cache_[leaves[i].value];
+        density[i] = in.sampled ? err[i] / (lattice_->sample_weight * std::max<double>(in.points, 1))
+                                : err[i] / h.measure(leaves[i]);
+      }
+    });
+  }
+
+  const std::vector<ElementIntegrals<D>>* integrals() const { return &cache_; }
+  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) {
+    remap_integral_cache(remap, cache_, grads_, have_);
+  }
+
+ private:
+  static constexpr IntegralIndex kById = IntegralIndex::kElementId;
+  const Field& f_;
+  const ApproximationOptions& opts_;
+  const SampleLattice* lattice_;
+  const double gw_, qedge_;
   // Integrals cached per element id (valid for leaves); refinement remaps them.
-  std::vector<ElementIntegrals<D>> cache;
-  std::vector<ElementGradients<D>> grads;  // H1 only
-  std::vector<std::uint8_t> have;
-  reserve_build_arrays(f, opts, h, cache, have);
+  std::vector<ElementIntegrals<D>> cache_;
+  std::vector<ElementGradients<D>> grads_;  // H1 only
+  std::vector<std::uint8_t> have_;
+  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
+  AssemblyWorkspace workspace_;
+  SparseMatrix m_;
+  Vector rhs_;
+};
+
+template <int D>
+class SampledSystem {
+ public:
+  SampledSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice& lattice)
+      : f_(f), opts_(opts), lattice_(lattice), op_(lattice, *f.samples()) {
+    // The hierarchy's address space up front, as CachedSystem's (the same cap per element).
+    reserve_hierarchy(static_cast<std::size_t>(f.samples()->voxel_count()), opts, h,
+                      sizeof(ElementIntegrals<D>), 3);
+  }
+
+  void prepare(const Hierarchy<D>& h, const std::vector<ElemId>&) {
+    std::vector<double> pad = padding_weights(h, lattice_);
+    op_.update(h, remap_, pad);
+    remap_.clear();
+    op_.load(rhs_, diagonal_);
+    add_padding_load(h, f_, pad, rhs_);
+    // Seen by a sample: a positive diagonal without the padding's weight.
+    seen_.assign(h.vertex_count(), 0);
+    for (std::size_t v = 0; v < pad.size(); ++v) seen_[v] = diagonal_[static_cast<Eigen::Index>(v)] > pad[v];
+  }
+
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector& start, std::vector<double>& values,
+               IterationStats& st) {
+    const JacobiPreconditioner pre(diagonal_);
+    Vector x = start;
+    const CgResult r = conjugate_gradient(op_, pre, rhs_, x, opts_.cg_tolerance, 5000);
+    st.cg_iterations = r.iterations;
+    st.cg_residual = r.relative_residual;
+    values.assign(x.data(), x.data() + x.size());
+    fill_unseen(h, f_, seen_, values);
+    return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  }
+
+  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x, std::vector<double>& err,
+              std::vector<double>& density) {
+    op_.leaf_errors(x, by_id_, samples_);
+    err.resize(leaves.size());
+    density.resize(leaves.size());
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+      err[i] = by_id_[leaves[i].value];
+      density[i] = err[i] / (lattice_.sample_weight * std::max<double>(samples_[leaves[i].value], 1));
+    }
+  }
+
+  const std::vector<ElementIntegrals<D>>* integrals() const { return nullptr; }
+  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) { remap_ = remap; }
+
+ private:
+  const Field& f_;
+  const ApproximationOptions& opts_;
+  const SampleLattice& lattice_;
+  SampledLeastSquares<D> op_;
+  std::vector<ElemId> remap_;  // refine()'s, for the next prepare()
+  Vector rhs_, diagonal_;
+  std::vector<std::uint8_t> seen_;
+  std::vector<double> by_id_;
+  std::vector<std::uint32_t> samples_;
+};
+
+// The refine-solve loop (Grosso, Lürig & Ertl, Sec. 3): prepare the system on the leaves,
+// solve, estimate, mark, stop or refine the worst within the budget.
+template <int D, class System>
+void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                  Approximation<D>& out, const SampleLattice* lattice, bool surface_driven,
+                  const std::string& surface_stop, Clock::time_point t0) {
+  const double value_span = out.value_max > out.value_min ? out.value_max - out.value_min : 1.0;
   std::vector<double> values;
   double vertices_per_mark = 2.0;  // a red refinement's 3 (2D) / 6 (3D) midpoints, shared
   bool budget_reached = false;     // a pass was cut by the budget (refine_worst)
   // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules
   // converge by themselves, and the paper's threshold rule runs to its end.
   const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
-
-  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
-  AssemblyWorkspace workspace;
-  SparseMatrix m;
-  Vector rhs;
+  std::vector<double> err, density;
   for (int it = 0;; ++it) {
     IterationStats st;
     st.iteration = it;
     auto ta = Clock::now();
     const auto leaves = h.leaves();
-    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, grads, have);
-    // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
-    // every iteration.
-    constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs, &grads);
-    if (lattice) regularize_padding(h, f, *lattice, m, rhs);
+    sys.prepare(h, leaves);
     st.assembly_seconds = since(ta);
 
     auto ts = Clock::now();
-    const Vector x =
-        solve_iteration(h, f, m, rhs, opts, gw, leaves, cache, lattice, out, surface_driven, values, st);
+    const Vector x = sys.solve(h, leaves, start_values(h, out, surface_driven, values), values, st);
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
-    const auto err = element_errors(h, leaves, cache, x, gw, kById, &grads);
+    sys.errors(h, leaves, x, err, density);
     const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
 
     // Mark.
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     std::size_t surface_marks = 0;
-    std::vector<Mark> marked =
-        mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks, lattice);
+    std::vector<Mark> marked = mark_leaves(h, leaves, err, density, sys.integrals(), x, f, opts, surface_driven,
+                                           target_met, &surface_marks, lattice);
     const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
                                        surface_stop, stall_checks);
     st.estimate_seconds = since(te);
@@ -830,9 +904,76 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
       out.leaf_errors = err;
       break;
     }
-    remap_integral_cache(remap, cache, grads, have);
+    sys.refined(h, remap);
   }
   out.values = std::move(values);
+}
+
+template <int D>
+Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in) {
+  if (f.dim() != D)
+    throw Error("approximate<" + std::to_string(D) + ">: the field is " + std::to_string(f.dim()) + "D");
+  const auto t0 = Clock::now();
+  Approximation<D> out;
+  ApproximationOptions opts = opts_in;
+  // The samples' lattice (sample_lattice.h): T0 is a cube 2^L samples wide, level L's vertices
+  // are the samples and nothing is refined below them.
+  const ScalarGrid* grid = f.samples();
+  out.on_lattice = opts.lattice && grid != nullptr;
+  const SampleLattice* lattice = nullptr;
+  typename Hierarchy<D>::Point lo, hi;
+  const auto ext = f.extent();
+  out.data_extent = ext;
+  if (out.on_lattice) {
+    out.lattice = sample_lattice(*grid);
+    lattice = &out.lattice;
+    opts.max_level = std::min(opts.max_level, out.lattice.level);
+  }
+  const bool interpolating = opts.max_sample_error >= 0;
+  if (interpolating && (!out.on_lattice || !std::isfinite(opts.max_sample_error)))
+    throw Error(
+        "a maximum error at the samples needs a finite bound and gridded input on the samples' lattice");
+  const auto box_ext = out.on_lattice ? out.lattice.box_extent() : ext;
+  for (int a = 0; a < D; ++a) {
+    lo[a] = 0;
+    hi[a] = box_ext[a];
+  }
+  out.hierarchy = Hierarchy<D>::box(lo, hi);
+  Hierarchy<D>& h = out.hierarchy;
+  out.domain_measure = 1;
+  for (int a = 0; a < D; ++a) out.domain_measure *= ext[a];
+  if (out.on_lattice) out.domain_measure = double(out.lattice.samples()) * out.lattice.sample_weight;
+  const auto range = f.range();
+  out.value_min = range[0];
+  out.value_max = range[1];
+
+  // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
+  // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
+  // On the lattice: where T0's cube is cut into cubes 16 samples wide, padding left alone.
+  if (interpolating) {
+    // Refinement from T0 where the samples need it: flat regions stay on coarse elements.
+    refine_to_sample_error(h, *grid, opts, t0, out);
+    return out;
+  }
+  refine_to_start_level(h, f, opts, out);
+  const bool surface_driven = opts.surface_driven && !opts.iso_values.empty();
+  std::string surface_stop;
+  if (surface_driven) surface_stop = refine_toward_surfaces(h, f, opts, t0, out, lattice);
+  if (surface_driven && !opts.solve) {
+    out.values = out.data_values;
+    out.stop_reason = surface_stop.empty() ? "surfaces within tolerance (u not solved)" : surface_stop;
+    return out;
+  }
+
+  // Least squares at the samples in L2 without the iso-aware estimate (which reads f's range per
+  // leaf from the integrals) is applied from the samples; everything else from the cache.
+  if (lattice && !opts.h1 && opts.iso_values.empty()) {
+    SampledSystem<D> sys(h, f, opts, *lattice);
+    refine_solve(sys, h, f, opts, out, lattice, surface_driven, surface_stop, t0);
+  } else {
+    CachedSystem<D> sys(h, f, opts, lattice);
+    refine_solve(sys, h, f, opts, out, lattice, surface_driven, surface_stop, t0);
+  }
   if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added
   return out;
 }

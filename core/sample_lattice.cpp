@@ -264,6 +264,24 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
 }
 
 template <int D>
+void owned_samples(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
+                   std::vector<OwnedSample<D>>& out) {
+  out.clear();
+  const auto c = index_corners<D>(p, lat);
+  const Numerators<D> num = numerators<D>(c);
+  std::array<double, D + 1> inv;
+  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const I64 nx = lat.dims[0], ny = lat.dims[1];
+  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+    OwnedSample<D> s;
+    s.index = q[0] + nx * (q[1] + ny * q[2]);
+    for (int i = 0; i <= D; ++i) s.lambda[i] = double(nn[i]) * inv[i];
+    out.push_back(s);
+    return true;
+  });
+}
+
+template <int D>
 SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
                                  const ScalarGrid& grid, const std::array<double, D + 1>& v, double stop) {
   SampleDeviation out;
@@ -327,6 +345,10 @@ template ElementIntegrals<2> sample_integrals<2>(const std::array<std::array<dou
 template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<double, 3>, 4>&,
                                                  const SampleLattice&, const ScalarGrid&, const Field&,
                                                  ElementGradients<3>*);
+template void owned_samples<2>(const std::array<std::array<double, 2>, 3>&, const SampleLattice&,
+                                std::vector<OwnedSample<2>>&);
+template void owned_samples<3>(const std::array<std::array<double, 3>, 4>&, const SampleLattice&,
+                                std::vector<OwnedSample<3>>&);
 template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
                                              const SampleLattice&, const ScalarGrid&,
                                              const std::array<double, 3>&, double);
