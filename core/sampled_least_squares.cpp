@@ -41,6 +41,7 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
   std::size_t first_new = 0;
   if (h_ == nullptr) {
     owner_.assign(ns, kNoOwner);
+    cells_.resize(ns);
     lambda_.resize(ns);
   } else if (remap.empty()) {
     first_new = elements_seen_;
@@ -74,6 +75,7 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
       if (owned.empty()) continue;
       for (const OwnedSample<D>& s : owned) {
         owner_[static_cast<std::size_t>(s.index)] = e.value;
+        cells_[static_cast<std::size_t>(s.index)] = h.cell(e);
         for (int a = 0; a < D; ++a) lambda_[static_cast<std::size_t>(s.index)][a] = float(s.lambda[a + 1]);
       }
       for (int a = 1; a < D; ++a) {  // the tiled axes
@@ -120,7 +122,7 @@ void SampledLeastSquares<D>::for_each_sample(int colour, Visit&& visit) const {
         for (std::int64_t y = y0; y < y1; ++y) {
           const std::size_t row = static_cast<std::size_t>(nx * (y + ny * z));
           for (std::size_t s = row; s < row + static_cast<std::size_t>(nx); ++s) {
-            const auto& c = h_->cell(ElemId(owner_[s]));
+            const auto& c = cells_[s];
             std::array<double, D + 1> lam;
             lam[0] = 1.0;
             for (int a = 0; a < D; ++a) {
