@@ -187,12 +187,18 @@ std::array<std::array<double, D>, D + 1> corners_of(const Hierarchy<D>& h, ElemI
 // per vertex and 70 per leaf; 100 per leaf keeps a margin. (160, from a run with the hash
 // sets, stopped that lossless build at the default budget with less than half of it used.)
 constexpr double kInterpolatingBytesPerLeaf = 100, kInterpolatingBytesPerVertex = 300;
+// The same for least squares applied from the samples (SampledSystem): the hierarchy, the
+// per-leaf errors, sample counts and marks, and the samples' own 32 bytes counted per leaf
+// (about two leaves per sample at a full head's noise level); per vertex the CG vectors. The
+// noisy full head's default build peaked at 1.85 GB (13.7 M leaves, 2.3 M vertices), which
+// this puts at 2.0 GB.
+constexpr double kSampledBytesPerLeaf = 100, kSampledBytesPerVertex = 280;
 
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
 // allows at the current ratio of leaves to vertices (0: no limit). *by_memory tells which binds.
 template <int D>
 std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices, std::size_t leaves,
-                         bool* by_memory) {
+                         bool* by_memory, bool sampled = false) {
   std::size_t limit = opts.max_vertices;
   *by_memory = false;
   if (opts.max_memory_bytes > 0) {
@@ -201,9 +207,9 @@ std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices,
     const double ratio =
         1.25 * std::max(double(leaves) / double(std::max<std::size_t>(1, vertices)), D == 3 ? 5.0 : 2.0);
     const double per_vertex =
-        opts.max_sample_error >= 0
-            ? kInterpolatingBytesPerLeaf * ratio + kInterpolatingBytesPerVertex
-            : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
+        opts.max_sample_error >= 0 ? kInterpolatingBytesPerLeaf * ratio + kInterpolatingBytesPerVertex
+        : sampled                  ? kSampledBytesPerLeaf * ratio + kSampledBytesPerVertex
+                                   : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
     const auto mem = static_cast<std::size_t>(double(opts.max_memory_bytes) / per_vertex);
     if (limit == 0 || mem < limit) {
       limit = std::max<std::size_t>(mem, 1);
@@ -646,8 +652,8 @@ template <int D>
 std::vector<ElemId> refine_worst(Hierarchy<D>& h, const ApproximationOptions& opts, std::size_t leaf_count,
                                  std::vector<Mark>& marked, std::size_t surface_marks, double excess,
                                  double& vertices_per_mark, std::size_t& count, bool& by_memory,
-                                 bool& budget_reached) {
-  const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaf_count, &by_memory);
+                                 bool& budget_reached, bool sampled) {
+  const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaf_count, &by_memory, sampled);
   const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
   const std::size_t cap =
       limit
@@ -711,6 +717,7 @@ Vector start_values(const Hierarchy<D>& h, const Approximation<D>& out, bool sur
 template <int D>
 class CachedSystem {
  public:
+  static constexpr bool kSampled = false;
   CachedSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice* lattice)
       : f_(f), opts_(opts), lattice_(lattice), gw_(gradient_weight<D>(f, opts)),
         qedge_(default_quadrature_edge(f, opts)) {
@@ -734,20 +741,12 @@ class CachedSystem {
     return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
   }
 
-  // E_T and E_T per unit measure (over the samples T owns, on the lattice).
   void errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Vector& x,
-              std::vector<double>& err, std::vector<double>& density) const {
+              std::vector<double>& err) const {
     err = element_errors(h, leaves, cache_, x, gw_, kById, &grads_);
-    density.resize(leaves.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 4096), [&](const auto& r) {
-      for (std::size_t i = r.begin(); i != r.end(); ++i) {
-        const auto& in = cache_[leaves[i].value];
-        density[i] = in.sampled ? err[i] / (lattice_->sample_weight * std::max<double>(in.points, 1))
-                                : err[i] / h.measure(leaves[i]);
-      }
-    });
   }
 
+  const std::vector<std::uint32_t>* samples() const { return nullptr; }  // read from the cache
   const std::vector<ElementIntegrals<D>>* integrals() const { return &cache_; }
   void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) {
     remap_integral_cache(remap, cache_, grads_, have_);
@@ -772,6 +771,7 @@ class CachedSystem {
 template <int D>
 class SampledSystem {
  public:
+  static constexpr bool kSampled = true;
   SampledSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice& lattice)
       : f_(f), opts_(opts), lattice_(lattice), op_(lattice, *f.samples()) {
     // The hierarchy's address space up front, as CachedSystem's (the same cap per element).
@@ -792,9 +792,16 @@ class SampledSystem {
 
   Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector& start, std::vector<double>& values,
                IterationStats& st) {
-    const JacobiPreconditioner pre(diagonal_);
+    // Jacobi unless asked otherwise, as for the assembled sampled matrix (Preconditioner::kAuto).
+    std::unique_ptr<LinearOperator> pre;
+    if (opts_.preconditioner == Preconditioner::kBpx)
+      pre = std::make_unique<BpxPreconditioner<D>>(h, 0.0);
+    else if (opts_.preconditioner == Preconditioner::kNone)
+      pre = std::make_unique<IdentityOperator>(op_.size());
+    else
+      pre = std::make_unique<JacobiPreconditioner>(diagonal_);
     Vector x = start;
-    const CgResult r = conjugate_gradient(op_, pre, rhs_, x, opts_.cg_tolerance, 5000);
+    const CgResult r = conjugate_gradient(op_, *pre, rhs_, x, opts_.cg_tolerance, 5000);
     st.cg_iterations = r.iterations;
     st.cg_residual = r.relative_residual;
     values.assign(x.data(), x.data() + x.size());
@@ -802,17 +809,11 @@ class SampledSystem {
     return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
   }
 
-  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x, std::vector<double>& err,
-              std::vector<double>& density) {
-    op_.leaf_errors(x, by_id_, samples_);
-    err.resize(leaves.size());
-    density.resize(leaves.size());
-    for (std::size_t i = 0; i < leaves.size(); ++i) {
-      err[i] = by_id_[leaves[i].value];
-      density[i] = err[i] / (lattice_.sample_weight * std::max<double>(samples_[leaves[i].value], 1));
-    }
+  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x, std::vector<double>& err) {
+    op_.leaf_errors(x, leaves, err, samples_);
   }
 
+  const std::vector<std::uint32_t>* samples() const { return &samples_; }
   const std::vector<ElementIntegrals<D>>* integrals() const { return nullptr; }
   void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) { remap_ = remap; }
 
@@ -824,8 +825,7 @@ class SampledSystem {
   std::vector<ElemId> remap_;  // refine()'s, for the next prepare()
   Vector rhs_, diagonal_;
   std::vector<std::uint8_t> seen_;
-  std::vector<double> by_id_;
-  std::vector<std::uint32_t> samples_;
+  std::vector<std::uint32_t> samples_;  // per leaf, from errors()
 };
 
 // The refine-solve loop (Grosso, Lürig & Ertl, Sec. 3): prepare the system on the leaves,
@@ -841,7 +841,7 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
   // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules
   // converge by themselves, and the paper's threshold rule runs to its end.
   const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
-  std::vector<double> err, density;
+  std::vector<double> err;
   for (int it = 0;; ++it) {
     IterationStats st;
     st.iteration = it;
@@ -855,13 +855,13 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
     st.solve_seconds = since(ts);
 
     auto te = Clock::now();
-    sys.errors(h, leaves, x, err, density);
+    sys.errors(h, leaves, x, err);
     const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
 
     // Mark.
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     std::size_t surface_marks = 0;
-    std::vector<Mark> marked = mark_leaves(h, leaves, err, density, sys.integrals(), x, f, opts, surface_driven,
+    std::vector<Mark> marked = mark_leaves(h, leaves, err, sys.samples(), sys.integrals(), x, f, opts, surface_driven,
                                            target_met, &surface_marks, lattice);
     const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
                                        surface_stop, stall_checks);
@@ -890,7 +890,8 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
     bool by_memory = false;
     std::size_t count = 0;
     const std::vector<ElemId> remap = refine_worst(h, opts, leaves.size(), marked, surface_marks, excess,
-                                                   vertices_per_mark, count, by_memory, budget_reached);
+                                                   vertices_per_mark, count, by_memory, budget_reached,
+                                                   System::kSampled);
     const bool refined = count > 0;
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);

@@ -111,11 +111,12 @@ bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, cons
 
 template <int D>
 std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                              const std::vector<double>& err, const std::vector<double>& density,
+                              const std::vector<double>& err, const std::vector<std::uint32_t>* samples,
                               const std::vector<ElementIntegrals<D>>* cache, const Vector& u, const Field& f,
                               const ApproximationOptions& opts, bool surface_driven, bool target_met,
                               std::size_t* surface_marks, const SampleLattice* lattice) {
-  MLFE_CHECK(err.size() == leaves.size() && density.size() == leaves.size());
+  MLFE_CHECK(err.size() == leaves.size() && (!samples || samples->size() == leaves.size()));
+  MLFE_CHECK(samples || cache);
   MLFE_CHECK(cache || surface_driven || opts.iso_values.empty());
   // Once the RMS target is met only the iso-aware rule (if any) still marks.
   const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
@@ -129,18 +130,26 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
           if (!refinable(h, e, opts.max_level)) continue;
           // Padding holds no sample and is never refined (sample_lattice.h).
           if (lattice && outside_data<D>(corner_points(h, e), *lattice)) continue;
+          // Mean square error on T: over its samples on the lattice.
+          double density;
+          if (samples)
+            density = err[i] / (lattice->sample_weight * std::max<double>((*samples)[i], 1));
+          else if (const auto& in = (*cache)[e.value]; in.sampled)
+            density = err[i] / (lattice->sample_weight * std::max<double>(in.points, 1));
+          else
+            density = err[i] / h.measure(e);
           bool mark = false;
-          if (opts.threshold > 0) mark |= density[i] > thr2;
+          if (opts.threshold > 0) mark |= density > thr2;
           // Equidistribution: if no element's mean square error exceeds tau²,
           // Σ E ≤ tau² |Ω|.
-          if (tau2 > 0) mark |= density[i] > tau2;
+          if (tau2 > 0) mark |= density > tau2;
           const bool surface =
               !opts.iso_values.empty() &&
               // u smooths the noise that f's interpolant follows: it is held
               // to twice the tolerance (snapping moves vertices the rest).
               (surface_driven ? opts.check_surfaces_against_u &&
                                     surface_gap_mark(h, e, u, f, opts, 2 * opts.surface_tolerance)
-                              : surface_needs_refinement(h, e, (*cache)[e.value], u, density[i], f, opts));
+                              : surface_needs_refinement(h, e, (*cache)[e.value], u, density, f, opts));
           decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
         }
       });
@@ -178,12 +187,12 @@ std::size_t rank_and_select(std::vector<Mark>& marks, std::size_t cap, std::size
 }
 
 template std::vector<Mark> mark_leaves<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
-                                          const std::vector<double>&, const std::vector<double>&,
+                                          const std::vector<double>&, const std::vector<std::uint32_t>*,
                                           const std::vector<ElementIntegrals<2>>*, const Vector&, const Field&,
                                           const ApproximationOptions&, bool, bool, std::size_t*,
                                           const SampleLattice*);
 template std::vector<Mark> mark_leaves<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
-                                          const std::vector<double>&, const std::vector<double>&,
+                                          const std::vector<double>&, const std::vector<std::uint32_t>*,
                                           const std::vector<ElementIntegrals<3>>*, const Vector&, const Field&,
                                           const ApproximationOptions&, bool, bool, std::size_t*,
                                           const SampleLattice*);

@@ -6,6 +6,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <limits>
@@ -33,19 +34,25 @@ SampledLeastSquares<D>::SampledLeastSquares(const SampleLattice& lattice, const 
 }
 
 template <int D>
+std::int64_t SampledLeastSquares<D>::tile_of(std::int64_t s) const {
+  const std::int64_t nx = lattice_.dims[0], ny = lattice_.dims[1];
+  const std::int64_t y = (s / nx) % ny, z = s / (nx * ny);
+  return y / tile_ + tiles_y_ * (D == 3 ? z / tile_ : 0);
+}
+
+template <int D>
 void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<ElemId>& remap,
                                     std::vector<double> padding) {
   MLFE_CHECK(padding.size() == h.vertex_count());
   const std::size_t ns = static_cast<std::size_t>(lattice_.samples());
-  // 1. Carry: the samples of leaves that stayed follow their ids; the first call owns nothing.
+  // 1. Carry: the samples and summed leaves that stayed follow their ids; the first call has
+  // neither.
   std::size_t first_new = 0;
   if (h_ == nullptr) {
     owner_.assign(ns, kNoOwner);
     cells_.resize(ns);
     lambda_.resize(ns);
-  } else if (remap.empty()) {
-    first_new = elements_seen_;
-  } else {
+  } else if (!remap.empty()) {
     MLFE_CHECK(remap.size() == elements_seen_);
     for (ElemId r : remap) first_new += r.valid();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ns, 1 << 16), [&](const auto& range) {
@@ -54,43 +61,78 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
         owner_[s] = o == kNoOwner ? kNoOwner : remap[o].value;  // invalid: kNoOwner too
       }
     });
+    for (SummedLeaf& b : summed_) b.id = remap[b.id.value];
+  } else {
+    first_new = elements_seen_;
   }
+  summed_.erase(std::remove_if(summed_.begin(), summed_.end(),
+                               [&](const SummedLeaf& b) { return !b.id.valid() || !h.is_leaf(b.id); }),
+                summed_.end());
   h_ = &h;
   elements_seen_ = h.element_count();
   padding_ = std::move(padding);
   // 2. Find: the samples of the leaves created since, each sample written by its one owner.
-  struct Extent {
-    std::int64_t value = 0;
+  struct Found {
+    std::int64_t extent = 0;
+    std::vector<SummedLeaf> summed;
+    std::vector<OwnedSample<D>> owned;
   };
-  tbb::enumerable_thread_specific<std::vector<OwnedSample<D>>> scratch;
-  tbb::enumerable_thread_specific<Extent> widest;
+  tbb::enumerable_thread_specific<Found> found;
+  const double w = lattice_.sample_weight;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(first_new, h.element_count(), 1024), [&](const auto& range) {
-    auto& owned = scratch.local();
-    std::int64_t& ext = widest.local().value;
+    Found& mine = found.local();
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const ElemId e(static_cast<std::uint32_t>(i));
       if (!h.is_leaf(e)) continue;
       const auto p = corners(h, e);
-      owned_samples<D>(p, lattice_, owned);
-      if (owned.empty()) continue;
-      for (const OwnedSample<D>& s : owned) {
-        owner_[static_cast<std::size_t>(s.index)] = e.value;
-        cells_[static_cast<std::size_t>(s.index)] = h.cell(e);
-        for (int a = 0; a < D; ++a) lambda_[static_cast<std::size_t>(s.index)][a] = float(s.lambda[a + 1]);
+      owned_samples<D>(p, lattice_, mine.owned);
+      if (mine.owned.empty()) continue;
+      const bool summed = mine.owned.size() >= kSummedLeaf;
+      SummedLeaf b{e, static_cast<std::uint32_t>(mine.owned.size()), mine.owned[0].index, 0, h.cell(e), 0, {}, {}};
+      for (const OwnedSample<D>& s : mine.owned) {
+        const auto at = static_cast<std::size_t>(s.index);
+        owner_[at] = e.value;
+        if (summed) {
+          cells_[at][0] = VertexId::invalid();
+          const double f = grid_.values[at];
+          b.f2 += w * f * f;
+          for (int a = 0, m = 0; a <= D; ++a) {
+            b.fphi[a] += w * f * s.lambda[a];
+            for (int c = a; c <= D; ++c) b.mass[m++] += w * s.lambda[a] * s.lambda[c];
+          }
+        } else {
+          cells_[at] = h.cell(e);
+          for (int a = 0; a < D; ++a) lambda_[at][a] = float(s.lambda[a + 1]);
+        }
       }
+      if (summed) mine.summed.push_back(b);
       for (int a = 1; a < D; ++a) {  // the tiled axes
         double lo = p[0][a], hi = p[0][a];
         for (int k = 1; k <= D; ++k) {
           lo = std::min(lo, p[k][a]);
           hi = std::max(hi, p[k][a]);
         }
-        ext = std::max(ext, static_cast<std::int64_t>((hi - lo) / lattice_.spacing[a] + 0.5));
+        mine.extent = std::max(mine.extent, static_cast<std::int64_t>((hi - lo) / lattice_.spacing[a] + 0.5));
       }
     }
   });
-  for (const Extent& x : widest) extent_ = std::max(extent_, x.value);
+  for (Found& f : found) {
+    extent_ = std::max(extent_, f.extent);
+    summed_.insert(summed_.end(), f.summed.begin(), f.summed.end());
+  }
+  // 3. Tiles: T = 2 × the largest extent so far (an upper bound: leaves only get smaller), the
+  // summed leaves sorted into theirs by (tile, id), a unique order.
   tile_ = 2 * extent_;
-  // 3. Every sample has a leaf (the rule gives each exactly one; a gap is a bug).
+  tiles_y_ = (lattice_.dims[1] + tile_ - 1) / tile_;
+  tiles_z_ = D == 3 ? (lattice_.dims[2] + tile_ - 1) / tile_ : 1;
+  for (SummedLeaf& b : summed_) b.tile = tile_of(b.first_sample);
+  tbb::parallel_sort(summed_.begin(), summed_.end(), [](const SummedLeaf& a, const SummedLeaf& b) {
+    return a.tile != b.tile ? a.tile < b.tile : a.id < b.id;
+  });
+  summed_start_.assign(static_cast<std::size_t>(tiles_y_ * tiles_z_) + 1, 0);
+  for (const SummedLeaf& b : summed_) ++summed_start_[static_cast<std::size_t>(b.tile) + 1];
+  for (std::size_t t = 1; t < summed_start_.size(); ++t) summed_start_[t] += summed_start_[t - 1];
+  // 4. Every sample has a leaf (the rule gives each exactly one; a gap is a bug).
   const std::size_t orphans = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, ns, 1 << 16), std::size_t(0),
       [&](const auto& range, std::size_t n) {
@@ -103,33 +145,34 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
 }
 
 template <int D>
-template <class Visit>
-void SampledLeastSquares<D>::for_each_sample(int colour, Visit&& visit) const {
+template <class Leaf, class Sample>
+void SampledLeastSquares<D>::for_each(int colour, Leaf&& leaf, Sample&& sample) const {
   MLFE_CHECK(h_ != nullptr);
   const std::int64_t nx = lattice_.dims[0], ny = lattice_.dims[1], nz = lattice_.dims[2];
-  // Tiles over (y, z) in 3D, over y in 2D; colour bit 0: y tile parity, bit 1: z tile parity.
-  const std::int64_t ty = (ny + tile_ - 1) / tile_;
-  const std::int64_t tz = D == 3 ? (nz + tile_ - 1) / tile_ : 1;
+  // Colour bit 0: y tile parity, bit 1: z tile parity.
   std::vector<std::int64_t> tiles;
-  for (std::int64_t z = 0; z < tz; ++z)
-    for (std::int64_t y = 0; y < ty; ++y)
-      if ((y & 1) + 2 * (z & 1) == colour) tiles.push_back(y + ty * z);
+  for (std::int64_t z = 0; z < tiles_z_; ++z)
+    for (std::int64_t y = 0; y < tiles_y_; ++y)
+      if ((y & 1) + 2 * (z & 1) == colour) tiles.push_back(y + tiles_y_ * z);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tiles.size(), 1), [&](const auto& range) {
     for (std::size_t t = range.begin(); t != range.end(); ++t) {
-      const std::int64_t y0 = (tiles[t] % ty) * tile_, z0 = (tiles[t] / ty) * tile_;
+      const auto tile = static_cast<std::size_t>(tiles[t]);
+      for (std::size_t b = summed_start_[tile]; b < summed_start_[tile + 1]; ++b) leaf(summed_[b]);
+      const std::int64_t y0 = (tiles[t] % tiles_y_) * tile_, z0 = (tiles[t] / tiles_y_) * tile_;
       const std::int64_t y1 = std::min(ny, y0 + tile_), z1 = D == 3 ? std::min(nz, z0 + tile_) : 1;
       for (std::int64_t z = D == 3 ? z0 : 0; z < z1; ++z)
         for (std::int64_t y = y0; y < y1; ++y) {
           const std::size_t row = static_cast<std::size_t>(nx * (y + ny * z));
           for (std::size_t s = row; s < row + static_cast<std::size_t>(nx); ++s) {
             const auto& c = cells_[s];
+            if (!c[0].valid()) continue;  // a summed leaf's
             std::array<double, D + 1> lam;
             lam[0] = 1.0;
             for (int a = 0; a < D; ++a) {
               lam[a + 1] = lambda_[s][a];
               lam[0] -= lam[a + 1];
             }
-            visit(s, c, lam);
+            sample(s, c, lam);
           }
         }
     }
@@ -142,12 +185,27 @@ void SampledLeastSquares<D>::apply(const Vector& x, Vector& y) const {
   y.setZero(size());
   const double w = lattice_.sample_weight;
   for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each_sample(colour, [&](std::size_t, const auto& c, const std::array<double, D + 1>& lam) {
-      double u = 0;
-      for (int i = 0; i <= D; ++i) u += lam[i] * x[c[i].value];
-      u *= w;
-      for (int i = 0; i <= D; ++i) y[c[i].value] += lam[i] * u;
-    });
+    for_each(
+        colour,
+        [&](const SummedLeaf& b) {
+          std::array<double, D + 1> xs, ys{};
+          for (int a = 0; a <= D; ++a) xs[a] = x[b.cell[a].value];
+          for (int a = 0, m = 0; a <= D; ++a) {
+            ys[a] += b.mass[m] * xs[a];
+            for (int c = a + 1; c <= D; ++c) {
+              ys[a] += b.mass[m + c - a] * xs[c];
+              ys[c] += b.mass[m + c - a] * xs[a];
+            }
+            m += D + 1 - a;
+          }
+          for (int a = 0; a <= D; ++a) y[b.cell[a].value] += ys[a];
+        },
+        [&](std::size_t, const auto& c, const std::array<double, D + 1>& lam) {
+          double u = 0;
+          for (int i = 0; i <= D; ++i) u += lam[i] * x[c[i].value];
+          u *= w;
+          for (int i = 0; i <= D; ++i) y[c[i].value] += lam[i] * u;
+        });
   for (Eigen::Index i = 0; i < size(); ++i) y[i] += padding_[static_cast<std::size_t>(i)] * x[i];
 }
 
@@ -157,32 +215,62 @@ void SampledLeastSquares<D>::load(Vector& rhs, Vector& diagonal) const {
   diagonal.setZero(size());
   const double w = lattice_.sample_weight;
   for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each_sample(colour, [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
-      const double wf = w * double(grid_.values[s]);
-      for (int i = 0; i <= D; ++i) {
-        rhs[c[i].value] += wf * lam[i];
-        diagonal[c[i].value] += w * lam[i] * lam[i];
-      }
-    });
+    for_each(
+        colour,
+        [&](const SummedLeaf& b) {
+          for (int a = 0, m = 0; a <= D; m += D + 1 - a, ++a) {
+            rhs[b.cell[a].value] += b.fphi[a];
+            diagonal[b.cell[a].value] += b.mass[m];
+          }
+        },
+        [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
+          const double wf = w * double(grid_.values[s]);
+          for (int i = 0; i <= D; ++i) {
+            rhs[c[i].value] += wf * lam[i];
+            diagonal[c[i].value] += w * lam[i] * lam[i];
+          }
+        });
   for (Eigen::Index i = 0; i < size(); ++i) diagonal[i] += padding_[static_cast<std::size_t>(i)];
 }
 
 template <int D>
-void SampledLeastSquares<D>::leaf_errors(const Vector& u, std::vector<double>& error,
-                                         std::vector<std::uint32_t>& samples) const {
+void SampledLeastSquares<D>::leaf_errors(const Vector& u, const std::vector<ElemId>& leaves,
+                                         std::vector<double>& error, std::vector<std::uint32_t>& samples) const {
   MLFE_CHECK(u.size() == size());
-  error.assign(h_->element_count(), 0.0);
-  samples.assign(h_->element_count(), 0);
+  // Sums straight into the leaves' order: an element id → leaf index table is the smallest
+  // array that gets there.
+  std::vector<std::uint32_t> index(h_->element_count(), kNoOwner);
+  for (std::size_t i = 0; i < leaves.size(); ++i) index[leaves[i].value] = static_cast<std::uint32_t>(i);
+  error.assign(leaves.size(), 0.0);
+  samples.assign(leaves.size(), 0);
   const double w = lattice_.sample_weight;
   for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each_sample(colour, [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
-      double v = 0;
-      for (int i = 0; i <= D; ++i) v += lam[i] * u[c[i].value];
-      const double d = double(grid_.values[s]) - v;
-      const std::uint32_t o = owner_[s];
-      error[o] += w * d * d;
-      ++samples[o];
-    });
+    for_each(
+        colour,
+        [&](const SummedLeaf& b) {
+          // Σ w f² − 2 U·F_T + Uᵀ M_T U; cancellation can leave a tiny negative.
+          std::array<double, D + 1> us;
+          for (int a = 0; a <= D; ++a) us[a] = u[b.cell[a].value];
+          double cross = 0, quad = 0;
+          for (int a = 0, m = 0; a <= D; ++a) {
+            cross += us[a] * b.fphi[a];
+            quad += us[a] * us[a] * b.mass[m];
+            for (int c = a + 1; c <= D; ++c) quad += 2 * us[a] * us[c] * b.mass[m + c - a];
+            m += D + 1 - a;
+          }
+          const std::uint32_t i = index[b.id.value];
+          MLFE_CHECK(i != kNoOwner);
+          error[i] = std::max(0.0, b.f2 - 2 * cross + quad);
+          samples[i] = b.samples;
+        },
+        [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
+          double v = 0;
+          for (int a = 0; a <= D; ++a) v += lam[a] * u[c[a].value];
+          const double d = double(grid_.values[s]) - v;
+          const std::uint32_t i = index[owner_[s]];
+          error[i] += w * d * d;
+          ++samples[i];
+        });
 }
 
 template class SampledLeastSquares<2>;

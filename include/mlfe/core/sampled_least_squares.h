@@ -5,16 +5,20 @@
 //     E_T = Σ_{s owned by T} w (f_s − u(x_s))².
 // Why: summed per element, the sampled mass and load are 136 bytes per element id, kept across
 // the refine-solve loop, and the matrix and its incidence table come on top (2.8 of the 3.9 GB
-// a 7 M-voxel full head's default build held). Per sample the operator keeps its owning leaf
-// and barycentrics instead (16 bytes a sample, fewer samples than elements), and a product
-// streams them once, as a sparse product streams the matrix.
+// a 7 M-voxel full head's default build held). Per sample the operator keeps its leaf, the
+// leaf's vertices and the barycentrics instead (32 bytes a sample; a full head at its noise
+// level has about two leaves per sample), and a product streams them once.
+// Leaves that own many samples (the coarse ones of the first iterations) keep their sums
+// instead — the element's sampled mass, load and Σ w f² — so a product costs what the mesh
+// has, not what the samples have, until leaves are small.
 //
 // Determinism: sums into vertices (and leaves) would race when two threads handle samples of
 // one element. The samples are cut into tiles of T × T rows (y, z; in 2D bands of T rows),
 // T at least twice the largest extent of a leaf that owns samples, and the tiles are coloured
 // by the parity of their indices: tiles of one colour share no vertex and no leaf, so a colour
-// runs in parallel and the colours one after the other. Every sum then has a fixed order
-// (colour, then sample order within the tile) whatever the thread count.
+// runs in parallel and the colours one after the other. A leaf with sums belongs to the tile of
+// its first sample and is applied before the tile's samples. Every sum then has a fixed order
+// whatever the thread count.
 #pragma once
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
@@ -48,31 +52,50 @@ class SampledLeastSquares final : public LinearOperator {
   /// The load F (without the padding's terms) and the diagonal of M (with the padding's weights).
   void load(Vector& rhs, Vector& diagonal) const;
 
-  /// Per element id (sized to the hierarchy's element count; 0 for elements that are not
-  /// leaves or own no sample): Σ w (f_s − u(x_s))² and the number of samples each leaf owns.
-  void leaf_errors(const Vector& u, std::vector<double>& error, std::vector<std::uint32_t>& samples) const;
+  /// For each of `leaves` (the hierarchy's, in any order): Σ w (f_s − u(x_s))² over the samples
+  /// it owns (never negative) and how many it owns.
+  void leaf_errors(const Vector& u, const std::vector<ElemId>& leaves, std::vector<double>& error,
+                   std::vector<std::uint32_t>& samples) const;
 
-  /// Bytes held per sample (owner and barycentrics), for memory estimates.
-  static constexpr std::size_t kBytesPerSample = 4 + (D + 1) * 4 + D * sizeof(float);
+  /// Leaves owning at least this many samples keep their sums instead of their samples.
+  static constexpr std::size_t kSummedLeaf = 8;
 
  private:
-  // Calls visit(s, cell, λ) for every sample of the tiles of colour `colour`, tiles in
-  // parallel, samples of a tile in order.
-  template <class Visit>
-  void for_each_sample(int colour, Visit&& visit) const;
+  static constexpr int kPairs = (D + 1) * (D + 2) / 2;
+  // A leaf that keeps its sums (upper triangle of its sampled mass, row major, as
+  // ElementIntegrals).
+  struct SummedLeaf {
+    ElemId id;
+    std::uint32_t samples;
+    std::int64_t first_sample;
+    std::int64_t tile;
+    typename Hierarchy<D>::Cell cell;
+    double f2;
+    std::array<double, D + 1> fphi;
+    std::array<double, kPairs> mass;
+  };
+
+  std::int64_t tile_of(std::int64_t sample) const;
+  // Calls leaf(summed leaf) and sample(s, cell, λ) for the tiles of colour `colour`, tiles in
+  // parallel; per tile its summed leaves first, then its other samples in order.
+  template <class Leaf, class Sample>
+  void for_each(int colour, Leaf&& leaf, Sample&& sample) const;
 
   const SampleLattice& lattice_;
   const ScalarGrid& grid_;
   const Hierarchy<D>* h_ = nullptr;
-  std::vector<std::uint32_t> owner_;           // per sample: its leaf's element id
+  std::vector<std::uint32_t> owner_;  // per sample: its leaf's element id
   // Per sample: its leaf's vertices (a copy: read through the leaf id, the cell was a cache
-  // miss per sample and 40 % of a product's time).
+  // miss per sample and 40 % of a product's time); the first is invalid for a summed leaf's.
   std::vector<typename Hierarchy<D>::Cell> cells_;
-  std::vector<std::array<float, D>> lambda_;   // per sample: λ_1 .. λ_D (λ_0 = 1 − their sum)
-  std::vector<double> padding_;                // per vertex
-  std::size_t elements_seen_ = 0;              // element count at the last update()
-  std::int64_t extent_ = 1;                    // largest y/z extent of a leaf owning samples
-  std::int64_t tile_ = 2;                      // T
+  std::vector<std::array<float, D>> lambda_;  // per sample: λ_1 .. λ_D (λ_0 = 1 − their sum)
+  std::vector<SummedLeaf> summed_;            // by (tile, id)
+  std::vector<std::size_t> summed_start_;     // per tile: its first in summed_ (CSR)
+  std::vector<double> padding_;               // per vertex
+  std::size_t elements_seen_ = 0;             // element count at the last update()
+  std::int64_t extent_ = 1;                   // largest y/z extent of a leaf owning samples
+  std::int64_t tile_ = 2;                     // T
+  std::int64_t tiles_y_ = 1, tiles_z_ = 1;
 };
 
 extern template class SampledLeastSquares<2>;
