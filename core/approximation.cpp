@@ -209,7 +209,7 @@ std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices,
     const double per_vertex =
         opts.max_sample_error >= 0 ? kInterpolatingBytesPerLeaf * ratio + kInterpolatingBytesPerVertex
         : sampled                  ? kSampledBytesPerLeaf * ratio + kSampledBytesPerVertex
-                                   : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
+                  : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
     const auto mem = static_cast<std::size_t>(double(opts.max_memory_bytes) / per_vertex);
     if (limit == 0 || mem < limit) {
       limit = std::max<std::size_t>(mem, 1);
@@ -718,8 +718,12 @@ template <int D>
 class CachedSystem {
  public:
   static constexpr bool kSampled = false;
-  CachedSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice* lattice)
-      : f_(f), opts_(opts), lattice_(lattice), gw_(gradient_weight<D>(f, opts)),
+  CachedSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+               const SampleLattice* lattice)
+      : f_(f),
+        opts_(opts),
+        lattice_(lattice),
+        gw_(gradient_weight<D>(f, opts)),
         qedge_(default_quadrature_edge(f, opts)) {
     reserve_build_arrays(f, opts, h, cache_, have_);
   }
@@ -772,7 +776,8 @@ template <int D>
 class SampledSystem {
  public:
   static constexpr bool kSampled = true;
-  SampledSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts, const SampleLattice& lattice)
+  SampledSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                const SampleLattice& lattice)
       : f_(f), opts_(opts), lattice_(lattice), op_(lattice, *f.samples()) {
     // The hierarchy's address space up front, as CachedSystem's (the same cap per element).
     reserve_hierarchy(static_cast<std::size_t>(f.samples()->voxel_count()), opts, h,
@@ -790,8 +795,8 @@ class SampledSystem {
     for (std::size_t v = 0; v < pad.size(); ++v) seen_[v] = diagonal_[static_cast<Eigen::Index>(v)] > pad[v];
   }
 
-  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector& start, std::vector<double>& values,
-               IterationStats& st) {
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector& start,
+               std::vector<double>& values, IterationStats& st) {
     // Jacobi unless asked otherwise, as for the assembled sampled matrix (Preconditioner::kAuto).
     std::unique_ptr<LinearOperator> pre;
     if (opts_.preconditioner == Preconditioner::kBpx)
@@ -809,7 +814,8 @@ class SampledSystem {
     return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
   }
 
-  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x, std::vector<double>& err) {
+  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x,
+              std::vector<double>& err) {
     op_.leaf_errors(x, leaves, err, samples_);
   }
 
@@ -861,8 +867,8 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
     // Mark.
     const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
     std::size_t surface_marks = 0;
-    std::vector<Mark> marked = mark_leaves(h, leaves, err, sys.samples(), sys.integrals(), x, f, opts, surface_driven,
-                                           target_met, &surface_marks, lattice);
+    std::vector<Mark> marked = mark_leaves(h, leaves, err, sys.samples(), sys.integrals(), x, f, opts,
+                                           surface_driven, target_met, &surface_marks, lattice);
     const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
                                        surface_stop, stall_checks);
     st.estimate_seconds = since(te);
@@ -872,7 +878,7 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
       out.iterations.push_back(st);
       if (opts.progress) opts.progress(st);
       out.stop_reason = stop;
-      out.leaf_errors = err;
+      out.leaf_errors = std::move(err);
       break;
     }
 
@@ -889,9 +895,9 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
                               : -1.0;
     bool by_memory = false;
     std::size_t count = 0;
-    const std::vector<ElemId> remap = refine_worst(h, opts, leaves.size(), marked, surface_marks, excess,
-                                                   vertices_per_mark, count, by_memory, budget_reached,
-                                                   System::kSampled);
+    const std::vector<ElemId> remap =
+        refine_worst(h, opts, leaves.size(), marked, surface_marks, excess, vertices_per_mark, count,
+                     by_memory, budget_reached, System::kSampled);
     const bool refined = count > 0;
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);
@@ -902,7 +908,7 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
       // The budget does not allow even one more refinement: keep the last solution.
       out.memory_limited = by_memory;
       out.stop_reason = by_memory ? "memory budget" : "vertex budget";
-      out.leaf_errors = err;
+      out.leaf_errors = std::move(err);
       break;
     }
     sys.refined(h, remap);

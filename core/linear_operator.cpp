@@ -29,7 +29,8 @@ void SparseOperator::apply(const Vector& x, Vector& y) const {
                     });
 }
 
-JacobiPreconditioner::JacobiPreconditioner(const SparseMatrix& a) : JacobiPreconditioner(Vector(a.diagonal())) {}
+JacobiPreconditioner::JacobiPreconditioner(const SparseMatrix& a)
+    : JacobiPreconditioner(Vector(a.diagonal())) {}
 
 JacobiPreconditioner::JacobiPreconditioner(const Vector& d) : inv_diag_(d.size()) {
   for (Eigen::Index i = 0; i < d.size(); ++i) {

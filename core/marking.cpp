@@ -188,13 +188,13 @@ std::size_t rank_and_select(std::vector<Mark>& marks, std::size_t cap, std::size
 
 template std::vector<Mark> mark_leaves<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
                                           const std::vector<double>&, const std::vector<std::uint32_t>*,
-                                          const std::vector<ElementIntegrals<2>>*, const Vector&, const Field&,
-                                          const ApproximationOptions&, bool, bool, std::size_t*,
+                                          const std::vector<ElementIntegrals<2>>*, const Vector&,
+                                          const Field&, const ApproximationOptions&, bool, bool, std::size_t*,
                                           const SampleLattice*);
 template std::vector<Mark> mark_leaves<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                           const std::vector<double>&, const std::vector<std::uint32_t>*,
-                                          const std::vector<ElementIntegrals<3>>*, const Vector&, const Field&,
-                                          const ApproximationOptions&, bool, bool, std::size_t*,
+                                          const std::vector<ElementIntegrals<3>>*, const Vector&,
+                                          const Field&, const ApproximationOptions&, bool, bool, std::size_t*,
                                           const SampleLattice*);
 template bool surface_gap_mark<2, Vector>(const Hierarchy<2>&, ElemId, const Vector&, const Field&,
                                           const ApproximationOptions&, double, bool*);

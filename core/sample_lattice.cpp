@@ -346,9 +346,9 @@ template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<dou
                                                  const SampleLattice&, const ScalarGrid&, const Field&,
                                                  ElementGradients<3>*);
 template void owned_samples<2>(const std::array<std::array<double, 2>, 3>&, const SampleLattice&,
-                                std::vector<OwnedSample<2>>&);
+                               std::vector<OwnedSample<2>>&);
 template void owned_samples<3>(const std::array<std::array<double, 3>, 4>&, const SampleLattice&,
-                                std::vector<OwnedSample<3>>&);
+                               std::vector<OwnedSample<3>>&);
 template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
                                              const SampleLattice&, const ScalarGrid&,
                                              const std::array<double, 3>&, double);

@@ -79,43 +79,46 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
   };
   tbb::enumerable_thread_specific<Found> found;
   const double w = lattice_.sample_weight;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(first_new, h.element_count(), 1024), [&](const auto& range) {
-    Found& mine = found.local();
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const ElemId e(static_cast<std::uint32_t>(i));
-      if (!h.is_leaf(e)) continue;
-      const auto p = corners(h, e);
-      owned_samples<D>(p, lattice_, mine.owned);
-      if (mine.owned.empty()) continue;
-      const bool summed = mine.owned.size() >= kSummedLeaf;
-      SummedLeaf b{e, static_cast<std::uint32_t>(mine.owned.size()), mine.owned[0].index, 0, h.cell(e), 0, {}, {}};
-      for (const OwnedSample<D>& s : mine.owned) {
-        const auto at = static_cast<std::size_t>(s.index);
-        owner_[at] = e.value;
-        if (summed) {
-          cells_[at][0] = VertexId::invalid();
-          const double f = grid_.values[at];
-          b.f2 += w * f * f;
-          for (int a = 0, m = 0; a <= D; ++a) {
-            b.fphi[a] += w * f * s.lambda[a];
-            for (int c = a; c <= D; ++c) b.mass[m++] += w * s.lambda[a] * s.lambda[c];
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(first_new, h.element_count(), 1024), [&](const auto& range) {
+        Found& mine = found.local();
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          const ElemId e(static_cast<std::uint32_t>(i));
+          if (!h.is_leaf(e)) continue;
+          const auto p = corners(h, e);
+          owned_samples<D>(p, lattice_, mine.owned);
+          if (mine.owned.empty()) continue;
+          const bool summed = mine.owned.size() >= kSummedLeaf;
+          SummedLeaf b{
+              e, static_cast<std::uint32_t>(mine.owned.size()), mine.owned[0].index, 0, h.cell(e), 0, {}, {}};
+          for (const OwnedSample<D>& s : mine.owned) {
+            const auto at = static_cast<std::size_t>(s.index);
+            owner_[at] = e.value;
+            if (summed) {
+              cells_[at][0] = VertexId::invalid();
+              const double f = grid_.values[at];
+              b.f2 += w * f * f;
+              for (int a = 0, m = 0; a <= D; ++a) {
+                b.fphi[a] += w * f * s.lambda[a];
+                for (int c = a; c <= D; ++c) b.mass[m++] += w * s.lambda[a] * s.lambda[c];
+              }
+            } else {
+              cells_[at] = h.cell(e);
+              for (int a = 0; a < D; ++a) lambda_[at][a] = float(s.lambda[a + 1]);
+            }
           }
-        } else {
-          cells_[at] = h.cell(e);
-          for (int a = 0; a < D; ++a) lambda_[at][a] = float(s.lambda[a + 1]);
+          if (summed) mine.summed.push_back(b);
+          for (int a = 1; a < D; ++a) {  // the tiled axes
+            double lo = p[0][a], hi = p[0][a];
+            for (int k = 1; k <= D; ++k) {
+              lo = std::min(lo, p[k][a]);
+              hi = std::max(hi, p[k][a]);
+            }
+            mine.extent =
+                std::max(mine.extent, static_cast<std::int64_t>((hi - lo) / lattice_.spacing[a] + 0.5));
+          }
         }
-      }
-      if (summed) mine.summed.push_back(b);
-      for (int a = 1; a < D; ++a) {  // the tiled axes
-        double lo = p[0][a], hi = p[0][a];
-        for (int k = 1; k <= D; ++k) {
-          lo = std::min(lo, p[k][a]);
-          hi = std::max(hi, p[k][a]);
-        }
-        mine.extent = std::max(mine.extent, static_cast<std::int64_t>((hi - lo) / lattice_.spacing[a] + 0.5));
-      }
-    }
-  });
+      });
   for (Found& f : found) {
     extent_ = std::max(extent_, f.extent);
     summed_.insert(summed_.end(), f.summed.begin(), f.summed.end());
@@ -235,7 +238,8 @@ void SampledLeastSquares<D>::load(Vector& rhs, Vector& diagonal) const {
 
 template <int D>
 void SampledLeastSquares<D>::leaf_errors(const Vector& u, const std::vector<ElemId>& leaves,
-                                         std::vector<double>& error, std::vector<std::uint32_t>& samples) const {
+                                         std::vector<double>& error,
+                                         std::vector<std::uint32_t>& samples) const {
   MLFE_CHECK(u.size() == size());
   // Sums straight into the leaves' order: an element id → leaf index table is the smallest
   // array that gets there.

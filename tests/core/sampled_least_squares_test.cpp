@@ -16,7 +16,8 @@
 namespace mlfe {
 namespace {
 
-ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::array<double, 3> spacing, unsigned seed) {
+ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::array<double, 3> spacing,
+                       unsigned seed) {
   ScalarGrid g;
   g.dim = dim;
   g.dims = dims;
@@ -117,7 +118,9 @@ void check_against_assembly(std::array<std::int64_t, 3> dims, std::array<double,
   EXPECT_TRUE(some_sampled);
 }
 
-TEST(SampledLeastSquares, MatchesTheAssembledSystem2D) { check_against_assembly<2>({37, 23, 1}, {0.7, 1.3, 1}, 5); }
+TEST(SampledLeastSquares, MatchesTheAssembledSystem2D) {
+  check_against_assembly<2>({37, 23, 1}, {0.7, 1.3, 1}, 5);
+}
 TEST(SampledLeastSquares, MatchesTheAssembledSystem3D) {
   check_against_assembly<3>({19, 13, 11}, {0.7, 1.3, 2.1}, 6);
 }
