@@ -60,13 +60,30 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
   const std::int64_t n_slab_axis = dims[A];
   const std::int64_t slab = std::max<std::int64_t>(1, n_slab_axis / 64);
   const std::int64_t n_slabs = (n_slab_axis + slab - 1) / slab;
+  // Chunks of leaves in parallel, each into its own buckets, joined in chunk order: the same
+  // lists as one pass in leaf order.
+  constexpr std::size_t kChunk = 1 << 16;
+  const std::size_t n_chunks = (leaves.size() + kChunk - 1) / kChunk;
+  std::vector<std::vector<std::vector<std::uint32_t>>> part(n_chunks);
+  tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t k) {
+    part[k].resize(static_cast<std::size_t>(n_slabs));
+    for (std::size_t l = k * kChunk, end = std::min(leaves.size(), l + kChunk); l < end; ++l) {
+      const auto box = leaf_box(l);
+      if (box[A] > box[D + A]) continue;
+      for (std::int64_t s = box[A] / slab; s <= box[D + A] / slab; ++s)
+        part[k][static_cast<std::size_t>(s)].push_back(static_cast<std::uint32_t>(l));
+    }
+  });
   std::vector<std::vector<std::uint32_t>> buckets(static_cast<std::size_t>(n_slabs));
-  for (std::size_t l = 0; l < leaves.size(); ++l) {
-    const auto box = leaf_box(l);
-    if (box[A] > box[D + A]) continue;
-    for (std::int64_t s = box[A] / slab; s <= box[D + A] / slab; ++s)
-      buckets[s].push_back(static_cast<std::uint32_t>(l));
-  }
+  tbb::parallel_for(std::size_t(0), buckets.size(), [&](std::size_t s) {
+    std::size_t n = 0;
+    for (const auto& p : part) n += p[s].size();
+    buckets[s].reserve(n);
+    for (auto& p : part) {
+      buckets[s].insert(buckets[s].end(), p[s].begin(), p[s].end());
+      std::vector<std::uint32_t>().swap(p[s]);
+    }
+  });
   // Step 2: per slab, barycentric coordinates of every grid point in each leaf's box.
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n_slabs),
                     [&](const tbb::blocked_range<std::int64_t>& r) {
