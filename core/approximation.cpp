@@ -772,6 +772,26 @@ class CachedSystem {
   Vector rhs_;
 };
 
+// A preconditioner by vertex id applied to vectors in the sampled operator's order.
+template <int D>
+class InOperatorOrder final : public LinearOperator {
+ public:
+  InOperatorOrder(const SampledLeastSquares<D>& op, std::unique_ptr<LinearOperator> inner)
+      : op_(op), inner_(std::move(inner)) {}
+  Eigen::Index size() const override { return op_.size(); }
+  void apply(const Vector& x, Vector& y) const override {
+    std::vector<double> by_vertex;
+    op_.from_operator_order(x, by_vertex);
+    Vector out;
+    inner_->apply(Eigen::Map<const Vector>(by_vertex.data(), x.size()), out);
+    op_.to_operator_order(std::vector<double>(out.data(), out.data() + out.size()), y);
+  }
+
+ private:
+  const SampledLeastSquares<D>& op_;
+  std::unique_ptr<LinearOperator> inner_;
+};
+
 template <int D>
 class SampledSystem {
  public:
@@ -784,39 +804,48 @@ class SampledSystem {
                       sizeof(ElementIntegrals<D>), 3);
   }
 
+  // The operator's vectors are in its own vertex order (sampled_least_squares.h); u, the
+  // padding and the seen flags are by vertex id.
   void prepare(const Hierarchy<D>& h, const std::vector<ElemId>&) {
-    std::vector<double> pad = padding_weights(h, lattice_);
+    const std::vector<double> pad = padding_weights(h, lattice_);
     op_.update(h, remap_, pad);
     remap_.clear();
     op_.load(rhs_, diagonal_);
-    add_padding_load(h, f_, pad, rhs_);
+    Vector pull = Vector::Zero(static_cast<Eigen::Index>(pad.size()));
+    add_padding_load(h, f_, pad, pull);
+    op_.to_operator_order(std::vector<double>(pull.data(), pull.data() + pull.size()), work_);
+    rhs_ += work_;
     // Seen by a sample: a positive diagonal without the padding's weight.
+    std::vector<double> diagonal;
+    op_.from_operator_order(diagonal_, diagonal);
     seen_.assign(h.vertex_count(), 0);
-    for (std::size_t v = 0; v < pad.size(); ++v) seen_[v] = diagonal_[static_cast<Eigen::Index>(v)] > pad[v];
+    for (std::size_t v = 0; v < pad.size(); ++v) seen_[v] = diagonal[v] > pad[v];
   }
 
-  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector& start,
-               std::vector<double>& values, IterationStats& st) {
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector&, std::vector<double>& values,
+               IterationStats& st) {
     // Jacobi unless asked otherwise, as for the assembled sampled matrix (Preconditioner::kAuto).
     std::unique_ptr<LinearOperator> pre;
     if (opts_.preconditioner == Preconditioner::kBpx)
-      pre = std::make_unique<BpxPreconditioner<D>>(h, 0.0);
+      pre = std::make_unique<InOperatorOrder<D>>(op_, std::make_unique<BpxPreconditioner<D>>(h, 0.0));
     else if (opts_.preconditioner == Preconditioner::kNone)
       pre = std::make_unique<IdentityOperator>(op_.size());
     else
       pre = std::make_unique<JacobiPreconditioner>(diagonal_);
-    Vector x = start;
+    Vector x;
+    op_.to_operator_order(values, x);  // the start (start_values)
     const CgResult r = conjugate_gradient(op_, *pre, rhs_, x, opts_.cg_tolerance, 5000);
     st.cg_iterations = r.iterations;
     st.cg_residual = r.relative_residual;
-    values.assign(x.data(), x.data() + x.size());
+    op_.from_operator_order(x, values);
     fill_unseen(h, f_, seen_, values);
     return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
   }
 
   void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x,
               std::vector<double>& err) {
-    op_.leaf_errors(x, leaves, err, samples_);
+    op_.to_operator_order(std::vector<double>(x.data(), x.data() + x.size()), work_);
+    op_.leaf_errors(work_, leaves, err, samples_);
   }
 
   const std::vector<std::uint32_t>* samples() const { return &samples_; }
@@ -828,8 +857,8 @@ class SampledSystem {
   const ApproximationOptions& opts_;
   const SampleLattice& lattice_;
   SampledLeastSquares<D> op_;
-  std::vector<ElemId> remap_;  // refine()'s, for the next prepare()
-  Vector rhs_, diagonal_;
+  std::vector<ElemId> remap_;     // refine()'s, for the next prepare()
+  Vector rhs_, diagonal_, work_;  // in the operator's order
   std::vector<std::uint8_t> seen_;
   std::vector<std::uint32_t> samples_;  // per leaf, from errors()
 };

@@ -9,6 +9,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 namespace mlfe {
@@ -45,6 +46,8 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
                                     std::vector<double> padding) {
   MLFE_CHECK(padding.size() == h.vertex_count());
   const std::size_t ns = static_cast<std::size_t>(lattice_.samples());
+  // 0. The stored cells back in vertex ids (new vertices change the order).
+  if (!order_.empty()) renumber_cells(order_);
   // 1. Carry: the samples and summed leaves that stayed follow their ids; the first call has
   // neither.
   std::size_t first_new = 0;
@@ -70,7 +73,6 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
                 summed_.end());
   h_ = &h;
   elements_seen_ = h.element_count();
-  padding_ = std::move(padding);
   // 2. Find: the samples of the leaves created since, each sample written by its one owner.
   struct Found {
     std::int64_t extent = 0;
@@ -135,7 +137,22 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
   summed_start_.assign(static_cast<std::size_t>(tiles_y_ * tiles_z_) + 1, 0);
   for (const SummedLeaf& b : summed_) ++summed_start_[static_cast<std::size_t>(b.tile) + 1];
   for (std::size_t t = 1; t < summed_start_.size(); ++t) summed_start_[t] += summed_start_[t - 1];
-  // 4. Every sample has a leaf (the rule gives each exactly one; a gap is a bug).
+  // 4. The operator's vertex order, the cells and the padding in it.
+  order_vertices(h);
+  renumber_cells(rank_);
+  padding_.assign(padding.size(), 0.0);
+  for (std::size_t v = 0; v < padding.size(); ++v) padding_[rank_[v]] = padding[v];
+  // 5. The rows with samples of their own (the others are all summed leaves' and skipped).
+  const std::int64_t rows = lattice_.dims[1] * lattice_.dims[2];
+  loose_rows_.assign(static_cast<std::size_t>(rows), 0);
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, rows, 256), [&](const auto& range) {
+    for (std::int64_t r = range.begin(); r != range.end(); ++r) {
+      const auto* c = cells_.data() + r * lattice_.dims[0];
+      loose_rows_[static_cast<std::size_t>(r)] =
+          std::any_of(c, c + lattice_.dims[0], [](const auto& cell) { return cell[0].valid(); });
+    }
+  });
+  // 6. Every sample has a leaf (the rule gives each exactly one; a gap is a bug).
   const std::size_t orphans = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, ns, 1 << 16), std::size_t(0),
       [&](const auto& range, std::size_t n) {
@@ -145,6 +162,80 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
       },
       [](std::size_t a, std::size_t b) { return a + b; });
   MLFE_CHECK_MSG(orphans == 0, "samples without a leaf after update()");
+}
+
+template <int D>
+void SampledLeastSquares<D>::order_vertices(const Hierarchy<D>& h) {
+  const std::size_t nv = h.vertex_count();
+  const std::int64_t ny = lattice_.dims[1], nz = lattice_.dims[2];
+  struct Key {
+    std::uint64_t hi, lo;  // (tile, z), (y, x)
+    std::uint32_t id;
+  };
+  const auto coord = [&](double x, int a) {
+    return static_cast<std::int64_t>(std::nearbyint(x / lattice_.spacing[a]));
+  };
+  // Bucketed by tile (a counting sort), then each tile sorted on its own.
+  const std::size_t tiles = static_cast<std::size_t>(tiles_y_ * tiles_z_);
+  std::vector<Key> keys(nv);
+  std::vector<std::uint32_t> start(tiles + 1, 0);
+  std::vector<std::uint32_t> tile(nv);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 1 << 14), [&](const auto& range) {
+    for (std::size_t v = range.begin(); v != range.end(); ++v) {
+      const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
+      const std::int64_t x = coord(p[0], 0), y = coord(p[1], 1), z = D == 3 ? coord(p[2], 2) : 0;
+      const std::int64_t t =
+          std::min(y, ny - 1) / tile_ + tiles_y_ * (D == 3 ? std::min(z, nz - 1) / tile_ : 0);
+      tile[v] = static_cast<std::uint32_t>(t);
+      keys[v] = {static_cast<std::uint64_t>(z),
+                 static_cast<std::uint64_t>(y) << 32 | static_cast<std::uint64_t>(x),
+                 static_cast<std::uint32_t>(v)};
+    }
+  });
+  for (std::size_t v = 0; v < nv; ++v) ++start[tile[v] + 1];
+  for (std::size_t t = 0; t < tiles; ++t) start[t + 1] += start[t];
+  std::vector<Key> sorted(nv);
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t v = 0; v < nv; ++v) sorted[fill[tile[v]]++] = keys[v];
+  }
+  tbb::parallel_for(std::size_t(0), tiles, [&](std::size_t t) {
+    std::sort(sorted.begin() + start[t], sorted.begin() + start[t + 1],
+              [](const Key& a, const Key& b) { return a.hi != b.hi ? a.hi < b.hi : a.lo < b.lo; });
+  });
+  order_.resize(nv);
+  rank_.resize(nv);
+  for (std::size_t i = 0; i < nv; ++i) {
+    order_[i] = sorted[i].id;
+    rank_[sorted[i].id] = static_cast<std::uint32_t>(i);
+  }
+}
+
+template <int D>
+void SampledLeastSquares<D>::renumber_cells(const std::vector<std::uint32_t>& map) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells_.size(), 1 << 16), [&](const auto& range) {
+    for (std::size_t s = range.begin(); s != range.end(); ++s) {
+      auto& c = cells_[s];
+      if (!c[0].valid()) continue;  // a summed leaf's sample
+      for (auto& v : c) v = VertexId(map[v.value]);
+    }
+  });
+  for (SummedLeaf& b : summed_)
+    for (auto& v : b.cell) v = VertexId(map[v.value]);
+}
+
+template <int D>
+void SampledLeastSquares<D>::to_operator_order(const std::vector<double>& by_vertex, Vector& out) const {
+  MLFE_CHECK(by_vertex.size() == order_.size());
+  out.resize(size());
+  for (Eigen::Index i = 0; i < out.size(); ++i) out[i] = by_vertex[order_[static_cast<std::size_t>(i)]];
+}
+
+template <int D>
+void SampledLeastSquares<D>::from_operator_order(const Vector& v, std::vector<double>& by_vertex) const {
+  MLFE_CHECK(static_cast<std::size_t>(v.size()) == order_.size());
+  by_vertex.resize(order_.size());
+  for (std::size_t i = 0; i < order_.size(); ++i) by_vertex[order_[i]] = v[static_cast<Eigen::Index>(i)];
 }
 
 template <int D>
@@ -165,6 +256,7 @@ void SampledLeastSquares<D>::for_each(int colour, Leaf&& leaf, Sample&& sample) 
       const std::int64_t y1 = std::min(ny, y0 + tile_), z1 = D == 3 ? std::min(nz, z0 + tile_) : 1;
       for (std::int64_t z = D == 3 ? z0 : 0; z < z1; ++z)
         for (std::int64_t y = y0; y < y1; ++y) {
+          if (!loose_rows_[static_cast<std::size_t>(y + ny * z)]) continue;
           const std::size_t row = static_cast<std::size_t>(nx * (y + ny * z));
           for (std::size_t s = row; s < row + static_cast<std::size_t>(nx); ++s) {
             const auto& c = cells_[s];

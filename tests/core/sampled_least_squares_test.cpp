@@ -66,20 +66,30 @@ void expect_matches_assembly(const Hierarchy<D>& h, const SampledLeastSquares<D>
   const Vector rhs = assemble_load<D>(h, leaves, in, 0.0);
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(-40, 40);
-  Vector x(static_cast<Eigen::Index>(h.vertex_count()));
-  for (Eigen::Index i = 0; i < x.size(); ++i) x[i] = u(rng);
-  Vector y;
-  op.apply(x, y);
+  std::vector<double> xv(h.vertex_count());
+  for (double& v : xv) v = u(rng);
+  const Vector x = Eigen::Map<const Vector>(xv.data(), static_cast<Eigen::Index>(xv.size()));
+  // The operator's vectors are in its own vertex order.
+  const auto by_vertex = [&](const Vector& v) {
+    std::vector<double> out;
+    op.from_operator_order(v, out);
+    return Vector(Eigen::Map<const Vector>(out.data(), static_cast<Eigen::Index>(out.size())));
+  };
+  Vector xo, yo;
+  op.to_operator_order(xv, xo);
+  op.apply(xo, yo);
+  const Vector y = by_vertex(yo);
   const Vector y_ref = m * x;
   // The barycentrics are kept as floats: relative differences of ~1e-7 at most.
   EXPECT_LE(max_abs(y - y_ref), 1e-6 * max_abs(y_ref));
-  Vector load, diagonal;
-  op.load(load, diagonal);
+  Vector load_o, diagonal_o;
+  op.load(load_o, diagonal_o);
+  const Vector load = by_vertex(load_o), diagonal = by_vertex(diagonal_o);
   EXPECT_LE(max_abs(load - rhs), 1e-6 * max_abs(rhs));
   EXPECT_LE(max_abs(diagonal - Vector(m.diagonal())), 1e-6 * max_abs(Vector(m.diagonal())));
   std::vector<double> err;
   std::vector<std::uint32_t> samples;
-  op.leaf_errors(x, leaves, err, samples);
+  op.leaf_errors(xo, leaves, err, samples);
   const std::vector<double> err_ref = element_errors<D>(h, leaves, in, x, 0.0);
   double scale = 0;
   for (double e : err_ref) scale = std::max(scale, e);
@@ -134,15 +144,22 @@ TEST(SampledLeastSquares, PaddingWeightsOnTheDiagonal) {
   std::vector<double> pad(h.vertex_count(), 0.0);
   pad[1] = 0.5;
   op.update(h, {}, std::vector<double>(h.vertex_count(), 0.0));
-  Vector x = Vector::Ones(static_cast<Eigen::Index>(h.vertex_count())), y0, y1, load, d0, d1;
+  const std::vector<double> ones(h.vertex_count(), 1.0);
+  Vector x, y0, y1, load, d0, d1;
+  op.to_operator_order(ones, x);
   op.apply(x, y0);
   op.load(load, d0);
   op.update(h, std::vector<ElemId>(), pad);
   op.apply(x, y1);
   op.load(load, d1);
-  EXPECT_DOUBLE_EQ(y1[1] - y0[1], 0.5);
-  EXPECT_DOUBLE_EQ(d1[1] - d0[1], 0.5);
-  EXPECT_EQ(y1[0], y0[0]);
+  std::vector<double> a0, a1, b0, b1;
+  op.from_operator_order(y0, a0);
+  op.from_operator_order(y1, a1);
+  op.from_operator_order(d0, b0);
+  op.from_operator_order(d1, b1);
+  EXPECT_DOUBLE_EQ(a1[1] - a0[1], 0.5);
+  EXPECT_DOUBLE_EQ(b1[1] - b0[1], 0.5);
+  EXPECT_EQ(a1[0], a0[0]);
 }
 
 // Same bits with 1 and 2 threads: the tiles' colouring fixes every sum's order.
@@ -162,7 +179,7 @@ TEST(SampledLeastSquares, SameBitsWithOneAndTwoThreads) {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(t + 1));
     SampledLeastSquares<3> op(lat, g);
     op.update(h, {}, std::vector<double>(h.vertex_count(), 0.0));
-    op.apply(x, y[t]);
+    op.apply(x, y[t]);  // x read in the operator's order: the same vector for both
     op.load(load[t], diag[t]);
     op.leaf_errors(x, leaves, err[t], samples);
   }

@@ -19,6 +19,12 @@
 // runs in parallel and the colours one after the other. A leaf with sums belongs to the tile of
 // its first sample and is applied before the tile's samples. Every sum then has a fixed order
 // whatever the thread count.
+//
+// Vertex order: the operator numbers the vertices its own way, tile by tile and within a tile
+// in the samples' (z, y, x) order, so a tile's products touch a compact range of the vectors
+// (in the hierarchy's order, refinement scatters a tile's vertices over the whole vector, and
+// a product waited on those misses). Vectors passed to apply(), load() and leaf_errors() are in
+// the operator's order: to_operator_order() and from_operator_order() convert.
 #pragma once
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/linear_operator.h>
@@ -46,11 +52,15 @@ class SampledLeastSquares final : public LinearOperator {
   void update(const Hierarchy<D>& h, const std::vector<ElemId>& remap, std::vector<double> padding);
 
   Eigen::Index size() const override { return static_cast<Eigen::Index>(padding_.size()); }
-  /// y = M x (+ padding ⊙ x).
+  /// y = M x (+ padding ⊙ x), in the operator's vertex order.
   void apply(const Vector& x, Vector& y) const override;
 
   /// The load F (without the padding's terms) and the diagonal of M (with the padding's weights).
   void load(Vector& rhs, Vector& diagonal) const;
+
+  /// A vector indexed by vertex id in the operator's order, and back.
+  void to_operator_order(const std::vector<double>& by_vertex, Vector& out) const;
+  void from_operator_order(const Vector& v, std::vector<double>& by_vertex) const;
 
   /// For each of `leaves` (the hierarchy's, in any order): Σ w (f_s − u(x_s))² over the samples
   /// it owns (never negative) and how many it owns.
@@ -76,6 +86,10 @@ class SampledLeastSquares final : public LinearOperator {
   };
 
   std::int64_t tile_of(std::int64_t sample) const;
+  // The vertex order: tile, then (z, y, x) of the vertex's lattice point (rank_: vertex id →
+  // operator index, order_: back); and the stored cells renumbered through `map`.
+  void order_vertices(const Hierarchy<D>& h);
+  void renumber_cells(const std::vector<std::uint32_t>& map);
   // Calls leaf(summed leaf) and sample(s, cell, λ) for the tiles of colour `colour`, tiles in
   // parallel; per tile its summed leaves first, then its other samples in order.
   template <class Leaf, class Sample>
@@ -89,9 +103,11 @@ class SampledLeastSquares final : public LinearOperator {
   // miss per sample and 40 % of a product's time); the first is invalid for a summed leaf's.
   std::vector<typename Hierarchy<D>::Cell> cells_;
   std::vector<std::array<float, D>> lambda_;  // per sample: λ_1 .. λ_D (λ_0 = 1 − their sum)
+  std::vector<std::uint8_t> loose_rows_;      // per row (y, z): has samples not in summed leaves
   std::vector<SummedLeaf> summed_;            // by (tile, id)
   std::vector<std::size_t> summed_start_;     // per tile: its first in summed_ (CSR)
-  std::vector<double> padding_;               // per vertex
+  std::vector<double> padding_;               // per vertex, in the operator's order
+  std::vector<std::uint32_t> rank_, order_;   // vertex id ↔ operator index (empty: identity)
   std::size_t elements_seen_ = 0;             // element count at the last update()
   std::int64_t extent_ = 1;                   // largest y/z extent of a leaf owning samples
   std::int64_t tile_ = 2;                     // T
