@@ -91,6 +91,18 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
                         const std::int64_t s_lo = s * slab, s_hi = std::min(n_slab_axis - 1, s_lo + slab - 1);
                         for (std::uint32_t l : buckets[s]) {
                           const auto box = leaf_box(l);
+                          const std::int64_t k_lo = D == 3 ? std::max(box[2], s_lo) : 0,
+                                             k_hi = D == 3 ? std::min(box[5], s_hi) : 0;
+                          const std::int64_t j_lo = D == 2 ? std::max(box[1], s_lo) : box[1];
+                          const std::int64_t j_hi = D == 2 ? std::min(box[3], s_hi) : box[1 + D];
+                          // Every point of the box already has its value (from an earlier
+                          // leaf sharing it): skip the element's set-up.
+                          bool open = false;
+                          for (std::int64_t k = k_lo; k <= k_hi && !open; ++k)
+                            for (std::int64_t j = j_lo; j <= j_hi && !open; ++j)
+                              for (std::int64_t i = box[0]; i <= box[D] && !open; ++i)
+                                open = std::isnan(out[static_cast<std::size_t>(i + nx * (j + ny * k))]);
+                          if (!open) continue;
                           const auto& c = h.cell(leaves[l]);
                           // Barycentric map: λ_{1..D} = ∇λ_{1..D} · (x − p0), λ_0 = 1 − Σ.
                           std::array<std::array<double, D>, D + 1> p;
@@ -100,10 +112,6 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
                           const auto& p0 = p[0];
                           double u[D + 1];
                           for (int i = 0; i <= D; ++i) u[i] = values[c[i].value];
-                          const std::int64_t k_lo = D == 3 ? std::max(box[2], s_lo) : 0,
-                                             k_hi = D == 3 ? std::min(box[5], s_hi) : 0;
-                          const std::int64_t j_lo = D == 2 ? std::max(box[1], s_lo) : box[1];
-                          const std::int64_t j_hi = D == 2 ? std::min(box[3], s_hi) : box[1 + D];
                           for (std::int64_t k = k_lo; k <= k_hi; ++k)
                             for (std::int64_t j = j_lo; j <= j_hi; ++j)
                               for (std::int64_t i = box[0]; i <= box[D]; ++i) {
