@@ -9,6 +9,7 @@
 #include <mlfe/core/huge_pages.h>
 #include <mlfe/core/marking.h>
 #include <mlfe/core/p1_element.h>
+#include <mlfe/core/sampled_least_squares.h>
 #include <mlfe/core/surface_estimator.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -100,33 +101,49 @@ double sample_or_value(const ScalarGrid& g, const Field& f, const std::array<dou
 // u at the samples measurably.
 constexpr double kPaddingWeight = 0.01;
 
+// The padding's weight per vertex: kPaddingWeight samples for vertices beyond the data's box,
+// 0 elsewhere.
 template <int D>
-void regularize_padding(const Hierarchy<D>& h, const Field& f, const SampleLattice& lat, SparseMatrix& m,
-                        Vector& rhs) {
+std::vector<double> padding_weights(const Hierarchy<D>& h, const SampleLattice& lat) {
   const auto ext = lat.data_extent();
   const double w = kPaddingWeight * lat.sample_weight;
+  std::vector<double> pad(h.vertex_count(), 0.0);
   for (std::size_t v = 0; v < h.vertex_count(); ++v) {
     const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
     bool outside = false;
     for (int a = 0; a < D; ++a) outside |= p[a] > ext[a] + 0.25 * lat.spacing[a];
-    if (!outside) continue;
-    std::array<double, 3> q{0, 0, 0};
-    for (int a = 0; a < D; ++a) q[a] = p[a];
-    const auto i = static_cast<Eigen::Index>(v);
-    m.coeffRef(i, i) += w;
-    rhs[i] += w * f.value(q);
+    if (outside) pad[v] = w;
   }
+  return pad;
+}
+
+// The padding's pull toward f (the data clamped to its box) in the load.
+template <int D>
+void add_padding_load(const Hierarchy<D>& h, const Field& f, const std::vector<double>& pad, Vector& rhs) {
+  for (std::size_t v = 0; v < pad.size(); ++v) {
+    if (pad[v] == 0) continue;
+    std::array<double, 3> q{0, 0, 0};
+    for (int a = 0; a < D; ++a) q[a] = h.point(VertexId(static_cast<std::uint32_t>(v)))[a];
+    rhs[static_cast<Eigen::Index>(v)] += pad[v] * f.value(q);
+  }
+}
+
+template <int D>
+void regularize_padding(const Hierarchy<D>& h, const Field& f, const SampleLattice& lat, SparseMatrix& m,
+                        Vector& rhs) {
+  const std::vector<double> pad = padding_weights(h, lat);
+  for (std::size_t v = 0; v < pad.size(); ++v)
+    if (pad[v] != 0) m.coeffRef(static_cast<Eigen::Index>(v), static_cast<Eigen::Index>(v)) += pad[v];
+  add_padding_load(h, f, pad, rhs);
 }
 
 std::vector<double> to_std(const Vector& x) { return std::vector<double>(x.data(), x.data() + x.size()); }
 
-// Values of the vertices that no sample sees (padding, sample_lattice.h): they change u at no
-// sample, so they get the value their parents predict (a zero surplus, nothing to store), T0's
-// the field's value there (clamped to the data).
+// The vertices some sample sees: a positive diagonal of the sampled mass on some leaf.
 template <int D>
-void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<ElemId>& leaves,
-                 const std::vector<ElementIntegrals<D>>& integrals, IntegralIndex index,
-                 std::vector<double>& x) {
+std::vector<std::uint8_t> seen_by_integrals(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
+                                            const std::vector<ElementIntegrals<D>>& integrals,
+                                            IntegralIndex index) {
   std::vector<std::uint8_t> seen(h.vertex_count(), 0);
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     const auto& in = integrals[index == IntegralIndex::kLeafOrder ? i : leaves[i].value];
@@ -134,6 +151,15 @@ void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<ElemId
     for (int a = 0; a <= D; ++a)
       if (in.mass_at(a, a) > 0) seen[c[a].value] = 1;
   }
+  return seen;
+}
+
+// Values of the vertices that no sample sees (padding, sample_lattice.h): they change u at no
+// sample, so they get the value their parents predict (a zero surplus, nothing to store), T0's
+// the field's value there (clamped to the data).
+template <int D>
+void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<std::uint8_t>& seen,
+                 std::vector<double>& x) {
   for (std::size_t v = 0; v < x.size(); ++v) {
     if (seen[v]) continue;
     const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
@@ -161,12 +187,18 @@ std::array<std::array<double, D>, D + 1> corners_of(const Hierarchy<D>& h, ElemI
 // per vertex and 70 per leaf; 100 per leaf keeps a margin. (160, from a run with the hash
 // sets, stopped that lossless build at the default budget with less than half of it used.)
 constexpr double kInterpolatingBytesPerLeaf = 100, kInterpolatingBytesPerVertex = 300;
+// The same for least squares applied from the samples (SampledSystem): the hierarchy, the
+// per-leaf errors, sample counts and marks, and the samples' own 32 bytes counted per leaf
+// (about two leaves per sample at a full head's noise level); per vertex the CG vectors. The
+// noisy full head's default build peaked at 1.85 GB (13.7 M leaves, 2.3 M vertices), which
+// this puts at 2.0 GB.
+constexpr double kSampledBytesPerLeaf = 100, kSampledBytesPerVertex = 280;
 
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
 // allows at the current ratio of leaves to vertices (0: no limit). *by_memory tells which binds.
 template <int D>
 std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices, std::size_t leaves,
-                         bool* by_memory) {
+                         bool* by_memory, bool sampled = false) {
   std::size_t limit = opts.max_vertices;
   *by_memory = false;
   if (opts.max_memory_bytes > 0) {
@@ -175,9 +207,9 @@ std::size_t vertex_limit(const ApproximationOptions& opts, std::size_t vertices,
     const double ratio =
         1.25 * std::max(double(leaves) / double(std::max<std::size_t>(1, vertices)), D == 3 ? 5.0 : 2.0);
     const double per_vertex =
-        opts.max_sample_error >= 0
-            ? kInterpolatingBytesPerLeaf * ratio + kInterpolatingBytesPerVertex
-            : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
+        opts.max_sample_error >= 0 ? kInterpolatingBytesPerLeaf * ratio + kInterpolatingBytesPerVertex
+        : sampled                  ? kSampledBytesPerLeaf * ratio + kSampledBytesPerVertex
+                  : double(estimated_memory_bytes(D, 1000, std::size_t(1000 * ratio))) / 1000.0;
     const auto mem = static_cast<std::size_t>(double(opts.max_memory_bytes) / per_vertex);
     if (limit == 0 || mem < limit) {
       limit = std::max<std::size_t>(mem, 1);
@@ -458,7 +490,7 @@ std::vector<double> solve_best_approximation(const Hierarchy<D>& h, const Field&
   IterationStats local;
   std::vector<double> x =
       to_std(solve_system(h, m, rhs, start, opts, gw, stats ? *stats : local, lattice != nullptr));
-  if (lattice) fill_unseen(h, f, leaves, integrals, IntegralIndex::kLeafOrder, x);
+  if (lattice) fill_unseen(h, f, seen_by_integrals(h, leaves, integrals, IntegralIndex::kLeafOrder), x);
   return x;
 }
 
@@ -620,8 +652,8 @@ template <int D>
 std::vector<ElemId> refine_worst(Hierarchy<D>& h, const ApproximationOptions& opts, std::size_t leaf_count,
                                  std::vector<Mark>& marked, std::size_t surface_marks, double excess,
                                  double& vertices_per_mark, std::size_t& count, bool& by_memory,
-                                 bool& budget_reached) {
-  const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaf_count, &by_memory);
+                                 bool& budget_reached, bool sampled) {
+  const std::size_t limit = vertex_limit<D>(opts, h.vertex_count(), leaf_count, &by_memory, sampled);
   const std::size_t room = limit ? limit - std::min(limit, h.vertex_count()) : 0;
   const std::size_t cap =
       limit
@@ -662,29 +694,255 @@ double record_errors(IterationStats& st, const Hierarchy<D>& h, std::size_t leaf
   return total;
 }
 
-// Solves the iteration's system for u, starting from the previous mesh's u interpolated (or,
-// first, f's interpolant on a mesh built around the surfaces, else 0); `values` becomes u.
+// The start of an iteration's solve: the previous mesh's u interpolated (or, first, f's
+// interpolant on a mesh built around the surfaces, else 0).
 template <int D>
-Vector solve_iteration(const Hierarchy<D>& h, const Field& f, const SparseMatrix& m, const Vector& rhs,
-                       const ApproximationOptions& opts, double gw, const std::vector<ElemId>& leaves,
-                       const std::vector<ElementIntegrals<D>>& cache, const SampleLattice* lattice,
-                       const Approximation<D>& out, bool surface_driven, std::vector<double>& values,
-                       IterationStats& st) {
-  constexpr IntegralIndex kById = IntegralIndex::kElementId;
+Vector start_values(const Hierarchy<D>& h, const Approximation<D>& out, bool surface_driven,
+                    std::vector<double>& values) {
   if (values.empty() && surface_driven)
     values = out.data_values;  // f's interpolant is close to u on a mesh built around the surfaces
   else if (values.empty())
     values.assign(h.vertex_count(), 0.0);
   else
     prolongate_to_new_vertices(h, values);  // warm start: u of the previous mesh, interpolated
-  Vector start = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
-  Vector x = solve_system(h, m, rhs, start, opts, gw, st, lattice != nullptr);
-  values.assign(x.data(), x.data() + x.size());
-  if (lattice) {
-    fill_unseen(h, f, leaves, cache, kById, values);
-    x = Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+}
+
+// What one refine-solve iteration needs of the system, two ways. CachedSystem: the integrals of
+// each leaf cached by element id, assembled into a sparse matrix (any field, H1, the iso-aware
+// estimate, which reads f's range per leaf). SampledSystem: least squares at the samples in L2,
+// applied from the samples (sampled_least_squares.h), no per-element sums and no matrix.
+// Both: prepare() after the mesh changed, solve() from `values` (becomes u), errors() per
+// leaf, refined() with refine()'s remap.
+template <int D>
+class CachedSystem {
+ public:
+  static constexpr bool kSampled = false;
+  CachedSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+               const SampleLattice* lattice)
+      : f_(f),
+        opts_(opts),
+        lattice_(lattice),
+        gw_(gradient_weight<D>(f, opts)),
+        qedge_(default_quadrature_edge(f, opts)) {
+    reserve_build_arrays(f, opts, h, cache_, have_);
   }
-  return x;
+
+  void prepare(const Hierarchy<D>& h, const std::vector<ElemId>& leaves) {
+    update_integral_cache(h, leaves, f_, qedge_, opts_, lattice_, cache_, grads_, have_);
+    // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
+    // every iteration.
+    assemble_system(h, leaves, gw_, cache_, kById, workspace_, m_, rhs_, &grads_);
+    if (lattice_) regularize_padding(h, f_, *lattice_, m_, rhs_);
+  }
+
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Vector& start,
+               std::vector<double>& values, IterationStats& st) {
+    Vector x = solve_system(h, m_, rhs_, start, opts_, gw_, st, lattice_ != nullptr);
+    values.assign(x.data(), x.data() + x.size());
+    if (!lattice_) return x;
+    fill_unseen(h, f_, seen_by_integrals(h, leaves, cache_, kById), values);
+    return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  }
+
+  void errors(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, const Vector& x,
+              std::vector<double>& err) const {
+    err = element_errors(h, leaves, cache_, x, gw_, kById, &grads_);
+  }
+
+  const std::vector<std::uint32_t>* samples() const { return nullptr; }  // read from the cache
+  const std::vector<ElementIntegrals<D>>* integrals() const { return &cache_; }
+  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) {
+    remap_integral_cache(remap, cache_, grads_, have_);
+  }
+
+ private:
+  static constexpr IntegralIndex kById = IntegralIndex::kElementId;
+  const Field& f_;
+  const ApproximationOptions& opts_;
+  const SampleLattice* lattice_;
+  const double gw_, qedge_;
+  // Integrals cached per element id (valid for leaves); refinement remaps them.
+  std::vector<ElementIntegrals<D>> cache_;
+  std::vector<ElementGradients<D>> grads_;  // H1 only
+  std::vector<std::uint8_t> have_;
+  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
+  AssemblyWorkspace workspace_;
+  SparseMatrix m_;
+  Vector rhs_;
+};
+
+// A preconditioner by vertex id applied to vectors in the sampled operator's order.
+template <int D>
+class InOperatorOrder final : public LinearOperator {
+ public:
+  InOperatorOrder(const SampledLeastSquares<D>& op, std::unique_ptr<LinearOperator> inner)
+      : op_(op), inner_(std::move(inner)) {}
+  Eigen::Index size() const override { return op_.size(); }
+  void apply(const Vector& x, Vector& y) const override {
+    std::vector<double> by_vertex;
+    op_.from_operator_order(x, by_vertex);
+    Vector out;
+    inner_->apply(Eigen::Map<const Vector>(by_vertex.data(), x.size()), out);
+    op_.to_operator_order(std::vector<double>(out.data(), out.data() + out.size()), y);
+  }
+
+ private:
+  const SampledLeastSquares<D>& op_;
+  std::unique_ptr<LinearOperator> inner_;
+};
+
+template <int D>
+class SampledSystem {
+ public:
+  static constexpr bool kSampled = true;
+  SampledSystem(Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                const SampleLattice& lattice)
+      : f_(f), opts_(opts), lattice_(lattice), op_(lattice, *f.samples()) {
+    // The hierarchy's address space up front, as CachedSystem's (the same cap per element).
+    reserve_hierarchy(static_cast<std::size_t>(f.samples()->voxel_count()), opts, h,
+                      sizeof(ElementIntegrals<D>), 3);
+  }
+
+  // The operator's vectors are in its own vertex order (sampled_least_squares.h); u, the
+  // padding and the seen flags are by vertex id.
+  void prepare(const Hierarchy<D>& h, const std::vector<ElemId>&) {
+    const std::vector<double> pad = padding_weights(h, lattice_);
+    op_.update(h, remap_, pad);
+    remap_.clear();
+    op_.load(rhs_, diagonal_);
+    Vector pull = Vector::Zero(static_cast<Eigen::Index>(pad.size()));
+    add_padding_load(h, f_, pad, pull);
+    op_.to_operator_order(std::vector<double>(pull.data(), pull.data() + pull.size()), work_);
+    rhs_ += work_;
+    // Seen by a sample: a positive diagonal without the padding's weight.
+    std::vector<double> diagonal;
+    op_.from_operator_order(diagonal_, diagonal);
+    seen_.assign(h.vertex_count(), 0);
+    for (std::size_t v = 0; v < pad.size(); ++v) seen_[v] = diagonal[v] > pad[v];
+  }
+
+  Vector solve(const Hierarchy<D>& h, const std::vector<ElemId>&, const Vector&, std::vector<double>& values,
+               IterationStats& st) {
+    // Jacobi unless asked otherwise, as for the assembled sampled matrix (Preconditioner::kAuto).
+    std::unique_ptr<LinearOperator> pre;
+    if (opts_.preconditioner == Preconditioner::kBpx)
+      pre = std::make_unique<InOperatorOrder<D>>(op_, std::make_unique<BpxPreconditioner<D>>(h, 0.0));
+    else if (opts_.preconditioner == Preconditioner::kNone)
+      pre = std::make_unique<IdentityOperator>(op_.size());
+    else
+      pre = std::make_unique<JacobiPreconditioner>(diagonal_);
+    Vector x;
+    op_.to_operator_order(values, x);  // the start (start_values)
+    const CgResult r = conjugate_gradient(op_, *pre, rhs_, x, opts_.cg_tolerance, 5000);
+    st.cg_iterations = r.iterations;
+    st.cg_residual = r.relative_residual;
+    op_.from_operator_order(x, values);
+    fill_unseen(h, f_, seen_, values);
+    return Eigen::Map<const Vector>(values.data(), static_cast<Eigen::Index>(values.size()));
+  }
+
+  void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x,
+              std::vector<double>& err) {
+    op_.to_operator_order(std::vector<double>(x.data(), x.data() + x.size()), work_);
+    op_.leaf_errors(work_, leaves, err, samples_);
+  }
+
+  const std::vector<std::uint32_t>* samples() const { return &samples_; }
+  const std::vector<ElementIntegrals<D>>* integrals() const { return nullptr; }
+  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) { remap_ = remap; }
+
+ private:
+  const Field& f_;
+  const ApproximationOptions& opts_;
+  const SampleLattice& lattice_;
+  SampledLeastSquares<D> op_;
+  std::vector<ElemId> remap_;     // refine()'s, for the next prepare()
+  Vector rhs_, diagonal_, work_;  // in the operator's order
+  std::vector<std::uint8_t> seen_;
+  std::vector<std::uint32_t> samples_;  // per leaf, from errors()
+};
+
+// The refine-solve loop (Grosso, Lürig & Ertl, Sec. 3): prepare the system on the leaves,
+// solve, estimate, mark, stop or refine the worst within the budget.
+template <int D, class System>
+void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const ApproximationOptions& opts,
+                  Approximation<D>& out, const SampleLattice* lattice, bool surface_driven,
+                  const std::string& surface_stop, Clock::time_point t0) {
+  const double value_span = out.value_max > out.value_min ? out.value_max - out.value_min : 1.0;
+  std::vector<double> values;
+  double vertices_per_mark = 2.0;  // a red refinement's 3 (2D) / 6 (3D) midpoints, shared
+  bool budget_reached = false;     // a pass was cut by the budget (refine_worst)
+  // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules
+  // converge by themselves, and the paper's threshold rule runs to its end.
+  const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
+  std::vector<double> err;
+  for (int it = 0;; ++it) {
+    IterationStats st;
+    st.iteration = it;
+    auto ta = Clock::now();
+    const auto leaves = h.leaves();
+    sys.prepare(h, leaves);
+    st.assembly_seconds = since(ta);
+
+    auto ts = Clock::now();
+    const Vector x = sys.solve(h, leaves, start_values(h, out, surface_driven, values), values, st);
+    st.solve_seconds = since(ts);
+
+    auto te = Clock::now();
+    sys.errors(h, leaves, x, err);
+    const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
+
+    // Mark.
+    const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
+    std::size_t surface_marks = 0;
+    std::vector<Mark> marked = mark_leaves(h, leaves, err, sys.samples(), sys.integrals(), x, f, opts,
+                                           surface_driven, target_met, &surface_marks, lattice);
+    const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
+                                       surface_stop, stall_checks);
+    st.estimate_seconds = since(te);
+
+    if (!stop.empty()) {
+      st.seconds = since(t0);
+      out.iterations.push_back(st);
+      if (opts.progress) opts.progress(st);
+      out.stop_reason = stop;
+      out.leaf_errors = std::move(err);
+      break;
+    }
+
+    // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
+    // the budget, undo it and try fewer. How many vertices a mark costs (its own midpoints,
+    // shared with neighbours, plus what the closure upgrades to red) grows from about 2 on a
+    // uniform mesh to 8-12 on a graded one; it is learned from the previous attempt, so an
+    // iteration usually takes one attempt instead of halving its way down to the budget.
+    auto tr = Clock::now();
+    // Rank and select: the worst `cap` first; with an RMS target, only as many as carry 60 %
+    // of the excess error.
+    const double excess = opts.target_rms > 0 && opts.threshold <= 0 && !target_met
+                              ? total - opts.target_rms * opts.target_rms * out.domain_measure
+                              : -1.0;
+    bool by_memory = false;
+    std::size_t count = 0;
+    const std::vector<ElemId> remap =
+        refine_worst(h, opts, leaves.size(), marked, surface_marks, excess, vertices_per_mark, count,
+                     by_memory, budget_reached, System::kSampled);
+    const bool refined = count > 0;
+    st.marked = refined ? count : 0;
+    st.refine_seconds = since(tr);
+    st.seconds = since(t0);
+    out.iterations.push_back(st);
+    if (opts.progress) opts.progress(st);
+    if (!refined) {
+      // The budget does not allow even one more refinement: keep the last solution.
+      out.memory_limited = by_memory;
+      out.stop_reason = by_memory ? "memory budget" : "vertex budget";
+      out.leaf_errors = std::move(err);
+      break;
+    }
+    sys.refined(h, remap);
+  }
+  out.values = std::move(values);
 }
 
 template <int D>
@@ -724,9 +982,6 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
   const auto range = f.range();
   out.value_min = range[0];
   out.value_max = range[1];
-  const double value_span = range[1] > range[0] ? range[1] - range[0] : 1.0;
-  const double gw = gradient_weight<D>(f, opts);
-  const double qedge = default_quadrature_edge(f, opts);
 
   // Coarse elements of a big volume cannot represent anything: start where edges are ≤ 16
   // voxels (the hierarchy still begins at T0, so levels and the hierarchical basis keep it).
@@ -746,93 +1001,15 @@ Approximation<D> approximate(const Field& f, const ApproximationOptions& opts_in
     return out;
   }
 
-  // Integrals cached per element id (valid for leaves); refinement remaps them.
-  std::vector<ElementIntegrals<D>> cache;
-  std::vector<ElementGradients<D>> grads;  // H1 only
-  std::vector<std::uint8_t> have;
-  reserve_build_arrays(f, opts, h, cache, have);
-  std::vector<double> values;
-  double vertices_per_mark = 2.0;  // a red refinement's 3 (2D) / 6 (3D) midpoints, shared
-  bool budget_reached = false;     // a pass was cut by the budget (refine_worst)
-  // Iso-aware marking stalls (a handful of surface elements per full solve); the global rules
-  // converge by themselves, and the paper's threshold rule runs to its end.
-  const bool stall_checks = opts.min_growth > 0 && opts.threshold <= 0 && !opts.iso_values.empty();
-
-  // The assembly's storage, reused from one iteration to the next (fe_assembly.h).
-  AssemblyWorkspace workspace;
-  SparseMatrix m;
-  Vector rhs;
-  for (int it = 0;; ++it) {
-    IterationStats st;
-    st.iteration = it;
-    auto ta = Clock::now();
-    const auto leaves = h.leaves();
-    update_integral_cache(h, leaves, f, qedge, opts, lattice, cache, grads, have);
-    // Read in place (cache[leaves[i]]): a leaf-ordered copy would move ~100 bytes per leaf
-    // every iteration.
-    constexpr IntegralIndex kById = IntegralIndex::kElementId;
-    assemble_system(h, leaves, gw, cache, kById, workspace, m, rhs, &grads);
-    if (lattice) regularize_padding(h, f, *lattice, m, rhs);
-    st.assembly_seconds = since(ta);
-
-    auto ts = Clock::now();
-    const Vector x =
-        solve_iteration(h, f, m, rhs, opts, gw, leaves, cache, lattice, out, surface_driven, values, st);
-    st.solve_seconds = since(ts);
-
-    auto te = Clock::now();
-    const auto err = element_errors(h, leaves, cache, x, gw, kById, &grads);
-    const double total = record_errors(st, h, leaves.size(), err, out.domain_measure, value_span);
-
-    // Mark.
-    const bool target_met = opts.target_rms > 0 && st.rms_error <= opts.target_rms;
-    std::size_t surface_marks = 0;
-    std::vector<Mark> marked =
-        mark_leaves(h, leaves, err, cache, x, f, opts, surface_driven, target_met, &surface_marks, lattice);
-    const std::string stop = loop_stop(h, opts, out, st, it, marked.empty(), target_met, surface_driven,
-                                       surface_stop, stall_checks);
-    st.estimate_seconds = since(te);
-
-    if (!stop.empty()) {
-      st.seconds = since(t0);
-      out.iterations.push_back(st);
-      if (opts.progress) opts.progress(st);
-      out.stop_reason = stop;
-      out.leaf_errors = err;
-      break;
-    }
-
-    // Refinement, within the vertex budget: worst elements first; if a refinement overshoots
-    // the budget, undo it and try fewer. How many vertices a mark costs (its own midpoints,
-    // shared with neighbours, plus what the closure upgrades to red) grows from about 2 on a
-    // uniform mesh to 8-12 on a graded one; it is learned from the previous attempt, so an
-    // iteration usually takes one attempt instead of halving its way down to the budget.
-    auto tr = Clock::now();
-    // Rank and select: the worst `cap` first; with an RMS target, only as many as carry 60 %
-    // of the excess error.
-    const double excess = opts.target_rms > 0 && opts.threshold <= 0 && !target_met
-                              ? total - opts.target_rms * opts.target_rms * out.domain_measure
-                              : -1.0;
-    bool by_memory = false;
-    std::size_t count = 0;
-    const std::vector<ElemId> remap = refine_worst(h, opts, leaves.size(), marked, surface_marks, excess,
-                                                   vertices_per_mark, count, by_memory, budget_reached);
-    const bool refined = count > 0;
-    st.marked = refined ? count : 0;
-    st.refine_seconds = since(tr);
-    st.seconds = since(t0);
-    out.iterations.push_back(st);
-    if (opts.progress) opts.progress(st);
-    if (!refined) {
-      // The budget does not allow even one more refinement: keep the last solution.
-      out.memory_limited = by_memory;
-      out.stop_reason = by_memory ? "memory budget" : "vertex budget";
-      out.leaf_errors = err;
-      break;
-    }
-    remap_integral_cache(remap, cache, grads, have);
+  // Least squares at the samples in L2 without the iso-aware estimate (which reads f's range per
+  // leaf from the integrals) is applied from the samples; everything else from the cache.
+  if (lattice && !opts.h1 && opts.iso_values.empty()) {
+    SampledSystem<D> sys(h, f, opts, *lattice);
+    refine_solve(sys, h, f, opts, out, lattice, surface_driven, surface_stop, t0);
+  } else {
+    CachedSystem<D> sys(h, f, opts, lattice);
+    refine_solve(sys, h, f, opts, out, lattice, surface_driven, surface_stop, t0);
   }
-  out.values = std::move(values);
   if (surface_driven) sample_at_vertices(h, f, out.data_values);  // vertices the u check added
   return out;
 }

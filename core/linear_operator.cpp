@@ -29,8 +29,10 @@ void SparseOperator::apply(const Vector& x, Vector& y) const {
                     });
 }
 
-JacobiPreconditioner::JacobiPreconditioner(const SparseMatrix& a) : inv_diag_(a.rows()) {
-  const Vector d = a.diagonal();
+JacobiPreconditioner::JacobiPreconditioner(const SparseMatrix& a)
+    : JacobiPreconditioner(Vector(a.diagonal())) {}
+
+JacobiPreconditioner::JacobiPreconditioner(const Vector& d) : inv_diag_(d.size()) {
   for (Eigen::Index i = 0; i < d.size(); ++i) {
     MLFE_CHECK(d[i] > 0);
     inv_diag_[i] = 1.0 / d[i];

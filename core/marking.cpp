@@ -1,4 +1,5 @@
 // Marking for the adaptive approximation (Grosso, Lürig & Ertl, IEEE Vis 1997); see marking.h.
+#include <mlfe/core/check.h>
 #include <mlfe/core/marking.h>
 #include <mlfe/core/p1_element.h>
 #include <mlfe/core/sample_lattice.h>
@@ -110,10 +111,13 @@ bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, cons
 
 template <int D>
 std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                              const std::vector<double>& err, const std::vector<ElementIntegrals<D>>& cache,
-                              const Vector& u, const Field& f, const ApproximationOptions& opts,
-                              bool surface_driven, bool target_met, std::size_t* surface_marks,
-                              const SampleLattice* lattice) {
+                              const std::vector<double>& err, const std::vector<std::uint32_t>* samples,
+                              const std::vector<ElementIntegrals<D>>* cache, const Vector& u, const Field& f,
+                              const ApproximationOptions& opts, bool surface_driven, bool target_met,
+                              std::size_t* surface_marks, const SampleLattice* lattice) {
+  MLFE_CHECK(err.size() == leaves.size() && (!samples || samples->size() == leaves.size()));
+  MLFE_CHECK(samples || cache);
+  MLFE_CHECK(cache || surface_driven || opts.iso_values.empty());
   // Once the RMS target is met only the iso-aware rule (if any) still marks.
   const double tau2 = opts.target_rms > 0 && !target_met ? opts.target_rms * opts.target_rms : 0.0;
   const double thr2 = opts.threshold * opts.threshold;
@@ -127,10 +131,13 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
           // Padding holds no sample and is never refined (sample_lattice.h).
           if (lattice && outside_data<D>(corner_points(h, e), *lattice)) continue;
           // Mean square error on T: over its samples on the lattice.
-          const auto& in = cache[e.value];
-          const double density = in.sampled
-                                     ? err[i] / (lattice->sample_weight * std::max<double>(in.points, 1))
-                                     : err[i] / h.measure(e);
+          double density;
+          if (samples)
+            density = err[i] / (lattice->sample_weight * std::max<double>((*samples)[i], 1));
+          else if (const auto& in = (*cache)[e.value]; in.sampled)
+            density = err[i] / (lattice->sample_weight * std::max<double>(in.points, 1));
+          else
+            density = err[i] / h.measure(e);
           bool mark = false;
           if (opts.threshold > 0) mark |= density > thr2;
           // Equidistribution: if no element's mean square error exceeds tau²,
@@ -142,7 +149,7 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
               // to twice the tolerance (snapping moves vertices the rest).
               (surface_driven ? opts.check_surfaces_against_u &&
                                     surface_gap_mark(h, e, u, f, opts, 2 * opts.surface_tolerance)
-                              : surface_needs_refinement(h, e, cache[e.value], u, density, f, opts));
+                              : surface_needs_refinement(h, e, (*cache)[e.value], u, density, f, opts));
           decision[i] = std::uint8_t((mark ? 1 : 0) | (surface ? 2 : 0));
         }
       });
@@ -180,13 +187,15 @@ std::size_t rank_and_select(std::vector<Mark>& marks, std::size_t cap, std::size
 }
 
 template std::vector<Mark> mark_leaves<2>(const Hierarchy<2>&, const std::vector<ElemId>&,
-                                          const std::vector<double>&, const std::vector<ElementIntegrals<2>>&,
-                                          const Vector&, const Field&, const ApproximationOptions&, bool,
-                                          bool, std::size_t*, const SampleLattice*);
+                                          const std::vector<double>&, const std::vector<std::uint32_t>*,
+                                          const std::vector<ElementIntegrals<2>>*, const Vector&,
+                                          const Field&, const ApproximationOptions&, bool, bool, std::size_t*,
+                                          const SampleLattice*);
 template std::vector<Mark> mark_leaves<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
-                                          const std::vector<double>&, const std::vector<ElementIntegrals<3>>&,
-                                          const Vector&, const Field&, const ApproximationOptions&, bool,
-                                          bool, std::size_t*, const SampleLattice*);
+                                          const std::vector<double>&, const std::vector<std::uint32_t>*,
+                                          const std::vector<ElementIntegrals<3>>*, const Vector&,
+                                          const Field&, const ApproximationOptions&, bool, bool, std::size_t*,
+                                          const SampleLattice*);
 template bool surface_gap_mark<2, Vector>(const Hierarchy<2>&, ElemId, const Vector&, const Field&,
                                           const ApproximationOptions&, double, bool*);
 template bool surface_gap_mark<3, Vector>(const Hierarchy<3>&, ElemId, const Vector&, const Field&,

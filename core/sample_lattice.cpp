@@ -90,6 +90,30 @@ bool pushed_inside(const std::array<I64, D>& n, const std::array<int, D>& s) {
   return false;
 }
 
+// An element's lattice corners, barycentric numerators and the numerators' reciprocals at the
+// corners (λ_i = N_i · inv_i).
+template <int D>
+struct LatticeSimplex {
+  std::array<std::array<I64, D>, D + 1> c;
+  Numerators<D> num;
+  std::array<double, D + 1> inv;
+};
+
+template <int D>
+LatticeSimplex<D> lattice_simplex(const std::array<std::array<double, D>, D + 1>& p,
+                                  const SampleLattice& lat) {
+  LatticeSimplex<D> s;
+  s.c = index_corners<D>(p, lat);
+  s.num = numerators<D>(s.c);
+  for (int i = 0; i <= D; ++i) s.inv[i] = 1.0 / double(s.num.at_corner[i]);
+  return s;
+}
+
+// A sample's index in the grid's values (x fastest).
+inline std::size_t linear_index(const std::array<I64, 3>& q, const SampleLattice& lat) {
+  return static_cast<std::size_t>(q[0] + lat.dims[0] * (q[1] + lat.dims[1] * q[2]));
+}
+
 }  // namespace
 
 std::array<double, 3> SampleLattice::data_extent() const {
@@ -224,39 +248,38 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
   ElementIntegrals<D> out;
   ElementGradients<D> gs;
   out.sampled = true;
-  const auto c = index_corners<D>(p, lat);
-  const Numerators<D> num = numerators<D>(c);
-  std::array<double, D + 1> inv;
-  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
+  const LatticeSimplex<D> t = lattice_simplex<D>(p, lat);
+  const auto& inv = t.inv;
   const double w = lat.sample_weight;
   float fmin = 0, fmax = 0;
   bool any = false;
-  const I64 nx = lat.dims[0], ny = lat.dims[1];
-  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
-    const float fv = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
-    const double fs = fv;
-    std::array<double, D + 1> lam;
-    for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
-    out.f2 += w * fs * fs;
-    for (int i = 0, m = 0; i <= D; ++i) {
-      out.fphi[i] += w * fs * lam[i];
-      for (int j = i; j <= D; ++j) out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
-    }
-    if (gradients) {
-      std::array<double, 3> xl{0, 0, 0};
-      for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
-      const auto g = f.gradient(xl);
-      for (int a = 0; a < D; ++a) {
-        gs.grad[a] += w * g[a];
-        gs.grad2 += w * g[a] * g[a];
-      }
-    }
-    if (!any || fv < fmin) fmin = fv;
-    if (!any || fv > fmax) fmax = fv;
-    any = true;
-    ++out.points;
-    return true;
-  });
+  for_each_owned_sample<D>(t.c, t.num, lat,
+                           [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+                             const float fv = grid.values[linear_index(q, lat)];
+                             const double fs = fv;
+                             std::array<double, D + 1> lam;
+                             for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
+                             out.f2 += w * fs * fs;
+                             for (int i = 0, m = 0; i <= D; ++i) {
+                               out.fphi[i] += w * fs * lam[i];
+                               for (int j = i; j <= D; ++j)
+                                 out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
+                             }
+                             if (gradients) {
+                               std::array<double, 3> xl{0, 0, 0};
+                               for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];
+                               const auto g = f.gradient(xl);
+                               for (int a = 0; a < D; ++a) {
+                                 gs.grad[a] += w * g[a];
+                                 gs.grad2 += w * g[a] * g[a];
+                               }
+                             }
+                             if (!any || fv < fmin) fmin = fv;
+                             if (!any || fv > fmax) fmax = fv;
+                             any = true;
+                             ++out.points;
+                             return true;
+                           });
   out.fmin = fmin;
   out.fmax = fmax;
   if (gradients) *gradients = gs;
@@ -264,27 +287,41 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
 }
 
 template <int D>
+void owned_samples(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
+                   std::vector<OwnedSample<D>>& out) {
+  out.clear();
+  const LatticeSimplex<D> t = lattice_simplex<D>(p, lat);
+  for_each_owned_sample<D>(t.c, t.num, lat,
+                           [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+                             OwnedSample<D> s;
+                             s.index = static_cast<std::int64_t>(linear_index(q, lat));
+                             for (int i = 0; i <= D; ++i) s.lambda[i] = double(nn[i]) * t.inv[i];
+                             out.push_back(s);
+                             return true;
+                           });
+}
+
+template <int D>
 SampleDeviation sample_deviation(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lat,
                                  const ScalarGrid& grid, const std::array<double, D + 1>& v, double stop) {
   SampleDeviation out;
-  const auto c = index_corners<D>(p, lat);
-  const Numerators<D> num = numerators<D>(c);
-  std::array<double, D + 1> inv;
-  for (int i = 0; i <= D; ++i) inv[i] = 1.0 / double(num.at_corner[i]);
-  const I64 nx = lat.dims[0], ny = lat.dims[1];
-  for_each_owned_sample<D>(c, num, lat, [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
-    const double fs = grid.values[static_cast<std::size_t>(q[0] + nx * (q[1] + ny * q[2]))];
-    // Relative to corner 0, so a flat element interpolates its value bit for bit, and at a
-    // corner (λ exactly a unit vector) the interpolant is that corner's value.
-    double u = v[0];
-    for (int i = 1; i <= D; ++i)
-      if (nn[i] != 0) u += double(nn[i]) * inv[i] * (v[i] - v[0]);
-    const double d = std::fabs(fs - u);
-    out.max = std::max(out.max, d);
-    out.sum2 += d * d;
-    ++out.samples;
-    return !(out.max > stop);
-  });
+  const LatticeSimplex<D> t = lattice_simplex<D>(p, lat);
+  const auto& inv = t.inv;
+  for_each_owned_sample<D>(t.c, t.num, lat,
+                           [&](const std::array<I64, 3>& q, const std::array<I64, D + 1>& nn) {
+                             const double fs = grid.values[linear_index(q, lat)];
+                             // Relative to corner 0, so a flat element interpolates its value bit for bit,
+                             // and at a corner (λ exactly a unit vector) the interpolant is that corner's
+                             // value.
+                             double u = v[0];
+                             for (int i = 1; i <= D; ++i)
+                               if (nn[i] != 0) u += double(nn[i]) * inv[i] * (v[i] - v[0]);
+                             const double d = std::fabs(fs - u);
+                             out.max = std::max(out.max, d);
+                             out.sum2 += d * d;
+                             ++out.samples;
+                             return !(out.max > stop);
+                           });
   return out;
 }
 
@@ -327,6 +364,10 @@ template ElementIntegrals<2> sample_integrals<2>(const std::array<std::array<dou
 template ElementIntegrals<3> sample_integrals<3>(const std::array<std::array<double, 3>, 4>&,
                                                  const SampleLattice&, const ScalarGrid&, const Field&,
                                                  ElementGradients<3>*);
+template void owned_samples<2>(const std::array<std::array<double, 2>, 3>&, const SampleLattice&,
+                               std::vector<OwnedSample<2>>&);
+template void owned_samples<3>(const std::array<std::array<double, 3>, 4>&, const SampleLattice&,
+                               std::vector<OwnedSample<3>>&);
 template SampleDeviation sample_deviation<2>(const std::array<std::array<double, 2>, 3>&,
                                              const SampleLattice&, const ScalarGrid&,
                                              const std::array<double, 3>&, double);

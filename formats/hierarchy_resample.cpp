@@ -39,34 +39,70 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
   const std::vector<ElemId> leaves = h.leaves();
   constexpr double kTol = 1e-9;
 
+  // A leaf's box in grid indices (lower corners, then upper), clamped to the grid; recomputed
+  // where needed: kept for every leaf, the boxes were 48 bytes a leaf (0.66 GB for a full head
+  // at its noise level, a build's peak).
+  const auto leaf_box = [&](std::size_t l) {
+    std::array<std::int64_t, 2 * D> box;
+    const auto& c = h.cell(leaves[l]);
+    for (int a = 0; a < D; ++a) {
+      double lo = h.point(c[0])[a], hi = lo;
+      for (int i = 1; i <= D; ++i) lo = std::min(lo, h.point(c[i])[a]), hi = std::max(hi, h.point(c[i])[a]);
+      box[a] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(lo / spacing[a] - kTol)));
+      box[D + a] =
+          std::min<std::int64_t>(dims[a] - 1, static_cast<std::int64_t>(std::floor(hi / spacing[a] + kTol)));
+    }
+    return box;
+  };
   // Step 1: bucket the leaves by the slabs (along the last axis) their boxes touch, in leaf
   // order, so each slab is filled by one task in a fixed order.
   constexpr int A = D - 1;  // slab axis
   const std::int64_t n_slab_axis = dims[A];
   const std::int64_t slab = std::max<std::int64_t>(1, n_slab_axis / 64);
   const std::int64_t n_slabs = (n_slab_axis + slab - 1) / slab;
-  std::vector<std::vector<std::uint32_t>> buckets(static_cast<std::size_t>(n_slabs));
-  std::vector<std::array<std::int64_t, 2 * D>> box(leaves.size());
-  for (std::size_t l = 0; l < leaves.size(); ++l) {
-    const auto& c = h.cell(leaves[l]);
-    for (int a = 0; a < D; ++a) {
-      double lo = h.point(c[0])[a], hi = lo;
-      for (int i = 1; i <= D; ++i) lo = std::min(lo, h.point(c[i])[a]), hi = std::max(hi, h.point(c[i])[a]);
-      box[l][a] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(lo / spacing[a] - kTol)));
-      box[l][D + a] =
-          std::min<std::int64_t>(dims[a] - 1, static_cast<std::int64_t>(std::floor(hi / spacing[a] + kTol)));
+  // Chunks of leaves in parallel, each into its own buckets, joined in chunk order: the same
+  // lists as one pass in leaf order.
+  constexpr std::size_t kChunk = 1 << 16;
+  const std::size_t n_chunks = (leaves.size() + kChunk - 1) / kChunk;
+  std::vector<std::vector<std::vector<std::uint32_t>>> part(n_chunks);
+  tbb::parallel_for(std::size_t(0), n_chunks, [&](std::size_t k) {
+    part[k].resize(static_cast<std::size_t>(n_slabs));
+    for (std::size_t l = k * kChunk, end = std::min(leaves.size(), l + kChunk); l < end; ++l) {
+      const auto box = leaf_box(l);
+      if (box[A] > box[D + A]) continue;
+      for (std::int64_t s = box[A] / slab; s <= box[D + A] / slab; ++s)
+        part[k][static_cast<std::size_t>(s)].push_back(static_cast<std::uint32_t>(l));
     }
-    if (box[l][A] > box[l][D + A]) continue;
-    for (std::int64_t s = box[l][A] / slab; s <= box[l][D + A] / slab; ++s)
-      buckets[s].push_back(static_cast<std::uint32_t>(l));
-  }
-
+  });
+  std::vector<std::vector<std::uint32_t>> buckets(static_cast<std::size_t>(n_slabs));
+  tbb::parallel_for(std::size_t(0), buckets.size(), [&](std::size_t s) {
+    std::size_t n = 0;
+    for (const auto& p : part) n += p[s].size();
+    buckets[s].reserve(n);
+    for (auto& p : part) {
+      buckets[s].insert(buckets[s].end(), p[s].begin(), p[s].end());
+      std::vector<std::uint32_t>().swap(p[s]);
+    }
+  });
   // Step 2: per slab, barycentric coordinates of every grid point in each leaf's box.
   tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, n_slabs),
                     [&](const tbb::blocked_range<std::int64_t>& r) {
                       for (std::int64_t s = r.begin(); s < r.end(); ++s) {
                         const std::int64_t s_lo = s * slab, s_hi = std::min(n_slab_axis - 1, s_lo + slab - 1);
                         for (std::uint32_t l : buckets[s]) {
+                          const auto box = leaf_box(l);
+                          const std::int64_t k_lo = D == 3 ? std::max(box[2], s_lo) : 0,
+                                             k_hi = D == 3 ? std::min(box[5], s_hi) : 0;
+                          const std::int64_t j_lo = D == 2 ? std::max(box[1], s_lo) : box[1];
+                          const std::int64_t j_hi = D == 2 ? std::min(box[3], s_hi) : box[1 + D];
+                          // Every point of the box already has its value (from an earlier
+                          // leaf sharing it): skip the element's set-up.
+                          bool open = false;
+                          for (std::int64_t k = k_lo; k <= k_hi && !open; ++k)
+                            for (std::int64_t j = j_lo; j <= j_hi && !open; ++j)
+                              for (std::int64_t i = box[0]; i <= box[D] && !open; ++i)
+                                open = std::isnan(out[static_cast<std::size_t>(i + nx * (j + ny * k))]);
+                          if (!open) continue;
                           const auto& c = h.cell(leaves[l]);
                           // Barycentric map: λ_{1..D} = ∇λ_{1..D} · (x − p0), λ_0 = 1 − Σ.
                           std::array<std::array<double, D>, D + 1> p;
@@ -76,13 +112,9 @@ std::vector<float> resample_to_grid(const Hierarchy<D>& h, const std::vector<dou
                           const auto& p0 = p[0];
                           double u[D + 1];
                           for (int i = 0; i <= D; ++i) u[i] = values[c[i].value];
-                          const std::int64_t k_lo = D == 3 ? std::max(box[l][2], s_lo) : 0,
-                                             k_hi = D == 3 ? std::min(box[l][5], s_hi) : 0;
-                          const std::int64_t j_lo = D == 2 ? std::max(box[l][1], s_lo) : box[l][1];
-                          const std::int64_t j_hi = D == 2 ? std::min(box[l][3], s_hi) : box[l][1 + D];
                           for (std::int64_t k = k_lo; k <= k_hi; ++k)
                             for (std::int64_t j = j_lo; j <= j_hi; ++j)
-                              for (std::int64_t i = box[l][0]; i <= box[l][D]; ++i) {
+                              for (std::int64_t i = box[0]; i <= box[D]; ++i) {
                                 float& o = out[static_cast<std::size_t>(i + nx * (j + ny * k))];
                                 if (!std::isnan(o)) continue;
                                 const double x[3] = {i * spacing[0] - p0[0], j * spacing[1] - p0[1],

@@ -13,22 +13,12 @@
 #include <cstdint>
 #include <random>
 
+#include "tests/core/test_hierarchies.h"
+
 namespace mlfe {
 namespace {
 
-ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::array<double, 3> spacing,
-                       unsigned seed, bool integers) {
-  ScalarGrid g;
-  g.dim = dim;
-  g.dims = dims;
-  if (dim == 2) g.dims[2] = 1;
-  g.transform.spacing = spacing;
-  g.values.resize(static_cast<std::size_t>(g.voxel_count()));
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> u(-50.f, 50.f);
-  for (float& v : g.values) v = integers ? std::round(u(rng)) : u(rng);
-  return g;
-}
+using test::random_grid;
 
 // Index coordinates of a local-frame point, CHECKing they are integers.
 template <int D>

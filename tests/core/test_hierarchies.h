@@ -3,13 +3,31 @@
 #pragma once
 #include <gtest/gtest.h>
 #include <mlfe/core/hierarchy.h>
+#include <mlfe/core/scalar_grid.h>
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <random>
 #include <vector>
 
 namespace mlfe::test {
+
+/// A grid of uniform random values in [-50, 50) (rounded with `integers`); 2D grids have one
+/// sample along z.
+inline ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::array<double, 3> spacing,
+                              unsigned seed, bool integers = false) {
+  ScalarGrid g;
+  g.dim = dim;
+  g.dims = dims;
+  if (dim == 2) g.dims[2] = 1;
+  g.transform.spacing = spacing;
+  g.values.resize(static_cast<std::size_t>(g.voxel_count()));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-50.f, 50.f);
+  for (float& v : g.values) v = integers ? std::round(u(rng)) : u(rng);
+  return g;
+}
 
 /// Red and green elements at several levels: `rounds` times, refines every leaf with a vertex
 /// in [0, 0.25]^D (the corner at the origin).

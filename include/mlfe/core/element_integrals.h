@@ -27,8 +27,9 @@ namespace mlfe {
 // The fields the assembly and the error estimate read for every leaf (f2, fphi, mass) come
 // last and together: a cache entry is read at random, once per corner, and these 120 bytes
 // (3D) span 2-3 cache lines where the former order spanned 3-4. The H1 term's sums are kept
-// apart (ElementGradients): an L2 build's cache, 136 bytes per element in 3D, is the largest
-// array of a build.
+// apart (ElementGradients): the cache, 136 bytes per element in 3D, is the largest array of
+// a build that uses it (the H1 norm, the iso-aware estimate, quadrature of unstructured input;
+// least squares at the samples in L2 does without: sampled_least_squares.h).
 template <int D>
 struct ElementIntegrals {
   float fmin = 0, fmax = 0;  ///< range of f at the quadrature points

@@ -49,6 +49,8 @@ class IdentityOperator final : public LinearOperator {
 class JacobiPreconditioner final : public LinearOperator {
  public:
   explicit JacobiPreconditioner(const SparseMatrix& a);
+  /// From the diagonal itself (an operator without a matrix).
+  explicit JacobiPreconditioner(const Vector& diagonal);
   Eigen::Index size() const override { return inv_diag_.size(); }
   void apply(const Vector& x, Vector& y) const override;
 

@@ -27,15 +27,18 @@ struct Mark {
 /// threshold), equidistribution toward the RMS target while it is not met (E_T/|T| > τ²), and
 /// with iso-values the surface rule (surface-driven builds: u's surfaces against the data's,
 /// only with check_surfaces_against_u; otherwise the iso-aware estimate of
-/// surface_needs_refinement). Leaves at max_level are never marked. `err` and `cache` are per
-/// leaf (leaves order) and per element id; `u` the solution at the vertices. *surface_marks
-/// counts the surface marks. Parallel; the result does not depend on the thread count.
+/// surface_needs_refinement). Leaves at max_level are never marked. `err` (E_T) is per leaf
+/// (leaves order); an error per unit measure decides: E_T over the weight of the samples T
+/// owns when `samples` (per leaf) is given or `cache` (per element id) holds sampled integrals,
+/// else E_T/|T|. The iso-aware estimate reads f's range on a leaf from `cache` (CHECKed);
+/// `u` is the solution at the vertices. *surface_marks counts the surface marks. Parallel; the
+/// result does not depend on the thread count.
 template <int D>
 std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
-                              const std::vector<double>& err, const std::vector<ElementIntegrals<D>>& cache,
-                              const Vector& u, const Field& f, const ApproximationOptions& opts,
-                              bool surface_driven, bool target_met, std::size_t* surface_marks,
-                              const SampleLattice* lattice = nullptr);
+                              const std::vector<double>& err, const std::vector<std::uint32_t>* samples,
+                              const std::vector<ElementIntegrals<D>>* cache, const Vector& u, const Field& f,
+                              const ApproximationOptions& opts, bool surface_driven, bool target_met,
+                              std::size_t* surface_marks, const SampleLattice* lattice = nullptr);
 
 /// Ranks the marks (surface marks first, then larger error, ties by id: a strict order) so that
 /// the first `cap` are the worst, sorted, and returns how many of them to refine: all `cap`, or

@@ -74,6 +74,21 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
                                      const SampleLattice& lattice, const ScalarGrid& grid, const Field& f,
                                      ElementGradients<D>* gradients = nullptr);
 
+/// A sample an element owns: its linear index in the grid (x fastest) and its barycentric
+/// coordinates in the element (exact rationals of the lattice, rounded once to double).
+template <int D>
+struct OwnedSample {
+  std::int64_t index;
+  std::array<double, D + 1> lambda;
+};
+
+/// The samples the simplex with lattice corners p (local frame; CHECKed) owns, by the rule above,
+/// in row order (x fastest, then y, then z); `out` is cleared first. Sums over every leaf's
+/// owned samples visit each sample of the data exactly once.
+template <int D>
+void owned_samples(const std::array<std::array<double, D>, D + 1>& p, const SampleLattice& lattice,
+                   std::vector<OwnedSample<D>>& out);
+
 /// How far the samples an element owns (the rule above) are from the linear interpolant of
 /// the corner values v: the largest |f_s − Σ λ_i v_i|, the sum of squares and the count. At a
 /// sample on a corner, and on an element whose corner values are equal, the interpolant is
