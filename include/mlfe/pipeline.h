@@ -557,7 +557,7 @@ struct HierarchyFileFigures {
 };
 
 struct BuildFileResult {
-  Built built;
+  Built built;  ///< the build (of a volume: without Approximation::leaf_errors, not kept)
   HierarchyFileFigures file;
   double max_error = -1;              ///< the bound asked for (< 0: none), verified when ≥ 0
   std::vector<std::string> warnings;  ///< e.g. written as format version 1
