@@ -35,9 +35,10 @@ SampledLeastSquares<D>::SampledLeastSquares(const SampleLattice& lattice, const 
 }
 
 template <int D>
-std::int64_t SampledLeastSquares<D>::tile_of(std::int64_t s) const {
-  const std::int64_t nx = lattice_.dims[0], ny = lattice_.dims[1];
-  const std::int64_t y = (s / nx) % ny, z = s / (nx * ny);
+std::int64_t SampledLeastSquares<D>::tile_at(std::int64_t y, std::int64_t z) const {
+  // Lattice points beyond the data (the padding's vertices) go to the last tile of the axis.
+  y = std::min(y, lattice_.dims[1] - 1);
+  z = std::min(z, lattice_.dims[2] - 1);
   return y / tile_ + tiles_y_ * (D == 3 ? z / tile_ : 0);
 }
 
@@ -130,7 +131,8 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
   tile_ = 2 * extent_;
   tiles_y_ = (lattice_.dims[1] + tile_ - 1) / tile_;
   tiles_z_ = D == 3 ? (lattice_.dims[2] + tile_ - 1) / tile_ : 1;
-  for (SummedLeaf& b : summed_) b.tile = tile_of(b.first_sample);
+  const std::int64_t nx = lattice_.dims[0], ny = lattice_.dims[1];
+  for (SummedLeaf& b : summed_) b.tile = tile_at((b.first_sample / nx) % ny, b.first_sample / (nx * ny));
   tbb::parallel_sort(summed_.begin(), summed_.end(), [](const SummedLeaf& a, const SummedLeaf& b) {
     return a.tile != b.tile ? a.tile < b.tile : a.id < b.id;
   });
@@ -167,7 +169,6 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
 template <int D>
 void SampledLeastSquares<D>::order_vertices(const Hierarchy<D>& h) {
   const std::size_t nv = h.vertex_count();
-  const std::int64_t ny = lattice_.dims[1], nz = lattice_.dims[2];
   struct Key {
     std::uint64_t hi, lo;  // (tile, z), (y, x)
     std::uint32_t id;
@@ -184,9 +185,7 @@ void SampledLeastSquares<D>::order_vertices(const Hierarchy<D>& h) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
       const auto& p = h.point(VertexId(static_cast<std::uint32_t>(v)));
       const std::int64_t x = coord(p[0], 0), y = coord(p[1], 1), z = D == 3 ? coord(p[2], 2) : 0;
-      const std::int64_t t =
-          std::min(y, ny - 1) / tile_ + tiles_y_ * (D == 3 ? std::min(z, nz - 1) / tile_ : 0);
-      tile[v] = static_cast<std::uint32_t>(t);
+      tile[v] = static_cast<std::uint32_t>(tile_at(y, z));
       keys[v] = {static_cast<std::uint64_t>(z),
                  static_cast<std::uint64_t>(y) << 32 | static_cast<std::uint64_t>(x),
                  static_cast<std::uint32_t>(v)};
@@ -240,7 +239,13 @@ void SampledLeastSquares<D>::from_operator_order(const Vector& v, std::vector<do
 
 template <int D>
 template <class Leaf, class Sample>
-void SampledLeastSquares<D>::for_each(int colour, Leaf&& leaf, Sample&& sample) const {
+void SampledLeastSquares<D>::for_each(Leaf&& leaf, Sample&& sample) const {
+  for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour) for_each_in_colour(colour, leaf, sample);
+}
+
+template <int D>
+template <class Leaf, class Sample>
+void SampledLeastSquares<D>::for_each_in_colour(int colour, Leaf& leaf, Sample& sample) const {
   MLFE_CHECK(h_ != nullptr);
   const std::int64_t nx = lattice_.dims[0], ny = lattice_.dims[1], nz = lattice_.dims[2];
   // Colour bit 0: y tile parity, bit 1: z tile parity.
@@ -279,28 +284,26 @@ void SampledLeastSquares<D>::apply(const Vector& x, Vector& y) const {
   MLFE_CHECK(x.size() == size());
   y.setZero(size());
   const double w = lattice_.sample_weight;
-  for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each(
-        colour,
-        [&](const SummedLeaf& b) {
-          std::array<double, D + 1> xs, ys{};
-          for (int a = 0; a <= D; ++a) xs[a] = x[b.cell[a].value];
-          for (int a = 0, m = 0; a <= D; ++a) {
-            ys[a] += b.mass[m] * xs[a];
-            for (int c = a + 1; c <= D; ++c) {
-              ys[a] += b.mass[m + c - a] * xs[c];
-              ys[c] += b.mass[m + c - a] * xs[a];
-            }
-            m += D + 1 - a;
+  for_each(
+      [&](const SummedLeaf& b) {
+        std::array<double, D + 1> xs, ys{};
+        for (int a = 0; a <= D; ++a) xs[a] = x[b.cell[a].value];
+        for (int a = 0, m = 0; a <= D; ++a) {
+          ys[a] += b.mass[m] * xs[a];
+          for (int c = a + 1; c <= D; ++c) {
+            ys[a] += b.mass[m + c - a] * xs[c];
+            ys[c] += b.mass[m + c - a] * xs[a];
           }
-          for (int a = 0; a <= D; ++a) y[b.cell[a].value] += ys[a];
-        },
-        [&](std::size_t, const auto& c, const std::array<double, D + 1>& lam) {
-          double u = 0;
-          for (int i = 0; i <= D; ++i) u += lam[i] * x[c[i].value];
-          u *= w;
-          for (int i = 0; i <= D; ++i) y[c[i].value] += lam[i] * u;
-        });
+          m += D + 1 - a;
+        }
+        for (int a = 0; a <= D; ++a) y[b.cell[a].value] += ys[a];
+      },
+      [&](std::size_t, const auto& c, const std::array<double, D + 1>& lam) {
+        double u = 0;
+        for (int i = 0; i <= D; ++i) u += lam[i] * x[c[i].value];
+        u *= w;
+        for (int i = 0; i <= D; ++i) y[c[i].value] += lam[i] * u;
+      });
   for (Eigen::Index i = 0; i < size(); ++i) y[i] += padding_[static_cast<std::size_t>(i)] * x[i];
 }
 
@@ -309,22 +312,20 @@ void SampledLeastSquares<D>::load(Vector& rhs, Vector& diagonal) const {
   rhs.setZero(size());
   diagonal.setZero(size());
   const double w = lattice_.sample_weight;
-  for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each(
-        colour,
-        [&](const SummedLeaf& b) {
-          for (int a = 0, m = 0; a <= D; m += D + 1 - a, ++a) {
-            rhs[b.cell[a].value] += b.fphi[a];
-            diagonal[b.cell[a].value] += b.mass[m];
-          }
-        },
-        [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
-          const double wf = w * double(grid_.values[s]);
-          for (int i = 0; i <= D; ++i) {
-            rhs[c[i].value] += wf * lam[i];
-            diagonal[c[i].value] += w * lam[i] * lam[i];
-          }
-        });
+  for_each(
+      [&](const SummedLeaf& b) {
+        for (int a = 0, m = 0; a <= D; m += D + 1 - a, ++a) {
+          rhs[b.cell[a].value] += b.fphi[a];
+          diagonal[b.cell[a].value] += b.mass[m];
+        }
+      },
+      [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
+        const double wf = w * double(grid_.values[s]);
+        for (int i = 0; i <= D; ++i) {
+          rhs[c[i].value] += wf * lam[i];
+          diagonal[c[i].value] += w * lam[i] * lam[i];
+        }
+      });
   for (Eigen::Index i = 0; i < size(); ++i) diagonal[i] += padding_[static_cast<std::size_t>(i)];
 }
 
@@ -340,33 +341,31 @@ void SampledLeastSquares<D>::leaf_errors(const Vector& u, const std::vector<Elem
   error.assign(leaves.size(), 0.0);
   samples.assign(leaves.size(), 0);
   const double w = lattice_.sample_weight;
-  for (int colour = 0; colour < (D == 3 ? 4 : 2); ++colour)
-    for_each(
-        colour,
-        [&](const SummedLeaf& b) {
-          // Σ w f² − 2 U·F_T + Uᵀ M_T U; cancellation can leave a tiny negative.
-          std::array<double, D + 1> us;
-          for (int a = 0; a <= D; ++a) us[a] = u[b.cell[a].value];
-          double cross = 0, quad = 0;
-          for (int a = 0, m = 0; a <= D; ++a) {
-            cross += us[a] * b.fphi[a];
-            quad += us[a] * us[a] * b.mass[m];
-            for (int c = a + 1; c <= D; ++c) quad += 2 * us[a] * us[c] * b.mass[m + c - a];
-            m += D + 1 - a;
-          }
-          const std::uint32_t i = index[b.id.value];
-          MLFE_CHECK(i != kNoOwner);
-          error[i] = std::max(0.0, b.f2 - 2 * cross + quad);
-          samples[i] = b.samples;
-        },
-        [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
-          double v = 0;
-          for (int a = 0; a <= D; ++a) v += lam[a] * u[c[a].value];
-          const double d = double(grid_.values[s]) - v;
-          const std::uint32_t i = index[owner_[s]];
-          error[i] += w * d * d;
-          ++samples[i];
-        });
+  for_each(
+      [&](const SummedLeaf& b) {
+        // Σ w f² − 2 U·F_T + Uᵀ M_T U; cancellation can leave a tiny negative.
+        std::array<double, D + 1> us;
+        for (int a = 0; a <= D; ++a) us[a] = u[b.cell[a].value];
+        double cross = 0, quad = 0;
+        for (int a = 0, m = 0; a <= D; ++a) {
+          cross += us[a] * b.fphi[a];
+          quad += us[a] * us[a] * b.mass[m];
+          for (int c = a + 1; c <= D; ++c) quad += 2 * us[a] * us[c] * b.mass[m + c - a];
+          m += D + 1 - a;
+        }
+        const std::uint32_t i = index[b.id.value];
+        MLFE_CHECK(i != kNoOwner);
+        error[i] = std::max(0.0, b.f2 - 2 * cross + quad);
+        samples[i] = b.samples;
+      },
+      [&](std::size_t s, const auto& c, const std::array<double, D + 1>& lam) {
+        double v = 0;
+        for (int a = 0; a <= D; ++a) v += lam[a] * u[c[a].value];
+        const double d = double(grid_.values[s]) - v;
+        const std::uint32_t i = index[owner_[s]];
+        error[i] += w * d * d;
+        ++samples[i];
+      });
 }
 
 template class SampledLeastSquares<2>;

@@ -85,15 +85,18 @@ class SampledLeastSquares final : public LinearOperator {
     std::array<double, kPairs> mass;
   };
 
-  std::int64_t tile_of(std::int64_t sample) const;
+  // The tile of lattice point (·, y, z); points beyond the data fall in the axis's last tile.
+  std::int64_t tile_at(std::int64_t y, std::int64_t z) const;
   // The vertex order: tile, then (z, y, x) of the vertex's lattice point (rank_: vertex id →
   // operator index, order_: back); and the stored cells renumbered through `map`.
   void order_vertices(const Hierarchy<D>& h);
   void renumber_cells(const std::vector<std::uint32_t>& map);
-  // Calls leaf(summed leaf) and sample(s, cell, λ) for the tiles of colour `colour`, tiles in
-  // parallel; per tile its summed leaves first, then its other samples in order.
+  // Calls leaf(summed leaf) and sample(s, cell, λ) for every tile, colour by colour, a colour's
+  // tiles in parallel; per tile its summed leaves first, then its other samples in order.
   template <class Leaf, class Sample>
-  void for_each(int colour, Leaf&& leaf, Sample&& sample) const;
+  void for_each(Leaf&& leaf, Sample&& sample) const;
+  template <class Leaf, class Sample>
+  void for_each_in_colour(int colour, Leaf& leaf, Sample& sample) const;
 
   const SampleLattice& lattice_;
   const ScalarGrid& grid_;
