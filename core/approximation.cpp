@@ -674,6 +674,7 @@ std::vector<ElemId> refine_worst(Hierarchy<D>& h, const ApproximationOptions& op
   if (limit && room < std::max<std::size_t>(8, limit / 200)) count = 0;
   std::vector<ElemId> sel(count);
   for (std::size_t i = 0; i < count; ++i) sel[i] = marked[i].id;
+  std::vector<Mark>().swap(marked);  // 16 bytes a mark, beside refine()'s peak
   // An attempt over the budget is rolled back by refine() itself (no copy of h).
   return refine_within(h, sel, count, limit, vertices_per_mark);
 }
@@ -752,7 +753,8 @@ class CachedSystem {
 
   const std::vector<std::uint32_t>* samples() const { return nullptr; }  // read from the cache
   const std::vector<ElementIntegrals<D>>* integrals() const { return &cache_; }
-  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) {
+  void refining() {}
+  void refined(const Hierarchy<D>&, std::vector<ElemId> remap) {
     remap_integral_cache(remap, cache_, grads_, have_);
   }
 
@@ -850,7 +852,10 @@ class SampledSystem {
 
   const std::vector<std::uint32_t>* samples() const { return &samples_; }
   const std::vector<ElementIntegrals<D>>* integrals() const { return nullptr; }
-  void refined(const Hierarchy<D>&, const std::vector<ElemId>& remap) { remap_ = remap; }
+  // The per-leaf sample counts are the marking's; errors() counts them again after the next
+  // solve.
+  void refining() { std::vector<std::uint32_t>().swap(samples_); }
+  void refined(const Hierarchy<D>&, std::vector<ElemId> remap) { remap_ = std::move(remap); }
 
  private:
   const Field& f_;
@@ -881,7 +886,7 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
     IterationStats st;
     st.iteration = it;
     auto ta = Clock::now();
-    const auto leaves = h.leaves();
+    auto leaves = h.leaves();
     sys.prepare(h, leaves);
     st.assembly_seconds = since(ta);
 
@@ -917,6 +922,13 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
     // uniform mesh to 8-12 on a graded one; it is learned from the previous attempt, so an
     // iteration usually takes one attempt instead of halving its way down to the budget.
     auto tr = Clock::now();
+    // What the next solve computes again goes before refine() grows the mesh, whose peak it
+    // would add to: the leaves, their errors and sample counts are 16 bytes a leaf (0.14 GB of
+    // a full head's 1.7 GB peak).
+    const std::size_t leaf_count = leaves.size();
+    std::vector<ElemId>().swap(leaves);
+    std::vector<double>().swap(err);
+    sys.refining();
     // Rank and select: the worst `cap` first; with an RMS target, only as many as carry 60 %
     // of the excess error.
     const double excess = opts.target_rms > 0 && opts.threshold <= 0 && !target_met
@@ -924,9 +936,9 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
                               : -1.0;
     bool by_memory = false;
     std::size_t count = 0;
-    const std::vector<ElemId> remap =
-        refine_worst(h, opts, leaves.size(), marked, surface_marks, excess, vertices_per_mark, count,
-                     by_memory, budget_reached, System::kSampled);
+    std::vector<ElemId> remap =
+        refine_worst(h, opts, leaf_count, marked, surface_marks, excess, vertices_per_mark, count, by_memory,
+                     budget_reached, System::kSampled);
     const bool refined = count > 0;
     st.marked = refined ? count : 0;
     st.refine_seconds = since(tr);
@@ -937,10 +949,11 @@ void refine_solve(System& sys, Hierarchy<D>& h, const Field& f, const Approximat
       // The budget does not allow even one more refinement: keep the last solution.
       out.memory_limited = by_memory;
       out.stop_reason = by_memory ? "memory budget" : "vertex budget";
+      sys.errors(h, h.leaves(), x, err);  // released above; the mesh is the solve's
       out.leaf_errors = std::move(err);
       break;
     }
-    sys.refined(h, remap);
+    sys.refined(h, std::move(remap));
   }
   out.values = std::move(values);
 }

@@ -6,6 +6,7 @@
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/huge_pages.h>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -572,8 +573,7 @@ class Hierarchy<D>::RedRounds {
       const std::size_t first_new_vertex = h_.vx_.points.size();
       apply(to_regreen, to_red);
       flag_split_edges(first_new_vertex);
-      std::vector<ElemId> candidates = pick_candidates(round_first_elem);
-      decide(candidates, round_first_elem, to_red, to_regreen);
+      decide(pick_candidates(round_first_elem), round_first_elem, to_red, to_regreen);
       for (VertexId v : dirty_list_) dirty_[v.value] = 0;
       dirty_list_.clear();
       if (!use_incidence_ && (!to_red.empty() || !to_regreen.empty())) switch_to_incidence();
@@ -736,7 +736,9 @@ class Hierarchy<D>::RedRounds {
       }
   }
 
-  // Step 3: every element created in this round, and older leaves with ≥ 2 dirty vertices.
+  // Step 3: older leaves with ≥ 2 dirty vertices; with every element created in this round
+  // (ids from round_first_elem on, not listed: a rebuild's last round creates 10^7) they are
+  // the candidates.
   std::vector<ElemId> pick_candidates(std::size_t round_first_elem) {
     std::vector<ElemId> candidates;
     if (use_incidence_) {
@@ -757,9 +759,6 @@ class Hierarchy<D>::RedRounds {
       // steps add a few hundred vertices to a million elements).
       candidates = leaves_with_two_flagged(dirty_, round_first_elem);
     }
-    candidates.reserve(candidates.size() + h_.el_.cells.size() - round_first_elem);
-    for (std::size_t e = round_first_elem; e < h_.el_.cells.size(); ++e)
-      candidates.push_back(ElemId(static_cast<std::uint32_t>(e)));
     return candidates;
   }
 
@@ -769,42 +768,52 @@ class Hierarchy<D>::RedRounds {
   // instead of red (green elements are still never refined): without this, one new midpoint on
   // a ring of green-refined elements turns the whole ring red, whose neighbours then turn red,
   // ... — a local mark could add 10^5 vertices.
-  void decide(const std::vector<ElemId>& candidates, std::size_t round_first_elem,
-              std::vector<ElemId>& to_red, std::vector<ElemId>& to_regreen) const {
-    std::vector<ElemId> request(candidates.size(), ElemId::invalid());
-    std::vector<ElemId> regreen(candidates.size(), ElemId::invalid());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, candidates.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                          const ElemId e = candidates[i];
-                          if (e.value < round_first_elem) {
-                            int n = 0;
-                            for (VertexId v : h_.el_.cells[e]) n += dirty_[v.value];
-                            if (n < 2) continue;  // no edge of e was split in this round
-                          }
-                          const unsigned mask = h_.hanging_mask(e, &touched);
-                          if (mask == 0) continue;
-                          if (h_.kind(e) == ElemKind::kGreen) {
-                            const ElemId p = h_.parent(e);
-                            const unsigned pmask =
-                                h_.hanging_on_parent_edges(e, mask) ? h_.hanging_mask(p) : 0;
-                            if (green_type(D, pmask) > 0 && !h_.green_edges_split(p, pmask, touched))
-                              regreen[i] = p;
-                            else
-                              request[i] = p;
-                          } else if (green_type(D, mask) < 0 || h_.green_edges_split(e, mask, touched)) {
-                            request[i] = e;
-                          }
-                        }
-                      });
+  void decide(const std::vector<ElemId>& older, std::size_t round_first_elem, std::vector<ElemId>& to_red,
+              std::vector<ElemId>& to_regreen) const {
+    // Candidate i: older[i], then the round's elements. The requests are few, so each thread
+    // keeps its own list (a slot per candidate was 8 bytes a new element, at refine()'s peak);
+    // sorted below, they do not depend on the split.
+    const std::size_t n = older.size() + (h_.el_.cells.size() - round_first_elem);
+    struct Requests {
+      std::vector<ElemId> red, regreen;
+    };
+    tbb::enumerable_thread_specific<Requests> found;
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          Requests& mine = found.local();
+          for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const ElemId e = i < older.size() ? older[i] : elem_id(round_first_elem + (i - older.size()));
+            if (e.value < round_first_elem) {
+              int m = 0;
+              for (VertexId v : h_.el_.cells[e]) m += dirty_[v.value];
+              if (m < 2) continue;  // no edge of e was split in this round
+            }
+            const unsigned mask = h_.hanging_mask(e, &touched);
+            if (mask == 0) continue;
+            if (h_.kind(e) == ElemKind::kGreen) {
+              const ElemId p = h_.parent(e);
+              const unsigned pmask = h_.hanging_on_parent_edges(e, mask) ? h_.hanging_mask(p) : 0;
+              if (green_type(D, pmask) > 0 && !h_.green_edges_split(p, pmask, touched))
+                mine.regreen.push_back(p);
+              else
+                mine.red.push_back(p);
+            } else if (green_type(D, mask) < 0 || h_.green_edges_split(e, mask, touched)) {
+              mine.red.push_back(e);
+            }
+          }
+        });
     to_red.clear();
-    for (ElemId r : request)
-      if (r.valid()) to_red.push_back(r);
+    to_regreen.clear();
+    for (const Requests& f : found) {
+      to_red.insert(to_red.end(), f.red.begin(), f.red.end());
+      to_regreen.insert(to_regreen.end(), f.regreen.begin(), f.regreen.end());
+    }
     std::sort(to_red.begin(), to_red.end());
     to_red.erase(std::unique(to_red.begin(), to_red.end()), to_red.end());
-    to_regreen.clear();
-    for (ElemId r : regreen)
-      if (r.valid() && !std::binary_search(to_red.begin(), to_red.end(), r)) to_regreen.push_back(r);
+    to_regreen.erase(
+        std::remove_if(to_regreen.begin(), to_regreen.end(),
+                       [&](ElemId r) { return std::binary_search(to_red.begin(), to_red.end(), r); }),
+        to_regreen.end());
     std::sort(to_regreen.begin(), to_regreen.end());
     to_regreen.erase(std::unique(to_regreen.begin(), to_regreen.end()), to_regreen.end());
   }
@@ -951,24 +960,26 @@ std::vector<ElemId> Hierarchy<D>::compact(const std::vector<std::uint8_t>& dead,
     for (std::size_t i = 0; i < old_count; ++i) same[i] = elem_id(i);
     return same;
   }
-  std::vector<std::uint32_t> new_id(el_.cells.size(), ElemId::kInvalidValue);
+  // One id table, truncated to the old elements for the caller afterwards (a second table of
+  // the old ids was 4 bytes an element at the build's peak).
+  std::vector<ElemId> new_id(el_.cells.size(), ElemId::invalid());
   std::uint32_t n = 0;
   for (std::size_t i = 0; i < el_.cells.size(); ++i)
-    if (!dead[i]) new_id[i] = n++;
-  std::vector<ElemId> old_to_new(old_count);
-  for (std::size_t i = 0; i < old_count; ++i) old_to_new[i] = ElemId(new_id[i]);
-  if (n == el_.cells.size()) return old_to_new;
-  auto remap = [&](ElemId e) { return e.valid() ? ElemId(new_id[e.value]) : e; };
-  for (ElemId i(0); i < el_.cells.end_id(); ++i.value) {
-    if (dead[i.value]) continue;
-    const ElemId j(new_id[i.value]);
-    MLFE_CHECK(!el_.parent[i].valid() || !dead[el_.parent[i].value]);
-    el_.for_each([&](auto& a) { a[j] = a[i]; });
-    el_.parent[j] = remap(el_.parent[j]);
-    el_.first_child[j] = remap(el_.first_child[j]);
+    if (!dead[i]) new_id[i] = ElemId(n++);
+  if (n != el_.cells.size()) {
+    auto remap = [&](ElemId e) { return e.valid() ? new_id[e.value] : e; };
+    for (ElemId i(0); i < el_.cells.end_id(); ++i.value) {
+      if (dead[i.value]) continue;
+      const ElemId j = new_id[i.value];
+      MLFE_CHECK(!el_.parent[i].valid() || !dead[el_.parent[i].value]);
+      el_.for_each([&](auto& a) { a[j] = a[i]; });
+      el_.parent[j] = remap(el_.parent[j]);
+      el_.first_child[j] = remap(el_.first_child[j]);
+    }
+    el_.for_each([&](auto& a) { a.resize(n); });
   }
-  el_.for_each([&](auto& a) { a.resize(n); });
-  return old_to_new;
+  new_id.resize(old_count);
+  return new_id;
 }
 
 template <int D>

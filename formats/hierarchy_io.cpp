@@ -1,4 +1,5 @@
 // .mlfeh reader and writer; the format is specified in hierarchy_io.h.
+#include <mlfe/core/check.h>
 #include <mlfe/core/error.h>
 #include <mlfe/core/huge_pages.h>
 #include <mlfe/formats/atomic_file.h>
@@ -240,9 +241,33 @@ void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const 
   put_bytes(file, payload.data(), payload.size());
 }
 
+// The checks of either write_hierarchy before anything is encoded.
 template <int D>
-void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
-              const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
+void check_write(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
+                 const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
+  static_assert(sizeof(typename Hierarchy<D>::Point) == 8 * D &&
+                    sizeof(typename Hierarchy<D>::Cell) == 4 * (D + 1) && sizeof(ElemId) == 4 &&
+                    sizeof(ElemKind) == 1,
+                "arrays are copied as raw bytes");
+  check_info(path, info);
+  check_lattice(path, D, info);
+  check_lattice_box(path, h, info);
+  if (options.version == 1 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
+    throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
+  if (options.version == 1 && options.integer_values)
+    throw Error(path + ": integer values need format version 3");
+  if (options.version < 1 || options.version > 3)
+    throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
+  if (!values.empty() && values.size() != h.vertex_count())
+    throw Error(path + ": " + std::to_string(values.size()) + " values for " +
+                std::to_string(h.vertex_count()) + " vertices");
+  if (options.version == 1) {
+    for (double v : values)
+      if (std::isnan(v)) throw Error(path + ": values contain NaN");
+    return;
+  }
+  for (double v : values)
+    if (!std::isfinite(v)) throw Error(path + ": values must be finite");
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw Error(path + ": max error must be finite and >= 0");
   if (h.max_level() > kMaxLevels) throw Error(path + ": more than 60 levels");
@@ -252,36 +277,38 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
     throw Error(path + ": integer values need format version 3 and an integer bound below 2^31");
   if (!v3 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
     throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
-  const std::uint32_t coding = values.empty()           ? kCodingNone
+  if (!info.metadata.empty() && info.metadata.dump().size() > kMaxMetadata)
+    throw Error(path + ": metadata larger than 16 MiB");
+}
+
+// h is in the canonical numbering `enc` describes; values (u) in its vertex order.
+template <int D>
+void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& enc,
+              const std::vector<double>& u, const HierarchyFileInfo& info,
+              const HierarchyWriteOptions& options) {
+  const bool v3 = options.version == 3;
+  const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
+
+  MLFE_CHECK(!enc.vertex_end.empty() && enc.vertex_end.back() == h.vertex_count() &&
+             enc.coarse_cells.size() == h.coarse_count() && enc.marks.size() + 1 == enc.vertex_end.size());
+  // Step 1: the values quantized in the canonical vertex order.
+  const std::uint32_t coding = u.empty()                ? kCodingNone
                                : options.integer_values ? kCodingInteger
                                : options.max_error > 0  ? kCodingQuantized
                                                         : kCodingExact;
-  const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
-  if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
-
-  // Step 1: the canonical level-by-level description and the values in its vertex order.
-  LevelEncoding<D> enc;
-  try {
-    enc = encode_levels(h);
-  } catch (const LevelRebuildError& e) {
-    throw LevelRebuildError(path + ": " + e.what());
-  }
-  std::vector<double> u(values.empty() ? 0 : h.vertex_count());
-  for (std::size_t v = 0; v < u.size(); ++v) u[v] = values[enc.to_original[v].value];
   std::vector<std::int64_t> codes;
   std::vector<double> decoded;  // integer coding: the contexts come from the decoded parents
   try {
-    if (coding == kCodingQuantized) quantize_hierarchical(enc.rebuilt, u, options.max_error, &codes);
+    if (coding == kCodingQuantized) quantize_hierarchical(h, u, options.max_error, &codes);
     if (coding == kCodingInteger)
-      decoded = quantize_integer(enc.rebuilt, u, static_cast<std::int64_t>(options.max_error), &codes);
+      decoded = quantize_integer(h, u, static_cast<std::int64_t>(options.max_error), &codes);
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
   const auto put_values = [&](Bytes& out, std::size_t from, std::size_t to) {
     if (coding == kCodingInteger) {
       std::array<Bytes, kContexts> streams;
-      for (std::size_t v = from; v < to; ++v)
-        put_varint(streams[integer_context(enc.rebuilt, decoded, v)], codes[v]);
+      for (std::size_t v = from; v < to; ++v) put_varint(streams[integer_context(h, decoded, v)], codes[v]);
       for (const Bytes& b : streams) put(out, static_cast<std::uint32_t>(b.size()));
       for (const Bytes& b : streams) put_array(out, b);
       return;
@@ -358,34 +385,20 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const std::vector<
 template <int D>
 void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
                      const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
-  static_assert(sizeof(typename Hierarchy<D>::Point) == 8 * D &&
-                    sizeof(typename Hierarchy<D>::Cell) == 4 * (D + 1) && sizeof(ElemId) == 4 &&
-                    sizeof(ElemKind) == 1,
-                "arrays are copied as raw bytes");
-  check_info(path, info);
-  check_lattice(path, D, info);
-  check_lattice_box(path, h, info);
-  if (options.version == 1 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
-    throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
-  if (options.version == 1 && options.integer_values)
-    throw Error(path + ": integer values need format version 3");
-  if (options.version < 1 || options.version > 3)
-    throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
+  check_write(path, h, values, info, options);
   if (options.version >= 2) {
-    if (!values.empty() && values.size() != h.vertex_count())
-      throw Error(path + ": " + std::to_string(values.size()) + " values for " +
-                  std::to_string(h.vertex_count()) + " vertices");
-    for (double v : values)
-      if (!std::isfinite(v)) throw Error(path + ": values must be finite");
-    write_v2(path, h, values, info, options);
+    LevelEncoding<D> enc;
+    try {
+      enc = encode_levels(h);
+    } catch (const LevelRebuildError& e) {
+      throw LevelRebuildError(path + ": " + e.what());
+    }
+    std::vector<double> u(values.empty() ? 0 : h.vertex_count());
+    for (std::size_t v = 0; v < u.size(); ++v) u[v] = values[enc.to_original[v].value];
+    write_v2(path, enc.rebuilt, enc, u, info, options);
     return;
   }
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
-  if (!values.empty() && values.size() != nv)
-    throw Error(path + ": " + std::to_string(values.size()) + " values for " + std::to_string(nv) +
-                " vertices");
-  for (double v : values)
-    if (std::isnan(v)) throw Error(path + ": values contain NaN");
   const bool has_values = !values.empty();
 
   Bytes raw;
@@ -442,6 +455,15 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
     out.write(reinterpret_cast<const char*>(section.data()), static_cast<std::streamsize>(section.size()));
     out.write(reinterpret_cast<const char*>(&crc), 4);
   });
+}
+
+template <int D>
+void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& levels,
+                     const std::vector<double>& values, const HierarchyFileInfo& info,
+                     const HierarchyWriteOptions& options) {
+  check_write(path, h, values, info, options);
+  MLFE_CHECK(options.version >= 2);
+  write_v2(path, h, levels, values, info, options);
 }
 
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
@@ -916,6 +938,12 @@ template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const 
                                  const HierarchyFileInfo&, const HierarchyWriteOptions&);
 template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,
                                  const HierarchyFileInfo&, const HierarchyWriteOptions&);
+template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const LevelDescription<2>&,
+                                 const std::vector<double>&, const HierarchyFileInfo&,
+                                 const HierarchyWriteOptions&);
+template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const LevelDescription<3>&,
+                                 const std::vector<double>&, const HierarchyFileInfo&,
+                                 const HierarchyWriteOptions&);
 
 bool is_hierarchy_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

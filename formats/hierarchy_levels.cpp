@@ -183,6 +183,22 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
 }
 
 template <int D>
+LevelDescription<D> renumber_canonically(Hierarchy<D>& h,
+                                         const std::vector<std::vector<double>*>& per_vertex) {
+  for (const std::vector<double>* a : per_vertex) MLFE_CHECK(a->empty() || a->size() == h.vertex_count());
+  LevelEncoding<D> enc = encode_levels(h);
+  h = Hierarchy<D>();  // freed before the arrays below are permuted
+  for (std::vector<double>* a : per_vertex) {
+    if (a->empty()) continue;
+    std::vector<double> p(a->size());
+    for (std::size_t v = 0; v < p.size(); ++v) p[v] = (*a)[enc.to_original[v].value];
+    a->swap(p);
+  }
+  h = std::move(enc.rebuilt);
+  return std::move(static_cast<LevelDescription<D>&>(enc));
+}
+
+template <int D>
 std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vector<double>& u,
                                           double max_error, std::vector<std::int64_t>* codes) {
   MLFE_CHECK(u.size() == h.vertex_count());
@@ -253,6 +269,8 @@ template std::vector<double> quantize_integer<2>(const Hierarchy<2>&, const std:
                                                  std::int64_t, std::vector<std::int64_t>*);
 template std::vector<double> quantize_integer<3>(const Hierarchy<3>&, const std::vector<double>&,
                                                  std::int64_t, std::vector<std::int64_t>*);
+template struct LevelDescription<2>;
+template struct LevelDescription<3>;
 template struct LevelEncoding<2>;
 template struct LevelEncoding<3>;
 template std::vector<ElemId> refinement_candidates<2>(const Hierarchy<2>&, int);
@@ -263,6 +281,8 @@ template std::vector<ElemId> apply_refinement_marks<3>(Hierarchy<3>&, const std:
                                                        const std::vector<std::uint8_t>&);
 template LevelEncoding<2> encode_levels<2>(const Hierarchy<2>&, int);
 template LevelEncoding<3> encode_levels<3>(const Hierarchy<3>&, int);
+template LevelDescription<2> renumber_canonically<2>(Hierarchy<2>&, const std::vector<std::vector<double>*>&);
+template LevelDescription<3> renumber_canonically<3>(Hierarchy<3>&, const std::vector<std::vector<double>*>&);
 template std::vector<double> quantize_hierarchical<2>(const Hierarchy<2>&, const std::vector<double>&, double,
                                                       std::vector<std::int64_t>*);
 template std::vector<double> quantize_hierarchical<3>(const Hierarchy<3>&, const std::vector<double>&, double,

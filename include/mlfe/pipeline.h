@@ -557,7 +557,9 @@ struct HierarchyFileFigures {
 };
 
 struct BuildFileResult {
-  Built built;  ///< the build (of a volume: without Approximation::leaf_errors, not kept)
+  /// The build, its hierarchy in the file's numbering (the canonical order of its levels, the
+  /// same mesh; values renumbered with it) and without Approximation::leaf_errors.
+  Built built;
   HierarchyFileFigures file;
   double max_error = -1;              ///< the bound asked for (< 0: none), verified when ≥ 0
   std::vector<std::string> warnings;  ///< e.g. written as format version 1

@@ -66,6 +66,7 @@
 #pragma once
 #include <mlfe/core/hierarchy.h>
 #include <mlfe/core/scalar_grid.h>
+#include <mlfe/formats/hierarchy_levels.h>
 
 #include <array>
 #include <cstdint>
@@ -149,6 +150,16 @@ template <int D>
 void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
                      const HierarchyFileInfo& info, const HierarchyWriteOptions& options = {});
 
+/// The same file for a hierarchy already in its levels' canonical numbering
+/// (renumber_canonically in hierarchy_levels.h): `levels` is its description and `values` are
+/// in h's vertex order, so the writer does not rebuild h beside itself (a second hierarchy at
+/// its peak). Format version 2 or 3; the bytes are those the overload above writes for the
+/// hierarchy before renumbering and its values.
+template <int D>
+void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& levels,
+                     const std::vector<double>& values, const HierarchyFileInfo& info,
+                     const HierarchyWriteOptions& options);
+
 /// Writes a HierarchyFile (dispatches on the variant; `dim` must match it).
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
                      const HierarchyWriteOptions& options = {});
@@ -173,5 +184,11 @@ extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&,
                                         const HierarchyFileInfo&, const HierarchyWriteOptions&);
 extern template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,
                                         const HierarchyFileInfo&, const HierarchyWriteOptions&);
+extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const LevelDescription<2>&,
+                                        const std::vector<double>&, const HierarchyFileInfo&,
+                                        const HierarchyWriteOptions&);
+extern template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const LevelDescription<3>&,
+                                        const std::vector<double>&, const HierarchyFileInfo&,
+                                        const HierarchyWriteOptions&);
 
 }  // namespace mlfe

@@ -43,17 +43,22 @@ struct LevelRebuildError : Error {
   using Error::Error;
 };
 
+/// A hierarchy's level-by-level description: what the file stores besides the values.
 template <int D>
-struct LevelEncoding {
+struct LevelDescription {
   std::vector<typename Hierarchy<D>::Point> coarse_points;
   std::vector<typename Hierarchy<D>::Cell> coarse_cells;  ///< ids into coarse_points
   /// marks[k − 1]: the marks of step k, k = 1 .. levels.
   std::vector<std::vector<std::uint8_t>> marks;
-  Hierarchy<D> rebuilt;               ///< the canonical rebuild (up to the requested level)
-  std::vector<VertexId> to_original;  ///< rebuilt vertex id → vertex id in the input hierarchy
   /// Rebuilt vertex count after step k (k = 0 .. levels); vertices of step k are the ids
   /// [vertex_end[k − 1], vertex_end[k]).
   std::vector<std::size_t> vertex_end;
+};
+
+template <int D>
+struct LevelEncoding : LevelDescription<D> {
+  Hierarchy<D> rebuilt;               ///< the canonical rebuild (up to the requested level)
+  std::vector<VertexId> to_original;  ///< rebuilt vertex id → vertex id in the input hierarchy
 };
 
 /// The level-by-level description of h, rebuilt canonically up to `max_level` (−1: all
@@ -63,6 +68,16 @@ struct LevelEncoding {
 /// in the message).
 template <int D>
 LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level = -1);
+
+/// Replaces h by its canonical rebuild (encode_levels(h).rebuilt, the same mesh in the file's
+/// numbering) and permutes each array of `per_vertex` (h.vertex_count() values each, or empty)
+/// to its vertex order; returns the description, for write_hierarchy without a second rebuild.
+/// A writer that rebuilt beside the caller's hierarchy held two of them at its peak; here the
+/// old one is freed as soon as the new one is complete. Throws LevelRebuildError as
+/// encode_levels does, with h and the arrays untouched.
+template <int D>
+LevelDescription<D> renumber_canonically(Hierarchy<D>& h,
+                                         const std::vector<std::vector<double>*>& per_vertex);
 
 /// Hierarchical-basis quantization: visiting vertices in id order (parents first), the
 /// prediction is 0 for vertices of T0 and the mean of the two decoded parent values otherwise;
@@ -91,6 +106,8 @@ inline std::int64_t integer_prediction(std::int64_t a, std::int64_t b) {
   return (a >> 1) + (b >> 1) + (a & b & 1);
 }
 
+extern template struct LevelDescription<2>;
+extern template struct LevelDescription<3>;
 extern template struct LevelEncoding<2>;
 extern template struct LevelEncoding<3>;
 
