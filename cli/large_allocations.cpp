@@ -25,10 +25,14 @@ namespace {
 // malloc's arenas, already touched.
 constexpr std::size_t kLarge = std::size_t(4) << 20;
 
-// Blocks below 32 MiB (glibc's largest threshold) from the heap, whose freed memory is kept
-// (trimmed only beyond 1 GiB free at its top) and grown 64 MiB at a time (address space).
+// Blocks below kLarge from the heap, whose freed memory is kept (trimmed only beyond 1 GiB free
+// at its top) and grown 64 MiB at a time (address space); from kLarge on, mapped on huge pages
+// and returned when freed. With the heap up to 32 MiB (glibc's largest threshold), vectors of a
+// few million entries (a solve's vectors, per-leaf figures) were freed into it and held as
+// garbage under a build's later peak: the full head's default build peaked 4-5 % higher and
+// ran no faster (bench/RESULTS.md, session 18).
 const bool kKeepFreedMemory = [] {
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_MMAP_THRESHOLD, static_cast<int>(kLarge));
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
   mallopt(M_TOP_PAD, 64 << 20);
   return true;

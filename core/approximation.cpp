@@ -846,7 +846,11 @@ class SampledSystem {
 
   void errors(const Hierarchy<D>&, const std::vector<ElemId>& leaves, const Vector& x,
               std::vector<double>& err) {
-    op_.to_operator_order(std::vector<double>(x.data(), x.data() + x.size()), work_);
+    // The solve is done: its right-hand side and diagonal go before the per-leaf arrays come
+    // (prepare() loads them again).
+    Vector().swap(rhs_);
+    Vector().swap(diagonal_);
+    op_.to_operator_order(x.data(), static_cast<std::size_t>(x.size()), work_);
     op_.leaf_errors(work_, leaves, err, samples_);
   }
 
@@ -854,7 +858,10 @@ class SampledSystem {
   const std::vector<ElementIntegrals<D>>* integrals() const { return nullptr; }
   // The per-leaf sample counts are the marking's; errors() counts them again after the next
   // solve.
-  void refining() { std::vector<std::uint32_t>().swap(samples_); }
+  void refining() {
+    std::vector<std::uint32_t>().swap(samples_);
+    Vector().swap(work_);
+  }
   void refined(const Hierarchy<D>&, std::vector<ElemId> remap) { remap_ = std::move(remap); }
 
  private:

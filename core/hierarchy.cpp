@@ -578,6 +578,13 @@ class Hierarchy<D>::RedRounds {
       dirty_list_.clear();
       if (!use_incidence_ && (!to_red.empty() || !to_regreen.empty())) switch_to_incidence();
     }
+    // The closure and the compaction that follow need only `dead` and `touched`: the incidence
+    // (20 bytes a leaf) goes before they add their own arrays.
+    std::vector<std::uint32_t>().swap(inc_head_);
+    std::vector<std::uint32_t>().swap(inc_next_);
+    std::vector<ElemId>().swap(inc_elem_);
+    std::vector<std::uint8_t>().swap(seen_);
+    std::vector<std::uint8_t>().swap(dirty_);
   }
 
   std::vector<std::uint8_t> dead;     // elements removed (green children replaced)
@@ -611,13 +618,14 @@ class Hierarchy<D>::RedRounds {
   void switch_to_incidence() {
     use_incidence_ = true;
     inc_head_.assign(h_.vx_.points.size(), kNone);
-    // The alive leaves after the first round (its decisions are not applied yet), in id order.
-    std::vector<ElemId> leaves;
+    // The alive leaves, in id order; counted first rather than listed (4 bytes a leaf beside
+    // the lists).
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < h_.el_.cells.size(); ++i) n += alive_leaf(elem_id(i));
+    inc_elem_.reserve(n);
+    inc_next_.reserve(n * (D + 1));
     for (std::size_t i = 0; i < h_.el_.cells.size(); ++i)
-      if (alive_leaf(elem_id(i))) leaves.push_back(elem_id(i));
-    inc_elem_.reserve(leaves.size());
-    inc_next_.reserve(leaves.size() * (D + 1));
-    for (ElemId e : leaves) add_incidence(e);
+      if (alive_leaf(elem_id(i))) add_incidence(elem_id(i));
   }
 
   // Alive leaves incident to any vertex of `verts` with ≥ 2 vertices flagged in `flag`

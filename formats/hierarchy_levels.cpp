@@ -13,54 +13,160 @@
 namespace mlfe {
 namespace {
 
-// An element as the sorted ids of its vertices (in the input hierarchy's numbering).
+// An element as the sorted ids of its vertices, through `map` if given (rebuilt → original).
 template <int D>
-std::array<std::uint32_t, D + 1> key_of(const typename Hierarchy<D>::Cell& c,
-                                        const std::vector<VertexId>* map) {
-  std::array<std::uint32_t, D + 1> k;
+using Key = std::array<std::uint32_t, D + 1>;
+
+template <int D>
+Key<D> key_of(const typename Hierarchy<D>::Cell& c, const std::vector<VertexId>* map) {
+  Key<D> k;
   for (int i = 0; i <= D; ++i) k[i] = map ? (*map)[c[i].value].value : c[i].value;
   std::sort(k.begin(), k.end());
   return k;
 }
 
-// Counterparts carried across a refine(): old element e is remap[e] now (invalid: a removed
-// green child); elements created by the call have none yet.
-inline std::vector<ElemId> carried_counterparts(const std::vector<ElemId>& remap, std::size_t old_count,
-                                                std::size_t new_count, const std::vector<ElemId>& orig) {
-  if (remap.empty()) {  // nothing refined: ids unchanged
-    std::vector<ElemId> out = orig;
-    out.resize(new_count, ElemId::invalid());
-    return out;
+template <int D>
+std::uint64_t key_hash(const Key<D>& k) {
+  std::uint64_t x = 0x9E3779B97F4A7C15ULL;
+  for (std::uint32_t v : k) {
+    x = (x ^ v) * 0xff51afd7ed558ccdULL;
+    x ^= x >> 33;
   }
-  MLFE_CHECK(remap.size() == old_count);
-  std::vector<ElemId> out(new_count, ElemId::invalid());
-  for (std::size_t e = 0; e < old_count; ++e)
-    if (remap[e].valid()) out[remap[e].value] = orig[e];
-  return out;
+  return x;
 }
 
-// Gives each element of `rebuilt` without a counterpart the child of its parent's counterpart
-// in h with the same vertices (through to_original), trying the same child slot first.
+// The vertex sets of a hierarchy's red-refined elements (open addressing, load ≤ 1/2). In a
+// nested hierarchy no two elements have the same vertices, so a set identifies an element.
 template <int D>
-void match_children(const Hierarchy<D>& h, const Hierarchy<D>& rebuilt,
-                    const std::vector<VertexId>& to_original, std::vector<ElemId>& orig) {
-  for (std::uint32_t e = 0; e < rebuilt.element_count(); ++e) {
-    if (orig[e].valid()) continue;
-    const ElemId p = rebuilt.parent(ElemId(e));
-    if (!p.valid() || !orig[p.value].valid()) continue;
-    const ElemId op = orig[p.value];
-    const int n = h.num_children(op);
-    if (n != rebuilt.num_children(p)) continue;
-    const auto key = key_of<D>(rebuilt.cell(ElemId(e)), &to_original);
-    const int slot = static_cast<int>(e - rebuilt.first_child(p).value);
-    for (int j = 0; j < n; ++j) {
-      const ElemId c(h.first_child(op).value + static_cast<std::uint32_t>((slot + j) % n));
-      if (key_of<D>(h.cell(c), nullptr) == key) {
-        orig[e] = c;
-        break;
-      }
+class KeySet {
+ public:
+  explicit KeySet(const std::vector<Key<D>>& keys) {
+    std::size_t cap = 64;
+    while (cap < 2 * keys.size()) cap *= 2;
+    slots_.assign(cap, empty());
+    for (const Key<D>& k : keys) {
+      std::size_t i = key_hash<D>(k) & (cap - 1);
+      while (slots_[i] != empty()) i = (i + 1) & (cap - 1);
+      slots_[i] = k;
     }
   }
+  bool contains(const Key<D>& k) const {
+    for (std::size_t i = key_hash<D>(k) & (slots_.size() - 1);; i = (i + 1) & (slots_.size() - 1)) {
+      if (slots_[i] == k) return true;
+      if (slots_[i] == empty()) return false;
+    }
+  }
+
+ private:
+  static Key<D> empty() {
+    Key<D> k;
+    k.fill(~std::uint32_t(0));
+    return k;
+  }
+  std::vector<Key<D>> slots_;
+};
+
+// What the rebuild needs of the hierarchy it follows, so a caller can free that hierarchy
+// first: T0, the edge → midpoint map, the vertex sets of the red-refined elements, the counts,
+// and a fingerprint of the leaves (the sum of their vertex sets' hashes).
+template <int D>
+struct Followed {
+  std::vector<typename Hierarchy<D>::Point> coarse_points;
+  std::vector<typename Hierarchy<D>::Cell> coarse_cells;  // ids into coarse_points
+  std::vector<VertexId> coarse_vertices;                  // coarse point → vertex id
+  EdgeMap edges;
+  KeySet<D> red;
+  std::size_t vertices = 0, elements = 0, leaves = 0;
+  int max_level = 0;
+  std::uint64_t leaf_print = 0;
+};
+
+template <int D>
+Followed<D> followed(const Hierarchy<D>& h) {
+  // Chunks in parallel: each lists its red-refined elements' keys and sums its leaves' hashes.
+  constexpr std::size_t kChunk = 1 << 16;
+  const std::size_t ne = h.element_count(), nchunks = (ne + kChunk - 1) / kChunk;
+  std::vector<std::vector<Key<D>>> red(nchunks);
+  std::vector<std::uint64_t> print(nchunks, 0);
+  std::vector<std::size_t> leaves(nchunks, 0);
+  tbb::parallel_for(std::size_t(0), nchunks, [&](std::size_t k) {
+    for (std::size_t e = k * kChunk, end = std::min(ne, e + kChunk); e < end; ++e) {
+      const ElemId id(static_cast<std::uint32_t>(e));
+      if (h.is_leaf(id)) {
+        print[k] += key_hash<D>(key_of<D>(h.cell(id), nullptr));
+        ++leaves[k];
+      } else if (h.kind(h.first_child(id)) == ElemKind::kRed) {
+        red[k].push_back(key_of<D>(h.cell(id), nullptr));
+      }
+    }
+  });
+  std::vector<Key<D>> keys;
+  for (auto& r : red) keys.insert(keys.end(), r.begin(), r.end());
+  Followed<D> f{{}, {}, {}, h.edge_midpoints(), KeySet<D>(keys), h.vertex_count(), ne, 0, h.max_level(), 0};
+  for (std::size_t k = 0; k < nchunks; ++k) f.leaf_print += print[k], f.leaves += leaves[k];
+  // T0 with its vertices renumbered densely in id order.
+  std::vector<VertexId> coarse_id(h.vertex_count(), VertexId::invalid());
+  for (std::uint32_t v = 0; v < h.vertex_count(); ++v)
+    if (!h.vertex_parents(VertexId(v))[0].valid()) {
+      coarse_id[v] = VertexId(static_cast<std::uint32_t>(f.coarse_points.size()));
+      f.coarse_points.push_back(h.point(VertexId(v)));
+      f.coarse_vertices.push_back(VertexId(v));
+    }
+  for (std::uint32_t e = 0; e < h.coarse_count(); ++e) {
+    typename Hierarchy<D>::Cell c = h.cell(ElemId(e));
+    for (auto& v : c) v = coarse_id[v.value];
+    f.coarse_cells.push_back(c);
+  }
+  return f;
+}
+
+// The canonical rebuild of the followed hierarchy up to `levels` (see hierarchy_levels.h).
+template <int D>
+LevelEncoding<D> rebuild(const Followed<D>& f, int levels) {
+  LevelEncoding<D> enc;
+  enc.coarse_points = f.coarse_points;
+  enc.coarse_cells = f.coarse_cells;
+  enc.to_original = f.coarse_vertices;
+  enc.rebuilt = Hierarchy<D>::from_coarse(enc.coarse_points, enc.coarse_cells);
+  // The rebuild reaches the counts (or fails): no array or map grows by copies on the way.
+  enc.rebuilt.reserve(f.vertices, f.elements, true);
+  enc.vertex_end.push_back(enc.rebuilt.vertex_count());
+  // Per level: mark the candidates whose vertex set is red-refined in the followed hierarchy,
+  // refine, and map the new vertices to its own through its edge → midpoint map.
+  for (int k = 1; k <= levels; ++k) {
+    const std::vector<ElemId> cand = refinement_candidates(enc.rebuilt, k);
+    std::vector<std::uint8_t> marks(cand.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cand.size(), 4096), [&](const auto& r) {
+      for (std::size_t i = r.begin(); i != r.end(); ++i)
+        marks[i] = f.red.contains(key_of<D>(enc.rebuilt.cell(cand[i]), &enc.to_original)) ? 1 : 0;
+    });
+    apply_refinement_marks(enc.rebuilt, cand, marks);
+    for (std::size_t v = enc.to_original.size(); v < enc.rebuilt.vertex_count(); ++v) {
+      const auto& p = enc.rebuilt.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
+      const VertexId o = f.edges.find(enc.to_original[p[0].value], enc.to_original[p[1].value]);
+      if (!o.valid())
+        throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (step " + std::to_string(k) +
+                                " creates a vertex it does not have)");
+      enc.to_original.push_back(o);
+    }
+    enc.marks.push_back(std::move(marks));
+    enc.vertex_end.push_back(enc.rebuilt.vertex_count());
+  }
+  // The full rebuild is the followed hierarchy (the file format relies on it): as many
+  // vertices, elements and leaves, and the same leaves (their vertex sets' fingerprint).
+  if (levels == f.max_level) {
+    std::uint64_t print = 0;
+    const std::vector<ElemId> leaves = enc.rebuilt.leaves();
+    for (ElemId e : leaves) print += key_hash<D>(key_of<D>(enc.rebuilt.cell(e), &enc.to_original));
+    if (enc.rebuilt.vertex_count() != f.vertices || enc.rebuilt.element_count() != f.elements ||
+        leaves.size() != f.leaves || print != f.leaf_print)
+      throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (the rebuild has " +
+                              std::to_string(enc.rebuilt.vertex_count()) + " vertices and " +
+                              std::to_string(enc.rebuilt.element_count()) + " elements, it has " +
+                              std::to_string(f.vertices) + " and " + std::to_string(f.elements) +
+                              (print != f.leaf_print ? ", other leaves" : "") + ")");
+  }
+  return enc;
 }
 
 }  // namespace
@@ -108,86 +214,20 @@ std::vector<ElemId> apply_refinement_marks(Hierarchy<D>& h, const std::vector<El
 template <int D>
 LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
   const int levels = max_level < 0 ? h.max_level() : std::min(max_level, h.max_level());
-  LevelEncoding<D> enc;
-
-  // Step 1: T0 with its vertices renumbered densely in id order.
-  std::vector<VertexId> coarse_id(h.vertex_count(), VertexId::invalid());
-  for (std::uint32_t v = 0; v < h.vertex_count(); ++v)
-    if (!h.vertex_parents(VertexId(v))[0].valid()) {
-      coarse_id[v] = VertexId(static_cast<std::uint32_t>(enc.coarse_points.size()));
-      enc.coarse_points.push_back(h.point(VertexId(v)));
-      enc.to_original.push_back(VertexId(v));
-    }
-  for (std::uint32_t e = 0; e < h.coarse_count(); ++e) {
-    typename Hierarchy<D>::Cell c = h.cell(ElemId(e));
-    for (auto& v : c) v = coarse_id[v.value];
-    enc.coarse_cells.push_back(c);
-  }
-  enc.rebuilt = Hierarchy<D>::from_coarse(enc.coarse_points, enc.coarse_cells);
-  // The rebuild reaches h's counts (or fails): no array or map grows by copies on the way.
-  enc.rebuilt.reserve(h.vertex_count(), h.element_count(), true);
-  enc.vertex_end.push_back(enc.rebuilt.vertex_count());
-
-  // Step 2: every rebuilt element's counterpart in h (same vertex set), element by element:
-  // T0 is h's T0, and a rebuilt child's counterpart is the child of its parent's counterpart
-  // with the same vertices. Candidates are red children, so each has one while the rebuild
-  // follows h; a candidate's mark is whether its counterpart is red-refined in h.
-  std::vector<ElemId> orig(enc.rebuilt.element_count(), ElemId::invalid());
-  for (std::uint32_t e = 0; e < h.coarse_count(); ++e) orig[e] = ElemId(e);
-  const auto red_refined = [&h](ElemId o) {
-    return o.valid() && !h.is_leaf(o) && h.kind(h.first_child(o)) == ElemKind::kRed;
-  };
-
-  // Step 3: per level, mark the candidates h red-refined, refine, map the new vertices to h's
-  // through its edge→midpoint map and the new elements to h's children.
-  for (int k = 1; k <= levels; ++k) {
-    const std::vector<ElemId> cand = refinement_candidates(enc.rebuilt, k);
-    std::vector<std::uint8_t> marks(cand.size());
-    for (std::size_t i = 0; i < cand.size(); ++i) marks[i] = red_refined(orig[cand[i].value]) ? 1 : 0;
-    const std::size_t old_count = enc.rebuilt.element_count();
-    const std::vector<ElemId> remap = apply_refinement_marks(enc.rebuilt, cand, marks);
-    for (std::size_t v = enc.to_original.size(); v < enc.rebuilt.vertex_count(); ++v) {
-      const auto& p = enc.rebuilt.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
-      const VertexId o = h.edge_midpoints().find(enc.to_original[p[0].value], enc.to_original[p[1].value]);
-      if (!o.valid())
-        throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (step " + std::to_string(k) +
-                                " creates a vertex it does not have)");
-      enc.to_original.push_back(o);
-    }
-    orig = carried_counterparts(remap, old_count, enc.rebuilt.element_count(), orig);
-    match_children(h, enc.rebuilt, enc.to_original, orig);
-    enc.marks.push_back(std::move(marks));
-    enc.vertex_end.push_back(enc.rebuilt.vertex_count());
-  }
-
-  // Step 4: the full rebuild is h (the file format relies on it): as many vertices, elements
-  // and leaves, and every rebuilt leaf has a leaf of h as its counterpart (distinct leaves of a
-  // conforming mesh have distinct vertex sets, so the counterparts are distinct).
-  if (levels == h.max_level()) {
-    bool same =
-        enc.rebuilt.vertex_count() == h.vertex_count() && enc.rebuilt.element_count() == h.element_count();
-    const std::vector<ElemId> rebuilt_leaves = enc.rebuilt.leaves();
-    same = same && rebuilt_leaves.size() == h.leaves().size();
-    for (std::size_t i = 0; same && i < rebuilt_leaves.size(); ++i) {
-      const ElemId o = orig[rebuilt_leaves[i].value];
-      same = o.valid() && h.is_leaf(o);
-    }
-    if (!same)
-      throw LevelRebuildError("the hierarchy cannot be rebuilt level by level (the rebuild has " +
-                              std::to_string(enc.rebuilt.vertex_count()) + " vertices and " +
-                              std::to_string(enc.rebuilt.element_count()) + " elements, it has " +
-                              std::to_string(h.vertex_count()) + " and " + std::to_string(h.element_count()) +
-                              ")");
-  }
-  return enc;
+  return rebuild(followed(h), levels);
 }
 
 template <int D>
 LevelDescription<D> renumber_canonically(Hierarchy<D>& h,
                                          const std::vector<std::vector<double>*>& per_vertex) {
   for (const std::vector<double>* a : per_vertex) MLFE_CHECK(a->empty() || a->size() == h.vertex_count());
-  LevelEncoding<D> enc = encode_levels(h);
-  h = Hierarchy<D>();  // freed before the arrays below are permuted
+  // h is freed before the rebuild: only what the rebuild follows stays.
+  LevelEncoding<D> enc;
+  {
+    const Followed<D> f = followed(h);
+    h = Hierarchy<D>();
+    enc = rebuild(f, f.max_level);
+  }
   for (std::vector<double>* a : per_vertex) {
     if (a->empty()) continue;
     std::vector<double> p(a->size());

@@ -114,49 +114,40 @@ HierarchyFileInfo file_info(const FileJob& job, const Built& b, const Approximat
 
 // Writes the v3 file: the build's hierarchy renumbered into its levels' file order first (the
 // encoder then needs no second hierarchy), values quantized to the bound, the error figures
-// measured against the input (`measure`) from exactly the values a reader decodes; version 1
-// (exact) when the levels would not rebuild this hierarchy.
+// measured against the input (`measure`) from exactly the values a reader decodes.
 template <int D>
 HierarchyFileFigures write_file(const FileJob& job, const Built& b, Approximation<D>& a,
-                                const Measure<D>& measure, std::vector<std::string>& warnings) {
+                                const Measure<D>& measure) {
   HierarchyFileFigures fig;
   const auto t0 = std::chrono::steady_clock::now();
   const double range = b.value_max - b.value_min;
   const double last_rms = b.iterations().empty() ? 0.0 : b.iterations().back().rms_error;
   // Step 1: the file's numbering. The per-leaf errors (not in the file, and in the old leaf
-  // order) go first, not to count in the rebuild's peak.
+  // order) go first, not to count in the rebuild's peak. The build's hierarchy is freed before
+  // its rebuild, so a rebuild that fails (a bug: every refine() history rebuilds) leaves no
+  // hierarchy to write in format version 1 instead.
   std::vector<double>().swap(a.leaf_errors);
-  std::optional<LevelDescription<D>> levels;
+  LevelDescription<D> levels;
   try {
     levels = renumber_canonically(a.hierarchy, {&a.values, &a.data_values});
   } catch (const LevelRebuildError& e) {
-    warnings.push_back(job.output + ": " + e.what() + "; writing format version 1 (exact, larger)");
-    fig.version = 1;
+    throw Error(job.output + ": " + e.what() + " (please report this)");
   }
   // Step 2: the decoded values and their errors.
-  fig.bound = !levels ? 0.0 : job.split ? job.split->quantization : value_bound(job.options, last_rms, range);
-  const std::vector<double> decoded = levels ? decoded_values(job, a, fig) : a.values;
-  if (!levels) fig.coding = "exact";
-  fig.errors = measure(a.hierarchy, decoded);
+  fig.bound = job.split ? job.split->quantization : value_bound(job.options, last_rms, range);
+  fig.errors = measure(a.hierarchy, decoded_values(job, a, fig));
   // The promise of max_error, checked on exactly what a reader decodes, before writing.
   if (job.split && !(fig.errors.max <= job.options.max_error))
     throw Error(
         fmt::format("{}: the decoded samples are up to {:.6g} from the input, over --max-error {:.6g} ({})",
                     job.output, fig.errors.max, job.options.max_error, b.stop_reason()));
   // Step 3: the file.
-  HierarchyFileInfo info = file_info(job, b, a, fig);
-  if (levels) {
-    HierarchyWriteOptions wo;
-    wo.version = 3;
-    wo.max_error = fig.bound;
-    wo.integer_values = fig.coding == "integer";
-    wo.zstd_level = 19;
-    write_hierarchy(job.output, a.hierarchy, *levels, a.values, info, wo);
-  } else {
-    info.on_lattice = false;
-    info.sample_error_bound = std::numeric_limits<double>::quiet_NaN();
-    write_hierarchy(job.output, a.hierarchy, a.values, info);
-  }
+  HierarchyWriteOptions wo;
+  wo.version = 3;
+  wo.max_error = fig.bound;
+  wo.integer_values = fig.coding == "integer";
+  wo.zstd_level = 19;
+  write_hierarchy(job.output, a.hierarchy, levels, a.values, file_info(job, b, a, fig), wo);
   fig.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   fig.bytes = written_file_size(job.output);
   return fig;
@@ -252,8 +243,7 @@ BuildFileResult build_mesh(const std::string& input, const std::string& output, 
       nullptr,
       {{"points", mesh.points.size()}, {"tetrahedra", mesh.tets.size()}, {"point_data", mesh.value_name}}};
   detail::OutputGuard written;
-  r.file =
-      write_file(job, b, r.built.get<3>(), at_mesh_points(mesh, f, b.value_max - b.value_min), r.warnings);
+  r.file = write_file(job, b, r.built.get<3>(), at_mesh_points(mesh, f, b.value_max - b.value_min));
   written.add(output);
   r.file.samples = double(mesh.points.size());
   r.file.on_voxels = false;
@@ -326,9 +316,8 @@ BuildFileResult build(const std::string& input, const std::string& output, const
   FileJob job{input, output, s, split ? &*split : nullptr, meta};
   detail::OutputGuard written;
   const bool integers = split && split->integer && rounding_keeps(s.max_error);
-  r.file = b.dim() == 2
-               ? write_file(job, b, r.built.get<2>(), on_grid<2>(grid, input, range, integers), r.warnings)
-               : write_file(job, b, r.built.get<3>(), on_grid<3>(grid, input, range, integers), r.warnings);
+  r.file = b.dim() == 2 ? write_file(job, b, r.built.get<2>(), on_grid<2>(grid, input, range, integers))
+                        : write_file(job, b, r.built.get<3>(), on_grid<3>(grid, input, range, integers));
   if (split) r.file.tolerance = split->tolerance;
   r.file.samples = static_cast<double>(grid.voxel_count());
   r.written.push_back(output);

@@ -60,6 +60,7 @@ class SampledLeastSquares final : public LinearOperator {
 
   /// A vector indexed by vertex id in the operator's order, and back.
   void to_operator_order(const std::vector<double>& by_vertex, Vector& out) const;
+  void to_operator_order(const double* by_vertex, std::size_t n, Vector& out) const;
   void from_operator_order(const Vector& v, std::vector<double>& by_vertex) const;
 
   /// For each of `leaves` (the hierarchy's, in any order): Σ w (f_s − u(x_s))² over the samples

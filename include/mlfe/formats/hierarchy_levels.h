@@ -34,11 +34,10 @@ template <int D>
 std::vector<ElemId> apply_refinement_marks(Hierarchy<D>& h, const std::vector<ElemId>& candidates,
                                            const std::vector<std::uint8_t>& marks);
 
-/// Thrown by encode_levels for a hierarchy the canonical rebuild does not reproduce. Known
-/// cause: Hierarchy::green_pattern breaks ties between equally long edges by global vertex id,
-/// so a green element whose refinement history differs from the rebuild's (ids in another
-/// relative order) can get the other diagonal. Hierarchies of approximate() rebuild in the
-/// cases measured; writers fall back to format version 1 on this error.
+/// Thrown by encode_levels for a hierarchy the canonical rebuild does not reproduce (a green
+/// closure that depended on the refinement history; Hierarchy::green_pattern breaks ties by
+/// the points' coordinates so that it does not). Hierarchies of refine() rebuild in every case
+/// tested; write_hierarchy's callers may fall back to format version 1 on this error.
 struct LevelRebuildError : Error {
   using Error::Error;
 };
@@ -72,9 +71,10 @@ LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level = -1);
 /// Replaces h by its canonical rebuild (encode_levels(h).rebuilt, the same mesh in the file's
 /// numbering) and permutes each array of `per_vertex` (h.vertex_count() values each, or empty)
 /// to its vertex order; returns the description, for write_hierarchy without a second rebuild.
-/// A writer that rebuilt beside the caller's hierarchy held two of them at its peak; here the
-/// old one is freed as soon as the new one is complete. Throws LevelRebuildError as
-/// encode_levels does, with h and the arrays untouched.
+/// A writer that rebuilt beside the caller's hierarchy held both at its peak; here h is freed
+/// before the rebuild, which follows only h's T0, edge → midpoint map and the vertex sets of
+/// its red-refined elements. Throws LevelRebuildError as encode_levels does, with h then
+/// empty (a caller that needs it afterwards uses encode_levels) and the arrays untouched.
 template <int D>
 LevelDescription<D> renumber_canonically(Hierarchy<D>& h,
                                          const std::vector<std::vector<double>*>& per_vertex);
