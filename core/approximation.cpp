@@ -811,7 +811,7 @@ class SampledSystem {
   void prepare(const Hierarchy<D>& h, const std::vector<ElemId>&) {
     const std::vector<double> pad = padding_weights(h, lattice_);
     op_.update(h, remap_, pad);
-    remap_.clear();
+    std::vector<ElemId>().swap(remap_);  // 4 bytes an element, beside the next refine() and solve
     op_.load(rhs_, diagonal_);
     Vector pull = Vector::Zero(static_cast<Eigen::Index>(pad.size()));
     add_padding_load(h, f_, pad, pull);

@@ -46,22 +46,28 @@ class KeySet {
     slots_.assign(cap, empty());
     for (const Key<D>& k : keys) {
       std::size_t i = key_hash<D>(k) & (cap - 1);
-      while (slots_[i] != empty()) i = (i + 1) & (cap - 1);
+      while (slots_[i][0] != kEmpty) i = (i + 1) & (cap - 1);
       slots_[i] = k;
     }
   }
   bool contains(const Key<D>& k) const {
     for (std::size_t i = key_hash<D>(k) & (slots_.size() - 1);; i = (i + 1) & (slots_.size() - 1)) {
-      if (slots_[i] == k) return true;
-      if (slots_[i] == empty()) return false;
+      if (same(slots_[i], k)) return true;
+      if (slots_[i][0] == kEmpty) return false;  // vertex ids are below kEmpty
     }
   }
 
  private:
+  static constexpr std::uint32_t kEmpty = ~std::uint32_t(0);
   static Key<D> empty() {
     Key<D> k;
-    k.fill(~std::uint32_t(0));
+    k.fill(kEmpty);
     return k;
+  }
+  static bool same(const Key<D>& a, const Key<D>& b) {
+    bool eq = true;
+    for (int i = 0; i <= D; ++i) eq &= a[i] == b[i];
+    return eq;
   }
   std::vector<Key<D>> slots_;
 };
