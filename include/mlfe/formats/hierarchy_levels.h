@@ -63,7 +63,8 @@ struct LevelEncoding : LevelDescription<D> {
 /// The level-by-level description of h, rebuilt canonically up to `max_level` (−1: all
 /// levels). With max_level < h.max_level(), `rebuilt` is T_max_level of h (its elements of
 /// level ≤ max_level). The full rebuild equals h up to numbering (verified: vertex, element
-/// and leaf counts and every leaf); when it does not, throws LevelRebuildError (no file name
+/// and leaf counts, and the sum of a 64-bit hash of every leaf's vertex set, so other leaves
+/// pass only by a 2^-64 coincidence); when it does not, throws LevelRebuildError (no file name
 /// in the message).
 template <int D>
 LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level = -1);
