@@ -173,16 +173,10 @@ void fill_unseen(const Hierarchy<D>& h, const Field& f, const std::vector<std::u
   }
 }
 
-template <int D>
-std::array<std::array<double, D>, D + 1> corners_of(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
-  return p;
-}
-
 // Peak bytes per leaf and per vertex of the interpolating build (max_sample_error), which
-// holds no integrals, matrix or solver vectors: the hierarchy, and in `mlfe build` its
-// canonical rebuild for the file. Measured (since the encoder keeps no hash sets): 5.1 GB peak
+// holds no integrals, matrix or solver vectors: the hierarchy, and in `mlfe build` the file's
+// rebuild of it (which now replaces it instead of sitting beside it, so the figures below keep
+// a further margin). Measured (since the encoder keeps no hash sets): 5.1 GB peak
 // RSS for the noisy full head's lossless file (7.18 M vertices, 42.7 M leaves), about 300 B
 // per vertex and 70 per leaf; 100 per leaf keeps a margin. (160, from a run with the hash
 // sets, stopped that lossless build at the default budget with less than half of it used.)
@@ -190,8 +184,8 @@ constexpr double kInterpolatingBytesPerLeaf = 100, kInterpolatingBytesPerVertex 
 // The same for least squares applied from the samples (SampledSystem): the hierarchy, the
 // per-leaf errors, sample counts and marks, and the samples' own 32 bytes counted per leaf
 // (about two leaves per sample at a full head's noise level); per vertex the CG vectors. The
-// noisy full head's default build peaked at 1.85 GB (13.7 M leaves, 2.3 M vertices), which
-// this puts at 2.0 GB.
+// noisy full head's default build peaks at 1.40 GB (13.7 M leaves, 2.3 M vertices; 1.85 GB
+// before session 18's releases), which this puts at 2.0 GB: a margin for the allocator.
 constexpr double kSampledBytesPerLeaf = 100, kSampledBytesPerVertex = 280;
 
 // The largest vertex count a refinement may reach: max_vertices, and what max_memory_bytes
@@ -267,7 +261,7 @@ std::string refine_toward_surfaces(Hierarchy<D>& h, const Field& f, const Approx
           for (std::size_t i = r.begin(); i != r.end(); ++i) {
             const ElemId e(static_cast<std::uint32_t>(i));
             if (!h.is_leaf(e)) continue;
-            if (lattice && outside_data<D>(corners_of(h, e), *lattice)) continue;  // padding
+            if (lattice && outside_data<D>(h.corner_points(e), *lattice)) continue;  // padding
             bool candidate = false;
             const bool mark = surface_gap_mark(h, e, fv, f, opts, opts.surface_tolerance, &candidate);
             decision[i - fresh] = std::uint8_t((candidate ? 1 : 0) | (mark ? 2 : 0));
@@ -398,7 +392,7 @@ void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const Approxim
             if (!h.is_leaf(e)) continue;
             // Red leaves of level L interpolate exactly (their samples are corners).
             if (h.kind(e) != ElemKind::kGreen && h.level(e) >= opts.max_level) continue;
-            const auto p = corners_of(h, e);
+            const auto p = h.corner_points(e);
             if (outside_data<D>(p, lat)) continue;  // padding: never refined
             std::array<double, D + 1> v;
             for (int k = 0; k <= D; ++k) v[k] = values[h.cell(e)[k].value];
@@ -435,7 +429,7 @@ void refine_to_sample_error(Hierarchy<D>& h, const ScalarGrid& g, const Approxim
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         std::array<double, D + 1> v;
                         for (int k = 0; k <= D; ++k) v[k] = values[h.cell(leaves[i])[k].value];
-                        dev[i] = sample_deviation<D>(corners_of(h, leaves[i]), lat, g, v,
+                        dev[i] = sample_deviation<D>(h.corner_points(leaves[i]), lat, g, v,
                                                      std::numeric_limits<double>::infinity());
                       }
                     });
@@ -523,7 +517,7 @@ void refine_to_start_level(Hierarchy<D>& h, const Field& f, const ApproximationO
     }
     std::vector<ElemId> inside;
     for (ElemId e : h.leaves())
-      if (!outside_data<D>(corners_of(h, e), out.lattice)) inside.push_back(e);
+      if (!outside_data<D>(h.corner_points(e), out.lattice)) inside.push_back(e);
     h.refine(std::move(inside));
   }
 }

@@ -17,16 +17,6 @@
 
 namespace mlfe {
 
-namespace {
-template <int D>
-std::array<std::array<double, D>, D + 1> element_points(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  const auto& c = h.cell(e);
-  for (int i = 0; i <= D; ++i) p[i] = h.point(c[i]);
-  return p;
-}
-}  // namespace
-
 template <int D>
 void compute_element_integrals_into(const Hierarchy<D>& h, const std::vector<ElemId>& elems, const Field& f,
                                     double max_sub_edge, ElementGradients<D>* gradients,
@@ -34,15 +24,15 @@ void compute_element_integrals_into(const Hierarchy<D>& h, const std::vector<Ele
                                     IntegralIndex index) {
   const ScalarGrid* grid = lattice ? f.samples() : nullptr;
   MLFE_CHECK(!lattice || grid);
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, elems.size(), 16), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-          const std::size_t at = index == IntegralIndex::kLeafOrder ? i : elems[i].value;
-          ElementGradients<D>* g = gradients ? gradients + at : nullptr;
-          out[at] = grid ? sample_integrals<D>(element_points(h, elems[i]), *lattice, *grid, f, g)
-                         : integrate_element<D>(element_points(h, elems[i]), f, max_sub_edge, g);
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, elems.size(), 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        const std::size_t at = index == IntegralIndex::kLeafOrder ? i : elems[i].value;
+                        ElementGradients<D>* g = gradients ? gradients + at : nullptr;
+                        out[at] = grid ? sample_integrals<D>(h.corner_points(elems[i]), *lattice, *grid, f, g)
+                                       : integrate_element<D>(h.corner_points(elems[i]), f, max_sub_edge, g);
+                      }
+                    });
 }
 
 template <int D>
@@ -271,10 +261,10 @@ void assemble_rows(const Hierarchy<D>& h, const std::vector<ElemId>& leaves, dou
       tbb::blocked_range<std::size_t>(0, ne, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
           if (!with_grad) {
-            local[i] = P1Element<D>::measure_of(element_points(h, leaves[i]));
+            local[i] = P1Element<D>::measure_of(h.corner_points(leaves[i]));
             continue;
           }
-          const P1Element<D> el(element_points(h, leaves[i]));
+          const P1Element<D> el(h.corner_points(leaves[i]));
           for (int a = 0; a <= D; ++a)
             for (int b = 0; b <= D; ++b)
               local[i * kLocal + a * (D + 1) + b] = (sampled ? sampled_at(i).mass_at(a, b) : el.mass(a, b)) +
@@ -349,7 +339,7 @@ Vector assemble_load(const Hierarchy<D>& h, const std::vector<ElemId>& leaves,
     const auto& c = h.cell(leaves[i]);
     const auto& in = integrals[i];
     if (gradient_weight != 0) {
-      const P1Element<D> el(element_points(h, leaves[i]));
+      const P1Element<D> el(h.corner_points(leaves[i]));
       const auto& gs = grads[integrals.at(i)];
       for (int a = 0; a <= D; ++a) {
         double g = 0;
@@ -377,7 +367,7 @@ std::vector<double> element_errors(const Hierarchy<D>& h, const std::vector<Elem
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
           const auto& c = h.cell(leaves[i]);
           const auto& in = integrals[i];
-          const auto pts = element_points(h, leaves[i]);
+          const auto pts = h.corner_points(leaves[i]);
           // The gradients (a 3×3 inverse) only for the H1 term.
           const double measure = P1Element<D>::measure_of(pts);
           double uu[D + 1];

@@ -198,9 +198,7 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
 
 template <int D>
 P1Element<D> element_of(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
-  return P1Element<D>(p);
+  return P1Element<D>(h.corner_points(e));
 }
 
 // Depth-first walk over the elements of T_level whose subtree range passes `keep`, in a fixed

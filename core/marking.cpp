@@ -47,13 +47,6 @@ bool surface_needs_refinement(const Hierarchy<D>& h, ElemId e, const ElementInte
   return false;
 }
 
-template <int D>
-std::array<std::array<double, D>, D + 1> corner_points(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
-  return p;
-}
-
 // (D!·|T|)^(1/D): the side of the cube D! copies of T would fill; a Kuhn simplex of a voxel has
 // size one voxel.
 template <int D>
@@ -104,7 +97,7 @@ bool surface_gap_mark(const Hierarchy<D>& h, ElemId e, const Values& nodal, cons
   // Samples one voxel apart along the axes of a Kuhn simplex (its longest edge is the cube's
   // diagonal, √3 voxels per voxel): a feature of two voxels cannot fall between them.
   const bool coarse = size > 2.0 * voxel;
-  const SurfaceGap gap = surface_gap<D>(corner_points(h, e), c, f, opts.iso_values, tolerance_voxels * voxel,
+  const SurfaceGap gap = surface_gap<D>(h.corner_points(e), c, f, opts.iso_values, tolerance_voxels * voxel,
                                         std::sqrt(double(D)) * voxel, coarse);
   return gap == SurfaceGap::kMissing || (gap == SurfaceGap::kDistant && coarse);
 }
@@ -129,7 +122,7 @@ std::vector<Mark> mark_leaves(const Hierarchy<D>& h, const std::vector<ElemId>& 
           const ElemId e = leaves[i];
           if (!refinable(h, e, opts.max_level)) continue;
           // Padding holds no sample and is never refined (sample_lattice.h).
-          if (lattice && outside_data<D>(corner_points(h, e), *lattice)) continue;
+          if (lattice && outside_data<D>(h.corner_points(e), *lattice)) continue;
           // Mean square error on T: over its samples on the lattice.
           double density;
           if (samples)

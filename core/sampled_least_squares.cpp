@@ -18,13 +18,6 @@ namespace {
 
 constexpr std::uint32_t kNoOwner = ~std::uint32_t(0);
 
-template <int D>
-std::array<std::array<double, D>, D + 1> corners(const Hierarchy<D>& h, ElemId e) {
-  std::array<std::array<double, D>, D + 1> p;
-  for (int i = 0; i <= D; ++i) p[i] = h.point(h.cell(e)[i]);
-  return p;
-}
-
 }  // namespace
 
 template <int D>
@@ -88,7 +81,7 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
           const ElemId e(static_cast<std::uint32_t>(i));
           if (!h.is_leaf(e)) continue;
-          const auto p = corners(h, e);
+          const auto p = h.corner_points(e);
           owned_samples<D>(p, lattice_, mine.owned);
           if (mine.owned.empty()) continue;
           const bool summed = mine.owned.size() >= kSummedLeaf;

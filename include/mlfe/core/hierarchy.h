@@ -159,6 +159,12 @@ class Hierarchy {
   std::size_t element_count() const { return el_.cells.size(); }
   std::size_t coarse_count() const { return coarse_count_; }
   const Cell& cell(ElemId e) const { return el_.cells[e]; }
+  /// The points of element e's vertices, in the cell's order.
+  std::array<Point, D + 1> corner_points(ElemId e) const {
+    std::array<Point, D + 1> p;
+    for (int i = 0; i <= D; ++i) p[i] = point(cell(e)[i]);
+    return p;
+  }
   ElemId parent(ElemId e) const { return el_.parent[e]; }
   ElemId first_child(ElemId e) const { return el_.first_child[e]; }
   int num_children(ElemId e) const { return el_.num_children[e]; }
