@@ -40,15 +40,18 @@ std::uint64_t key_hash(const Key<D>& k) {
 template <int D>
 class KeySet {
  public:
-  explicit KeySet(const std::vector<Key<D>>& keys) {
-    std::size_t cap = 64;
-    while (cap < 2 * keys.size()) cap *= 2;
+  // The keys of several lists (distinct keys).
+  explicit KeySet(const std::vector<std::vector<Key<D>>>& lists) {
+    std::size_t n = 0, cap = 64;
+    for (const auto& l : lists) n += l.size();
+    while (cap < 2 * n) cap *= 2;
     slots_.assign(cap, empty());
-    for (const Key<D>& k : keys) {
-      std::size_t i = key_hash<D>(k) & (cap - 1);
-      while (slots_[i][0] != kEmpty) i = (i + 1) & (cap - 1);
-      slots_[i] = k;
-    }
+    for (const auto& l : lists)
+      for (const Key<D>& k : l) {
+        std::size_t i = key_hash<D>(k) & (cap - 1);
+        while (slots_[i][0] != kEmpty) i = (i + 1) & (cap - 1);
+        slots_[i] = k;
+      }
   }
   bool contains(const Key<D>& k) const {
     for (std::size_t i = key_hash<D>(k) & (slots_.size() - 1);; i = (i + 1) & (slots_.size() - 1)) {
@@ -106,9 +109,7 @@ Followed<D> followed(const Hierarchy<D>& h) {
       }
     }
   });
-  std::vector<Key<D>> keys;
-  for (auto& r : red) keys.insert(keys.end(), r.begin(), r.end());
-  Followed<D> f{{}, {}, {}, h.edge_midpoints(), KeySet<D>(keys), h.vertex_count(), ne, 0, h.max_level(), 0};
+  Followed<D> f{{}, {}, {}, h.edge_midpoints(), KeySet<D>(red), h.vertex_count(), ne, 0, h.max_level(), 0};
   for (std::size_t k = 0; k < nchunks; ++k) f.leaf_print += print[k], f.leaves += leaves[k];
   // T0 with its vertices renumbered densely in id order.
   std::vector<VertexId> coarse_id(h.vertex_count(), VertexId::invalid());
@@ -219,8 +220,8 @@ std::vector<ElemId> apply_refinement_marks(Hierarchy<D>& h, const std::vector<El
 
 template <int D>
 LevelEncoding<D> encode_levels(const Hierarchy<D>& h, int max_level) {
-  const int levels = max_level < 0 ? h.max_level() : std::min(max_level, h.max_level());
-  return rebuild(followed(h), levels);
+  const Followed<D> f = followed(h);
+  return rebuild(f, max_level < 0 ? f.max_level : std::min(max_level, f.max_level));
 }
 
 template <int D>

@@ -562,7 +562,7 @@ struct BuildFileResult {
   Built built;
   HierarchyFileFigures file;
   double max_error = -1;              ///< the bound asked for (< 0: none), verified when ≥ 0
-  std::vector<std::string> warnings;  ///< e.g. written as format version 1
+  std::vector<std::string> warnings;  ///< e.g. a label table beside the volume not used
   std::vector<std::string> written;   ///< the hierarchy, then the report
 };
 
