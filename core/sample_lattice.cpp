@@ -259,12 +259,7 @@ ElementIntegrals<D> sample_integrals(const std::array<std::array<double, D>, D +
                              const double fs = fv;
                              std::array<double, D + 1> lam;
                              for (int i = 0; i <= D; ++i) lam[i] = double(nn[i]) * inv[i];
-                             out.f2 += w * fs * fs;
-                             for (int i = 0, m = 0; i <= D; ++i) {
-                               out.fphi[i] += w * fs * lam[i];
-                               for (int j = i; j <= D; ++j)
-                                 out.mass[static_cast<std::size_t>(m++)] += w * lam[i] * lam[j];
-                             }
+                             add_sample_terms<D>(w, fs, lam, out.f2, out.fphi, out.mass);
                              if (gradients) {
                                std::array<double, 3> xl{0, 0, 0};
                                for (int a = 0; a < D; ++a) xl[a] = double(q[a]) * lat.spacing[a];

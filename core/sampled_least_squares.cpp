@@ -92,12 +92,7 @@ void SampledLeastSquares<D>::update(const Hierarchy<D>& h, const std::vector<Ele
             owner_[at] = e.value;
             if (summed) {
               cells_[at][0] = VertexId::invalid();
-              const double f = grid_.values[at];
-              b.f2 += w * f * f;
-              for (int a = 0, m = 0; a <= D; ++a) {
-                b.fphi[a] += w * f * s.lambda[a];
-                for (int c = a; c <= D; ++c) b.mass[m++] += w * s.lambda[a] * s.lambda[c];
-              }
+              add_sample_terms<D>(w, grid_.values[at], s.lambda, b.f2, b.fphi, b.mass);
             } else {
               cells_[at] = h.cell(e);
               for (int a = 0; a < D; ++a) lambda_[at][a] = float(s.lambda[a + 1]);

@@ -241,10 +241,17 @@ void put_section(const std::string& path, Bytes& file, std::uint32_t tag, const 
   put_bytes(file, payload.data(), payload.size());
 }
 
-// The checks of either write_hierarchy before anything is encoded.
+// The metadata as written (compact JSON; empty for none), checked against the format's limit.
+std::string metadata_text(const std::string& path, const HierarchyFileInfo& info) {
+  std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
+  if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
+  return meta;
+}
+
+// The checks of either write_hierarchy before anything is encoded; returns the metadata text.
 template <int D>
-void check_write(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
-                 const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
+std::string check_write(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
+                        const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
   static_assert(sizeof(typename Hierarchy<D>::Point) == 8 * D &&
                     sizeof(typename Hierarchy<D>::Cell) == 4 * (D + 1) && sizeof(ElemId) == 4 &&
                     sizeof(ElemKind) == 1,
@@ -264,7 +271,7 @@ void check_write(const std::string& path, const Hierarchy<D>& h, const std::vect
   if (options.version == 1) {
     for (double v : values)
       if (std::isnan(v)) throw Error(path + ": values contain NaN");
-    return;
+    return metadata_text(path, info);
   }
   for (double v : values)
     if (!std::isfinite(v)) throw Error(path + ": values must be finite");
@@ -277,17 +284,16 @@ void check_write(const std::string& path, const Hierarchy<D>& h, const std::vect
     throw Error(path + ": integer values need format version 3 and an integer bound below 2^31");
   if (!v3 && (info.on_lattice || !std::isnan(info.sample_error_bound)))
     throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
-  if (!info.metadata.empty() && info.metadata.dump().size() > kMaxMetadata)
-    throw Error(path + ": metadata larger than 16 MiB");
+  return metadata_text(path, info);
 }
 
-// h is in the canonical numbering `enc` describes; values (u) in its vertex order.
+// h is in the canonical numbering `enc` describes; values (u) in its vertex order; meta from
+// check_write.
 template <int D>
 void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& enc,
-              const std::vector<double>& u, const HierarchyFileInfo& info,
+              const std::vector<double>& u, const HierarchyFileInfo& info, const std::string& meta,
               const HierarchyWriteOptions& options) {
   const bool v3 = options.version == 3;
-  const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
 
   MLFE_CHECK(!enc.vertex_end.empty() && enc.vertex_end.back() == h.vertex_count() &&
              enc.coarse_cells.size() == h.coarse_count() && enc.marks.size() + 1 == enc.vertex_end.size());
@@ -385,7 +391,7 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
 template <int D>
 void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::vector<double>& values,
                      const HierarchyFileInfo& info, const HierarchyWriteOptions& options) {
-  check_write(path, h, values, info, options);
+  const std::string meta = check_write(path, h, values, info, options);
   if (options.version >= 2) {
     LevelEncoding<D> enc;
     try {
@@ -395,7 +401,7 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
     }
     std::vector<double> u(values.empty() ? 0 : h.vertex_count());
     for (std::size_t v = 0; v < u.size(); ++v) u[v] = values[enc.to_original[v].value];
-    write_v2(path, enc.rebuilt, enc, u, info, options);
+    write_v2(path, enc.rebuilt, enc, u, info, meta, options);
     return;
   }
   const std::size_t nv = h.vertex_count(), ne = h.element_count();
@@ -424,8 +430,6 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const std::
     Bytes().swap(raw);
   }
   const Bytes& section = options.compress ? packed : raw;
-  const std::string meta = info.metadata.empty() ? std::string() : info.metadata.dump();
-  if (meta.size() > kMaxMetadata) throw Error(path + ": metadata larger than 16 MiB");
 
   Bytes head;
   head.reserve(kHeaderSize + info.space.size() + meta.size());
@@ -461,9 +465,9 @@ template <int D>
 void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& levels,
                      const std::vector<double>& values, const HierarchyFileInfo& info,
                      const HierarchyWriteOptions& options) {
-  check_write(path, h, values, info, options);
+  const std::string meta = check_write(path, h, values, info, options);
   MLFE_CHECK(options.version >= 2);
-  write_v2(path, h, levels, values, info, options);
+  write_v2(path, h, levels, values, info, meta, options);
 }
 
 void write_hierarchy(const std::string& path, const HierarchyFile& file,

@@ -82,6 +82,23 @@ struct OwnedSample {
   std::array<double, D + 1> lambda;
 };
 
+/// Adds one sample's terms to the least-squares sums of its element: f2 += w f²,
+/// fphi_i += w f λ_i and mass (upper triangle, row major, as ElementIntegrals) += w λ_i λ_j.
+/// The one place those sums are formed, so every path that sums samples (sample_integrals, the
+/// sampled operator's summed leaves) gives the same bits.
+template <int D>
+inline void add_sample_terms(double w, double f, const std::array<double, D + 1>& lambda, double& f2,
+                             std::array<double, D + 1>& fphi,
+                             std::array<double, (D + 1) * (D + 2) / 2>& mass) {
+  f2 += w * f * f;
+  for (int i = 0, m = 0; i <= D; ++i) {
+    fphi[static_cast<std::size_t>(i)] += w * f * lambda[static_cast<std::size_t>(i)];
+    for (int j = i; j <= D; ++j)
+      mass[static_cast<std::size_t>(m++)] +=
+          w * lambda[static_cast<std::size_t>(i)] * lambda[static_cast<std::size_t>(j)];
+  }
+}
+
 /// The samples the simplex with lattice corners p (local frame; CHECKed) owns, by the rule above,
 /// in row order (x fastest, then y, then z); `out` is cleared first. Sums over every leaf's
 /// owned samples visit each sample of the data exactly once.
