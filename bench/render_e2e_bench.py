@@ -23,9 +23,14 @@ reference, every hierarchy with this build and (with --base-build) the base, one
 in turn, reporting per command the minimum and median wall time, the median CPU time (user +
 system, from the process's own rusage: less sensitive to other load than wall time) and the
 peak resident memory; `cmp` of each hierarchy's image against the base's.
+With --turntable N, instead: the per-frame time once the render structures exist, as VTK's
+"best after the first" is: `mlfe render H --frames N` (azimuths 0, 360/N, ...; frame 0 also
+builds the step records) against VTK fixed point at each of the same views (best of --repeat
+after its first render), for the first hierarchy and the reference, each view's ratio and
+their median over frames 1..N-1.
 
 usage: bench/render_e2e_bench.py VOL H1.mlfeh [H2.mlfeh ...] [--base-build DIR] [--size WxH]
-       [--repeat N] [--rounds N] [--no-vtk] [--no-levels] [--work DIR] [--json OUT]
+       [--repeat N] [--rounds N] [--turntable N] [--no-vtk] [--no-levels] [--work DIR] [--json OUT]
 """
 import argparse
 import json
@@ -70,6 +75,71 @@ def run_once(mlfe, args):
     m = re.search(r"in ([0-9.]+) s, ", err)
     return {"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "rss_mb": ru.ru_maxrss / 1024.0,
             "frame_s": float(m.group(1)) if m else None}
+
+
+def frame_times(mlfe, args):
+    """Per-frame render times of one `mlfe render --frames` process, in frame order."""
+    p = subprocess.run([mlfe, "--threads", "2"] + args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if p.returncode != 0:
+        raise RuntimeError("mlfe %s failed: %s" % (" ".join(args), p.stderr[-2000:]))
+    return [float(x) for x in re.findall(r"in ([0-9.]+) s, ", p.stderr)]
+
+
+def vtk_env():
+    """The environment for VTK's off-screen window, and the Xvfb started for it (or None)."""
+    env = dict(os.environ, OMP_NUM_THREADS="2")
+    if "DISPLAY" in env:
+        return env, None
+    xvfb = subprocess.Popen(["Xvfb", ":88", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(1.5)
+    env["DISPLAY"] = ":88"
+    return env, xvfb
+
+
+def turntable(a, mlfe, helper, w, h):
+    """--turntable: steady per-frame times, mlfe's turntable against VTK at the same views."""
+    n = a.turntable
+    H = a.hierarchies[0]
+    common = ["--frames", str(n), "--size", a.size, "--azimuth", "0", "--elevation", "0", "--tf", a.tf]
+    out = {"frames": n}
+    for tag, src, extra in (("mesh", H, []), ("reference", a.volume, ["--reference"])):
+        best = None
+        for _ in range(a.repeat):
+            t = frame_times(mlfe, ["render", src, "-o", os.path.join(a.work, "tt_%s.exr" % tag)] + common + extra)
+            best = t if best is None else [min(x, y) for x, y in zip(best, t)]
+        out[tag] = best
+    env, xvfb = vtk_env()
+    try:
+        vtk_times = []
+        for k in range(n):
+            az = 360.0 * k / n
+            prefix = os.path.join(a.work, "vtk_tt%d" % k)
+            setup = json.loads(subprocess.run([helper, "setup", a.volume, H, str(az), "0", str(w), str(h), a.tf,
+                                               prefix], capture_output=True, text=True, check=True).stdout)
+            with open(prefix + "_setup.json", "w") as f:
+                json.dump(setup, f)
+            cfg = dict(kind="fixed", setup=prefix + "_setup.json", size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
+                       sample_distance=1.0 * min(setup["spacing"]), png=prefix + ".png")
+            p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
+                               capture_output=True, text=True, env=env, check=True)
+            vtk_times.append(json.loads(p.stdout.strip().splitlines()[-1])["render_s"])
+        out["vtk_fixed_1voxel"] = vtk_times
+    finally:
+        if xvfb:
+            xvfb.terminate()
+            xvfb.wait()
+    med = lambda xs: sorted(xs)[len(xs) // 2]
+    print("%-6s %10s %10s %10s %12s" % ("frame", "azimuth", "mesh s", "VTK 1vx s", "reference s"))
+    for k in range(n):
+        print("%-6d %10.1f %10.3f %10.3f %12.3f" % (k, 360.0 * k / n, out["mesh"][k], out["vtk_fixed_1voxel"][k],
+                                                     out["reference"][k]))
+    later = range(1, n)
+    out["median_mesh_over_vtk"] = med([out["mesh"][k] / out["vtk_fixed_1voxel"][k] for k in later])
+    out["median_mesh_over_reference"] = med([out["mesh"][k] / out["reference"][k] for k in later])
+    print("frames 1..%d, median ratio: mesh / VTK %.2f, mesh / reference %.2f" %
+          (n - 1, out["median_mesh_over_vtk"], out["median_mesh_over_reference"]))
+    return out
 
 
 def interleaved(a, builds, view):
@@ -140,6 +210,7 @@ def main():
     ap.add_argument("--tf", default="grey")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--rounds", type=int, default=0)
+    ap.add_argument("--turntable", type=int, default=0)
     ap.add_argument("--no-vtk", action="store_true")
     ap.add_argument("--no-levels", action="store_true")
     ap.add_argument("--json", default="")
@@ -153,6 +224,12 @@ def main():
     w, h = [int(x) for x in a.size.lower().split("x")]
     view = ["--azimuth", "0", "--elevation", "0", "--tf", a.tf]
     res = {"volume": a.volume, "size": a.size, "runs": {}}
+    if a.turntable > 1:
+        res["turntable"] = turntable(a, mlfe, helper, w, h)
+        if a.json:
+            with open(a.json, "w") as f:
+                json.dump(res, f, indent=1)
+        return
     if a.rounds > 0:
         res["interleaved"] = interleaved(a, builds, view)
         if a.json:
