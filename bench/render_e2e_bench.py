@@ -267,13 +267,7 @@ def main():
             res["levels"].append(row)
             print(json.dumps(row), flush=True)
     if not a.no_vtk:
-        env = dict(os.environ)
-        xvfb = None
-        if "DISPLAY" not in env:
-            xvfb = subprocess.Popen(["Xvfb", ":88", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            time.sleep(1.5)
-            env["DISPLAY"] = ":88"
+        env, xvfb = vtk_env()
         try:
             prefix = os.path.join(a.work, "vtk")
             setup = json.loads(subprocess.run([helper, "setup", a.volume, a.hierarchies[0], "0", "0", str(w), str(h),
@@ -287,7 +281,7 @@ def main():
                 cfg = dict(kind="fixed", setup=setup_path, size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
                            sample_distance=dist, png=prefix + "_" + label + ".png")
                 p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
-                                   capture_output=True, text=True, env=dict(env, OMP_NUM_THREADS="2"))
+                                   capture_output=True, text=True, env=env)
                 res["vtk"][label] = (json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else
                                      {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
                 print(json.dumps({label: res["vtk"][label]}), flush=True)
