@@ -223,15 +223,16 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
     mesh = render_mesh_of(a3, p, entry, source);
     r.tetrahedra = mesh->size();
     r.level = mesh->level();
-    r.mesh_bytes = mesh->memory_bytes();
   }
   for (int frame = 0; frame < p.frames; ++frame) {
     report(double(frame) / p.frames, "rendering");
     RenderFrame f;
     f.camera = frame_camera(p, framing, frame);
+    RenderOptions frame_opt = opt;
+    frame_opt.images = p.frames - frame;  // step records pay off over the frames still to come
     const auto t0 = std::chrono::steady_clock::now();
-    f.image = p.reference ? render_grid(*grid, tf, f.camera, opt, &f.stats)
-                          : render_mesh(*mesh, b.transform, tf, f.camera, opt, &f.stats);
+    f.image = p.reference ? render_grid(*grid, tf, f.camera, frame_opt, &f.stats)
+                          : render_mesh(*mesh, b.transform, tf, f.camera, frame_opt, &f.stats);
     f.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     f.width = p.size[0];
     f.height = p.size[1];
@@ -251,6 +252,8 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
     }
     r.frames.push_back(std::move(f));
   }
+  // After the frames: step records count as far as they were built.
+  if (mesh) r.mesh_bytes = mesh->memory_bytes();
   written.release();
   report.finish(output.empty() ? "rendering" : "writing");
   return r;

@@ -610,7 +610,7 @@ struct RenderResult {
   std::vector<RenderFrame> frames;
   std::size_t tetrahedra = 0;  ///< the render mesh (0 for the reference)
   int level = 0;
-  std::size_t mesh_bytes = 0;
+  std::size_t mesh_bytes = 0;        ///< what the renderer added, step records as far as built
   Built built;                       ///< what was rendered (the file's or the build's)
   std::vector<std::string> written;  ///< every file, in order
 };

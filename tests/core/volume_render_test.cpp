@@ -232,10 +232,68 @@ void expect_adjacency_of_face_neighbors(const Hierarchy<3>& h, const std::vector
   }
 }
 
+// The step records computed at every step instead of stored are the same bytes: so is the
+// image, with either thread count.
+TEST(RenderMesh, StoredAndComputedStepRecordsGiveTheSameImage) {
+  const Blob b;
+  const TransferFunction tf = transfer_function_preset("hot", 0.3, 1, 0.05);
+  const Camera cam = orbit_camera({0.5, 0.5, 0.5}, 0.87, 70, -10, true, 64, 48);
+  RenderImage img[3];
+  for (int k = 0; k < 3; ++k) {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, k == 2 ? 1 : 2);
+    const TetRenderMesh m(b.h, b.u);
+    RenderOptions opt;
+    opt.shading = true;
+    opt.records = k == 0 ? RenderOptions::Records::kStore : RenderOptions::Records::kCompute;
+    RenderStats s;
+    img[k] = render_mesh(m, GridTransform{}, tf, cam, opt, &s);
+    EXPECT_EQ(s.records_stored, k == 0);
+    EXPECT_EQ(m.records_built() > 0, k == 0);
+    EXPECT_GT(s.segments, 0u);
+  }
+  for (int k = 1; k < 3; ++k) {
+    ASSERT_EQ(img[0].rgba.size(), img[k].rgba.size());
+    EXPECT_EQ(0, std::memcmp(img[0].rgba.data(), img[k].rgba.data(), img[0].rgba.size() * sizeof(float)));
+    EXPECT_EQ(0, std::memcmp(img[0].z.data(), img[k].z.data(), img[0].z.size() * sizeof(float)));
+  }
+}
+
+// kAuto stores the step records only where they are reused: not for a small image over many
+// elements, but for the same with many images to come, or for a large image.
+TEST(RenderMesh, AutoStoresStepRecordsWhereTheyAreReused) {
+  const Blob b;
+  const TransferFunction tf = transfer_function_preset("grey", 0, 1, 0.05);
+  const auto cam = [](int size) { return orbit_camera({0.5, 0.5, 0.5}, 0.87, 30, 20, false, size, size); };
+  RenderStats s;
+  {
+    const TetRenderMesh m(b.h, b.u);  // 24 576 leaves: a 16x16 image crosses few of them
+    render_mesh(m, GridTransform{}, tf, cam(16), RenderOptions{}, &s);
+    EXPECT_FALSE(s.records_stored);
+    EXPECT_EQ(m.records_built(), 0u);
+    RenderOptions turntable;
+    turntable.images = 1000;
+    render_mesh(m, GridTransform{}, tf, cam(16), turntable, &s);
+    EXPECT_TRUE(s.records_stored);
+    EXPECT_GT(m.records_built(), 0u);
+    render_mesh(m, GridTransform{}, tf, cam(16), RenderOptions{}, &s);  // all built: used
+    EXPECT_EQ(s.records_stored, m.records_built() == m.size());
+  }
+  {
+    const TetRenderMesh m(b.h, b.u);
+    render_mesh(m, GridTransform{}, tf, cam(400), RenderOptions{}, &s);
+    EXPECT_TRUE(s.records_stored);
+    EXPECT_EQ(m.records_built(), m.size());  // built up front for a large image
+  }
+}
+
 TEST(RenderMesh, CompactAdjacency) {
   const Blob b;
   const TetRenderMesh m(b.h, b.u);
-  // 128-byte step records (built on use) and 16 bytes of neighbours they are built from.
+  // Neighbours (16 bytes), render order and value ranges (ancestors' included); the 128-byte
+  // step records only once built.
+  EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 40.0);
+  m.build_all_records();
+  EXPECT_EQ(m.records_built(), m.size());
   EXPECT_LE(double(m.memory_bytes()) / double(m.size()), 165.0);
   for (int level : {-1, 1, 2, 3}) {
     SCOPED_TRACE(level);

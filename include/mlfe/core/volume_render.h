@@ -89,6 +89,16 @@ struct RenderOptions {
   bool shading = false;        ///< scale colours by 0.35 + 0.65 |cos(gradient, ray)|
   bool skip_empty = true;      ///< cross transparent coarse elements in one step (mesh only)
   int skip_levels = 5;         ///< ... when they are at least this many levels above the leaf
+  /// Mesh only: whether the step records (TetRenderMesh::StepRecord) are stored for reuse or
+  /// computed at every step. Storing one costs what computing it does plus 128 bytes of fresh
+  /// memory, so it pays only for elements crossed more than once: kAuto stores them when the
+  /// rays of this image and of the `images` still expected from the mesh cross its elements
+  /// at least twice on average (estimated from the rays that hit its box; records already
+  /// stored are always used). Unstructured meshes (RayEntry::kBoundaryFaces) always store
+  /// them. The image is the same bytes either way.
+  enum class Records { kAuto, kStore, kCompute };
+  Records records = Records::kAuto;
+  int images = 1;  ///< images expected from the mesh, this one included (a turntable's frames)
 };
 
 /// Premultiplied linear RGBA (4 floats per pixel, row 0 at the top) and Z (distance along the
@@ -106,6 +116,7 @@ struct RenderStats {
   std::uint64_t relocations = 0;      ///< rays located again after leaving the mesh early
   std::uint64_t step_bound_hits = 0;  ///< rays ended by the step bound (should be 0)
   std::uint64_t reentries = 0;        ///< RayEntry::kBoundaryFaces: entries after the first
+  bool records_stored = false;        ///< mesh only: the step records were stored (RenderOptions::records)
 };
 
 /// How a ray finds its entry element and where it goes when it leaves the mesh.
@@ -193,8 +204,12 @@ class TetRenderMesh {
     if (!built_[chunk].load(std::memory_order_acquire)) build_chunk(chunk);
     return records_[r];
   }
+  /// Element r's step record computed into `out`, the same bytes record(r) holds.
+  void compute_record(std::uint32_t r, StepRecord& out) const;
   /// Builds every step record not built yet, in parallel (record() then only reads).
   void build_all_records() const;
+  /// Step records built so far (chunks of consecutive render indices are built together).
+  std::size_t records_built() const;
   /// Where record(r) is or will be, without building it (for prefetching).
   const StepRecord* record_address(std::uint32_t r) const { return records_.data() + r; }
   /// Where the ray o + t d, t in [t0, t1], may start for transfer function tf: a little before
@@ -203,7 +218,8 @@ class TetRenderMesh {
   /// there is none. Every element holding a point of the ray in front is transparent.
   double first_visible(const std::array<double, 3>& o, const std::array<double, 3>& d, double t0, double t1,
                        const CompiledTransferFunction& tf) const;
-  /// Bytes the renderer adds on top of the hierarchy and its values.
+  /// Bytes the renderer adds on top of the hierarchy and its values (step records as far as
+  /// built).
   std::size_t memory_bytes() const;
 
   RayEntry ray_entry() const { return entry_; }
@@ -237,6 +253,7 @@ class TetRenderMesh {
   std::vector<std::array<std::uint32_t, 4>, DefaultInit<std::array<std::uint32_t, 4>>> next_;
   std::unique_ptr<std::atomic<bool>[]> built_;
   std::unique_ptr<std::once_flag[]> build_once_;
+  mutable std::atomic<std::size_t> chunks_built_{0};
   void build_chunk(std::uint32_t chunk) const;
   void fill_record(std::uint32_t r) const;
   std::vector<std::uint32_t, DefaultInit<std::uint32_t>> render_of_;
