@@ -98,6 +98,27 @@ def vtk_env():
     return env, xvfb
 
 
+def vtk_setup(a, helper, az, w, h, prefix):
+    """render_bench's set-up (the grid as raw floats, camera, transfer function) of the view at
+    azimuth az, written beside prefix; returns it and its path."""
+    setup = json.loads(subprocess.run([helper, "setup", a.volume, a.hierarchies[0], str(az), "0", str(w), str(h),
+                                       a.tf, prefix], capture_output=True, text=True, check=True).stdout)
+    path = prefix + "_setup.json"
+    with open(path, "w") as f:
+        json.dump(setup, f)
+    return setup, path
+
+
+def vtk_render(a, env, setup_path, prefix, w, h, dist, png):
+    """VTK fixed point on that set-up at sample distance dist: its JSON line, or {"error": ...}."""
+    cfg = dict(kind="fixed", setup=setup_path, size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
+               sample_distance=dist, png=png)
+    p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
+                       capture_output=True, text=True, env=env)
+    return (json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else
+            {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
+
+
 def turntable(a, mlfe, helper, w, h):
     """--turntable: steady per-frame times, mlfe's turntable against VTK at the same views."""
     n = a.turntable
@@ -114,17 +135,12 @@ def turntable(a, mlfe, helper, w, h):
     try:
         vtk_times = []
         for k in range(n):
-            az = 360.0 * k / n
             prefix = os.path.join(a.work, "vtk_tt%d" % k)
-            setup = json.loads(subprocess.run([helper, "setup", a.volume, H, str(az), "0", str(w), str(h), a.tf,
-                                               prefix], capture_output=True, text=True, check=True).stdout)
-            with open(prefix + "_setup.json", "w") as f:
-                json.dump(setup, f)
-            cfg = dict(kind="fixed", setup=prefix + "_setup.json", size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
-                       sample_distance=1.0 * min(setup["spacing"]), png=prefix + ".png")
-            p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
-                               capture_output=True, text=True, env=env, check=True)
-            vtk_times.append(json.loads(p.stdout.strip().splitlines()[-1])["render_s"])
+            setup, path = vtk_setup(a, helper, 360.0 * k / n, w, h, prefix)
+            r = vtk_render(a, env, path, prefix, w, h, 1.0 * min(setup["spacing"]), prefix + ".png")
+            if "error" in r:
+                raise RuntimeError("VTK at frame %d: %s" % (k, r["error"]))
+            vtk_times.append(r["render_s"])
         out["vtk_fixed_1voxel"] = vtk_times
     finally:
         if xvfb:
@@ -277,20 +293,11 @@ def main():
         env, xvfb = vtk_env()
         try:
             prefix = os.path.join(a.work, "vtk")
-            setup = json.loads(subprocess.run([helper, "setup", a.volume, a.hierarchies[0], "0", "0", str(w), str(h),
-                                               a.tf, prefix], capture_output=True, text=True, check=True).stdout)
-            setup_path = prefix + "_setup.json"
-            with open(setup_path, "w") as f:
-                json.dump(setup, f)
+            setup, setup_path = vtk_setup(a, helper, 0, w, h, prefix)
             res["vtk"] = {}
             for label, dist in (("fixed_1voxel", 1.0 * min(setup["spacing"])),
                                 ("fixed_half_voxel", 0.5 * min(setup["spacing"]))):
-                cfg = dict(kind="fixed", setup=setup_path, size=[w, h], repeat=a.repeat, raw=prefix + ".raw",
-                           sample_distance=dist, png=prefix + "_" + label + ".png")
-                p = subprocess.run([sys.executable, "-c", render_bench.VTK_CHILD, json.dumps(cfg)],
-                                   capture_output=True, text=True, env=env)
-                res["vtk"][label] = (json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else
-                                     {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]})
+                res["vtk"][label] = vtk_render(a, env, setup_path, prefix, w, h, dist, prefix + "_" + label + ".png")
                 print(json.dumps({label: res["vtk"][label]}), flush=True)
         finally:
             if xvfb:

@@ -655,7 +655,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // Records: address space only until build_chunk() writes them.
   records_.resize(elems_.size());
   advise_huge_pages(records_);
-  const std::size_t chunks = (elems_.size() >> kChunkBits) + 1;
+  const std::size_t chunks = chunk_count();
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
@@ -743,8 +743,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
 
-void TetRenderMesh::fill_record(std::uint32_t r) const { compute_record(r, records_[r]); }
-
 // One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.
 void TetRenderMesh::compute_record(std::uint32_t r, StepRecord& R) const {
   const auto& c = h_.cell(ElemId(elems_[r]));
@@ -771,7 +769,7 @@ void TetRenderMesh::compute_record(std::uint32_t r, StepRecord& R) const {
 }
 
 void TetRenderMesh::build_all_records() const {
-  const std::size_t chunks = (records_.size() >> kChunkBits) + 1;
+  const std::size_t chunks = chunk_count();
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 4), [&](const auto& range) {
     for (std::size_t c = range.begin(); c != range.end(); ++c)
       if (!built_[c].load(std::memory_order_acquire)) build_chunk(std::uint32_t(c));
@@ -782,8 +780,7 @@ void TetRenderMesh::build_chunk(std::uint32_t chunk) const {
   std::call_once(build_once_[chunk], [&] {
     const std::size_t first = std::size_t(chunk) << kChunkBits;
     const std::size_t last = std::min(records_.size(), first + (std::size_t(1) << kChunkBits));
-    for (std::size_t r = first; r < last; ++r) fill_record(std::uint32_t(r));
-    chunks_built_.fetch_add(1, std::memory_order_relaxed);
+    for (std::size_t r = first; r < last; ++r) compute_record(std::uint32_t(r), records_[r]);
     built_[chunk].store(true, std::memory_order_release);
   });
 }
@@ -969,7 +966,13 @@ bool TetRenderMesh::boundary_hit(const std::array<double, 3>& o, const std::arra
 }
 
 std::size_t TetRenderMesh::records_built() const {
-  return std::min(records_.size(), chunks_built_.load(std::memory_order_relaxed) << kChunkBits);
+  // One flag per 512 records: a scan costs nothing beside a render.
+  const std::size_t chunks = chunk_count();
+  std::size_t n = 0;
+  for (std::size_t c = 0; c < chunks; ++c)
+    if (built_[c].load(std::memory_order_acquire))
+      n += std::min(records_.size(), (c + 1) << kChunkBits) - (c << kChunkBits);
+  return n;
 }
 
 std::size_t TetRenderMesh::memory_bytes() const {

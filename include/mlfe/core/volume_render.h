@@ -253,9 +253,8 @@ class TetRenderMesh {
   std::vector<std::array<std::uint32_t, 4>, DefaultInit<std::array<std::uint32_t, 4>>> next_;
   std::unique_ptr<std::atomic<bool>[]> built_;
   std::unique_ptr<std::once_flag[]> build_once_;
-  mutable std::atomic<std::size_t> chunks_built_{0};
   void build_chunk(std::uint32_t chunk) const;
-  void fill_record(std::uint32_t r) const;
+  std::size_t chunk_count() const { return (records_.size() >> kChunkBits) + 1; }
   std::vector<std::uint32_t, DefaultInit<std::uint32_t>> render_of_;
   std::vector<float, DefaultInit<float>> lo_, hi_;
   std::array<double, 3> lo_box_, hi_box_;
