@@ -1,6 +1,6 @@
 #include <fcntl.h>
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/check.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <signal.h>
 #include <sys/stat.h>

@@ -2,7 +2,7 @@
 #include <draco/compression/encode.h>
 #include <draco/compression/expert_encode.h>
 #include <draco/mesh/mesh.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 

@@ -6,8 +6,8 @@
 #include <ImfStandardAttributes.h>
 #include <ImfStringAttribute.h>
 #include <half.h>
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/check.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/exr_writer.h>
 #include <png.h>

@@ -5,7 +5,7 @@
 // on damaged .glb files (GltfReader.TruncatedAndCorruptedFilesThrowError). The JSON is parsed
 // with nlohmann::json and every index and byte range is checked here instead.
 #include <fmt/format.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>
 
 #include <Eigen/Dense>

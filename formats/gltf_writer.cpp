@@ -5,7 +5,7 @@
 // TINYGLTF_IMPLEMENTATION here as well would put a second, differently configured copy of every
 // tinygltf symbol into the process (an ODR violation resolved by symbol interposition).
 #include <fmt/format.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>

@@ -1,7 +1,7 @@
 // .mlfeh reader and writer; the format is specified in hierarchy_io.h.
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/huge_pages.h>
+#include <mlfe/core/base/check.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/base/huge_pages.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
@@ -94,7 +94,7 @@ void check_info(const std::string& path, const HierarchyFileInfo& info) {
   if (!info.metadata.is_object()) throw Error(path + ": metadata must be a JSON object");
 }
 
-// The lattice fields of a v3 file (core/sample_lattice.h): dims ≥ 2 on the used axes, 1 on the
+// The lattice fields of a v3 file (core/fem/sample_lattice.h): dims ≥ 2 on the used axes, 1 on the
 // others, and L the smallest level with 2^L ≥ n − 1 on every axis.
 void check_lattice(const std::string& path, int dim, const HierarchyFileInfo& info) {
   if (!std::isnan(info.sample_error_bound) &&

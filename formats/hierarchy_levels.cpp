@@ -1,7 +1,7 @@
 // Level-by-level rebuild and hierarchical-basis quantization of the .mlfeh v2 file (Grosso,
 // Lürig & Ertl 1997; Yserentant 1986; Di & Cappello 2016); see hierarchy_levels.h.
-#include <mlfe/core/check.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/check.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/hierarchy_levels.h>
 #include <tbb/parallel_for.h>
 

@@ -12,7 +12,7 @@
 #include <ImfStringAttribute.h>
 #include <ImfVecAttribute.h>
 #include <fmt/format.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/png_reader.h>
 #include <png.h>

@@ -1,6 +1,6 @@
 // Label table readers (formats: label_table.h). One tokenizer for the text formats; the layout
 // of the first data line decides the format and every later line must follow it.
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/label_table.h>
 

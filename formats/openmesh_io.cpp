@@ -3,7 +3,7 @@
 // GCC matches the pragma by source location, so it must precede the OpenMesh/libstdc++ headers.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/openmesh_io.h>

@@ -1,4 +1,4 @@
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/transfer_function_io.h>
 
 #include <fstream>

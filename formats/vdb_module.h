@@ -3,7 +3,7 @@
 // file is read or written: binding libopenvdb's ~57 000 symbols took most of every command's
 // start-up (77 ms of `mlfe --version`) whether or not it ever saw a VDB file. Not public API.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>

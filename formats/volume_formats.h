@@ -3,7 +3,7 @@
 // (formats/volume_writer.cpp) picks the writer from it; a new format is one row here, its reader
 // (and writer), and a fuzz entry (fuzz/CMakeLists.txt). Not part of the public API.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

@@ -1,7 +1,7 @@
 // Helpers shared by the volume readers in formats/*_reader.cpp. Not part of the public API.
 #pragma once
-#include <mlfe/core/error.h>
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <array>

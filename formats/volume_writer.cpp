@@ -1,5 +1,5 @@
 #include <fmt/format.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/volume_writer.h>
 #include <nifti2_io.h>

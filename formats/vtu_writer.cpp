@@ -1,4 +1,4 @@
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/vtu_writer.h>
 

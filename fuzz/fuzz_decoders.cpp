@@ -2,7 +2,7 @@
 // the glTF reader (read_gltf, .glb) and the EXR/PNG reader (read_image, .exr), each through a
 // temporary file, and the Draco payload decoder (decode_draco). mlfe::Error is the expected
 // outcome for bad input; anything else is a finding.
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/hierarchy_io.h>

@@ -2,7 +2,7 @@
 // parsed as each kind the file name chooses (JSON, MRIcron .lut, Slicer .ctbl, and the text
 // formats MRIcron, ITK-SNAP, FreeSurfer and Slicer that the content chooses among).
 // mlfe::Error is the expected outcome for bad input; anything else is a finding.
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/label_table.h>
 
 #include <cstdint>

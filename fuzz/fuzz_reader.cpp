@@ -2,7 +2,7 @@
 // extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh).
 // mlfe::Error is the expected outcome for bad input; anything else (a crash, a sanitizer report, another
 // exception, an exit from inside a library) is a finding.
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
 #include <unistd.h>

@@ -5,13 +5,13 @@
 // (volumes read, surfaces extracted, hierarchy values) are views of the C++ buffers, kept alive by their
 // owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
-#include <mlfe/core/error.h>
-#include <mlfe/formats/compare.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
+#include <mlfe/pipeline/compare.h>
 #include <mlfe/version.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks the house rule "no function over 150 lines" in core/, formats/, pipeline/ and cli/.
+"""Checks the house rule "no function over 150 lines" in core/, formats/ and converters/.
 
 A function is a brace block opened at namespace or class scope after a header with a '(' (its
 signature), from the signature's first line to the closing brace; comments, string literals and
@@ -14,7 +14,7 @@ import pathlib
 import re
 import sys
 
-FOLDERS = ("core", "formats", "pipeline", "cli")
+FOLDERS = ("core", "formats", "converters")
 # Over the limit and not split yet (issue #26): reported, not failed on. Remove an entry when its
 # function is split; the check fails on an entry that no longer needs to be here.
 KNOWN = {

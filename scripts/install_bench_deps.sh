@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages that only the benchmarks in bench/ need:
-#   python3-vtk9       VTK flying edges / marching cubes / quadric decimation (bench/iso_bench.py)
+#   python3-vtk9       VTK flying edges / marching cubes / quadric decimation (bench/py/iso_bench.py)
 #   python3-numpy      arrays for the distance measurements (pulled in by vtk, listed for clarity)
-#   python3-scipy      KD-tree for the surface distances (bench/iso_bench.py)
+#   python3-scipy      KD-tree for the surface distances (bench/py/iso_bench.py)
 #   libopenvdb-tools   vdb_tool / vdb_print / vdb_render (OpenVDB comparison)
-#   xvfb               X server for VTK's volume mappers, which need a render window (bench/render_bench.py)
+#   xvfb               X server for VTK's volume mappers, which need a render window (bench/py/render_bench.py)
 #   libzfp-dev         optional: ZFP compressed-array comparison (skipped if unavailable)
-#   python3-zfpy       ZFP fixed-accuracy rate-distortion beside the hierarchy file (bench/hierarchy_file_bench.py)
-#   zstd               zstd -19 of the raw input (bench/hierarchy_file_bench.py)
-# and from npm: gltfpack 1.3 (bench/convert_bench.py's meshoptimizer 1.x peer).
+#   python3-zfpy       ZFP fixed-accuracy rate-distortion beside the hierarchy file (bench/py/hierarchy_file_bench.py)
+#   zstd               zstd -19 of the raw input (bench/py/hierarchy_file_bench.py)
+# and from npm: gltfpack 1.3 (bench/py/convert_bench.py's meshoptimizer 1.x peer).
 # Idempotent: checks every package with dpkg-query and runs apt-get update/install only when
 # something is missing. Build dependencies of mlfe itself: scripts/install_deps.sh.
 set -euo pipefail
@@ -25,7 +25,7 @@ for p in "${REQUIRED[@]}"; do is_installed "$p" || missing+=("$p"); done
 missing_opt=()
 for p in "${OPTIONAL[@]}"; do is_installed "$p" || missing_opt+=("$p"); done
 
-# gltfpack 1.3 (npm; meshoptimizer 1.x's simplifier), the asset peer of bench/convert_bench.py.
+# gltfpack 1.3 (npm; meshoptimizer 1.x's simplifier), the asset peer of bench/py/convert_bench.py.
 if ! command -v gltfpack >/dev/null 2>&1; then
   if command -v npm >/dev/null 2>&1; then
     echo "mlfe bench: installing gltfpack@1.3 from npm" >&2

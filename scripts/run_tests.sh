@@ -13,11 +13,14 @@ JOBS="${MLFE_JOBS:-$(nproc)}"
 bash "$ROOT/scripts/install_deps.sh"
 
 echo "== clang-format (.clang-format; Debian 12's clang-format 14)"
-find "$ROOT"/{core,formats,pipeline,cli,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
+find "$ROOT"/{core,formats,converters,include,tests,fuzz,bench,python} \( -name '*.cpp' -o -name '*.h' \) -print0 |
   xargs -0 clang-format --dry-run -Werror
 
-echo "== no function over 150 lines in core/, formats/, pipeline/, cli/"
+echo "== no function over 150 lines in core/, formats/, converters/"
 python3 "$ROOT/scripts/check_function_length.py" "$ROOT"
+
+echo "== layering: includes go down or sideways (docs/architecture.md)"
+python3 "$ROOT/scripts/check_layering.py" "$ROOT"
 
 echo "== release build and tests"
 bash "$ROOT/scripts/build.sh" -DMLFE_BUILD_TESTS=ON -DMLFE_BUILD_BENCH=ON

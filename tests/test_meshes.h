@@ -2,7 +2,7 @@
 // openmesh_io, draco_io, gltf_writer, the CLI tests). Header-only.
 #pragma once
 #include <gtest/gtest.h>
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <unistd.h>
 
 #include <algorithm>

@@ -2,8 +2,8 @@
 // .vtu/.msh readers, the paper's Poisson example): Kuhn-split cube grids, optionally with
 // cubes left out. Header-only.
 #pragma once
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/tet_mesh_field.h>
+#include <mlfe/core/field/tet_mesh_field.h>
+#include <mlfe/core/mesh/hierarchy.h>
 
 #include <algorithm>
 #include <array>

@@ -4,23 +4,23 @@
 // and the formats. Bad input anywhere throws mlfe::Error (mlfe/core/error.h).
 #pragma once
 
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchical_basis.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/mesh_distance.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/core/surface_simplification.h>
-#include <mlfe/core/transfer_function.h>
-#include <mlfe/core/triangle_mesh.h>
-#include <mlfe/core/volume_render.h>
-#include <mlfe/formats/compare.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/hierarchical_basis.h>
+#include <mlfe/core/field/field.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/mesh/hierarchy.h>
+#include <mlfe/core/render/transfer_function.h>
+#include <mlfe/core/render/volume_render.h>
+#include <mlfe/core/simplify/surface_simplification.h>
+#include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/mesh_distance.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/exr_writer.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
+#include <mlfe/pipeline/compare.h>
 #include <mlfe/version.h>

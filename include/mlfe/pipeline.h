@@ -4,19 +4,19 @@
 // Options are typed; their defaults are the command line's. Bad input or options throw
 // mlfe::Error with a one-line message; nothing is printed (progress goes to the callbacks).
 #pragma once
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/scalar_grid.h>
-#include <mlfe/core/tet_mesh_field.h>
-#include <mlfe/core/triangle_mesh.h>
-#include <mlfe/core/volume_render.h>
-#include <mlfe/formats/compare.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/hierarchy_resample.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/field/tet_mesh_field.h>
+#include <mlfe/core/render/volume_render.h>
+#include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/hierarchy_resample.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
+#include <mlfe/pipeline/compare.h>
 
 #include <array>
 #include <atomic>
@@ -129,7 +129,7 @@ struct Built {
   /// The memory the build was allowed (0: no budget); see memory_limited().
   std::size_t memory_budget_bytes = 0;
   /// The RMS target the build ran to (0: none), and for gridded input without --rms the
-  /// estimated noise deviation of the samples (core/noise_estimate.h); target_from_noise when
+  /// estimated noise deviation of the samples (core/field/noise_estimate.h); target_from_noise when
   /// the noise, not --rms's default, set the target.
   double target_rms = 0;
   double noise_sigma = 0;
@@ -243,7 +243,7 @@ struct AssetOptions {
   int lod = 0;               ///< coarser levels to add to glTF (0..8)
   std::size_t decimate = 0;  ///< triangle budget per surface (OpenMesh quadric decimation), 0: off
   /// Simplification tolerance in voxels (0: the raw extraction). The default keeps assets
-  /// compact (bench/convert_bench.py).
+  /// compact (bench/py/convert_bench.py).
   double simplify = 0.3;
   /// Simplification stops at this fraction of each extracted surface's triangles, or earlier
   /// where the `simplify` bound binds (0: the bound alone). The default gives assets of about a
@@ -271,7 +271,7 @@ struct AssetOptions {
   Normals normals = Normals::kAuto;
   /// simplify's vertex placement: kInput (half-edge collapses: every vertex an extracted,
   /// snapped one), kOptimal (quadric minimum near the surface, then the least-squares refit of
-  /// every vertex to the extracted surface, core/surface_fitting.h: fewer triangles at the same
+  /// every vertex to the extracted surface, core/surface/surface_fitting.h: fewer triangles at the same
   /// bound, closer to the data, smoother, slower) or kAuto (optimal, but input with gradient normals, which
   /// hold only at extracted vertices).
   VertexPlacement placement = VertexPlacement::kAuto;
@@ -354,7 +354,7 @@ ConvertResult convert(const std::string& input, const std::string& out, const Co
                       const VolumeReadOptions& read = {});
 
 /// Options of convert_labels (`mlfe convert --labels`): a label map in, one closed, named,
-/// coloured surface per structure out (core/label_surface.h).
+/// coloured surface per structure out (core/labels/label_surface.h).
 struct LabelOptions {
   /// The structures to write; empty: every label present except the background 0. Labels not
   /// picked count as background, so the picked ones stay closed where they touched them.
@@ -710,7 +710,7 @@ ExportResult export_hierarchy(const std::string& input, const std::string& outpu
 
 // ---- compare ----
 
-/// `mlfe compare`: compare_files (<mlfe/formats/compare.h>), and the JSON report written to `report`
+/// `mlfe compare`: compare_files (<mlfe/pipeline/compare.h>), and the JSON report written to `report`
 /// when given.
 CompareResult compare(const std::string& expected, const std::string& actual,
                       const CompareOptions& options = {}, const std::string& report = "");

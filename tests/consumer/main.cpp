@@ -3,8 +3,8 @@
 // hierarchy it kept twice (a file and in memory) and compares the images with
 // mlfe::pipeline::compare. Writes OUT.glb, OUT.mlfeh, OUT.exr and OUT_again.exr.
 // Usage: mlfe_consumer VOLUME OUT.glb
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/mesh/hierarchy.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 

@@ -1,7 +1,7 @@
 // End-to-end tests of `mlfe convert / build / iso`: validator verdicts, physical placement,
 // determinism across thread counts, golden files, and bad input (exit 2, one line, no output).
 #include <gtest/gtest.h>
-#include <mlfe/core/field.h>
+#include <mlfe/core/field/field.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/openmesh_io.h>

@@ -2,9 +2,9 @@
 // mlfe's own readers to the same values and physical frame, its RMS against the input is the
 // file's reported error, and the leaf mesh is a valid .vtu (read by VTK) and Gmsh .msh.
 #include <gtest/gtest.h>
-#include <mlfe/core/sample_lattice.h>
+#include <mlfe/core/fem/hierarchy_resample.h>
+#include <mlfe/core/fem/sample_lattice.h>
 #include <mlfe/formats/hierarchy_io.h>
-#include <mlfe/formats/hierarchy_resample.h>
 #include <mlfe/formats/volume_reader.h>
 #include <sys/wait.h>
 #include <unistd.h>

@@ -3,7 +3,7 @@
 // through the command line; validator verdicts, names, colours and label extras, closed and
 // outward surfaces, shared interfaces, the same bytes with 1 and 2 threads, bad input.
 #include <gtest/gtest.h>
-#include <mlfe/core/label_surface.h>
+#include <mlfe/core/labels/label_surface.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/volume_writer.h>

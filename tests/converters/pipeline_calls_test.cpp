@@ -3,7 +3,7 @@
 // file and no temporary behind, whichever stage it was cancelled in; the calls give the command
 // line's bytes.
 #include <gtest/gtest.h>
-#include <mlfe/core/usage_error.h>
+#include <mlfe/core/base/usage_error.h>
 #include <mlfe/pipeline.h>
 
 #include <cstdlib>

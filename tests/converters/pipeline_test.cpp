@@ -2,7 +2,7 @@
 // command line's bytes, extract() and write_assets() agree, the 2D/3D holder, and bad input
 // throws mlfe::Error before any output is written.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/pipeline.h>
 
 #include <cstdlib>

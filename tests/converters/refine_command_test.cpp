@@ -1,6 +1,6 @@
 // mlfe refine, run as a separate process.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <sys/wait.h>
 #include <unistd.h>

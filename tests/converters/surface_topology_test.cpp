@@ -5,7 +5,7 @@
 // Also: every part of the data's surface is extracted (a single-sample spike), and
 // --min-component drops small parts and reports them.
 #include <gtest/gtest.h>
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/volume_reader.h>

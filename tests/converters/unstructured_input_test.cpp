@@ -2,7 +2,7 @@
 // re-entrant edge of a cube with a corner cut away, as point values on a tetrahedral mesh
 // (.vtu), reduced by mlfe::build and `mlfe build` / `mlfe convert`.
 #include <gtest/gtest.h>
-#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/mesh/hierarchy.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/vtu_writer.h>
 #include <mlfe/pipeline.h>

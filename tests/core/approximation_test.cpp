@@ -1,9 +1,9 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/bpx.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/bpx.h>
+#include <mlfe/core/fem/fe_assembly.h>
+#include <mlfe/core/fem/hierarchical_basis.h>
+#include <mlfe/core/field/field.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

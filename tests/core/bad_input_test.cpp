@@ -1,16 +1,16 @@
 // Bad input reaching the core through its public API throws mlfe::Error with a message (it used
 // to abort through MLFE_CHECK, which is kept for bugs in mlfe itself).
 #include <gtest/gtest.h>
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/hierarchical_basis.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/mesh_distance.h>
-#include <mlfe/core/transfer_function.h>
-#include <mlfe/core/triangle_mesh.h>
-#include <mlfe/core/volume_render.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/hierarchical_basis.h>
+#include <mlfe/core/field/field.h>
+#include <mlfe/core/mesh/hierarchy.h>
+#include <mlfe/core/render/transfer_function.h>
+#include <mlfe/core/render/volume_render.h>
+#include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/mesh_distance.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <string>
 #include <vector>

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/p1_element.h>
+#include <mlfe/core/fem/fe_assembly.h>
+#include <mlfe/core/fem/p1_element.h>
 
 #include <algorithm>
 #include <random>

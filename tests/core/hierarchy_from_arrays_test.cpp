@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/mesh/hierarchy.h>
 
 #include <cmath>
 #include <functional>

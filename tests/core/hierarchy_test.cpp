@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/mesh_quality.h>
+#include <mlfe/core/mesh/hierarchy.h>
+#include <mlfe/core/mesh/mesh_quality.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>

@@ -1,7 +1,7 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/iso_surface.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/field/field.h>
+#include <mlfe/core/surface/iso_surface.h>
 
 #include <cmath>
 #include <map>

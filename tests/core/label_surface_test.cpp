@@ -2,9 +2,9 @@
 // touching structures share every interface vertex; no phantom structure between two labels;
 // small islands kept; the same output whatever the thread count.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/label_surface.h>
-#include <mlfe/core/mesh_distance.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/labels/label_surface.h>
+#include <mlfe/core/surface/mesh_distance.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

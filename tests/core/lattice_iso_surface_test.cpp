@@ -1,7 +1,7 @@
-// lattice_iso_surface: marching cubes on the samples (core/lattice_iso_surface.cpp).
+// lattice_iso_surface: marching cubes on the samples (core/surface/lattice_iso_surface.cpp).
 #include <gtest/gtest.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

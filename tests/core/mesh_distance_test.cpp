@@ -1,7 +1,7 @@
 // core/mesh_distance: closest points against brute force, exact distances for planted
 // displacements, sampling determinism across thread counts, signed volume and handedness.
 #include <gtest/gtest.h>
-#include <mlfe/core/mesh_distance.h>
+#include <mlfe/core/surface/mesh_distance.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

@@ -1,8 +1,8 @@
 // mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone;
 // spatially_ordered keeps the surface.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <algorithm>
 #include <array>

@@ -1,12 +1,12 @@
 // The hierarchy on the samples' lattice (sample_lattice.h): vertices on samples, nothing below
 // the sample spacing, every sample owned once, the finest level exact, errors at the samples.
 #include <gtest/gtest.h>
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/iso_surface.h>
-#include <mlfe/core/noise_estimate.h>
-#include <mlfe/core/sample_lattice.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/fe_assembly.h>
+#include <mlfe/core/fem/sample_lattice.h>
+#include <mlfe/core/field/field.h>
+#include <mlfe/core/field/noise_estimate.h>
+#include <mlfe/core/surface/iso_surface.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

@@ -3,10 +3,10 @@
 // graded meshes with coarse leaves (kept as sums) and fine ones (kept as samples), across
 // refinements, and the same bits whatever the thread count.
 #include <gtest/gtest.h>
-#include <mlfe/core/fe_assembly.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/sample_lattice.h>
-#include <mlfe/core/sampled_least_squares.h>
+#include <mlfe/core/fem/fe_assembly.h>
+#include <mlfe/core/fem/sample_lattice.h>
+#include <mlfe/core/fem/sampled_least_squares.h>
+#include <mlfe/core/field/field.h>
 #include <tbb/global_control.h>
 
 #include <algorithm>

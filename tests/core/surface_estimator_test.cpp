@@ -1,9 +1,9 @@
 // The min/max pyramid, the surface-gap estimator and surface-driven refinement.
 #include <gtest/gtest.h>
-#include <mlfe/core/approximation.h>
-#include <mlfe/core/field.h>
-#include <mlfe/core/minmax_pyramid.h>
-#include <mlfe/core/surface_estimator.h>
+#include <mlfe/core/fem/approximation.h>
+#include <mlfe/core/fem/surface_estimator.h>
+#include <mlfe/core/field/field.h>
+#include <mlfe/core/field/minmax_pyramid.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

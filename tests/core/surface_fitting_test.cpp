@@ -1,7 +1,7 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/surface_fitting.h>
-#include <mlfe/core/surface_simplification.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/simplify/surface_simplification.h>
+#include <mlfe/core/surface/surface_fitting.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/surface_simplification.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/simplify/surface_simplification.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 

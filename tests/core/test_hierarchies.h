@@ -2,8 +2,8 @@
 // random marking, barycentric coordinates, equality of every stored array.
 #pragma once
 #include <gtest/gtest.h>
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/mesh/hierarchy.h>
 
 #include <array>
 #include <cmath>

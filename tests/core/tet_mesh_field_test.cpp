@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/tet_mesh_field.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/field/tet_mesh_field.h>
 
 #include <cmath>
 #include <random>

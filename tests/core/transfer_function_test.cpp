@@ -2,8 +2,8 @@
 // accumulator (both) against fine numerical integration, the table against the closed form,
 // constant opacity against the analytic transmittance, narrow spikes, early termination.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/transfer_function.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/render/transfer_function.h>
 
 #include <algorithm>
 #include <cmath>

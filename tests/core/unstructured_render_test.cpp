@@ -4,8 +4,8 @@
 // hierarchy renderer's on the same tetrahedra (camera outside and inside, with and without
 // empty-space skipping), the same bytes with 1 and 2 threads, non-conforming meshes rejected.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/volume_render.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/render/volume_render.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

@@ -2,7 +2,7 @@
 // faces; analytic transmittance; exactness on linear fields across levels; empty-space
 // skipping; the same image with 1 and 2 threads; the renderer's memory per tetrahedron.
 #include <gtest/gtest.h>
-#include <mlfe/core/volume_render.h>
+#include <mlfe/core/render/volume_render.h>
 #include <tbb/global_control.h>
 
 #include <cmath>

@@ -6,7 +6,7 @@
 #include <ImfInputFile.h>
 #include <ImfMatrixAttribute.h>
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/exr_writer.h>
 #include <mlfe/formats/transfer_function_io.h>
 

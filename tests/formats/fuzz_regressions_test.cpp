@@ -1,7 +1,7 @@
 // Inputs the fuzzers once crashed on (tests/data/fuzz_regressions/): each must now be
 // refused with mlfe::Error naming the file — never a crash or an abort inside a library.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/volume_reader.h>
 

@@ -1,7 +1,7 @@
 // formats/gltf_reader: geometry back from mlfe's own .glb/.gltf (Draco, plain, quantized), node
 // transforms applied (a mirroring one flips the winding), and bad files end in mlfe::Error.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/gltf_writer.h>
 

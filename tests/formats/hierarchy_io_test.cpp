@@ -1,5 +1,5 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <zlib.h>
 

@@ -2,8 +2,8 @@
 // bound, prefixes as the hierarchical-basis approximation of their level, v1 still read,
 // truncated and bit-flipped files rejected.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchical_basis.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/fem/hierarchical_basis.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
 

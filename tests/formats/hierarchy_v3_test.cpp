@@ -3,7 +3,7 @@
 // otherwise, inconsistent lattices and values are refused, and every truncation or bit flip
 // of a v3 file is rejected.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
 

@@ -7,7 +7,7 @@
 #include <ImfStringAttribute.h>
 #include <gtest/gtest.h>
 #include <half.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/image_reader.h>
 #include <png.h>
 

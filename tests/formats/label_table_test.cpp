@@ -1,7 +1,7 @@
 // Label tables: one small file per format (tests/data/labels), the JHU atlas' MRIcron pair,
 // the table found beside a volume, and bad tables as one-line errors.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/label_table.h>
 
 #include <filesystem>

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/mesh/hierarchy.h>
 #include <mlfe/formats/msh_writer.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/vtu_writer.h>

@@ -2,7 +2,7 @@
 // problem, never a crash, an abort or an exit from inside a library.
 #include <dirent.h>
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/volume_reader.h>
 #include <nifti2_io.h>
 #include <openvdb/io/File.h>

@@ -1,6 +1,6 @@
 // Importers: round trips through each library's own writer, and the shared real files.
 #include <gtest/gtest.h>
-#include <mlfe/core/error.h>
+#include <mlfe/core/base/error.h>
 #include <mlfe/formats/volume_reader.h>
 #include <nifti2_io.h>
 #include <openvdb/io/File.h>

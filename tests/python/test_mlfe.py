@@ -112,7 +112,7 @@ class PythonModuleTest(unittest.TestCase):
         """A .vtu tetrahedral mesh as the input function: build and convert from Python give the
         command line's hierarchy and surfaces."""
         vtu = os.path.join(self.dir, "poisson.vtu")
-        subprocess.run(["/usr/bin/python3", os.path.join(SOURCE, "bench", "make_poisson_vtu.py"), vtu, "--n", "8"],
+        subprocess.run(["/usr/bin/python3", os.path.join(SOURCE, "bench", "data", "make_poisson_vtu.py"), vtu, "--n", "8"],
                        check=True, capture_output=True)
         b = mlfe.build(vtu, rms="1%")
         rep = os.path.join(self.dir, "cli.json")

@@ -3,7 +3,7 @@
 // surfaces encoded with the same DracoOptions box land on the same grid points: shared
 // boundaries stay crack-free after decoding.
 #pragma once
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <array>
 #include <cstddef>

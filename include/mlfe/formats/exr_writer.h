@@ -6,7 +6,7 @@
 // row-vector convention, p' = p · M), and string attributes given by the caller (mlfe writes
 // the transfer function, the source and the Z convention).
 #pragma once
-#include <mlfe/core/volume_render.h>
+#include <mlfe/core/render/volume_render.h>
 
 #include <array>
 #include <string>

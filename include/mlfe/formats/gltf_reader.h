@@ -3,7 +3,7 @@
 // the asset, Draco decodes KHR_draco_mesh_compression primitives, and node transforms are
 // applied so positions are in the scene's frame (metres, +Y up for mlfe's assets).
 #pragma once
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <nlohmann/json.hpp>
 #include <string>

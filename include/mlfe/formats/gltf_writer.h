@@ -5,7 +5,7 @@
 // maps to +Y and anterior to +Z, so a viewer shows the patient upright, facing the camera.
 // The matrix used is recorded in asset.extras.mlfe.physical_to_gltf.
 #pragma once
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <array>
 #include <nlohmann/json.hpp>

@@ -40,7 +40,7 @@
 //     num_children    ne     u8
 //     level           ne     u8
 //     kind            ne     u8    0 coarse, 1 red, 2 green
-//   The arrays are those of mlfe::Hierarchy (core/hierarchy.h); the edge map is not stored, it
+//   The arrays are those of mlfe::Hierarchy (core/mesh/hierarchy.h); the edge map is not stored, it
 //   is rebuilt from vertex_parents. Readers validate everything (Hierarchy::from_arrays).
 //
 // Versioning: a reader rejects versions it does not know; any change to the layout above
@@ -58,14 +58,14 @@
 // ---- Format, version 3 (docs/mlfeh-v3.md) ----
 //
 // Version 2's layout with a longer HEAD: whether the hierarchy is on the samples' lattice
-// (core/sample_lattice.h), the lattice level L and the data's samples per axis (so readers
+// (core/fem/sample_lattice.h), the lattice level L and the data's samples per axis (so readers
 // know the data's grid and box inside T0's padded cube), and the error bound at the samples
 // of an error-bounded build; and one more value coding, integer surpluses (lossless for
 // integer data at bound 0).
 //
 #pragma once
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/mesh/hierarchy.h>
 #include <mlfe/formats/hierarchy_levels.h>
 
 #include <array>

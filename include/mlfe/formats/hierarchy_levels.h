@@ -15,8 +15,8 @@
 // the same elements, vertices and levels in a canonical numbering (the ids differ from the
 // original's in general, the mesh does not).
 #pragma once
-#include <mlfe/core/error.h>
-#include <mlfe/core/hierarchy.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/mesh/hierarchy.h>
 
 #include <cstdint>
 #include <vector>

@@ -1,6 +1,6 @@
 // MetaImage (.mha with the data in the same file, .mhd with a separate data file).
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

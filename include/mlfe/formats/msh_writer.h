@@ -12,9 +12,9 @@
 // $Entities holds one entity of dimension D per group (ascending label, its own box), and
 // $Elements one block per entity; element tags run 1..m in block order.
 #pragma once
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/ids.h>
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/mesh/hierarchy.h>
+#include <mlfe/core/mesh/ids.h>
 #include <mlfe/formats/element_regions.h>
 
 #include <string>

@@ -1,6 +1,6 @@
 // NRRD volumes and height fields (.nrrd with attached data, .nhdr with detached data) via Teem.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

@@ -2,7 +2,7 @@
 // .off, .stl) and quadric decimation for coarser levels of detail.
 #pragma once
 // OpenMesh registers its readers/writers only when MeshIO.hh is seen before a mesh kernel.
-#include <mlfe/core/triangle_mesh.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>

@@ -1,6 +1,6 @@
 // Binary PGM (P5) height fields, 8 or 16 bit.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

@@ -1,6 +1,6 @@
 // Grey PNG height fields (8 or 16 bit) via libpng.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

@@ -1,6 +1,6 @@
 // Headerless raw volumes described by a JSON sidecar (FILE.json) or by command-line flags.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>

@@ -13,7 +13,7 @@
 // and the memory limit) and reports any bad, truncated or unsupported input as mlfe::Error with
 // one line "<file>: <problem>".
 #pragma once
-#include <mlfe/core/tet_mesh_field.h>
+#include <mlfe/core/field/tet_mesh_field.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>

@@ -6,7 +6,7 @@
 // Only linear opacity segments (midpoint 0.5, sharpness 0, ParaView's default) are accepted:
 // other values would need ParaView's Hermite-shaped segments. "Name" becomes the name.
 #pragma once
-#include <mlfe/core/transfer_function.h>
+#include <mlfe/core/render/transfer_function.h>
 
 #include <string>
 

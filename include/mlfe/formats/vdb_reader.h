@@ -1,6 +1,6 @@
 // OpenVDB volumes (.vdb): level sets, fog volumes and other scalar grids.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <string>

@@ -9,7 +9,7 @@
 // of any kind is reported as mlfe::Error with one line "<file>: <problem>"; the libraries'
 // own diagnostics are captured and never printed, and no library may end the process.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 
 #include <array>
 #include <cstddef>

@@ -2,7 +2,7 @@
 // OpenVDB), keeping the grid's index-to-physical transform, so `mlfe export` output opens in
 // other tools in the frame of the data it came from.
 #pragma once
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
 
 #include <string>
 

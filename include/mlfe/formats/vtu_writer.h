@@ -8,9 +8,9 @@
 // All arrays are in one <AppendedData encoding="raw"> block, each preceded by its byte count as
 // a UInt64, in the order the DataArray elements appear; the XML offsets point at those counts.
 #pragma once
-#include <mlfe/core/hierarchy.h>
-#include <mlfe/core/ids.h>
-#include <mlfe/core/scalar_grid.h>
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/mesh/hierarchy.h>
+#include <mlfe/core/mesh/ids.h>
 #include <mlfe/formats/element_regions.h>
 
 #include <string>

@@ -1,0 +1,256 @@
+#!/usr/bin/python3
+"""Label maps (issue #24): `mlfe convert --labels` against the Slicer-like VTK pipeline.
+
+Peers, in one run on the same files:
+  - mlfe: `mlfe convert VOL --labels -o out.glb --report r.json`, timed end to end (read, label
+    checks, extraction, smoothing, simplification, Draco .glb), peak RSS from `/usr/bin/time -f %M`.
+  - VTK 9.1 (python3-vtk9), what 3D Slicer does to make closed surfaces: per label
+    vtkDiscreteFlyingEdges3D, vtkWindowedSincPolyDataFilter (20 iterations, pass band 0.1,
+    non-manifold smoothing, normalized coordinates, as Slicer), vtkQuadricDecimation to 10 %
+    (target reduction 0.9). Timed from reading the volume to the last decimated label, in its
+    own process (peak RSS of that process: VmHWM of its own address space). Its meshes are written to PLY after the clock stops
+    and packed into a Draco .glb at mlfe's tolerance by label_distance_bench, for the bytes.
+  - The reference per label: its voxel-boundary surface, vtkDiscreteFlyingEdges3D unsmoothed
+    (the first stage of the VTK pipeline, written to PLY outside the timed part).
+Peak RSS: not getrusage's ru_maxrss of the process itself, nor of a child of this script: Linux
+carries the high-water mark over fork and exec, so a child of this script (which holds the parcel
+volume and the distance arrays) reports at least this script's own peak (the earlier run recorded
+352.5 MB for both peers). /usr/bin/time forks from its own small image, and VmHWM belongs to the
+address space made by exec, so both measure the peer alone.
+
+Distances per label (label_distance_bench, core/surface/mesh_distance.h): symmetric Hausdorff and the
+larger one-sided mean, in voxels, vertices + 20 000 area samples per mesh.
+
+The >= 100-label volume: the colin27 brain (181 x 217 x 181, 1 mm) cut into 60 Voronoi parcels
+(seeds drawn with a fixed generator inside the brain mask) and two intensity classes (below and
+above the brain's median), 120 labels; written as a uint16 NRRD.
+
+  /usr/bin/python3 bench/py/labels_bench.py --build build --out /tmp/labels_bench
+  /usr/bin/python3 bench/py/labels_bench.py --build build --timing-rounds 5 --base-build ../base/build
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHARED = os.path.join(HERE, "..", "..", "..", "shared", "data")
+
+
+def make_parcels(out_path, parcels=60, seed=24):
+    """colin27 -> 2 intensity classes x `parcels` Voronoi cells inside the brain mask."""
+    from vtkmodules.vtkIOImage import vtkNIFTIImageReader
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    r = vtkNIFTIImageReader()
+    r.SetFileName(os.path.join(SHARED, "mri_colin27_brain.nii.gz"))
+    r.Update()
+    img = r.GetOutput()
+    nx, ny, nz = img.GetDimensions()
+    a = vtk_to_numpy(img.GetPointData().GetScalars()).reshape(nz, ny, nx)
+    mask = a > 0
+    idx = np.argwhere(mask)  # (k, j, i)
+    rng = np.random.default_rng(seed)
+    seeds = idx[rng.choice(len(idx), parcels, replace=False)].astype(np.float32)
+    cell = np.empty(len(idx), np.int32)
+    for s in range(0, len(idx), 200000):
+        p = idx[s:s + 200000].astype(np.float32)
+        d = ((p[:, None, :] - seeds[None, :, :]) ** 2).sum(axis=2)
+        cell[s:s + 200000] = d.argmin(axis=1)
+    bright = a[mask] > np.median(a[mask])
+    labels = np.zeros(a.shape, np.uint16)
+    labels[mask] = (1 + cell + parcels * bright).astype(np.uint16)
+    header = ("NRRD0004\ntype: uint16\ndimension: 3\nsizes: {} {} {}\nspace: RAS\n"
+              "space directions: (1,0,0) (0,1,0) (0,0,1)\nspace origin: (0,0,0)\nendian: little\n"
+              "encoding: raw\n\n").format(nx, ny, nz)
+    with open(out_path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(labels.astype("<u2").tobytes())
+    return int(len(np.unique(labels)) - 1)
+
+
+VTK_WORKER = r'''
+import json, sys, time
+t0 = time.perf_counter()
+from vtkmodules.vtkIOImage import vtkNIFTIImageReader, vtkNrrdReader
+from vtkmodules.vtkFiltersGeneral import vtkDiscreteFlyingEdges3D
+from vtkmodules.vtkFiltersCore import vtkWindowedSincPolyDataFilter, vtkQuadricDecimation
+from vtkmodules.vtkIOPLY import vtkPLYWriter
+from vtkmodules.util.numpy_support import vtk_to_numpy
+import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_paths import mlfe_binary  # noqa: E402
+path, out_dir = sys.argv[1], sys.argv[2]
+r = vtkNIFTIImageReader() if ".nii" in path else vtkNrrdReader()
+r.SetFileName(path)
+r.Update()
+img = r.GetOutput()
+if ".nii" in path and r.GetQFac() < 0:
+    # VTK reverses the slices of a qfac = -1 NIfTI; back to the file's voxel order.
+    from vtkmodules.vtkImagingCore import vtkImageFlip
+    flip = vtkImageFlip()
+    flip.SetInputData(img)
+    flip.SetFilteredAxis(2)
+    flip.Update()
+    img = flip.GetOutput()
+# Index space: the distances are in voxels and mlfe's meshes are mapped back to indices.
+img.SetSpacing(1, 1, 1)
+img.SetOrigin(0, 0, 0)
+labels = [int(v) for v in np.unique(vtk_to_numpy(img.GetPointData().GetScalars())) if v != 0]
+compute = 0.0
+refs, outs = {}, {}
+for l in labels:
+    t = time.perf_counter()
+    fe = vtkDiscreteFlyingEdges3D()
+    fe.SetInputData(img)
+    fe.SetValue(0, l)
+    fe.ComputeNormalsOff()
+    fe.ComputeGradientsOff()
+    fe.ComputeScalarsOff()
+    fe.Update()
+    sm = vtkWindowedSincPolyDataFilter()
+    sm.SetInputConnection(fe.GetOutputPort())
+    sm.SetNumberOfIterations(20)
+    sm.SetPassBand(0.1)
+    sm.BoundarySmoothingOff()
+    sm.FeatureEdgeSmoothingOff()
+    sm.NonManifoldSmoothingOn()
+    sm.NormalizeCoordinatesOn()
+    dec = vtkQuadricDecimation()
+    dec.SetInputConnection(sm.GetOutputPort())
+    dec.SetTargetReduction(0.9)
+    dec.Update()
+    compute += time.perf_counter() - t
+    refs[l] = fe.GetOutput()
+    outs[l] = dec.GetOutput()
+seconds = time.perf_counter() - t0
+triangles = sum(o.GetNumberOfPolys() for o in outs.values())
+# VmHWM: the high-water mark of this address space, which exec made fresh (ru_maxrss is not: it
+# starts at the parent's resident size at fork).
+peak = next(float(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")) / 1024.0
+for l in labels:
+    for name, poly in (("ref", refs[l]), ("vtk", outs[l])):
+        w = vtkPLYWriter()
+        w.SetFileName("%s/%s_%d.ply" % (out_dir, name, l))
+        w.SetInputData(poly)
+        w.SetFileTypeToBinary()
+        w.Write()
+print(json.dumps({"labels": labels, "seconds": seconds, "compute_seconds": compute, "triangles": triangles,
+                  "peak_rss_mb": peak,
+                  "reference_triangles": sum(o.GetNumberOfPolys() for o in refs.values())}))
+'''
+
+
+def run_vtk(vol, out_dir):
+    p = subprocess.run([sys.executable, "-c", VTK_WORKER, vol, out_dir], check=True, capture_output=True,
+                       text=True)
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def run_mlfe(mlfe, vol, out_dir, tag, extra):
+    glb = os.path.join(out_dir, tag + ".glb")
+    rep = os.path.join(out_dir, tag + ".json")
+    t = time.perf_counter()
+    p = subprocess.run(["/usr/bin/time", "-f", "maxrss_kb %M", mlfe, "convert", vol, "--labels", "-o", glb, "--report",
+                        rep, "--quiet"] + extra, check=True, capture_output=True, text=True)
+    seconds = time.perf_counter() - t
+    peak_kb = [float(l.split()[1]) for l in p.stderr.splitlines() if l.startswith("maxrss_kb ")][-1]
+    r = json.load(open(rep))
+    return glb, {"seconds": seconds, "triangles": r["asset"]["triangles"], "bytes": r["asset"]["bytes"],
+                 "peak_rss_mb": peak_kb / 1024.0, "report_peak_rss_mb": r["peak_rss_mb"], "structures": r["asset"]["structure_count"],
+                 "stage_seconds": r["asset"]["stage_seconds"],
+                 "all_closed": all(s["closed"] for s in r["asset"]["structures"])}
+
+
+def timed(cmd):
+    """Runs cmd under /usr/bin/time; returns (process, wall seconds, user + sys seconds)."""
+    p = subprocess.run(["/usr/bin/time", "-f", "TIME %e %U %S"] + cmd, capture_output=True, text=True, check=True)
+    e, u, s = [float(x) for x in [l for l in p.stderr.splitlines() if l.startswith("TIME")][-1].split()[1:]]
+    return p, e, u + s
+
+
+def timing_rounds(mlfe, base_mlfe, vol, out_dir, rounds):
+    """Time only, interleaved: per round the VTK worker, mlfe with 2 and 1 threads and (when
+    given) a base build's mlfe with 2 threads. VTK's wall is its worker's own clock; CPU is user +
+    sys of each process. Prints each round and the minima and medians."""
+    import statistics
+    glb = os.path.join(out_dir, "timing.glb")
+    peers = [("mlfe, 2 threads", mlfe, 2), ("mlfe, 1 thread", mlfe, 1)]
+    if base_mlfe:
+        peers.append(("base mlfe, 2 threads", base_mlfe, 2))
+    rows = {"VTK pipeline": []}
+    rows.update({name: [] for name, _, _ in peers})
+    for i in range(rounds):
+        load = open("/proc/loadavg").read().split()[0]
+        p, _, cpu = timed([sys.executable, "-c", VTK_WORKER, vol, out_dir])
+        rows["VTK pipeline"].append((json.loads(p.stdout.strip().splitlines()[-1])["seconds"], cpu))
+        for name, binary, threads in peers:
+            _, wall, cpu = timed([binary, "--threads", str(threads), "convert", vol, "--labels", "-o", glb, "--quiet"])
+            rows[name].append((wall, cpu))
+        print(json.dumps({"round": i, "load": load, "wall_cpu": {k: r[-1] for k, r in rows.items()}}), flush=True)
+    vtk_wall = statistics.median(x[0] for x in rows["VTK pipeline"])
+    vtk_cpu = statistics.median(x[1] for x in rows["VTK pipeline"])
+    for name, r in rows.items():
+        wall, cpu = [x[0] for x in r], [x[1] for x in r]
+        print("%-22s wall min %.2f median %.2f  cpu min %.2f median %.2f  median/VTK wall %.2f cpu %.2f" %
+              (name, min(wall), statistics.median(wall), min(cpu), statistics.median(cpu),
+               statistics.median(wall) / vtk_wall, statistics.median(cpu) / vtk_cpu), flush=True)
+
+
+def distances(build, vol, glb, out_dir):
+    tool = os.path.join(build, "bench", "label_distance_bench")
+    p = subprocess.run([tool, vol, glb, out_dir], check=True, capture_output=True, text=True)
+    return json.loads(p.stdout)
+
+
+def summary(rows, key):
+    means = [r[key]["mean"] for r in rows]
+    hd = [r[key]["hausdorff"] for r in rows]
+    return {"mean_max": max(means), "mean_median": float(np.median(means)), "hausdorff_max": max(hd),
+            "hausdorff_median": float(np.median(hd)),
+            "labels_mean_le_0.15": sum(m <= 0.15 for m in means), "labels_hausdorff_le_1.5": sum(h <= 1.5 for h in hd)}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--build", default=os.path.join(HERE, "..", "..", "build"))
+    ap.add_argument("--out", default="/tmp/labels_bench")
+    ap.add_argument("--mlfe-args", default="", help="extra mlfe convert options")
+    ap.add_argument("--volumes", default="jhu,parcels", help="which volumes: jhu, parcels or both")
+    ap.add_argument("--timing-rounds", type=int, default=0,
+                    help="instead: this many interleaved timing rounds on the JHU atlas (no distances)")
+    ap.add_argument("--base-build", default="", help="with --timing-rounds: a second build to time beside")
+    args = ap.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    mlfe = mlfe_binary(args.build)
+    if args.timing_rounds > 0:
+        base = mlfe_binary(args.base_build) if args.base_build else ""
+        timing_rounds(mlfe, base, os.path.join(SHARED, "atlas_jhu_wm_labels_1mm.nii.gz"), args.out,
+                      args.timing_rounds)
+        return
+    parcels = os.path.join(args.out, "colin27_parcels_120.nrrd")
+    wanted = args.volumes.split(",")
+    volumes = []
+    if "jhu" in wanted:
+        volumes.append(("jhu_atlas", os.path.join(SHARED, "atlas_jhu_wm_labels_1mm.nii.gz")))
+    if "parcels" in wanted:
+        volumes.append(("parcels_%d" % make_parcels(parcels), parcels))
+    results = {}
+    for tag, vol in volumes:
+        d = os.path.join(args.out, tag)
+        os.makedirs(d, exist_ok=True)
+        vtk = run_vtk(vol, d)
+        glb, m = run_mlfe(mlfe, vol, d, "mlfe", args.mlfe_args.split())
+        dist = distances(args.build, vol, glb, d)
+        results[tag] = {"mlfe": m, "vtk": vtk | {"bytes": dist["vtk_glb_bytes"]},
+                        "mlfe_distance": summary(dist["labels"], "mlfe"),
+                        "vtk_distance": summary(dist["labels"], "vtk"), "per_label": dist["labels"]}
+        print(json.dumps({tag: {k: v for k, v in results[tag].items() if k != "per_label"}}, indent=1), flush=True)
+    json.dump(results, open(os.path.join(args.out, "results.json"), "w"), indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,84 @@
+#include "converters/cli/volume_options.h"
+
+#include <mlfe/formats/atomic_file.h>
+
+#include <filesystem>
+#include <vector>
+
+namespace mlfe::cli {
+
+void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
+  VolumeReadOptions* o = &opts;
+  cmd->add_option("--grid", opts.grid_name,
+                  "VDB: name of the grid to read (default: the first scalar grid); .vtu/.msh: the point-data "
+                  "array or $NodeData view (default: the first scalar one)");
+  cmd->add_flag("--vec-magnitude", opts.vec_magnitude, "VDB: read a vector grid as its magnitude");
+  cmd->add_option_function<double>(
+      "--nan-as", [o](const double& v) { o->nan_as = v; },
+      "replace NaN/Inf voxels by this value (default: NaN/Inf is an error)");
+  cmd->add_option("--space", opts.space, "output coordinate convention: ras or lps (flips x and y as needed)")
+      ->transform(CLI::IsMember({"ras", "lps"}, CLI::ignore_case));
+  cmd->add_option_function<std::vector<std::int64_t>>(
+         "--raw-dims",
+         [o](const std::vector<std::int64_t>& v) {
+           o->raw_dims = std::array<std::int64_t, 3>{v[0], v[1], v.size() > 2 ? v[2] : 1};
+         },
+         "raw data without sidecar: NX NY [NZ]")
+      ->expected(2, 3);
+  cmd->add_option("--raw-type", opts.raw_dtype,
+                  "raw data type: uint8 int8 uint16 int16 uint32 int32 float32 float64")
+      ->check(CLI::IsMember({"uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64",
+                             "u8", "i8", "u16", "i16", "u32", "i32", "f32", "f64", "float", "double"}));
+  cmd->add_option("--raw-endian", opts.raw_endian, "raw data byte order: little (default) or big")
+      ->check(CLI::IsMember({"little", "big"}));
+  cmd->add_option_function<std::vector<double>>(
+         "--raw-spacing",
+         [o](const std::vector<double>& v) {
+           o->raw_spacing = std::array<double, 3>{v[0], v[1], v.size() > 2 ? v[2] : 1.0};
+         },
+         "raw data: voxel spacing SX SY [SZ]")
+      ->expected(2, 3);
+  cmd->add_option_function<std::vector<double>>(
+         "--raw-origin",
+         [o](const std::vector<double>& v) {
+           o->raw_origin = std::array<double, 3>{v[0], v[1], v.size() > 2 ? v[2] : 0.0};
+         },
+         "raw data: physical position of voxel (0,0,0): OX OY [OZ]")
+      ->expected(2, 3);
+  cmd->add_option("--raw-offset", opts.raw_offset, "raw data: bytes to skip before the voxels")
+      ->check(CLI::NonNegativeNumber);
+}
+
+namespace {
+
+bool same_file(const std::string& a, const std::string& b) {
+  namespace fs = std::filesystem;
+  // weakly_canonical keeps a relative path relative when nothing of it exists yet.
+  std::error_code ea, eb;
+  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea);
+  const fs::path cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
+  if (!ea && !eb && ca == cb) return true;
+  std::error_code ec;
+  return fs::equivalent(a, b, ec) && !ec;
+}
+
+}  // namespace
+
+void check_distinct_files(const NamedPaths& inputs, const NamedPaths& outputs) {
+  std::vector<std::pair<std::string, std::string>> written;  // option, target
+  for (const auto& [name, path] : outputs) {
+    if (path.empty()) continue;
+    const std::string target = output_target(path);
+    for (const auto& [in_name, in_path] : inputs)
+      if (!in_path.empty() && same_file(target, in_path))
+        throw CLI::ValidationError(name,
+                                   path + " is also an input (" + in_name + "); it would be overwritten");
+    for (const auto& [other, other_target] : written)
+      if (same_file(target, other_target))
+        throw CLI::ValidationError(name,
+                                   path + " is also the output " + other + " (two outputs on one path)");
+    written.emplace_back(name, target);
+  }
+}
+
+}  // namespace mlfe::cli

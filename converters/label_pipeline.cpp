@@ -1,0 +1,274 @@
+// convert_labels (pipeline.h): a label map to one named, coloured, closed surface per
+// structure, through the shared interface complex of core/labels/label_surface.h.
+#include <fmt/format.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/labels/label_surface.h>
+#include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/gltf_writer.h>
+#include <mlfe/formats/label_table.h>
+#include <mlfe/formats/openmesh_io.h>
+#include <mlfe/pipeline.h>
+#include <mlfe/version.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <map>
+
+#include "converters/label_hierarchy.h"
+
+namespace mlfe {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// glTF colours are linear; tables hold sRGB bytes.
+float srgb_to_linear(std::uint8_t c) {
+  const double x = c / 255.0;
+  return float(x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4));
+}
+
+}  // namespace
+
+std::vector<std::uint16_t> parse_label_list(const std::string& text) {
+  std::vector<std::uint16_t> out;
+  auto number = [&](const std::string& s) -> long long {
+    std::size_t used = 0;
+    long long v = -1;
+    try {
+      v = std::stoll(s, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (s.empty() || used != s.size() || v < 0 || v > 65535)
+      throw Error(fmt::format("--labels: '{}' is not a label 0..65535 (expected e.g. 3,7-9)", s));
+    return v;
+  };
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    const std::string item = text.substr(start, comma - start);
+    const std::size_t dash = item.find('-', 1);
+    const long long lo = number(item.substr(0, dash)),
+                    hi = dash == std::string::npos ? lo : number(item.substr(dash + 1));
+    if (hi < lo) throw Error(fmt::format("--labels: range '{}' runs backwards", item));
+    for (long long v = lo; v <= hi; ++v) out.push_back(static_cast<std::uint16_t>(v));
+    start = comma + 1;
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+namespace {
+
+void check_label_options(const LabelOptions& o) {
+  if (!(o.simplify >= 0) || !std::isfinite(o.simplify))
+    throw Error(fmt::format("simplify: expected a value >= 0, got {}", o.simplify));
+  if (!(o.max_offset >= 0) || !std::isfinite(o.max_offset))
+    throw Error(fmt::format("max offset: expected a value >= 0, got {}", o.max_offset));
+  if (o.smoothing_iterations < 0 || o.smoothing_iterations > 1000)
+    throw Error(fmt::format("smoothing iterations: expected 0..1000, got {}", o.smoothing_iterations));
+  if (!(o.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", o.tolerance));
+}
+
+// The named table, else one held in memory (a label hierarchy's), else the one beside the volume.
+LabelTable label_table_for(const LabelOptions& o, const ScalarGrid& grid,
+                           const std::function<void(const std::string&)>& warn) {
+  if (o.table.empty() && !o.table_json.empty()) {
+    LabelTable table = parse_label_table(o.table_json, o.table_json_source + ".json");
+    table.source = o.table_json_source;
+    return table;
+  }
+  std::vector<std::string> warnings;
+  LabelTable table = pipeline::detail::named_or_beside_table(o.table, grid.source, warnings);
+  for (const auto& w : warnings) warn(w);
+  return table;
+}
+
+// The labels to write: the picked ones present (absent ones warned about), else every label
+// but the background; the table's labels absent from the volume are warned about too.
+std::vector<std::uint16_t> pick_labels(const LabelOptions& o,
+                                       const std::map<std::uint16_t, std::size_t>& present,
+                                       const LabelTable& table, const std::string& source,
+                                       const std::function<void(const std::string&)>& warn) {
+  std::vector<std::uint16_t> absent;
+  for (const auto& [l, e] : table.entries)
+    if (l != 0 && !present.count(l)) absent.push_back(l);
+  if (!absent.empty())
+    warn(fmt::format("{}: {} labels of the table are absent from {} (e.g. {})", table.source, absent.size(),
+                     source, absent.front()));
+  std::vector<std::uint16_t> picked;
+  for (auto l : o.labels) {
+    if (l == 0) throw Error("--labels: 0 is the background and has no surface");
+    if (!present.count(l))
+      warn(fmt::format("label {} is absent from {}", l, source));
+    else
+      picked.push_back(l);
+  }
+  if (o.labels.empty())
+    for (const auto& [l, n] : present)
+      if (l != 0) picked.push_back(l);
+  if (picked.empty()) throw Error(source + ": no labels to convert (only background)");
+  return picked;
+}
+
+// One surface per picked structure, named and coloured from the table, with its summary row.
+struct Structures {
+  std::vector<GltfSurface> surfaces;
+  nlohmann::json rows = nlohmann::json::array();
+  std::size_t triangles = 0;
+};
+
+Structures structure_surfaces(const LabelInterfaces& x, const std::vector<std::uint16_t>& picked,
+                              const LabelTable& table, const std::map<std::uint16_t, std::size_t>& counts,
+                              const GridTransform& transform) {
+  const double voxel_mm3 = transform.spacing[0] * transform.spacing[1] * transform.spacing[2];
+  Structures out;
+  for (auto l : labels_with_surfaces(x)) {
+    if (std::find(picked.begin(), picked.end(), l) == picked.end()) continue;
+    GltfSurface s;
+    s.mesh = label_surface(x, l, transform);
+    compute_area_weighted_normals(s.mesh);
+    s.name = table.name(l);
+    s.node_name = s.name;
+    const auto c = table.color(l);
+    s.color = {srgb_to_linear(c[0]), srgb_to_linear(c[1]), srgb_to_linear(c[2]), 1.0f};
+    s.iso_value = l;
+    const std::size_t voxels = counts.count(l) ? counts.at(l) : 0;
+    s.node_extras = {{"label", l}, {"voxels", voxels}, {"volume_mm3", double(voxels) * voxel_mm3}};
+    out.rows.push_back({{"label", l},
+                        {"name", s.name},
+                        {"color", {c[0], c[1], c[2]}},
+                        {"voxels", voxels},
+                        {"volume_mm3", double(voxels) * voxel_mm3},
+                        {"triangles", s.mesh.triangles.size()},
+                        {"vertices", s.mesh.positions.size()},
+                        {"pieces", connected_pieces(s.mesh)},
+                        {"closed", unmatched_edges(s.mesh) == 0}});
+    out.triangles += s.mesh.triangles.size();
+    out.surfaces.push_back(std::move(s));
+  }
+  return out;
+}
+
+// One glTF scene of every structure, or the single structure's mesh in any other format.
+void write_structures(const std::string& out, const std::vector<GltfSurface>& surfaces, const LabelOptions& o,
+                      double tol, const nlohmann::json& provenance, const std::string& space) {
+  const std::string ext = lower_extension(out);
+  if (ext == ".glb" || ext == ".gltf") {
+    GltfOptions go;
+    go.draco = o.draco;
+    go.quantize = o.quantize;
+    go.tolerance_mm = tol;
+    go.space = space;
+    go.extras = provenance;
+    go.extras["tolerance_mm"] = tol;
+    write_gltf(out, surfaces, go);
+  } else if (ext == ".drc") {
+    DracoOptions d;
+    d.tolerance = tol;
+    write_draco_file(out, surfaces.front().mesh, d);
+  } else {
+    write_mesh_file(out, surfaces.front().mesh);
+  }
+}
+
+}  // namespace
+
+nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, const LabelOptions& o,
+                              const nlohmann::json& provenance) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check_output_path(out, kAssetExtensions);
+  const std::string ext = lower_extension(out);
+  check_label_options(o);
+  const std::function<void(const std::string&)> warn = [&](const std::string& w) {
+    if (o.warn) o.warn(w);
+  };
+
+  // Step 1: the labels (bad values fail here, before any output), the table, the picked ones.
+  LabelGrid g = label_grid(grid);
+  const LabelTable table = label_table_for(o, grid, warn);
+  const std::vector<std::uint16_t> picked = pick_labels(o, label_counts(g), table, grid.source, warn);
+  const bool single = ext != ".glb" && ext != ".gltf";
+  if (single && picked.size() != 1)
+    throw Error(
+        fmt::format("{}: {} writes one mesh, but {} labels are picked; pick one with --labels N or "
+                    "write .glb/.gltf",
+                    out, ext, picked.size()));
+  if (!o.labels.empty()) keep_labels(g, picked);
+
+  // Step 2: small pieces take their surroundings' label; voxel counts after that.
+  const ComponentRemoval removed = remove_small_components(g, o.min_component);
+  const auto counts = label_counts(g);
+  const double prepare_s = seconds_since(t0);
+
+  // Step 3: the interface complex, smoothed and simplified as a whole.
+  const auto t1 = std::chrono::steady_clock::now();
+  LabelInterfaces x = extract_label_interfaces(g, mixed_kuhn_tets(g));
+  const std::size_t extracted_triangles = x.triangles.size();
+  const double extract_s = seconds_since(t1);
+  const auto t2 = std::chrono::steady_clock::now();
+  LabelSmoothingOptions so;
+  so.iterations = o.smoothing_iterations;
+  so.max_offset = o.max_offset;
+  smooth_label_interfaces(x, so);
+  const double smooth_s = seconds_since(t2);
+  const auto t3 = std::chrono::steady_clock::now();
+  std::size_t vertices_removed = 0;
+  if (o.simplify > 0) vertices_removed = simplify_label_interfaces(x, o.simplify);
+  const double simplify_s = seconds_since(t3);
+
+  // Step 4: one surface per structure, written.
+  const auto t4 = std::chrono::steady_clock::now();
+  const Structures st = structure_surfaces(x, picked, table, counts, grid.transform);
+  // Picked labels whose every voxel min_component relabelled have no surface left.
+  if (st.surfaces.empty()) throw Error(grid.source + ": no structure left to write (see --min-component)");
+  double smallest = grid.transform.spacing[0];
+  for (double s : grid.transform.spacing) smallest = std::min(smallest, std::abs(s));
+  const double tol = o.tolerance > 0 ? o.tolerance : smallest / 10.0;
+  nlohmann::json prov = {{"input", std::filesystem::path(grid.source).filename().string()},
+                         {"tool", std::string("mlfe ") + MLFE_VERSION},
+                         {"labels", "multi-material marching tetrahedra (core/labels/label_surface.h)"},
+                         {"label_table", table.source},
+                         {"label_table_format", table.format},
+                         {"smoothing_iterations", o.smoothing_iterations},
+                         {"max_offset_voxels", o.max_offset},
+                         {"simplify_voxels", o.simplify},
+                         {"min_component_voxels", o.min_component}};
+  if (provenance.is_object()) prov.merge_patch(provenance);
+  write_structures(out, st.surfaces, o, tol, prov, grid.space);
+  const double write_s = seconds_since(t4);
+
+  nlohmann::json removed_json = nlohmann::json::object();
+  for (const auto& [l, n] : removed.removed) removed_json[std::to_string(l)] = n;
+  nlohmann::json summary;
+  summary["output"] = out;
+  summary["structures"] = st.rows;
+  summary["structure_count"] = st.rows.size();
+  summary["triangles"] = st.triangles;
+  summary["extracted_interface_triangles"] = extracted_triangles;
+  summary["interface_triangles"] = x.triangles.size();
+  summary["simplify_vertices_removed"] = vertices_removed;
+  summary["islands_removed"] = removed_json;
+  summary["islands_removed_voxels"] = removed.voxels;
+  summary["label_table"] = table.source;
+  summary["bytes"] = written_file_size(out);
+  summary["tolerance_mm"] = tol;
+  summary["seconds"] = seconds_since(t0);
+  summary["stage_seconds"] = {{"labels", prepare_s},
+                              {"extract", extract_s},
+                              {"smooth", smooth_s},
+                              {"simplify", simplify_s},
+                              {"write", write_s}};
+  return summary;
+}
+
+}  // namespace mlfe

@@ -1,0 +1,280 @@
+// Area-weighted vertex normals of an indexed triangle mesh, its spatial (Morton) order, and its
+// topology counted.
+#include <mlfe/core/base/check.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/surface/triangle_mesh.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "base/morton.h"
+
+namespace mlfe {
+
+using Vec3 = Eigen::Vector3d;
+
+TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
+  const std::size_t nv = mesh.positions.size();
+  for (const auto& t : mesh.triangles)
+    if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
+      throw Error("spatial order: a triangle refers to a vertex beyond the " + std::to_string(nv) +
+                  " positions");
+  std::array<float, 3> lo{}, hi{};
+  for (int c = 0; c < 3; ++c) {
+    lo[c] = std::numeric_limits<float>::infinity();
+    hi[c] = -std::numeric_limits<float>::infinity();
+  }
+  for (const auto& p : mesh.positions)
+    for (int c = 0; c < 3; ++c)
+      if (std::isfinite(p[c])) {
+        lo[c] = std::min(lo[c], p[c]);
+        hi[c] = std::max(hi[c], p[c]);
+      }
+  double extent = 0;
+  for (int c = 0; c < 3; ++c) extent = std::max(extent, double(hi[c]) - double(lo[c]));
+  const double scale = extent > 0 ? 1023.0 / extent : 0.0;
+  // Sorted as (code, index) pairs: unique keys, so the parallel sort gives the one order a
+  // stable sort by code would, whatever the thread count.
+  std::vector<std::uint64_t> key(nv);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 8192),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                        std::uint32_t code = 0;
+                        for (int c = 0; c < 3; ++c) {
+                          const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
+                          const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
+                          code |= detail::spread_bits(q) << c;
+                        }
+                        key[v] = std::uint64_t(code) << 32 | v;
+                      }
+                    });
+  tbb::parallel_sort(key.begin(), key.end());
+  std::vector<std::uint32_t> order(nv);  // new -> old
+  for (std::size_t i = 0; i < nv; ++i) order[i] = std::uint32_t(key[i]);
+  std::vector<std::uint64_t>().swap(key);
+  std::vector<std::uint32_t> index(nv);  // old -> new
+  for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
+  TriangleMesh out;
+  out.positions.resize(nv);
+  for (std::size_t i = 0; i < nv; ++i) out.positions[i] = mesh.positions[order[i]];
+  if (mesh.normals.size() == nv) {
+    out.normals.resize(nv);
+    for (std::size_t i = 0; i < nv; ++i) out.normals[i] = mesh.normals[order[i]];
+  } else {
+    out.normals = mesh.normals;
+  }
+  // Triangles by their first new vertex, ties in input order: (first vertex, input position)
+  // pairs, unique again.
+  const std::size_t nt = mesh.triangles.size();
+  if (nt > std::numeric_limits<std::uint32_t>::max()) throw Error("spatial order: more than 2^32 triangles");
+  std::vector<std::uint64_t> by_first(nt);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nt, 8192), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+          const auto& t = mesh.triangles[i];
+          by_first[i] = std::uint64_t(std::min({index[t[0]], index[t[1]], index[t[2]]})) << 32 | i;
+        }
+      });
+  tbb::parallel_sort(by_first.begin(), by_first.end());
+  out.triangles.resize(nt);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 8192),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        const auto& t = mesh.triangles[std::uint32_t(by_first[i])];
+                        out.triangles[i] = {index[t[0]], index[t[1]], index[t[2]]};
+                      }
+                    });
+  return out;
+}
+
+void compute_area_weighted_normals(TriangleMesh& mesh) {
+  // Cross products are twice the area times the unit normal: summing them weights by area.
+  std::vector<Vec3> sum(mesh.positions.size(), Vec3::Zero());
+  for (const auto& t : mesh.triangles) {
+    if (t[0] >= sum.size() || t[1] >= sum.size() || t[2] >= sum.size())
+      throw Error("normals: a triangle refers to a vertex beyond the " + std::to_string(sum.size()) +
+                  " positions");
+    const auto &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
+    const Vec3 u(double(b[0]) - a[0], double(b[1]) - a[1], double(b[2]) - a[2]);
+    const Vec3 v(double(c[0]) - a[0], double(c[1]) - a[1], double(c[2]) - a[2]);
+    const Vec3 n = u.cross(v);
+    for (auto i : t) sum[i] += n;
+  }
+  mesh.normals.resize(mesh.positions.size());
+  for (std::size_t i = 0; i < sum.size(); ++i) {
+    const double len = sum[i].norm();
+    if (len > 0)
+      mesh.normals[i] = {float(sum[i].x() / len), float(sum[i].y() / len), float(sum[i].z() / len)};
+    else
+      mesh.normals[i] = {0.0f, 0.0f, 1.0f};
+  }
+}
+
+namespace {
+
+// Edge and fan checks of triangles without repeated corners (indices < nv): adds to the edge and
+// vertex counts of `r` and, when `bad` is given, marks the vertices where the surface is not an
+// oriented 2-manifold. `on_box(a, b)` tells whether a boundary edge lies on the box.
+template <class OnBox>
+void check_edges_and_fans(const std::vector<std::array<std::uint32_t, 3>>& tris, std::size_t nv,
+                          MeshTopology& r, std::vector<std::uint8_t>* bad, OnBox&& on_box) {
+  if (bad) bad->assign(nv, 0);
+  auto mark = [&](std::uint32_t v) {
+    if (bad) (*bad)[v] = 1;
+  };
+  // 1. Edges: every directed triangle edge, sorted by its undirected key.
+  struct HalfEdge {
+    std::uint32_t lo, hi;
+    std::uint32_t tri;
+    bool forward;  // lo -> hi in its triangle
+  };
+  std::vector<HalfEdge> edges;
+  edges.reserve(tris.size() * 3);
+  for (std::uint32_t i = 0; i < tris.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = tris[i][k], b = tris[i][(k + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), i, a < b});
+    }
+  std::sort(edges.begin(), edges.end(), [](const HalfEdge& x, const HalfEdge& y) {
+    return std::tie(x.lo, x.hi, x.tri) < std::tie(y.lo, y.hi, y.tri);
+  });
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j].lo == edges[i].lo && edges[j].hi == edges[i].hi) ++j;
+    const std::size_t n = j - i;
+    bool ok = true;
+    if (n == 1) {
+      ++r.boundary_edges;
+      if (!on_box(edges[i].lo, edges[i].hi)) ++r.boundary_edges_off_box;
+    } else if (n == 2) {
+      ok = edges[i].forward != edges[i + 1].forward;
+      r.inconsistent_edges += !ok;
+    } else {
+      ok = false;
+      ++r.non_manifold_edges;
+    }
+    if (!ok) {
+      mark(edges[i].lo);
+      mark(edges[i].hi);
+    }
+    i = j;
+  }
+
+  // 2. Vertices: the triangles around a vertex must form one fan, i.e. one component when
+  // triangles that share an edge through the vertex are joined.
+  std::vector<std::uint32_t> start(nv + 1, 0);
+  for (const auto& t : tris)
+    for (auto v : t) ++start[v + 1];
+  std::partial_sum(start.begin(), start.end(), start.begin());
+  std::vector<std::uint32_t> around(start.back());
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::uint32_t i = 0; i < tris.size(); ++i)
+      for (auto v : tris[i]) around[fill[v]++] = i;
+  }
+  std::vector<std::uint32_t> parent;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> spokes;  // (other end, local triangle)
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const std::uint32_t n = start[v + 1] - start[v];
+    if (n < 2) continue;
+    parent.resize(n);
+    std::iota(parent.begin(), parent.end(), 0u);
+    auto find = [&](std::uint32_t x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    spokes.clear();
+    for (std::uint32_t k = 0; k < n; ++k)
+      for (auto w : tris[around[start[v] + k]])
+        if (w != v) spokes.push_back({w, k});
+    std::sort(spokes.begin(), spokes.end());
+    std::uint32_t components = n;
+    for (std::size_t i = 1; i < spokes.size(); ++i)
+      if (spokes[i].first == spokes[i - 1].first) {
+        const std::uint32_t a = find(spokes[i].second), b = find(spokes[i - 1].second);
+        if (a != b) {
+          parent[a] = b;
+          --components;
+        }
+      }
+    if (components > 1) {
+      ++r.non_manifold_vertices;
+      mark(v);
+    }
+  }
+}
+
+}  // namespace
+
+MeshTopology mesh_topology(const TriangleMesh& mesh, const std::array<double, 3>* box_min,
+                           const std::array<double, 3>* box_max, double box_tolerance) {
+  MeshTopology r;
+  const std::size_t nv = mesh.positions.size();
+  for (const auto& t : mesh.triangles)
+    for (auto v : t)
+      if (v >= nv)
+        throw Error("topology: a triangle refers to a vertex beyond the " + std::to_string(nv) +
+                    " positions");
+
+  // Weld by exact position: the first vertex at a position stands for all of them.
+  std::vector<std::uint32_t> order(nv), weld(nv);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return std::tie(mesh.positions[a], a) < std::tie(mesh.positions[b], b);
+  });
+  for (std::size_t i = 0; i < nv; ++i) {
+    const std::uint32_t v = order[i];
+    const bool same = i > 0 && mesh.positions[order[i - 1]] == mesh.positions[v];
+    weld[v] = same ? weld[order[i - 1]] : v;
+    r.duplicate_vertices += same;
+  }
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    const std::array<std::uint32_t, 3> w{weld[t[0]], weld[t[1]], weld[t[2]]};
+    if (w[0] == w[1] || w[1] == w[2] || w[0] == w[2])
+      ++r.degenerate_triangles;
+    else
+      tris.push_back(w);
+  }
+  check_edges_and_fans(tris, nv, r, nullptr, [&](std::uint32_t a, std::uint32_t b) {
+    if (!box_min || !box_max) return true;
+    for (int k = 0; k < 3; ++k)
+      for (const double plane : {(*box_min)[k], (*box_max)[k]})
+        if (std::abs(mesh.positions[a][k] - plane) <= box_tolerance &&
+            std::abs(mesh.positions[b][k] - plane) <= box_tolerance)
+          return true;
+    return false;
+  });
+  return r;
+}
+
+std::vector<std::uint8_t> non_manifold_vertices(const std::vector<std::array<std::uint32_t, 3>>& triangles,
+                                                std::size_t vertex_count) {
+  std::vector<std::array<std::uint32_t, 3>> tris;
+  tris.reserve(triangles.size());
+  for (const auto& t : triangles) {
+    for (auto v : t)
+      if (v >= vertex_count)
+        throw Error("topology: a triangle refers to a vertex beyond the " + std::to_string(vertex_count) +
+                    " vertices");
+    if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) tris.push_back(t);
+  }
+  MeshTopology r;
+  std::vector<std::uint8_t> bad;
+  check_edges_and_fans(tris, vertex_count, r, &bad, [](std::uint32_t, std::uint32_t) { return true; });
+  return bad;
+}
+
+}  // namespace mlfe

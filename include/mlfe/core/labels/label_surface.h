@@ -1,0 +1,160 @@
+// Label maps (segmentations, atlases) to one closed surface per structure, with the surfaces of
+// touching structures sharing their interface exactly: multi-material marching tetrahedra on
+// the Kuhn (Freudenthal) triangulation of the samples' lattice, then smoothing and
+// simplification of the whole interface complex at once, then a split per label.
+//
+// Labels are categories: nothing here interpolates a label value. Every lattice vertex carries
+// its sample's label, and each label's region is cut out of every tetrahedron by interfaces
+// through the midpoints of the edges whose ends differ, the centroids of faces with three
+// labels and the centroid of a tetrahedron with three or four. Where a tetrahedron holds two
+// labels that is plain marching tetrahedra on the label's indicator function at 1/2 (what a
+// binary mask of the structure alone gives); where it holds more, the interfaces of the
+// indicators are fanned to the centroids, where the junction curves run. This is right for
+// categories: the result depends on the corner labels alone and treats every label alike, the
+// pieces partition each tetrahedron (no gap, no overlap), and label 3 next to label 7 gives one
+// 3|7 interface and no surface of 4, 5 or 6. The hierarchy of issue #23 (tetrahedra of level L
+// = one-voxel Kuhn tetrahedra) refines exactly where a tetrahedron holds more than one label,
+// so extraction takes the set of mixed one-voxel tetrahedra as its input: coarse elements
+// inside structures hold no interface.
+//
+// Every interface triangle is stored once, tagged with its two labels, over one vertex set, so
+// two structures that touch have the same vertices and edges along their interface by
+// construction; smoothing and simplification act on that shared complex and keep it so. The
+// volume is padded with background (label 0) outside its box, so every structure is closed.
+#pragma once
+#include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/surface/triangle_mesh.h>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <vector>
+
+namespace mlfe {
+
+/// One label (0..65535; 0 is the background) per sample of a 3D lattice, x fastest.
+struct LabelGrid {
+  std::array<std::int64_t, 3> dims{0, 0, 0};
+  std::vector<std::uint16_t> labels;
+  GridTransform transform;
+
+  /// The label at (i, j, k); 0 (background) outside the lattice, which closes every structure
+  /// at the volume's box.
+  std::uint16_t at(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return 0;
+    return labels[static_cast<std::size_t>(i + dims[0] * (j + dims[1] * k))];
+  }
+};
+
+/// The labels of a 3D scalar grid. Throws mlfe::Error (naming the first offending voxel) for
+/// a 2D grid, a value that is not an integer, or a label below 0 or above 65535.
+LabelGrid label_grid(const ScalarGrid& grid);
+
+/// Voxel count per label present (background included), ascending by label.
+std::map<std::uint16_t, std::size_t> label_counts(const LabelGrid& g);
+
+/// Replaces every label not in `keep` by the background (0). Labels listed in `keep` that are
+/// absent change nothing.
+void keep_labels(LabelGrid& g, const std::vector<std::uint16_t>& keep);
+
+/// What remove_small_components removed: connected pieces (6-connected voxels of one label)
+/// per label.
+struct ComponentRemoval {
+  std::map<std::uint16_t, std::size_t> removed;  ///< label -> pieces removed
+  std::size_t voxels = 0;                        ///< voxels relabelled
+};
+
+/// Relabels every 6-connected piece of a non-background label with fewer than `min_voxels`
+/// voxels to the label most of its 6-neighbours outside the piece carry (the lowest such label
+/// on ties; the background when it has none). Pieces are visited in lattice order, so the
+/// result is deterministic.
+ComponentRemoval remove_small_components(LabelGrid& g, std::size_t min_voxels);
+
+/// One tetrahedron of the Kuhn triangulation of the lattice: the cube with lower corner
+/// (i, j, k) (-1 .. dims-1: the padded lattice) is cut into 6 tetrahedra along its diagonal
+/// from (i, j, k) to (i+1, j+1, k+1); `order` (0..5) picks the axis order of the monotone path
+/// from the first corner to the last. Every cube is cut the same way, so the tetrahedra form a
+/// conforming mesh: level L of the lattice hierarchy.
+struct KuhnTet {
+  std::int32_t i = 0, j = 0, k = 0;
+  std::uint8_t order = 0;
+};
+
+/// The Kuhn tetrahedra of the padded lattice whose four corners carry more than one label, in
+/// lattice order (z slowest). Parallel; the same list for any thread count.
+std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g);
+
+/// The interface complex: triangles between label regions over one shared vertex set.
+/// Positions are in index coordinates (voxels) of the lattice.
+struct LabelInterfaces {
+  std::vector<std::array<double, 3>> positions;
+  std::vector<std::array<std::uint32_t, 3>> triangles;
+  /// Per triangle its labels {a, b}, a < b; the triangle is counter-clockwise seen from b, so
+  /// its normal points out of a.
+  std::vector<std::array<std::uint16_t, 2>> labels;
+};
+
+/// Multi-material marching tetrahedra on the given one-voxel Kuhn tetrahedra (mixed_kuhn_tets,
+/// or the mixed leaves of a lattice hierarchy): per tetrahedron one triangle or quad through
+/// the midpoints of its mixed edges where it holds two labels; where it holds three or four, a
+/// fan around its centroid over the interface segments on its faces (across two-label faces
+/// between edge midpoints, from edge midpoints to the centroid of three-label faces). Vertices are shared
+/// through edge and face keys; the output is sequential and deterministic. Each label's triangles form a
+/// closed, consistently oriented surface when `tets` holds every mixed tetrahedron.
+LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<KuhnTet>& tets);
+
+struct LabelSmoothingOptions {
+  /// Taubin λ|μ pairs (Taubin 1995: a low-pass filter that does not shrink). 0: no smoothing.
+  int iterations = 20;
+  double lambda = 0.5, mu = -0.53;
+  /// No vertex moves further than this from where extraction put it (voxels): the surfaces stay
+  /// within this bound of the labels' voxel boundary (the extracted interface), whatever the
+  /// filter does to thin parts and single voxels.
+  double max_offset = 0.5;
+};
+
+/// Smooths the complex in place. Vertices inside one interface (every edge between the same two
+/// labels) move toward their neighbours; vertices on a junction curve (an edge where three or
+/// more labels meet) move along the curve only; where curves meet, vertices stay. So interfaces
+/// stay shared, junctions stay on the curves where the labels meet, and corners stay put.
+/// Jacobi updates: the same result for any thread count.
+void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& options);
+
+/// Simplifies the complex by quadric edge collapse (Garland & Heckbert 1997) over all its
+/// interfaces at once, cheap merges first, each merged vertex placed where the summed
+/// quadrics (area-weighted planes of the triangles it absorbed) are least. A merge is made only
+/// when that RMS distance to the absorbed planes stays within `tolerance` voxels. Constraints
+/// keep the complex a partition: a vertex inside one interface merges with a neighbour in the
+/// same interface or moves onto a junction-curve neighbour; a vertex on a junction curve (where
+/// three or more labels meet) merges only along its curve, placed on the segment; where curves
+/// meet, and at non-manifold points of an interface, vertices stay. Merging vertices never
+/// opens a closed surface; the link condition (the ends' common neighbours are exactly the
+/// edge's apexes), a no-flip test on every moved triangle, at least a tetrahedron per closed
+/// piece and three vertices per junction loop keep every label's surface closed, consistently
+/// oriented and its islands present, and the interfaces shared. The cheap merges (within a fifth
+/// of the tolerance) go first inside fixed blocks of 16³ voxels, in parallel, away from the
+/// blocks' borders; then the two halves below and above the vertices' median height, at once,
+/// cheapest first up to the tolerance, away from the other half; then the whole complex (the
+/// seam). Parts do not interact and each part's pass is sequential in itself, so the same
+/// result for any thread count. Returns the number of
+/// vertices removed. Throws mlfe::Error unless `tolerance` is positive and finite.
+std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
+
+/// The closed surface of `label`: its triangles from the complex, oriented outward (normals
+/// out of the structure), positions mapped to physical coordinates with `t` (windings
+/// reversed when `t` mirrors), vertices in first-use order. Empty when the label has none.
+TriangleMesh label_surface(const LabelInterfaces& x, std::uint16_t label, const GridTransform& t);
+
+/// The labels that have triangles in `x`, ascending (the background excluded).
+std::vector<std::uint16_t> labels_with_surfaces(const LabelInterfaces& x);
+
+/// Checks that every oriented edge of `mesh` has exactly one reverse twin (closed and
+/// consistently oriented, non-manifold edges counted in pairs); returns the number of edges
+/// without one (0 for a closed surface).
+std::size_t unmatched_edges(const TriangleMesh& mesh);
+
+/// Connected pieces of a triangle mesh (triangles sharing a vertex).
+std::size_t connected_pieces(const TriangleMesh& mesh);
+
+}  // namespace mlfe
