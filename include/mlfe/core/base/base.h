@@ -10,3 +10,4 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/huge_pages.h>
 #include <mlfe/core/base/usage_error.h>
+#include <mlfe/core/base/vec.h>
