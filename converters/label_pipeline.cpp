@@ -236,7 +236,9 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   const double tol = o.tolerance > 0 ? o.tolerance : smallest / 10.0;
   nlohmann::json prov = {{"input", std::filesystem::path(grid.source).filename().string()},
                          {"tool", std::string("mlfe ") + MLFE_VERSION},
-                         {"labels", "multi-material marching tetrahedra (core/labels/label_surface.h)"},
+                         // The method as the assets name it: part of every label asset's bytes (golden
+                         // files), so it keeps the header's name from before core/ had rooms.
+                         {"labels", "multi-material marching tetrahedra (core/label_surface.h)"},
                          {"label_table", table.source},
                          {"label_table_format", table.format},
                          {"smoothing_iterations", o.smoothing_iterations},
