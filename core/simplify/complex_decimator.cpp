@@ -49,7 +49,7 @@ std::uint32_t number_kept(std::size_t n, Kept kept, std::vector<std::uint32_t>& 
 // stays put); a vertex on a junction curve merges only with its neighbours along that curve
 // (placed on the segment between them where the quadric is least); where curves meet, and at
 // vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
-// label's closed surface onto a closed surface, so closed stays closed and shared stays shared.
+// region's closed surface onto a closed surface, so closed stays closed and shared stays shared.
 //
 // Three passes: first every block of a fixed partition of space into small blocks on its own
 // (in parallel), collapsing only edges whose ends and all their neighbours lie in the block and
