@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/labels/label_surface.h>
+#include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
@@ -223,7 +224,11 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   const double smooth_s = seconds_since(t2);
   const auto t3 = std::chrono::steady_clock::now();
   std::size_t vertices_removed = 0;
-  if (o.simplify > 0) vertices_removed = simplify_label_interfaces(x, o.simplify);
+  if (o.simplify > 0) {
+    SimplifierOptions simplifier;
+    simplifier.tolerance = o.simplify;
+    vertices_removed = simplify(x, simplifier);
+  }
   const double simplify_s = seconds_since(t3);
 
   // Step 4: one surface per structure, written.

@@ -3,9 +3,8 @@
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/core/field/field.h>
 #include <mlfe/core/field/noise_estimate.h>
-#include <mlfe/core/simplify/surface_simplification.h>
+#include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
-#include <mlfe/core/surface/surface_fitting.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
@@ -424,42 +423,6 @@ TriangleMesh merge(const std::vector<GltfSurface>& surfaces) {
   return m;
 }
 
-// One surface through --simplifier's choice. auto: up to 200 000 triangles, the verified bound
-// (about a second or two at ~10 µs per triangle). Above, first the same topology-preserving
-// collapses with the error estimated from the quadrics to half the tolerance (most of the
-// collapses, cheaply; no flips, which are sequential and which the second stage does), then
-// the verified bound to the tolerance and the ratio on what is left, with the thin parts kept
-// that area-weighted quadrics let retract (Hausdorff 1.45 against 2.5 voxels, bench/RESULTS.md).
-// Half rather than a third of the tolerance: the noisy (σ 3) full head leaves the first stage
-// with 24 % of its triangles instead of 34 %, the verified stage's work halves, at the same
-// mean distance (and a lower one on the σ 1.5 head). Below a 5 % ratio the verified bound's late passes take
-// minutes, so the estimate goes all the way (meshoptimizer is faster still, but pinches the surface into
-// thousands of non-manifold edges and keeps twice the triangles). Decided from the surface's
-// size and the options alone, so the bytes do not depend on the thread count.
-TriangleMesh simplify_surface(const TriangleMesh& m, const SimplifyOptions& so, Simplifier simplifier,
-                              double ratio) {
-  if (simplifier == Simplifier::kMeshopt) return simplify_fast(m, so.tolerance);
-  constexpr std::size_t kBoundedUpTo = 200000;
-  constexpr double kBoundedDownTo = 0.05;
-  SimplifyOptions o = so;
-  o.min_triangles = std::size_t(ratio * double(m.triangles.size()));
-  o.verify_bound = simplifier == Simplifier::kBounded;
-  if (simplifier != Simplifier::kAuto) return simplify_within(m, o);
-  if (m.triangles.size() <= kBoundedUpTo) {
-    o.verify_bound = true;
-    return simplify_within(m, o);
-  }
-  if (ratio < kBoundedDownTo) return simplify_within(m, o);
-  SimplifyOptions first = o;
-  first.tolerance = o.tolerance / 2;
-  first.flip_edges = false;  // the second stage flips; flips are sequential
-  // The first stage keeps the extraction's vertex order (slices); the second walks one-rings
-  // in cost order, and runs faster (σ 3 head: 1.3x) on vertices in spatial order.
-  const TriangleMesh pre = spatially_ordered(simplify_within(m, first));
-  o.verify_bound = true;
-  return simplify_within(pre, o);
-}
-
 // The voxel size tolerances are expressed in: the smallest spacing of the data's axes (mm).
 double smallest_spacing(const GridTransform& t, int dim) {
   double s = 1e300;
@@ -559,24 +522,16 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
   if (p.progress && !p.progress(0.5, "simplifying")) throw Cancelled();
   if (p.simplify > 0) {
     const double voxel = smallest_spacing(b.transform, dim);
-    SimplifyOptions so;
+    SimplifierOptions so;
+    so.kind = p.simplifier;
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
     if (!(p.ratio >= 0 && p.ratio <= 1)) throw Error(fmt::format("ratio: expected 0..1, got {}", p.ratio));
-    // Optimal placement ends with the least-squares refit of the simplified surface to the
-    // extracted one (the greedy collapses leave each vertex where its last merge put it).
-    const bool refit = so.placement == Placement::kOptimal && p.simplifier != Simplifier::kMeshopt;
+    so.ratio = p.ratio;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (m.triangles.empty()) return;
-      TriangleMesh simplified = simplify_surface(m, so, p.simplifier, p.ratio);
-      if (refit) {  // to the extracted surface, still in m
-        SurfaceFitOptions fo;
-        fo.tolerance = so.tolerance;
-        fit_surface(simplified, m, fo);
-      }
-      m = std::move(simplified);
+      if (!m.triangles.empty()) m = simplify(m, so);
     });
   }
   if (p.decimate > 0)

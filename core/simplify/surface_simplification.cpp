@@ -28,13 +28,14 @@
 // A vertex that passes no check is stuck until something near it changes. Once most picked
 // vertices turn out stuck (late, when the bound binds), every candidate is checked up front in
 // parallel instead, so stuck vertices stop blocking their neighbours' rings.
-// With an estimated bound on big meshes the passes are preceded by blocks (as core/labels/label_surface.cpp does for
-// labels): cubes of space, each simplified on its own, sequentially, cheapest collapse first,
-// with both ends of every collapse inside the cube; then the cubes shifted by half their edge,
-// whose insides hold the first cubes' seams. Blocks share nothing a collapse reads or writes,
-// so they run in parallel with the same result for any thread count. On a full head's 1.4 M
-// triangles they do 99 % of the collapses, and the passes (28 instead of 76) the rest, without
-// the per-pass scans of the sorted candidates that made them slow (bench/RESULTS.md).
+// With an estimated bound on big meshes the passes are preceded by blocks (as complex_decimator.cpp
+// does for interface complexes): cubes of space, each simplified on its own, sequentially,
+// cheapest collapse first, with both ends of every collapse inside the cube; then the cubes
+// shifted by half their edge, whose insides hold the first cubes' seams. Blocks share nothing a
+// collapse reads or writes, so they run in parallel with the same result for any thread count.
+// On a full head's 1.4 M triangles they do 99 % of the collapses, and the passes (28 instead of
+// 76) the rest, without the per-pass scans of the sorted candidates that made them slow
+// (bench/RESULTS.md).
 //
 // Local numbering of a collapse v0 -> v1 (v0 disappears; faces around v0 not containing v1
 // get v1 in its place, the one or two faces on edge v0 v1 are removed; with optimal placement
@@ -238,8 +239,40 @@ struct Scratch {
 
 class Simplifier {
  public:
+  // Reading the input, then the adjacency, the quadrics, the points of the bound and the locked
+  // vertices that every pass reads; every vertex starts dirty, so the first pass keys them all.
   Simplifier(const TriangleMesh& mesh, const SimplifyOptions& opts)
       : opts_(opts), optimal_(opts.placement == Placement::kOptimal) {
+    read_input(mesh);
+    build_vertex_faces();
+    init_quadrics();
+    attach_points();
+    classify_vertices();
+    start_state();
+  }
+
+  // Collapses, then valence-improving flips, which free further collapses, twice. On the MRI's
+  // 467 k-triangle surface this gave 2.5 % fewer triangles and a 2.7 % smaller Draco file for
+  // 20 % more time; further rounds gained under 0.5 % each.
+  TriangleMesh run(SimplifyStats* stats) {
+    SimplifyStats st;
+    for (int round = 0; round < 2; ++round) {
+      // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
+      if (round == 0 && !opts_.verify_bound && faces_.size() >= kBlocksFrom)
+        for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
+      collapse_all(st.passes, st.collapses);
+      if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
+      if (!flip_round(st.flips)) break;
+    }
+    if (stats) *stats = st;
+    return output();
+  }
+
+ private:
+  // The faces (triangles with a repeated corner dropped), positions and normals, checked; the
+  // copies only the verified bound reads (the input faces with a moving survivor, the input
+  // positions as the points kept within the bound).
+  void read_input(const TriangleMesh& mesh) {
     const std::size_t nv = mesh.positions.size();
     if (nv >= kNone) throw Error("simplification: too many vertices");
     faces_.reserve(mesh.triangles.size());
@@ -250,11 +283,11 @@ class Simplifier {
     }
     if (faces_.size() >= kNone) throw Error("simplification: too many triangles");
     // The input surface is only read by the verified bound's checks.
-    if (optimal_ && opts.verify_bound) input_faces_ = faces_;
+    if (optimal_ && opts_.verify_bound) input_faces_ = faces_;
     pos_.resize(nv);
     for (std::size_t i = 0; i < nv; ++i)
       pos_[i] = Vec3(mesh.positions[i][0], mesh.positions[i][1], mesh.positions[i][2]);
-    if (opts.verify_bound) points_ = pos_;
+    if (opts_.verify_bound) points_ = pos_;
     for (const auto& f : faces_)
       for (Index v : f)
         if (!pos_[v].allFinite()) throw Error("simplification: non-finite vertex position");
@@ -265,38 +298,50 @@ class Simplifier {
     }
     face_alive_.assign(faces_.size(), 1);
     alive_faces_ = faces_.size();
-    tol2_ = opts.tolerance * opts.tolerance;
-    cos_max_turn_ = std::cos(opts.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+    tol2_ = opts_.tolerance * opts_.tolerance;
+    cos_max_turn_ = std::cos(opts_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+  }
 
-    build_vertex_faces();
-    // Each vertex sums the planes of its faces in face order, in parallel.
-    quadric_.resize(nv);
-    tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 4096), [&](const tbb::blocked_range<Index>& r) {
-      for (Index v = r.begin(); v != r.end(); ++v)
-        for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f) {
-          const auto& face = faces_[*f];
-          const Vec3 n = normal_of(face);
-          const double len = n.norm();
-          if (!(len > 0)) continue;
-          const Vec3 u = n / len;
-          quadric_[v].add_plane(u, -u.dot(pos_[face[0]]), 0.5 * len);
-        }
-    });
-    if (optimal_ && opts.verify_bound) {
+  // Each vertex sums the planes of its faces in face order, in parallel: the same sums for any
+  // thread count.
+  void init_quadrics() {
+    quadric_.resize(pos_.size());
+    tbb::parallel_for(tbb::blocked_range<Index>(0, Index(pos_.size()), 4096),
+                      [&](const tbb::blocked_range<Index>& r) {
+                        for (Index v = r.begin(); v != r.end(); ++v)
+                          for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f) {
+                            const auto& face = faces_[*f];
+                            const Vec3 n = normal_of(face);
+                            const double len = n.norm();
+                            if (!(len > 0)) continue;
+                            const Vec3 u = n / len;
+                            quadric_[v].add_plane(u, -u.dot(pos_[face[0]]), 0.5 * len);
+                          }
+                      });
+  }
+
+  // Every input vertex is a point to keep within the bound, attached to its first face
+  // (distance 0). Vertices no triangle uses are not part of the surface. An estimated bound
+  // attaches none, so no collapse checks or moves points. A moving survivor also keeps the
+  // input's vertex -> face rows, for near_input().
+  void attach_points() {
+    const std::size_t nv = pos_.size();
+    if (optimal_ && opts_.verify_bound) {
       input_vf_.offset.assign(1, 0);
       for (Index v = 0; v < Index(nv); ++v)
         input_vf_.offset.push_back(input_vf_.offset.back() + vf_.count[v]);
       input_vf_.items = vf_.items;  // as just built: contiguous, in vertex order
     }
-    // Every input vertex is a point to keep within the bound, attached to its first face
-    // (distance 0). Vertices no triangle uses are not part of the surface. An estimated bound
-    // attaches none, so no collapse checks or moves points.
     owner_.assign(nv, kNone);
-    for (Index v = 0; v < nv && opts.verify_bound; ++v)
+    for (Index v = 0; v < nv && opts_.verify_bound; ++v)
       if (vf_.size(v) > 0) owner_[v] = *vf_.begin(v);
-    // Stars that are not a single fan (non-manifold edges or vertices) never change.
-    // Boundary vertices stay boundary vertices (collapses keep the topology, flips only take
-    // interior edges), so the flag is set once, from the same neighbour lists.
+  }
+
+  // Stars that are not a single fan (non-manifold edges or vertices) never change. Boundary
+  // vertices stay boundary vertices (collapses keep the topology, flips only take interior
+  // edges), so the flag is set once, from the same neighbour lists.
+  void classify_vertices() {
+    const std::size_t nv = pos_.size();
     locked_.assign(nv, 0);
     boundary_.assign(nv, 0);
     tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 1024), [&](const tbb::blocked_range<Index>& r) {
@@ -307,6 +352,12 @@ class Simplifier {
         boundary_[v] = on_boundary(n);
       }
     });
+  }
+
+  // No keys yet and every vertex dirty, so the first pass keys them all; the face -> points
+  // rows of the bound (rebuilt every pass when verified).
+  void start_state() {
+    const std::size_t nv = pos_.size();
     key_.assign(nv, kNoKey);
     target_.assign(nv, kNone);
     stuck_.assign(nv, 0);
@@ -317,101 +368,47 @@ class Simplifier {
     dirty_.assign(nv, 1);
     dirty_list_.resize(nv);
     for (Index v = 0; v < Index(nv); ++v) dirty_list_[v] = v;
-    build_face_points();  // with a verified bound rebuilt every pass
+    build_face_points();
     stamp_.assign(nv, 0);
     removed_faces_.assign(nv, 0);
   }
 
-  TriangleMesh run(SimplifyStats* stats) {
-    SimplifyStats st;
-    // Collapses, then valence-improving flips, which free further collapses, twice. On the
-    // MRI's 467 k-triangle surface this gave 2.5 % fewer triangles and a 2.7 % smaller Draco
-    // file for 20 % more time; further rounds gained under 0.5 % each.
-    for (int round = 0; round < 2; ++round) {
-      // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
-      if (round == 0 && !opts_.verify_bound && faces_.size() >= kBlocksFrom)
-        for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
-      collapse_all(st.passes, st.collapses);
-      if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
-      std::vector<Index> flipped;
-      flip_all(flipped);
-      st.flips += flipped.size() / 4;
-      if (flipped.empty()) break;
-      build_vertex_faces();
-      build_face_points();
-      mark_changed(flipped);
-    }
-    if (stats) *stats = st;
-    return output();
+  // One pass of flips; false when none was made. The flips change stars, so the adjacency and
+  // the points' rows are rebuilt and the flipped vertices' rings keyed again.
+  bool flip_round(std::size_t& flips) {
+    std::vector<Index> flipped;
+    flip_all(flipped);
+    flips += flipped.size() / 4;
+    if (flipped.empty()) return false;
+    build_vertex_faces();
+    build_face_points();
+    mark_changed(flipped);
+    return true;
   }
 
- private:
+  // Passes of independent collapses until the floor, or until no candidate is left: each pass
+  // keys the vertices whose ring changed, ranks the candidates, selects rings that do not touch,
+  // collapses them in parallel and marks what changed for the next pass.
   void collapse_all(std::size_t& passes, std::size_t& collapses) {
-    std::vector<Index> work, selected, survivors;
-    std::vector<std::pair<double, Index>> fresh, kept;
+    std::vector<Index> selected;
     bool screen = false;
     while (alive_faces_ > opts_.min_triangles) {
       pass_ = Index(++passes);
       if (opts_.verify_bound) build_face_points();
-      // Cheap keys (quadric cost of the best-looking neighbour) for vertices whose
-      // neighbourhood changed; the full legality check waits until a vertex is selected.
-      work.swap(dirty_list_);
-      dirty_list_.clear();
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, work.size(), 512),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-                          Scratch s;
-                          for (std::size_t i = r.begin(); i != r.end(); ++i) {
-                            const Index v = work[i];
-                            key_[v] = cheapest(v, s);
-                            stuck_[v] = 0;
-                            screened_[v] = 0;
-                            dirty_[v] = 0;
-                            keyed_[v] = Index(passes);
-                          }
-                        });
-      // Candidates cheapest first, ties by index, so the order is a function of the mesh
-      // alone. The sorted list carries over between passes: only fresh keys are sorted and
-      // merged in; entries whose vertex was re-keyed, collapsed or got stuck drop out.
-      fresh.clear();
-      for (Index v : work)
-        if (key_[v] < kNoKey) fresh.push_back({key_[v], v});
-      tbb::parallel_sort(fresh.begin(), fresh.end());
-      kept.clear();
-      for (const auto& c : sorted_)
-        if (keyed_[c.second] != Index(passes) && !stuck_[c.second] && key_[c.second] < kNoKey)
-          kept.push_back(c);
-      sorted_.resize(kept.size() + fresh.size());
-      std::merge(kept.begin(), kept.end(), fresh.begin(), fresh.end(), sorted_.begin());
+      rank_candidates(rekey_dirty());
       if (sorted_.empty()) break;
       // Late on, most cheap candidates fail the checks and a selected failure blocks its ring
       // for the pass; then the candidates are checked before they are picked.
       if (screen)
-        select_screened(Index(passes), selected);
+        select_screened(pass_, selected);
       else
         select_independent(selected);
-      // Each collapse removes at most two faces: far from the floor, all selected collapses
-      // run at once; near it, one by one in cost order until the floor is reached.
-      if (alive_faces_ > opts_.min_triangles + 2 * selected.size()) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, selected.size(), 64),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-                            Scratch s;
-                            for (std::size_t i = r.begin(); i != r.end(); ++i) collapse(selected[i], s);
-                          });
-        for (Index v0 : selected) alive_faces_ -= removed_faces_[v0];
-      } else {
-        Scratch s;
-        std::size_t n = 0;
-        for (; n < selected.size() && alive_faces_ > opts_.min_triangles; ++n)
-          if (collapse(selected[n], s)) alive_faces_ -= removed_faces_[selected[n]];
-        selected.resize(n);
-      }
-      std::size_t applied = 0;
-      for (Index v0 : selected) applied += target_[v0] != kNone;
+      const std::size_t applied = collapse_selected(selected);
       collapses += applied;
       screen = screen || 2 * applied < selected.size();
       if (applied == 0) continue;  // only stuck vertices were selected; they are skipped now
       update_vertex_faces(selected);
-      survivors.clear();
+      std::vector<Index> survivors;
       for (Index v0 : selected)
         if (target_[v0] != kNone) {
           key_[v0] = kNoKey;  // gone
@@ -419,6 +416,64 @@ class Simplifier {
         }
       mark_changed(survivors);
     }
+  }
+
+  // Cheap keys (quadric cost of the best-looking neighbour) for vertices whose neighbourhood
+  // changed, in parallel; the full legality check waits until a vertex is selected. Returns
+  // the vertices keyed.
+  std::vector<Index> rekey_dirty() {
+    std::vector<Index> work;
+    work.swap(dirty_list_);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, work.size(), 512),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        Scratch s;
+                        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                          const Index v = work[i];
+                          key_[v] = cheapest(v, s);
+                          stuck_[v] = 0;
+                          screened_[v] = 0;
+                          dirty_[v] = 0;
+                          keyed_[v] = pass_;
+                        }
+                      });
+    return work;
+  }
+
+  // Candidates cheapest first, ties by index, so the order is a function of the mesh alone. The
+  // sorted list carries over between passes: only the fresh keys of `keyed` are sorted and
+  // merged in; entries whose vertex was re-keyed, collapsed or got stuck drop out.
+  void rank_candidates(const std::vector<Index>& keyed) {
+    std::vector<std::pair<double, Index>> fresh, kept;
+    for (Index v : keyed)
+      if (key_[v] < kNoKey) fresh.push_back({key_[v], v});
+    tbb::parallel_sort(fresh.begin(), fresh.end());
+    for (const auto& c : sorted_)
+      if (keyed_[c.second] != pass_ && !stuck_[c.second] && key_[c.second] < kNoKey) kept.push_back(c);
+    sorted_.resize(kept.size() + fresh.size());
+    std::merge(kept.begin(), kept.end(), fresh.begin(), fresh.end(), sorted_.begin());
+  }
+
+  // Collapses the selected vertices and returns how many moved. Each collapse removes at most
+  // two faces: far from the floor, all run at once; near it, one by one in cost order until
+  // the floor is reached (`selected` then cut to those tried).
+  std::size_t collapse_selected(std::vector<Index>& selected) {
+    if (alive_faces_ > opts_.min_triangles + 2 * selected.size()) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, selected.size(), 64),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          Scratch s;
+                          for (std::size_t i = r.begin(); i != r.end(); ++i) collapse(selected[i], s);
+                        });
+      for (Index v0 : selected) alive_faces_ -= removed_faces_[v0];
+    } else {
+      Scratch s;
+      std::size_t n = 0;
+      for (; n < selected.size() && alive_faces_ > opts_.min_triangles; ++n)
+        if (collapse(selected[n], s)) alive_faces_ -= removed_faces_[selected[n]];
+      selected.resize(n);
+    }
+    std::size_t applied = 0;
+    for (Index v0 : selected) applied += target_[v0] != kNone;
+    return applied;
   }
 
   // v0's closed one-ring (two-ring when survivors move) holds no vertex stamped with `stamp`.

@@ -10,6 +10,7 @@
 #include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/core/field/tet_mesh_field.h>
 #include <mlfe/core/render/volume_render.h>
+#include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
 #include <mlfe/core/surface/triangle_mesh.h>
 #include <mlfe/formats/gltf_writer.h>
@@ -224,7 +225,6 @@ std::string write_built(const std::string& path, const Built& b, const nlohmann:
 /// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
 nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b);
 
-enum class Simplifier { kAuto, kFast, kBounded, kMeshopt };
 enum class VertexPlacement { kAuto, kInput, kOptimal };
 enum class Normals { kAuto, kGradient, kSurface };
 enum class SurfaceSource { kAuto, kSamples, kHierarchy };
@@ -250,12 +250,9 @@ struct AssetOptions {
   /// tenth of the marching-cubes triangles, as asset pipelines' ratio simplifiers do, with the
   /// error well inside the bound.
   double ratio = 0.1;
-  /// kBounded: simplify_within, error verified; kFast: the same collapses and topology checks
-  /// with the error estimated from the quadrics (SimplifyOptions::verify_bound false);
-  /// kMeshopt: meshoptimizer (simplify_fast), error estimated, seconds for millions of
-  /// triangles but it may pinch the surface (non-manifold spots, counted in the report); kAuto:
-  /// bounded, but fast for surfaces of over 200 000 extracted triangles with a ratio below 5 %
-  /// (topology kept either way).
+  /// Which simplifier (core/simplify/simplifier.h says what each kind does: kBounded verified,
+  /// kFast and kMeshopt estimated, kAuto by size); kMeshopt's non-manifold spots are counted in
+  /// the report.
   Simplifier simplifier = Simplifier::kAuto;
   double snap = 1.0;  ///< move vertices onto the data's surface, at most this many voxels (0: off)
   /// Drop connected parts of a 3D surface whose vertices lie in fewer than this many voxel

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/labels/label_surface.h>
+#include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/mesh_distance.h>
 #include <tbb/global_control.h>
 
@@ -152,7 +153,7 @@ TEST(LabelSurface, SmoothedAndSimplifiedStructuresStayClosedSharedAndBounded) {
   expect_shared_interface(x, 1, 2, g.transform);
   expect_shared_interface(x, 3, 7, g.transform);
   const std::size_t before = x.triangles.size();
-  simplify_label_interfaces(x, 0.3);
+  decimate_interface_complex(x, 0.3);
   EXPECT_LT(x.triangles.size(), before);
   EXPECT_EQ(labels_with_surfaces(x), (std::vector<std::uint16_t>{1, 2, 3, 5, 7}));
   expect_structures_closed(x, g, false);
@@ -169,7 +170,7 @@ TEST(LabelSurface, QuadricCollapseMergesFarAndStaysNearTheSmoothedSurface) {
   LabelInterfaces x = complex_of(g);
   smooth_label_interfaces(x, {});
   const LabelInterfaces smoothed = x;
-  const std::size_t removed = simplify_label_interfaces(x, 0.34);
+  const std::size_t removed = decimate_interface_complex(x, 0.34);
   EXPECT_EQ(removed, smoothed.positions.size() - x.positions.size());
   EXPECT_LT(x.triangles.size() * 4, smoothed.triangles.size());
   EXPECT_EQ(labels_with_surfaces(x), labels_with_surfaces(smoothed));
@@ -186,10 +187,33 @@ TEST(LabelSurface, QuadricCollapseMergesFarAndStaysNearTheSmoothedSurface) {
   }
   // A larger tolerance merges more; none of it opens a surface.
   LabelInterfaces coarse = smoothed;
-  simplify_label_interfaces(coarse, 1.0);
+  decimate_interface_complex(coarse, 1.0);
   EXPECT_LT(coarse.triangles.size(), x.triangles.size());
   expect_structures_closed(coarse, g, false);
-  EXPECT_THROW(simplify_label_interfaces(coarse, 0.0), Error);
+  EXPECT_THROW(decimate_interface_complex(coarse, 0.0), Error);
+}
+
+// The complex goes through core/simplify's one entry point: auto and fast are its decimator,
+// the one-surface-at-a-time kinds are refused.
+TEST(LabelSurface, SimplifyTakesTheComplexToItsDecimator) {
+  const LabelGrid g = atlas_phantom();
+  LabelInterfaces direct = complex_of(g);
+  const std::size_t removed = decimate_interface_complex(direct, 0.3);
+  SimplifierOptions o;
+  o.tolerance = 0.3;
+  for (Simplifier kind : {Simplifier::kAuto, Simplifier::kFast}) {
+    LabelInterfaces x = complex_of(g);
+    o.kind = kind;
+    EXPECT_EQ(simplify(x, o), removed);
+    EXPECT_EQ(x.positions, direct.positions);
+    EXPECT_EQ(x.triangles, direct.triangles);
+    EXPECT_EQ(x.labels, direct.labels);
+  }
+  for (Simplifier kind : {Simplifier::kBounded, Simplifier::kMeshopt}) {
+    LabelInterfaces x = complex_of(g);
+    o.kind = kind;
+    EXPECT_THROW(simplify(x, o), Error);
+  }
 }
 
 TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
@@ -198,7 +222,7 @@ TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
     const LabelGrid g = atlas_phantom();
     LabelInterfaces x = complex_of(g);
     smooth_label_interfaces(x, {});
-    simplify_label_interfaces(x, 0.3);
+    decimate_interface_complex(x, 0.3);
     return x;
   };
   const LabelInterfaces a = run(1), b = run(2);

@@ -23,6 +23,7 @@
 // volume is padded with background (label 0) outside its box, so every structure is closed.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/core/simplify/complex_decimator.h>
 #include <mlfe/core/surface/triangle_mesh.h>
 
 #include <array>
@@ -85,15 +86,11 @@ struct KuhnTet {
 /// lattice order (z slowest). Parallel; the same list for any thread count.
 std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g);
 
-/// The interface complex: triangles between label regions over one shared vertex set.
-/// Positions are in index coordinates (voxels) of the lattice.
-struct LabelInterfaces {
-  std::vector<std::array<double, 3>> positions;
-  std::vector<std::array<std::uint32_t, 3>> triangles;
-  /// Per triangle its labels {a, b}, a < b; the triangle is counter-clockwise seen from b, so
-  /// its normal points out of a.
-  std::vector<std::array<std::uint16_t, 2>> labels;
-};
+/// The interface complex: triangles between label regions over one shared vertex set (the
+/// regions are the labels, InterfaceComplex::labels). Positions are in index coordinates
+/// (voxels) of the lattice, so core/simplify's tolerances on it (simplify(), or
+/// decimate_interface_complex()) are in voxels.
+using LabelInterfaces = InterfaceComplex;
 
 /// Multi-material marching tetrahedra on the given one-voxel Kuhn tetrahedra (mixed_kuhn_tets,
 /// or the mixed leaves of a lattice hierarchy): per tetrahedron one triangle or quad through
@@ -120,26 +117,6 @@ struct LabelSmoothingOptions {
 /// stay shared, junctions stay on the curves where the labels meet, and corners stay put.
 /// Jacobi updates: the same result for any thread count.
 void smooth_label_interfaces(LabelInterfaces& x, const LabelSmoothingOptions& options);
-
-/// Simplifies the complex by quadric edge collapse (Garland & Heckbert 1997) over all its
-/// interfaces at once, cheap merges first, each merged vertex placed where the summed
-/// quadrics (area-weighted planes of the triangles it absorbed) are least. A merge is made only
-/// when that RMS distance to the absorbed planes stays within `tolerance` voxels. Constraints
-/// keep the complex a partition: a vertex inside one interface merges with a neighbour in the
-/// same interface or moves onto a junction-curve neighbour; a vertex on a junction curve (where
-/// three or more labels meet) merges only along its curve, placed on the segment; where curves
-/// meet, and at non-manifold points of an interface, vertices stay. Merging vertices never
-/// opens a closed surface; the link condition (the ends' common neighbours are exactly the
-/// edge's apexes), a no-flip test on every moved triangle, at least a tetrahedron per closed
-/// piece and three vertices per junction loop keep every label's surface closed, consistently
-/// oriented and its islands present, and the interfaces shared. The cheap merges (within a fifth
-/// of the tolerance) go first inside fixed blocks of 16³ voxels, in parallel, away from the
-/// blocks' borders; then the two halves below and above the vertices' median height, at once,
-/// cheapest first up to the tolerance, away from the other half; then the whole complex (the
-/// seam). Parts do not interact and each part's pass is sequential in itself, so the same
-/// result for any thread count. Returns the number of
-/// vertices removed. Throws mlfe::Error unless `tolerance` is positive and finite.
-std::size_t simplify_label_interfaces(LabelInterfaces& x, double tolerance);
 
 /// The closed surface of `label`: its triangles from the complex, oriented outward (normals
 /// out of the structure), positions mapped to physical coordinates with `t` (windings

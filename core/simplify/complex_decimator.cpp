@@ -1,0 +1,674 @@
+// Garland & Heckbert's quadric edge collapse ("Surface simplification using quadric error
+// metrics", SIGGRAPH 1997) over a whole interface complex at once, with the merged vertex at the
+// quadric's least point, constrained so the complex stays a partition. See complex_decimator.h
+// for the contract.
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
+#include <mlfe/core/simplify/complex_decimator.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <type_traits>
+
+namespace mlfe {
+
+namespace {
+
+// Numbers the items i < n for which kept(i) holds in their order (number[i]; ~0u for the
+// others) and returns how many: counted per chunk in parallel, then numbered per chunk from
+// the chunk's offset.
+template <class Kept>
+std::uint32_t number_kept(std::size_t n, Kept kept, std::vector<std::uint32_t>& number) {
+  constexpr std::size_t kChunk = 1 << 14;
+  const std::size_t chunks = (n + kChunk - 1) / kChunk;
+  std::vector<std::uint32_t> offset(chunks + 1, 0);
+  number.resize(n);
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) offset[c + 1] += kept(i);
+  });
+  std::partial_sum(offset.begin(), offset.end(), offset.begin());
+  tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+    std::uint32_t next = offset[c];
+    for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+      number[i] = kept(i) ? next++ : ~0u;
+  });
+  return offset[chunks];
+}
+
+// Garland & Heckbert's quadric edge collapse (SIGGRAPH 1997) over the whole interface complex
+// at once, with the optimal placement of the merged vertex, constrained so the complex stays a
+// partition: a vertex inside one interface merges with a neighbour inside the same interface
+// (placed where the summed quadric is least) or moves onto a junction-curve neighbour (which
+// stays put); a vertex on a junction curve merges only with its neighbours along that curve
+// (placed on the segment between them where the quadric is least); where curves meet, and at
+// vertices whose triangles do not form one fan, nothing moves. Merging vertices maps every
+// region's closed surface onto a closed surface, so closed stays closed and shared stays shared.
+//
+// Three passes: first every block of a fixed partition of space into small blocks on its own
+// (in parallel), collapsing only edges whose ends and all their neighbours lie in the block and
+// only the cheap merges; then the two halves of the complex, below and above the median height
+// of its vertices, the same way (one at a time per thread) up to the tolerance; then the whole
+// complex, where the halves meet. A part's collapses touch nothing outside it (see
+// decimate_parts), and each part's pass is sequential in itself, so the result does not depend
+// on the thread count; a block's few thousand vertices stay in cache, and the halves share the
+// collapse over the complex, which waits on memory for every triangle list it reads, between
+// two threads. One seam across the complex costs nothing measurable (bench/RESULTS.md); many
+// (the small blocks at the full tolerance) show in the distances.
+class ComplexDecimator {
+ public:
+  ComplexDecimator(InterfaceComplex& x, double tolerance) : x_(x), tol2_(tolerance * tolerance) {}
+
+  // Numbered by block first, so every later array is read block by block; the triangle lists,
+  // kinds and quadrics before any collapse reads them; then the three passes (blocks, halves,
+  // seam: above) and the compaction the caller sees.
+  void run() {
+    order_by_block();
+    vertex_triangles();
+    classify();
+    init_quadrics();
+    decimate_blocks();
+    decimate_halves();
+    decimate_seam();
+    compact();
+  }
+
+ private:
+  enum Kind : std::uint8_t { kInterior, kCurve, kFixed };
+  struct Quadric {
+    double a[6]{}, b[3]{}, c = 0, w = 0;  // p^T A p - 2 b^T p + c, A = {xx xy xz yy yz zz}
+    void add(const Quadric& q) {
+      for (int i = 0; i < 6; ++i) a[i] += q.a[i];
+      for (int i = 0; i < 3; ++i) b[i] += q.b[i];
+      c += q.c, w += q.w;
+    }
+    double eval(const Vec3& p) const {
+      const double ap0 = a[0] * p[0] + a[1] * p[1] + a[2] * p[2],
+                   ap1 = a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
+                   ap2 = a[2] * p[0] + a[4] * p[1] + a[5] * p[2];
+      return p[0] * ap0 + p[1] * ap1 + p[2] * ap2 - 2 * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) + c;
+    }
+  };
+  // A queued edge. Every change to an end queues its edges again, so an entry whose edge now
+  // plans into another bucket (or not at all) is stale and skipped: the fresh entry is elsewhere.
+  struct Candidate {
+    std::uint32_t a, b;
+  };
+  static constexpr std::size_t kBuckets = 2048;
+  // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
+  // candidates, most of them stale, costs more than the collapses). Within a bucket the last
+  // pushed goes first. Also the scratch lists of one pass.
+  struct Queue {
+    std::vector<std::vector<Candidate>> buckets = std::vector<std::vector<Candidate>>(kBuckets);
+    std::size_t lowest = kBuckets;
+    double limit2 = 0;  // the pass's largest cost
+    std::vector<std::uint32_t> nu, nv, common, apex;
+  };
+  // Blocks of kBlock³ voxels; a pass's scope is a part's number or the whole complex. The
+  // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
+  // 73 % at 0.2, with distances within the spread that reordering near-equal merges of one
+  // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
+  static constexpr double kBlock = 16, kBlockShare = 0.2;
+  static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
+
+  // Per vertex its triangles in triangle order, each list reserved at its final size.
+  void vertex_triangles() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::uint32_t> count(nv, 0);
+    for (const auto& t : x_.triangles)
+      for (auto v : t) ++count[v];
+    tris_of_.resize(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) tris_of_[v].reserve(count[v]);
+                      });
+    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
+      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
+    tri_alive_.assign(x_.triangles.size(), 1);
+    alive_.assign(nv, 1);
+  }
+
+  // Kinds: interior (no junction edge), curve (two junction edges), fixed (other counts, or a
+  // vertex whose triangles do not form one closed fan: a non-manifold point of an interface).
+  void classify() {
+    const std::size_t nv = x_.positions.size();
+    kind_.assign(nv, kInterior);
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          // Per vertex its junction edges, counted from its own triangles (a global edge list would
+          // cost more memory than the collapse itself).
+          std::vector<std::pair<std::uint32_t, std::uint32_t>> around, link;
+          for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            around.clear();
+            for (auto t : tris_of_[v])
+              for (auto w : x_.triangles[t])
+                if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
+            std::sort(around.begin(), around.end());
+            int junction_degree = 0;
+            for (std::size_t i = 0; i < around.size();) {
+              std::size_t j = i;
+              while (j < around.size() && around[j].first == around[i].first) ++j;
+              junction_degree += !(j - i == 2 && around[i].second == around[i + 1].second);
+              i = j;
+            }
+            if (junction_degree == 2) kind_[v] = kCurve;
+            if (junction_degree != 0 && junction_degree != 2) kind_[v] = kFixed;
+            if (kind_[v] == kInterior && !one_fan(std::uint32_t(v), link)) kind_[v] = kFixed;
+          }
+        });
+  }
+
+  // Whether the triangles around an interior vertex form one closed fan: the edges opposite v
+  // form one cycle.
+  bool one_fan(std::uint32_t v, std::vector<std::pair<std::uint32_t, std::uint32_t>>& link) const {
+    link.clear();
+    for (auto t : tris_of_[v]) {
+      const auto& tri = x_.triangles[t];
+      const int c = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+      link.emplace_back(tri[(c + 1) % 3], tri[(c + 2) % 3]);
+    }
+    if (link.size() < 3) return false;
+    // Follow the oriented cycle from the first edge; it must use every edge once.
+    std::size_t steps = 0;
+    std::uint32_t at = link[0].second;
+    while (at != link[0].first) {
+      std::size_t found = 0, next = 0;
+      for (std::size_t i = 0; i < link.size(); ++i)
+        if (link[i].first == at) ++found, next = i;
+      if (found != 1 || ++steps > link.size()) return false;
+      at = link[next].second;
+    }
+    return steps + 1 == link.size();
+  }
+
+  // Per vertex the sum of its triangles' area-weighted plane quadrics, in triangle order.
+  void init_quadrics() {
+    q_.assign(x_.positions.size(), Quadric{});
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, q_.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v)
+            for (auto t : tris_of_[v]) {
+              const auto& tri = x_.triangles[t];
+              const Vec3 &p0 = x_.positions[tri[0]], &p1 = x_.positions[tri[1]], &p2 = x_.positions[tri[2]];
+              Vec3 n = cross(sub(p1, p0), sub(p2, p0));
+              const double len = std::sqrt(dot(n, n));
+              if (!(len > 0)) continue;
+              const double area = len / 2;
+              for (auto& c : n) c /= len;
+              const double d = -dot(n, p0);
+              // area * (n.p + d)^2
+              Quadric q;
+              q.a[0] = area * n[0] * n[0], q.a[1] = area * n[0] * n[1], q.a[2] = area * n[0] * n[2];
+              q.a[3] = area * n[1] * n[1], q.a[4] = area * n[1] * n[2], q.a[5] = area * n[2] * n[2];
+              for (int c = 0; c < 3; ++c) q.b[c] = -area * d * n[c];
+              q.c = area * d * d;
+              q.w = area;
+              q_[v].add(q);
+            }
+        });
+  }
+
+  // Each block's inside alone, the cheap merges only: most merges of the complex, where the
+  // order hardly matters, in parallel and in cache. The block numbers are not needed after.
+  void decimate_blocks() {
+    const std::vector<std::vector<std::uint32_t>> blocks = block_insides(cell_);
+    std::vector<std::uint64_t>().swap(cell_);
+    decimate_parts(blocks, tol2_ * kBlockShare * kBlockShare);
+  }
+
+  // Each half of the complex alone (below and above its vertices' median height), up to the
+  // tolerance: the merges that shape the result, both halves at once, on the live vertices
+  // renumbered for a smaller working set.
+  void decimate_halves() {
+    renumber_alive();
+    decimate_parts(block_insides(halves()), tol2_);
+  }
+
+  // The whole complex, for the seam between the halves.
+  void decimate_seam() {
+    std::vector<std::uint32_t> all(x_.positions.size());
+    std::iota(all.begin(), all.end(), 0u);
+    Queue q;
+    q.limit2 = tol2_;
+    decimate(all, kEverywhere, q);
+  }
+
+  // The parts of a partition of the live vertices (by `cell`, per vertex): the vertices inside
+  // each non-empty part (no neighbour in another part), ascending, parts in the order of their
+  // cells; every vertex's scope_ is its part's number in that list, or kBorder.
+  std::vector<std::vector<std::uint32_t>> block_insides(const std::vector<std::uint64_t>& cell) {
+    const std::size_t nv = x_.positions.size();
+    scope_.assign(nv, kBorder);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          bool inside = alive_[v];
+                          for (auto t : tris_of_[v])
+                            if (tri_alive_[t])
+                              for (auto w : x_.triangles[t]) inside &= cell[w] == cell[v];
+                          if (inside) scope_[v] = 0;
+                        }
+                      });
+    // Number the blocks in order of their cells.
+    std::vector<std::uint64_t> cells;
+    for (std::size_t v = 0; v < nv; ++v)
+      if (scope_[v] == 0) cells.push_back(cell[v]);
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    std::vector<std::vector<std::uint32_t>> blocks(cells.size());
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      if (scope_[v] == kBorder) continue;
+      scope_[v] = std::uint32_t(std::lower_bound(cells.begin(), cells.end(), cell[v]) - cells.begin());
+      blocks[scope_[v]].push_back(v);
+    }
+    return blocks;
+  }
+
+  // The block of every vertex (its cell of kBlock³ voxels), and the vertices numbered by block,
+  // in their order within a block: a block's pass then reads contiguous memory. Within a block
+  // the order is the same as before, so are the collapses; original_[v] is v's number before,
+  // the order renumber_alive restores for the pass over the whole complex.
+  void order_by_block() {
+    const std::size_t nv = x_.positions.size();
+    std::vector<std::array<std::uint32_t, 3>> at(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          for (int c = 0; c < 3; ++c) {
+                            const double s = std::floor((x_.positions[v][c] + 2) / kBlock);
+                            at[v][c] = std::uint32_t(std::clamp(s, 0.0, double(1 << 20)));
+                          }
+                      });
+    std::array<std::uint64_t, 3> dims{1, 1, 1};
+    for (const auto& b : at)
+      for (int c = 0; c < 3; ++c) dims[c] = std::max(dims[c], std::uint64_t(b[c]) + 1);
+    // Counting sort by block: stable, so each block keeps its vertices' order.
+    std::vector<std::uint32_t> first(dims[0] * dims[1] * dims[2] + 1, 0);
+    cell_.resize(nv);
+    for (std::size_t v = 0; v < nv; ++v) {
+      cell_[v] = (at[v][0] * dims[1] + at[v][1]) * dims[2] + at[v][2];
+      ++first[cell_[v] + 1];
+    }
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    original_.resize(nv);
+    std::vector<std::uint64_t> cell(nv);
+    for (std::uint32_t v = 0; v < nv; ++v) {
+      const std::uint32_t to = first[cell_[v]]++;
+      original_[to] = v, cell[to] = cell_[v];
+    }
+    cell_.swap(cell);
+    std::vector<std::uint32_t> where(nv);
+    std::vector<Vec3> positions(nv);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          where[original_[v]] = std::uint32_t(v);
+                          positions[v] = x_.positions[original_[v]];
+                        }
+                      });
+    x_.positions.swap(positions);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, x_.triangles.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t)
+                          for (auto& v : x_.triangles[t]) v = where[v];
+                      });
+  }
+
+  // Every part's vertices decimated alone, up to cost `limit2`, parts in parallel (scope_ holds
+  // each vertex's part, see block_insides). A collapse of u into v writes u's and v's triangle
+  // lists, their triangles, v's position and quadric, and reads their neighbours; with both ends
+  // inside a part (no neighbour in another part: a collapse inside a part never adds one, so
+  // this stays true), all of that belongs to the part.
+  void decimate_parts(const std::vector<std::vector<std::uint32_t>>& parts, double limit2) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, parts.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        Queue& q = queues_.local();
+                        q.limit2 = limit2;
+                        for (std::size_t b = r.begin(); b != r.end(); ++b)
+                          decimate(parts[b], std::uint32_t(b), q);
+                      });
+  }
+
+  // Per vertex its half of the complex: 1 at or above the median height of the vertices.
+  std::vector<std::uint64_t> halves() const {
+    const std::size_t n = x_.positions.size();
+    std::vector<std::uint64_t> half(n);
+    if (n == 0) return half;
+    std::vector<double> z(n);
+    for (std::size_t v = 0; v < n; ++v) z[v] = x_.positions[v][2];
+    std::nth_element(z.begin(), z.begin() + n / 2, z.end());
+    const double split = z[n / 2];
+    for (std::size_t v = 0; v < n; ++v) half[v] = x_.positions[v][2] >= split;
+    return half;
+  }
+
+  bool in_scope(std::uint32_t v, std::uint32_t scope) const {
+    return scope == kEverywhere || scope_[v] == scope;
+  }
+
+  // One pass: the edges of `vertices` within `scope` queued, then collapsed cheapest first.
+  void decimate(const std::vector<std::uint32_t>& vertices, std::uint32_t scope, Queue& q) {
+    queue_edges(vertices, scope, q);
+    collapse_cheapest(scope, q);
+  }
+
+  // Every edge of `vertices` within `scope` queued once, from its lower vertex, in vertex order
+  // (the order breaks ties between equal costs, so it is a function of the numbering alone).
+  void queue_edges(const std::vector<std::uint32_t>& vertices, std::uint32_t scope, Queue& q) {
+    for (auto v : vertices) {
+      neighbours(v, q.nv);
+      for (auto w : q.nv)
+        if (w > v && in_scope(w, scope)) push(v, w, q);
+    }
+  }
+
+  // Collapses the queued edges cheapest first while within the pass's limit; each collapse
+  // queues its survivor's edges again, and stale entries (an end gone, or a cost that moved to
+  // another bucket) are skipped.
+  void collapse_cheapest(std::uint32_t scope, Queue& q) {
+    for (;;) {
+      while (q.lowest < kBuckets && q.buckets[q.lowest].empty()) ++q.lowest;
+      if (q.lowest == kBuckets) break;
+      const Candidate c = q.buckets[q.lowest].back();
+      q.buckets[q.lowest].pop_back();
+      if (!alive_[c.a] || !alive_[c.b]) continue;
+      std::uint32_t from = 0, to = 0;
+      Vec3 p{};
+      const double cost = plan(c.a, c.b, from, to, p);
+      if (!(cost <= q.limit2) || bucket_of(cost, q) != q.lowest) continue;
+      if (collapsible(from, to, p, q)) collapse(from, to, p, scope, q);
+    }
+  }
+
+  // The triangles on edge {a, b} and whether it lies on a junction curve (not exactly two
+  // triangles of one interface).
+  bool junction_edge(std::uint32_t a, std::uint32_t b) const {
+    int n = 0;
+    std::uint32_t pair = 0;
+    bool same = true;
+    for (auto t : tris_of_[a]) {
+      if (!tri_alive_[t]) continue;
+      const auto& tri = x_.triangles[t];
+      if (tri[0] != b && tri[1] != b && tri[2] != b) continue;
+      const std::uint32_t p = std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1];
+      if (n++ == 0) pair = p;
+      same &= p == pair;
+    }
+    return !(same && n == 2);
+  }
+
+  // The least of q on the segment a..b.
+  static Vec3 best_on_segment(const Quadric& q, const Vec3& a, const Vec3& b) {
+    const Vec3 d = sub(b, a);
+    const Vec3 ad{q.a[0] * d[0] + q.a[1] * d[1] + q.a[2] * d[2],
+                  q.a[1] * d[0] + q.a[3] * d[1] + q.a[4] * d[2],
+                  q.a[2] * d[0] + q.a[4] * d[1] + q.a[5] * d[2]};
+    const double dad = dot(d, ad);
+    double t = 0.5;
+    if (dad > 1e-18)
+      t = std::clamp(((q.b[0] * d[0] + q.b[1] * d[1] + q.b[2] * d[2]) - dot(a, ad)) / dad, 0.0, 1.0);
+    return {a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]};
+  }
+
+  // The least of q over space when well conditioned and near the edge, else on the segment.
+  static Vec3 best_point(const Quadric& q, const Vec3& a, const Vec3& b) {
+    const double* m = q.a;
+    const double c00 = m[3] * m[5] - m[4] * m[4], c01 = m[2] * m[4] - m[1] * m[5],
+                 c02 = m[1] * m[4] - m[2] * m[3];
+    const double det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+    const double scale = m[0] + m[3] + m[5];
+    if (scale > 0 && std::abs(det) > 1e-3 * scale * scale * scale) {
+      const double c11 = m[0] * m[5] - m[2] * m[2], c12 = m[1] * m[2] - m[0] * m[4],
+                   c22 = m[0] * m[3] - m[1] * m[1];
+      const Vec3 p{(c00 * q.b[0] + c01 * q.b[1] + c02 * q.b[2]) / det,
+                   (c01 * q.b[0] + c11 * q.b[1] + c12 * q.b[2]) / det,
+                   (c02 * q.b[0] + c12 * q.b[1] + c22 * q.b[2]) / det};
+      const Vec3 mid{(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2}, ab = sub(b, a),
+                                                                               pm = sub(p, mid);
+      if (dot(pm, pm) <= dot(ab, ab)) return p;
+    }
+    return best_on_segment(q, a, b);
+  }
+
+  // The allowed collapse of edge {a, b} (which end goes, where the other moves) and its cost:
+  // the summed quadric per unit area (a mean squared distance to the merged planes) at the
+  // placement. Infinite when the edge may not collapse.
+  double plan(std::uint32_t a, std::uint32_t b, std::uint32_t& from, std::uint32_t& to, Vec3& p) const {
+    constexpr double kNever = std::numeric_limits<double>::infinity();
+    const Kind ka = kind_[a], kb = kind_[b];
+    if (ka == kFixed && kb == kFixed) return kNever;
+    Quadric q = q_[a];
+    q.add(q_[b]);
+    if (ka == kInterior && kb == kInterior) {
+      p = best_point(q, x_.positions[a], x_.positions[b]);
+      from = std::max(a, b), to = std::min(a, b);
+    } else if (ka == kInterior || kb == kInterior) {
+      from = ka == kInterior ? a : b, to = ka == kInterior ? b : a;
+      p = x_.positions[to];
+    } else {
+      // Both on curves (or one where curves meet): only along a junction curve.
+      if (!junction_edge(a, b)) return kNever;
+      if (ka == kCurve && kb == kCurve) {
+        p = best_on_segment(q, x_.positions[a], x_.positions[b]);
+        from = std::max(a, b), to = std::min(a, b);
+      } else {
+        from = ka == kCurve ? a : b, to = ka == kCurve ? b : a;
+        p = x_.positions[to];
+      }
+    }
+    return q.w > 0 ? std::max(0.0, q.eval(p)) / q.w : 0.0;
+  }
+
+  // Queues the collapse of edge {a, b} when it is allowed and within the tolerance.
+  void push(std::uint32_t a, std::uint32_t b, Queue& q) const {
+    std::uint32_t from = 0, to = 0;
+    Vec3 p{};
+    const double cost = plan(a, b, from, to, p);
+    if (!(cost <= q.limit2)) return;
+    const std::size_t bucket = bucket_of(cost, q);
+    q.buckets[bucket].push_back({a, b});
+    q.lowest = std::min(q.lowest, bucket);
+  }
+
+  static std::size_t bucket_of(double cost, const Queue& q) {
+    return std::min(kBuckets - 1, std::size_t(std::sqrt(cost / q.limit2) * double(kBuckets)));
+  }
+
+  // The live neighbours of v, ascending; drops v's dead triangles from its list on the way.
+  void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) {
+    out.clear();
+    auto& tv = tris_of_[v];
+    std::size_t kept = 0;
+    for (auto t : tv)
+      if (tri_alive_[t]) {
+        tv[kept++] = t;
+        for (auto w : x_.triangles[t])
+          if (w != v) out.push_back(w);
+      }
+    tv.resize(kept);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+
+  // Topology (the link condition: the common neighbours of the two ends are exactly the apexes
+  // of the triangles on the edge; no closed piece below a tetrahedron; a junction curve keeps at
+  // least three vertices per loop) and geometry (no triangle flips or degenerates).
+  bool collapsible(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) {
+    neighbours(u, q.nu);
+    neighbours(v, q.nv);
+    if (q.nu.size() <= 3 && q.nv.size() <= 3) return false;
+    q.common.clear();
+    std::set_intersection(q.nu.begin(), q.nu.end(), q.nv.begin(), q.nv.end(), std::back_inserter(q.common));
+    q.apex.clear();
+    for (auto t : tris_of_[u]) {
+      const auto& tri = x_.triangles[t];
+      if (tri[0] != v && tri[1] != v && tri[2] != v) continue;
+      for (auto w : tri)
+        if (w != u && w != v) q.apex.push_back(w);
+    }
+    if (q.apex.empty()) return false;
+    std::sort(q.apex.begin(), q.apex.end());
+    q.apex.erase(std::unique(q.apex.begin(), q.apex.end()), q.apex.end());
+    if (q.apex != q.common) return false;
+    if (kind_[u] == kCurve && kind_[v] != kInterior) {
+      // The other curve neighbours of u and v must differ (else a loop of three closes up).
+      for (auto w : q.common)
+        if (kind_[w] != kInterior && junction_edge(u, w) && junction_edge(v, w)) return false;
+    }
+    return !flips(u, v, p) && !flips(v, u, p);
+  }
+
+  // Whether moving `v` to `p` (with `other` merged into it) flips or flattens a triangle of v
+  // that survives.
+  bool flips(std::uint32_t v, std::uint32_t other, const Vec3& p) const {
+    for (auto t : tris_of_[v]) {
+      if (!tri_alive_[t]) continue;
+      const auto& tri = x_.triangles[t];
+      if (tri[0] == other || tri[1] == other || tri[2] == other) continue;
+      Vec3 before[3], after[3];
+      for (int k = 0; k < 3; ++k) before[k] = after[k] = x_.positions[tri[k]];
+      for (int k = 0; k < 3; ++k)
+        if (tri[k] == v) after[k] = p;
+      const Vec3 n0 = cross(sub(before[1], before[0]), sub(before[2], before[0]));
+      const Vec3 n1 = cross(sub(after[1], after[0]), sub(after[2], after[0]));
+      const double l0 = dot(n0, n0), l1 = dot(n1, n1);
+      if (!(l1 > 1e-12)) return true;
+      if (dot(n0, n1) < kMinCos * std::sqrt(l0 * l1)) return true;
+    }
+    return false;
+  }
+
+  // Merges u into v at p and queues v's edges within `scope` again.
+  void collapse(std::uint32_t u, std::uint32_t v, const Vec3& p, std::uint32_t scope, Queue& q) {
+    for (auto t : tris_of_[u]) {
+      if (!tri_alive_[t]) continue;
+      auto& tri = x_.triangles[t];
+      if (tri[0] == v || tri[1] == v || tri[2] == v) {
+        tri_alive_[t] = 0;
+        continue;
+      }
+      for (auto& w : tri)
+        if (w == u) w = v;
+      tris_of_[v].push_back(t);
+    }
+    tris_of_[u].clear();
+    tris_of_[u].shrink_to_fit();
+    alive_[u] = 0;
+    x_.positions[v] = p;
+    q_[v].add(q_[u]);
+    neighbours(v, q.nv);
+    for (auto w : q.nv)
+      if (in_scope(w, scope)) push(v, w, q);
+  }
+
+  // Drops dead vertices and triangles, numbering the rest in the same order (so every choice
+  // that compares numbers or follows their order is the same), for a smaller working set.
+  void renumber_alive() {
+    const std::size_t nv = x_.positions.size(), nt = x_.triangles.size();
+    // Vertices in their order before order_by_block: at[o] is the vertex numbered o then.
+    std::vector<std::uint32_t> at(nv), rank, vmap(nv), tmap;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v)
+                          at[original_[v]] = std::uint32_t(v);
+                      });
+    const std::uint32_t n = number_kept(
+        nv, [&](std::size_t o) { return alive_[at[o]] != 0; }, rank);
+    // One array at a time (the old one freed before the next is made), for the peak.
+    auto keep = [&](auto& array, auto move) {
+      std::remove_reference_t<decltype(array)> kept(n);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t o = r.begin(); o != r.end(); ++o)
+                            if (rank[o] != ~0u) move(kept[rank[o]], array[at[o]]);
+                        });
+      array.swap(kept);
+    };
+    auto copy = [](auto& to, auto& from) { to = from; };
+    keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
+    keep(tris_of_, copy);  // fresh lists, each part's next to each other
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
+                      });
+    alive_.assign(n, 1);
+    original_.clear(), cell_.clear();
+    const std::uint32_t m = number_kept(
+        nt, [&](std::size_t t) { return tri_alive_[t] != 0; }, tmap);
+    std::vector<std::array<std::uint32_t, 3>> triangles(m);
+    std::vector<std::array<std::uint16_t, 2>> labels(m);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                          if (tmap[t] == ~0u) continue;
+                          for (int c = 0; c < 3; ++c) triangles[tmap[t]][c] = vmap[x_.triangles[t][c]];
+                          labels[tmap[t]] = x_.labels[t];
+                        }
+                      });
+    x_.triangles.swap(triangles), x_.labels.swap(labels);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                          auto& tv = tris_of_[v];
+                          std::size_t kept = 0;
+                          for (auto t : tv)
+                            if (tri_alive_[t]) tv[kept++] = tmap[t];
+                          tv.resize(kept);
+                        }
+                      });
+    tri_alive_.assign(m, 1);
+  }
+
+  // Drops dead triangles and unused vertices; vertices numbered in first use.
+  void compact() {
+    std::vector<std::array<std::uint32_t, 3>> tris;
+    std::vector<std::array<std::uint16_t, 2>> labels;
+    for (std::size_t t = 0; t < x_.triangles.size(); ++t)
+      if (tri_alive_[t]) tris.push_back(x_.triangles[t]), labels.push_back(x_.labels[t]);
+    std::vector<std::uint32_t> remap(x_.positions.size(), ~0u);
+    std::vector<Vec3> positions;
+    for (auto& t : tris)
+      for (auto& v : t) {
+        if (remap[v] == ~0u) {
+          remap[v] = std::uint32_t(positions.size());
+          positions.push_back(x_.positions[v]);
+        }
+        v = remap[v];
+      }
+    x_.positions = std::move(positions);
+    x_.triangles = std::move(tris);
+    x_.labels = std::move(labels);
+  }
+
+  static constexpr double kMinCos = 0.2;
+  InterfaceComplex& x_;
+  const double tol2_;
+  std::vector<Kind> kind_;
+  std::vector<char> alive_, tri_alive_;
+  std::vector<std::vector<std::uint32_t>> tris_of_;
+  std::vector<Quadric> q_;
+  std::vector<std::uint32_t> scope_;
+  std::vector<std::uint64_t> cell_;
+  std::vector<std::uint32_t> original_;
+  // Per thread the pass's queue, kept for the next pass (its buckets' storage).
+  tbb::enumerable_thread_specific<Queue> queues_;
+};
+
+}  // namespace
+
+std::size_t decimate_interface_complex(InterfaceComplex& x, double tolerance) {
+  if (!(tolerance > 0) || !std::isfinite(tolerance))
+    throw Error("simplification tolerance must be positive and finite (got " + std::to_string(tolerance) +
+                ")");
+  const std::size_t before = x.positions.size();
+  ComplexDecimator(x, tolerance).run();
+  return before - x.positions.size();
+}
+
+}  // namespace mlfe

@@ -1,0 +1,49 @@
+// The one entry point to every simplifier: options naming the kind (the command line's
+// --simplifier) and the bound, and simplify(), which picks the algorithm for a surface or for an
+// interface complex. The algorithms' own contracts are in surface_simplification.h and
+// complex_decimator.h.
+#pragma once
+#include <mlfe/core/simplify/complex_decimator.h>
+#include <mlfe/core/simplify/surface_simplification.h>
+#include <mlfe/core/surface/triangle_mesh.h>
+
+#include <cstddef>
+
+namespace mlfe {
+
+/// Which simplifier. kBounded: simplify_within, the bound verified; kFast: the same collapses
+/// and topology checks with the error estimated from the quadrics (SimplifyOptions::verify_bound
+/// false); kMeshopt: meshoptimizer (simplify_fast), error estimated, seconds for millions of
+/// triangles but it may pinch the surface (non-manifold spots); kAuto: bounded, but fast for
+/// surfaces of over 200 000 triangles with a ratio below 5 % (topology kept either way).
+enum class Simplifier { kAuto, kFast, kBounded, kMeshopt };
+
+struct SimplifierOptions {
+  Simplifier kind = Simplifier::kAuto;
+  double tolerance = 0;  ///< the bound, position units; > 0
+  /// Stop at this fraction of the input's triangles, or earlier where the bound binds (0: the
+  /// bound alone). Surfaces only: an interface complex stops at the bound.
+  double ratio = 0;
+  /// Where a collapse puts the surviving vertex (surfaces; not kMeshopt, which keeps input
+  /// vertices). kOptimal ends with the least-squares refit of the simplified surface to the
+  /// input (core/surface/surface_fitting.h), since the greedy collapses leave each vertex where
+  /// its last merge put it.
+  Placement placement = Placement::kInputVertex;
+};
+
+/// `mesh` simplified by `o.kind` within `o.tolerance`, down to `o.ratio` of its triangles. For
+/// kAuto: up to 200 000 triangles the verified bound; above, the estimated bound to half the
+/// tolerance first, then the verified bound on what is left (below a 5 % ratio the estimate all
+/// the way). Decided from the mesh's size and the options alone, so the output does not depend
+/// on the thread count. Throws mlfe::Error as the chosen algorithm does (a tolerance that is not
+/// positive and finite, an index out of range, ...).
+TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o);
+
+/// Simplifies the interface complex `x` in place within `o.tolerance`, keeping its interfaces
+/// shared and every region's surface closed; returns the vertices removed. kAuto and kFast:
+/// decimate_interface_complex (the bound estimated from the quadrics, as kFast's). Throws
+/// mlfe::Error for kBounded and kMeshopt, which simplify one surface at a time and would unshare
+/// the interfaces, and as decimate_interface_complex does.
+std::size_t simplify(InterfaceComplex& x, const SimplifierOptions& o);
+
+}  // namespace mlfe
