@@ -7,6 +7,7 @@
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline/compare.h>
 
@@ -14,7 +15,6 @@
 #include <cctype>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <map>
 
 namespace mlfe {
@@ -33,15 +33,6 @@ std::string lower_extension(const std::string& path) {
   if (lower.size() > 7 && lower.compare(lower.size() - 7, 7, ".nii.gz") == 0) return ".nii.gz";
   const auto dot = lower.find_last_of('.');
   return dot == std::string::npos ? "" : lower.substr(dot);
-}
-
-std::string head_bytes(const std::string& path, std::size_t n) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open file");
-  std::string s(n, '\0');
-  in.read(s.data(), std::streamsize(n));
-  s.resize(std::size_t(in.gcount()));
-  return s;
 }
 
 enum class Kind { kGltf, kMesh, kImage, kVolume, kHierarchy };
@@ -65,7 +56,7 @@ const char* kind_name(Kind k) {
 /// Magic bytes first (they cannot lie), extension second, volume as the fallback because
 /// read_volume has its own detection (and its own error for what it does not know).
 Kind detect_kind(const std::string& path) {
-  const std::string head = head_bytes(path, 8);
+  const std::string head = read_file_prefix(path, 8);
   if (head.size() >= 4 && std::memcmp(head.data(), "glTF", 4) == 0) return Kind::kGltf;
   if (head.size() >= 5 && std::memcmp(head.data(), "DRACO", 5) == 0) return Kind::kMesh;
   if (is_hierarchy_file(path)) return Kind::kHierarchy;
@@ -77,7 +68,7 @@ Kind detect_kind(const std::string& path) {
 }
 
 TriangleMesh read_any_mesh(const std::string& path) {
-  const std::string head = head_bytes(path, 5);
+  const std::string head = read_file_prefix(path, 5);
   if (head == "DRACO" || lower_extension(path) == ".drc") return read_draco_file(path);
   return read_mesh_file(path);
 }

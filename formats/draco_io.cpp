@@ -5,12 +5,11 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/safe_read.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <fstream>
-#include <iterator>
 #include <limits>
 #include <memory>
 #include <new>
@@ -335,10 +334,7 @@ void write_draco_file(const std::string& path, const TriangleMesh& mesh, const D
 }
 
 TriangleMesh read_draco_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open file");
-  std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw Error(path + ": read failed");
+  const std::string bytes = read_regular_file(path, UINT64_MAX, "the file");
   return decode_draco(bytes.data(), bytes.size(), path);
 }
 

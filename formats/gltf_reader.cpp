@@ -7,14 +7,13 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/safe_read.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
-#include <sstream>
 
 namespace mlfe {
 namespace {
@@ -24,15 +23,6 @@ constexpr const char* kEncodingExtensions[] = {"KHR_draco_mesh_compression", "KH
 
 [[noreturn]] void fail(const std::string& path, const std::string& problem) {
   throw Error(path + ": " + problem);
-}
-
-std::string read_all(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) fail(path, "read error");
-  return ss.str();
 }
 
 bool is_glb(const std::string& bytes) {
@@ -203,7 +193,7 @@ std::vector<std::string> load_buffers(const std::string& path, const std::string
         if (uri.find("..") != std::string::npos || uri.find(':') != std::string::npos || uri.empty() ||
             uri[0] == '/')
           fail(path, "buffer URI '" + uri + "' is not a file next to the asset");
-        data = read_all(dir + "/" + uri);
+        data = read_regular_file(dir + "/" + uri, UINT64_MAX, "the buffer");
       }
     }
     if (data.size() < length) fail(path, "a buffer is shorter than its byteLength");
@@ -379,7 +369,7 @@ void transform_mesh(TriangleMesh& m, const Eigen::Matrix4d& world) {
 }  // namespace
 
 GltfAsset read_gltf(const std::string& path) {
-  const std::string bytes = read_all(path);
+  const std::string bytes = read_regular_file(path, UINT64_MAX, "the file");
   GltfAsset asset;
   try {
     const nlohmann::json j = parse_json(path, bytes);

@@ -5,6 +5,7 @@
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/hierarchy_levels.h>
+#include <mlfe/formats/safe_read.h>
 #include <zlib.h>
 #include <zstd.h>
 
@@ -85,8 +86,7 @@ void check_info(const std::string& path, const HierarchyFileInfo& info) {
     if (!std::isfinite(info.transform.spacing[i]) || !(info.transform.spacing[i] > 0) ||
         !std::isfinite(info.transform.origin[i]))
       throw Error(path + ": transform spacing must be positive and origin finite");
-  for (double d : info.transform.direction)
-    if (!std::isfinite(d)) throw Error(path + ": transform direction is not finite");
+  check_frame(path, info.transform.direction);
   if (!std::isfinite(info.value_min) || !std::isfinite(info.value_max) || info.value_min > info.value_max)
     throw Error(path + ": value range must be finite with min <= max");
   if (info.space.size() > kMaxSpace || !printable(info.space))
@@ -905,6 +905,7 @@ void truncate_levels(const std::string& path, HierarchyFile& f, int max_level) {
 HierarchyFile read_hierarchy(const std::string& path, int max_level) {
   std::uint32_t version = 0;
   std::uint64_t file_size = 0;
+  regular_file_size(path);
   {
     std::ifstream in(path, std::ios::binary);
     if (!in) throw Error(path + ": cannot open file");
@@ -950,10 +951,12 @@ template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const 
                                  const HierarchyWriteOptions&);
 
 bool is_hierarchy_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  char magic[8] = {};
-  in.read(magic, 8);
-  return in.gcount() == 8 && std::memcmp(magic, kMagic, 8) == 0;
+  try {
+    const std::string magic = read_file_prefix(path, 8);
+    return magic.size() == 8 && std::memcmp(magic.data(), kMagic, 8) == 0;
+  } catch (const Error&) {
+    return false;  // missing, or not a regular file: not one to read
+  }
 }
 
 }  // namespace mlfe

@@ -15,14 +15,12 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/png_reader.h>
+#include <mlfe/formats/safe_read.h>
 #include <png.h>
 
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
-#include <iterator>
-#include <sstream>
 #include <vector>
 
 namespace mlfe {
@@ -30,15 +28,6 @@ namespace {
 
 [[noreturn]] void fail(const std::string& path, const std::string& problem) {
   throw Error(path + ": " + problem);
-}
-
-std::string first_bytes(const std::string& path, std::size_t n) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open file");
-  std::string s(n, '\0');
-  in.read(s.data(), std::streamsize(n));
-  s.resize(std::size_t(in.gcount()));
-  return s;
 }
 
 bool is_exr_magic(const std::string& head) {
@@ -76,8 +65,7 @@ std::string attribute_text(const Imf::Attribute& a) {
 // corrupt size makes it ask for gigabytes. Every attribute of a single-part header must lie in
 // the file: name\0 type\0 int32 size, value; the list ends with an empty name.
 void check_exr_header(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::vector<char> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string b = read_regular_file(path, UINT64_MAX, "the file");
   const auto fail = [&](const std::string& what) {
     throw Error(path + ": not a valid EXR file (" + what + ")");
   };
@@ -158,11 +146,7 @@ Image read_exr(const std::string& path) {
 Image read_png_image(const std::string& path) {
   Image img;
   img.format = "png";
-  {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) fail(path, "cannot open file");
-    check_png_chunks(path, std::string(std::istreambuf_iterator<char>(in), {}));
-  }
+  check_png_chunks(path, read_regular_file(path, UINT64_MAX, "the file"));
   png_image image;
   std::memset(&image, 0, sizeof image);
   image.version = PNG_IMAGE_VERSION;
@@ -213,12 +197,12 @@ Image read_png_image(const std::string& path) {
 }  // namespace
 
 bool is_image_file(const std::string& path) {
-  const std::string head = first_bytes(path, 8);
+  const std::string head = read_file_prefix(path, 8);
   return is_exr_magic(head) || is_png_magic(head);
 }
 
 Image read_image(const std::string& path) {
-  const std::string head = first_bytes(path, 8);
+  const std::string head = read_file_prefix(path, 8);
   if (is_exr_magic(head)) return read_exr(path);
   if (is_png_magic(head)) return read_png_image(path);
   fail(path, "not an OpenEXR or PNG image");

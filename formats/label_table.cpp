@@ -3,11 +3,11 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/label_table.h>
+#include <mlfe/formats/safe_read.h>
 
 #include <charconv>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <vector>
@@ -19,18 +19,6 @@ namespace mlfe {
 namespace {
 
 constexpr std::size_t kMaxTableBytes = 64u << 20;
-
-std::string read_all(const std::string& path) {
-  std::error_code ec;
-  const auto size = fs::file_size(path, ec);
-  if (ec) throw Error(path + ": cannot open label table");
-  if (size > kMaxTableBytes) throw Error(path + ": label table larger than 64 MiB");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(path + ": cannot open label table");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 bool parse_int(const std::string& s, long long& v) {
   const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
@@ -290,13 +278,14 @@ LabelTable parse_label_table(const std::string& bytes, const std::string& file_n
 }
 
 LabelTable read_label_table(const std::string& path) {
-  LabelTable t = parse_label_table(read_all(path), path);
+  LabelTable t = parse_label_table(read_regular_file(path, kMaxTableBytes, "a label table"), path);
   if (t.format != "mricron") return t;
   // MRIcron keeps colours in a .lut beside the names.
   fs::path lut = fs::path(path).replace_extension(".lut");
   std::error_code ec;
   if (!fs::exists(lut, ec)) return t;
-  const LabelTable colours = parse_label_table(read_all(lut.string()), lut.string());
+  const LabelTable colours =
+      parse_label_table(read_regular_file(lut.string(), kMaxTableBytes, "a label table"), lut.string());
   for (auto& [value, e] : t.entries) {
     const auto it = colours.entries.find(value);
     if (it != colours.entries.end()) {

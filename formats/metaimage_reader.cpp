@@ -1,7 +1,6 @@
 #include <fmt/format.h>
 #include <mlfe/formats/metaimage_reader.h>
 #include <mlfe/formats/raw_reader.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cctype>
@@ -127,51 +126,10 @@ void read_transform(const std::string& path, const Header& get, int ndims, GridT
   }
 }
 
-// The zlib stream `packed`, which must inflate to exactly `bytes`.
-std::vector<unsigned char> inflate_exactly(const std::string& path, std::string& packed,
-                                           std::uint64_t bytes) {
-  const std::uint64_t avail = packed.size();
-  std::vector<unsigned char> raw(static_cast<std::size_t>(bytes));
-  z_stream zs{};
-  if (inflateInit(&zs) != Z_OK) fail(path, "zlib initialisation failed");
-  std::uint64_t in_pos = 0, out_done = 0;
-  int rc = Z_OK;
-  bool overflow = false;
-  // zlib counts in 32-bit units; feed it in pieces so data over 4 GB works.
-  for (;;) {
-    const uInt ai = static_cast<uInt>(std::min<std::uint64_t>(avail - in_pos, 1u << 30));
-    const uInt ao = static_cast<uInt>(std::min<std::uint64_t>(bytes - out_done, 1u << 30));
-    unsigned char extra = 0;
-    zs.next_in = reinterpret_cast<Bytef*>(packed.data()) + in_pos;
-    zs.avail_in = ai;
-    zs.next_out = ao ? raw.data() + out_done : &extra;  // all voxels there: the stream must end
-    zs.avail_out = ao ? ao : 1;
-    rc = inflate(&zs, Z_NO_FLUSH);
-    const uInt used = ai - zs.avail_in;
-    const uInt made = (ao ? ao : 1) - zs.avail_out;
-    in_pos += used;
-    if (ao == 0 && made > 0) overflow = true;
-    if (ao) out_done += made;
-    if (rc == Z_STREAM_END || overflow) break;
-    if (rc != Z_OK && rc != Z_BUF_ERROR) break;
-    if (used == 0 && made == 0) break;  // no progress: input exhausted
-  }
-  std::string zmsg = zs.msg ? zs.msg : "";
-  inflateEnd(&zs);
-  if (overflow || (rc == Z_STREAM_END && out_done != bytes))
-    fail(path, fmt::format("compressed data does not inflate to the {} bytes of the dimensions", bytes));
-  if (rc != Z_STREAM_END) {
-    if (rc == Z_OK || rc == Z_BUF_ERROR)
-      fail(path, fmt::format("truncated compressed data ({} of {} bytes inflated)", out_done, bytes));
-    fail(path, "corrupt compressed data" + (zmsg.empty() ? std::string() : " (" + zmsg + ")"));
-  }
-  return raw;
-}
-
 }  // namespace
 
 ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
-  file_size(path);
+  regular_file_size(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open");
   std::uint64_t header_end = 0;
@@ -224,7 +182,7 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     data_file = sibling_path(path, edf);
     offset = 0;
   }
-  const std::uint64_t dsize = file_size(data_file);
+  const std::uint64_t dsize = regular_file_size(data_file);
   const int esize = scalar_type_size(*type);
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
   if (auto hs = get("HeaderSize")) {
@@ -252,9 +210,8 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
                                   dims[0], dims[1], dims[2], *et, bytes, avail));
     check_memory(path, need, opts, "the float32 grid");
     allocate_values(grid);
-    std::ifstream din(data_file, std::ios::binary);
-    if (!din) fail(data_file, "cannot open");
-    din.seekg(static_cast<std::streamoff>(offset));
+    RegularFile din(data_file);
+    din.seek(offset);
     read_raw_values(data_file, din, *type, msb == host_is_little_endian(), grid.values.data(),
                     grid.values.size());
     return grid;
@@ -265,12 +222,11 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
   check_memory(path, need, opts, "the compressed data, the voxels and the float32 grid");
   std::string packed(static_cast<std::size_t>(avail), '\0');
   {
-    std::ifstream din(data_file, std::ios::binary);
-    din.seekg(static_cast<std::streamoff>(offset));
-    din.read(packed.data(), static_cast<std::streamsize>(avail));
-    if (static_cast<std::uint64_t>(din.gcount()) != avail) fail(data_file, "read error");
+    RegularFile din(data_file);
+    din.seek(offset);
+    if (din.read(packed.data(), packed.size()) != avail) fail(data_file, "read error");
   }
-  const std::vector<unsigned char> raw = inflate_exactly(path, packed, bytes);
+  const std::vector<unsigned char> raw = inflate_exactly(path, packed.data(), packed.size(), bytes);
   allocate_values(grid);
   convert_to_float(raw.data(), *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
   add_note(grid, "zlib-compressed MetaImage");

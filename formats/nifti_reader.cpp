@@ -1,6 +1,7 @@
 #include <fmt/format.h>
 #include <mlfe/formats/nifti_reader.h>
 #include <nifti2_io.h>
+#include <sys/stat.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -47,7 +48,7 @@ std::string header_file(const std::string& path) {
 
 // The first bytes of the (possibly gzipped) header file, decompressed.
 std::string header_bytes(const std::string& file, std::size_t n) {
-  file_size(file);
+  regular_file_size(file);
   gzFile gz = gzopen(file.c_str(), "rb");
   if (!gz) fail(file, "cannot open");
   std::string s(n, '\0');
@@ -81,6 +82,21 @@ std::optional<ScalarType> nifti_type(int dt) {
       return ScalarType::F64;
     default:
       return std::nullopt;
+  }
+}
+
+// libnifti opens the image file of a .hdr/.img pair (and looks for one beside a .nii) while it
+// reads the header, so every such file present must be a regular file before it does.
+void check_image_files(const std::string& path) {
+  std::string base = path;
+  for (const char* ext : {".hdr.gz", ".img.gz", ".hdr", ".img", ".nii.gz", ".nii"})
+    if (ends_with_ci(path, ext)) {
+      base = path.substr(0, path.size() - std::strlen(ext));
+      break;
+    }
+  for (const char* ext : {".img", ".img.gz", ".IMG", ".IMG.GZ", ".hdr", ".hdr.gz", ".HDR", ".HDR.GZ"}) {
+    struct stat st {};
+    if (::stat((base + ext).c_str(), &st) == 0) regular_file_size(base + ext);
   }
 }
 
@@ -160,14 +176,21 @@ void read_voxels(const std::string& path, const nifti_image* nim, double vox_off
   if (static_cast<double>(nim->iname_offset) != vox_offset)
     fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
                            vox_offset, nim->iname_offset));
+  regular_file_size(nim->iname);
   znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
   if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
-  std::vector<char> data(bytes);
+  struct Closer {
+    znzFile& fp;
+    ~Closer() { znzclose(fp); }
+  } closer{fp};
   // fseek returns 0, gzseek the new offset; both -1 on failure.
-  const bool positioned = znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) >= 0;
-  const std::size_t got = positioned ? znzread(data.data(), 1, data.size(), fp) : 0;
-  znzclose(fp);
-  if (got != bytes) fail(path, "truncated or unreadable NIfTI voxel data (short read or corrupt gzip)");
+  if (znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) < 0)
+    fail(path, "unreadable NIfTI voxel data (cannot seek to vox_offset)");
+  // Read as it decodes: a few bytes of gzip claiming a huge grid end early without the claim
+  // ever being allocated.
+  const std::vector<unsigned char> data = read_exactly(
+      path, [fp](unsigned char* dst, std::size_t n) { return znzread(dst, 1, n, fp); }, bytes,
+      "or unreadable NIfTI voxel data");
   allocate_values(grid);
   convert_to_float(data.data(), type, nim->byteorder != nifti_short_order(), grid.values.data(),
                    grid.values.size());
@@ -215,6 +238,7 @@ void read_transform(const std::string& path, const nifti_image* nim, ScalarGrid&
 
 ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   const double vox_offset = checked_vox_offset(path);
+  check_image_files(path);
 
   std::lock_guard<std::mutex> lock(nifti_mutex());
   nifti_set_debug_level(0);
@@ -242,7 +266,7 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
   // Only uncompressed data can be compared with the file size without decompressing it.
   if (nim->iname && !ends_with_ci(nim->iname, ".gz")) {
     const std::string iname = nim->iname;
-    const std::uint64_t isize = file_size(iname);
+    const std::uint64_t isize = regular_file_size(iname);
     std::uint64_t total = 0, end = 0;
     if (nim->iname_offset < 0 || __builtin_mul_overflow(bytes, static_cast<std::uint64_t>(volumes), &total) ||
         __builtin_add_overflow(total, static_cast<std::uint64_t>(nim->iname_offset), &end))

@@ -6,9 +6,12 @@
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
+#include <cstring>
 #include <memory>
 #include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "formats/volume_reader_detail.h"
 
@@ -76,7 +79,7 @@ std::optional<ScalarType> teem_type(int t) {
 
 // Length of an attached header: up to and including the first empty line.
 std::optional<std::uint64_t> attached_header_length(const std::string& path) {
-  std::string head = read_prefix(path, 1 << 20);
+  std::string head = read_file_prefix(path, 1 << 20);
   std::size_t a = head.find("\n\n");
   std::size_t b = head.find("\r\n\r\n");
   if (a == std::string::npos && b == std::string::npos) return std::nullopt;
@@ -84,12 +87,44 @@ std::optional<std::uint64_t> attached_header_length(const std::string& path) {
   return a + 2;
 }
 
+// The files a "data file:" value names, resolved against the header's folder as Teem resolves
+// them: one name, "LIST" (the names follow the header, one a line) or "FORMAT MIN MAX STEP
+// [SUBDIM]" with one %d conversion. `rest` is the text after the header.
+std::vector<std::string> detached_files(const std::string& path, const std::string& value,
+                                        const std::string& rest) {
+  std::vector<std::string> names;
+  if (value == "LIST") {
+    std::istringstream in(rest);
+    for (std::string line; std::getline(in, line);)
+      if (!line.empty()) names.push_back(line.back() == '\r' ? line.substr(0, line.size() - 1) : line);
+  } else if (value.find('%') != std::string::npos) {
+    std::istringstream in(value);
+    std::string format;
+    long long lo = 0, hi = 0, step = 0;
+    in >> format >> lo >> hi >> step;
+    const std::size_t pct = format.find('%');
+    const std::size_t conv = format.find_first_not_of("0123456789", pct + 1);
+    if (!in || step == 0 || conv == std::string::npos || format[conv] != 'd' ||
+        format.find('%', conv) != std::string::npos || (hi - lo) / step < 0 || (hi - lo) / step > 100000)
+      fail(path, "bad NRRD header: unsupported data file format \"" + value.substr(0, 100) + "\"");
+    for (long long i = lo; step > 0 ? i <= hi : i >= hi; i += step)
+      names.push_back(fmt::format("{}{:0{}}{}", format.substr(0, pct), i,
+                                  std::atoi(format.substr(pct + 1, conv - pct - 1).c_str()),
+                                  format.substr(conv + 1)));
+  } else {
+    names.push_back(value);
+  }
+  for (auto& n : names) n = sibling_path(path, n);
+  return names;
+}
+
 // Teem 1.12 formats some parse errors, quoting the offending header line, into a fixed
 // 1025-byte buffer with vsprintf; a long bad line overflows it and the process aborts
 // (found by fuzzing). Field lines of valid headers are short, so long ones are refused
-// here. Comments are never quoted by Teem and may be long.
+// here. Comments are never quoted by Teem and may be long. Detached data files are checked to
+// be regular files here too: Teem opens them while it parses the header, and a FIFO hung it.
 void check_header_lines(const std::string& path) {
-  const std::string head = read_prefix(path, 1 << 20);
+  const std::string head = read_file_prefix(path, 1 << 20);
   std::size_t start = 0;
   int number = 0;
   while (start < head.size()) {
@@ -101,6 +136,10 @@ void check_header_lines(const std::string& path) {
     if (end + 1 < head.size() && head[end] == '\r' && head[end + 1] == '\n') ++end;
     ++number;
     if (line.empty()) break;  // end of the header
+    for (const char* key : {"data file: ", "datafile: "})
+      if (line.rfind(key, 0) == 0)
+        for (const std::string& f : detached_files(path, line.substr(std::strlen(key)), head.substr(end + 1)))
+          regular_file_size(f);
     if (line[0] != '#' && line.find(":=") == std::string::npos && line.size() > 400)
       fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (field lines are at most 400)",
                              number, line.size()));
@@ -122,45 +161,49 @@ void check_header_lines(const std::string& path) {
   }
 }
 
-// Compares the data the header promises with the file size before Teem allocates: Teem would
-// allocate the full array first and only then find the file short.
-void check_data_size(const std::string& path, const NrrdIoState& nio_ref, std::uint64_t fsize,
-                     std::uint64_t bytes, const std::array<std::int64_t, 3>& dims, ScalarType type) {
+// Compares the data the header promises with what the file holds before Teem allocates: Teem
+// would allocate the full array first and only then find the data short. Compressed data is
+// weighed by what it decodes to (bzip2, whose ratio has no useful bound, by decoding it once
+// in bounded memory), text by the fewest characters a value can take.
+void check_data_size(const std::string& path, const NrrdIoState& nio_ref, std::uint64_t bytes,
+                     const std::array<std::int64_t, 3>& dims, ScalarType type) {
   const NrrdIoState* nio = &nio_ref;
   const bool attached = nio->dataFNArr->len == 0 && !nio->dataFNFormat;
-  const std::string encoding = nio->encoding ? nio->encoding->name : "";
-  // Deflate expands at most 1032:1, so gzip data cannot hold more than that many times its size;
-  // a small file claiming a huge grid is refused before Teem allocates the grid it claims.
-  if (encoding == "gzip") {
-    std::string data_file = attached ? path : (nio->dataFNArr->len == 1 ? std::string(nio->dataFN[0]) : "");
-    if (!data_file.empty()) {
-      std::uint64_t compressed = attached ? fsize : file_size(data_file);
-      if (attached) {
-        const auto hl = attached_header_length(path);
-        compressed -= std::min<std::uint64_t>(compressed, hl ? *hl : fsize);
-      }
-      constexpr std::uint64_t kMaxDeflateRatio = 1032;
-      if (bytes / kMaxDeflateRatio > compressed + 64)
-        fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, more than "
-                                    "{} bytes of gzip data can hold",
-                                    dims[0], dims[1], dims[2], scalar_type_name(type), bytes, compressed));
-    }
+  if (!attached && nio->dataFNArr->len != 1) return;  // several files: each is read in turn
+  // Teem keeps the name as written and opens it relative to the header's folder.
+  const std::string data_file = attached ? path : sibling_path(path, nio->dataFN[0]);
+  RegularFile file(data_file);
+  std::uint64_t start = 0;
+  if (attached) {
+    const auto hl = attached_header_length(path);
+    start = hl ? *hl : file.size();
   }
-  if (encoding == "raw" && nio->lineSkip == 0 && nio->byteSkip >= 0) {
-    std::string data_file = attached ? path : (nio->dataFNArr->len == 1 ? std::string(nio->dataFN[0]) : "");
-    if (!data_file.empty()) {
-      std::uint64_t avail = attached ? fsize : file_size(data_file);
-      std::uint64_t skip = static_cast<std::uint64_t>(nio->byteSkip);
-      if (attached) {
-        auto hl = attached_header_length(path);
-        skip += hl ? *hl : fsize;
-      }
-      avail = avail > skip ? avail - skip : 0;
-      if (avail < bytes)
-        fail(data_file,
-             fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}", dims[0],
-                         dims[1], dims[2], scalar_type_name(type), bytes, avail));
-    }
+  const std::uint64_t avail = file.size() > start ? file.size() - start : 0;
+  const NrrdEncoding* encoding = nio->encoding;
+  const auto truncated = [&](const std::string& held) {
+    fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, {}", dims[0],
+                                dims[1], dims[2], scalar_type_name(type), bytes, held));
+  };
+  const std::uint64_t voxels = bytes / static_cast<std::uint64_t>(scalar_type_size(type));
+  if (encoding == nrrdEncodingRaw && nio->lineSkip == 0 && nio->byteSkip >= 0) {
+    const auto skip = static_cast<std::uint64_t>(nio->byteSkip);
+    const std::uint64_t left = avail > skip ? avail - skip : 0;
+    if (left < bytes) truncated(fmt::format("the file has {}", left));
+  } else if (encoding == nrrdEncodingGzip) {
+    // Deflate expands at most 1032:1.
+    constexpr std::uint64_t kMaxDeflateRatio = 1032;
+    if (bytes / kMaxDeflateRatio > avail + 64)
+      truncated(fmt::format("more than {} bytes of gzip data can hold", avail));
+  } else if (encoding == nrrdEncodingBzip2) {
+    file.seek(start);
+    const std::uint64_t held =
+        count_bytes(decoded_source(data_file, Compression::kBzip2, file_source(file)), bytes);
+    if (held < bytes) truncated(fmt::format("the bzip2 data holds {}", held));
+  } else if (encoding == nrrdEncodingAscii || encoding == nrrdEncodingHex) {
+    // A value as text is at least a digit and a separator; a byte in hex is two digits.
+    const std::uint64_t least = encoding == nrrdEncodingHex ? 2 * bytes : 2 * voxels - 1;
+    if (avail < least)
+      truncated(fmt::format("more than {} bytes of {} text can hold", avail, encoding->name));
   }
 }
 
@@ -236,8 +279,7 @@ void read_transform(const std::string& path, const Nrrd* nrrd, unsigned dim, Sca
 }  // namespace
 
 ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
-  const std::uint64_t fsize = file_size(path);
-  std::string magic = read_prefix(path, 8);
+  std::string magic = read_file_prefix(path, 8);
   if (magic.rfind("NRRD000", 0) != 0) fail(path, "not a NRRD file (no NRRD000x magic)");
   if (magic.size() < 8 || magic[7] < '1' || magic[7] > '5')
     fail(path, "unsupported NRRD version " + magic.substr(0, 8));
@@ -267,7 +309,7 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
 
   const std::string encoding = nio->encoding ? nio->encoding->name : "";
-  check_data_size(path, *nio, fsize, bytes, dims, *type);
+  check_data_size(path, *nio, bytes, dims, *type);
   std::uint64_t need = 0;
   if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
   check_memory(path, need, opts, "the NRRD data and the float32 grid");

@@ -7,17 +7,21 @@
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/safe_read.h>
 
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <mutex>
+#include <sstream>
+#include <string>
+#include <vector>
 
 namespace mlfe {
 namespace {
@@ -134,17 +138,68 @@ TriangleMesh from_openmesh(const OpenMeshTriMesh& om) {
 
 namespace {
 
+// A count a header declares: a whole non-negative number.
+std::uint64_t header_count(const std::string& path, const std::string& what, const std::string& token) {
+  std::uint64_t v = 0;
+  const auto r = std::from_chars(token.data(), token.data() + token.size(), v);
+  if (token.empty() || r.ec != std::errc() || r.ptr != token.data() + token.size())
+    throw Error(path + ": " + what + " '" + token.substr(0, 40) + "' is not a count");
+  return v;
+}
+
+// OpenMesh loops over (and reserves for) the counts an OFF or PLY header declares before it
+// finds the data short: 30 bytes declaring a million vertices took minutes. Each count is
+// weighed against the file size with the fewest bytes an item can take (a value as text is a
+// digit and a separator; in binary at least a byte).
+void check_declared_counts(const std::string& path, const std::string& ext, const std::string& head,
+                           std::uint64_t size) {
+  std::istringstream in(head);
+  if (ext == ".off") {
+    std::vector<std::string> words;
+    for (std::string line; words.size() < 5 && std::getline(in, line);) {
+      std::istringstream w(line.substr(0, line.find('#')));
+      for (std::string word; w >> word;) words.push_back(word);
+    }
+    if (words.size() > 1 && words[1] == "BINARY") return;  // binary counts: OpenMesh checks them
+    if (words.size() < 3) throw Error(path + ": truncated OFF header (no vertex and face counts)");
+    check_declared_count(path, "the OFF header's vertex count",
+                         header_count(path, "the OFF vertex count", words[1]), 6, size);
+    check_declared_count(path, "the OFF header's face count",
+                         header_count(path, "the OFF face count", words[2]), 8, size);
+    return;
+  }
+  bool ascii = false;
+  std::string element;
+  std::uint64_t count = 0, properties = 0;
+  const auto weigh = [&] {
+    if (!element.empty())
+      check_declared_count(path, "the PLY element '" + element.substr(0, 40) + "'", count,
+                           (ascii ? 2 : 1) * std::max<std::uint64_t>(properties, 1), size);
+  };
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream w(line);
+    std::string key, a, b;
+    w >> key >> a >> b;
+    if (key == "format") ascii = a == "ascii";
+    if (key == "property") ++properties;
+    if (key == "element" || key == "end_header") {
+      weigh();
+      if (key == "end_header") return;
+      element = a;
+      count = header_count(path, "the PLY element '" + a.substr(0, 40) + "' count", b);
+      properties = 0;
+    }
+  }
+}
+
 // OpenMesh reads what it can and skips the rest, so random bytes named .stl or .obj became an
 // empty mesh (and two such files compared equal). What each format must start with is checked
 // here; a binary STL must also be exactly as long as its triangle count says.
 void check_mesh_file_header(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::string head(4096, '\0');
-  in.read(head.data(), std::streamsize(head.size()));
-  head.resize(std::size_t(in.gcount()));
-  in.clear();
-  in.seekg(0, std::ios::end);
-  const auto size = static_cast<std::uint64_t>(in.tellg());
+  RegularFile file(path);
+  const std::uint64_t size = file.size();
+  std::string head(static_cast<std::size_t>(std::min<std::uint64_t>(4096, size)), '\0');
+  head.resize(file.read(head.data(), head.size()));
   const std::string ext = lower_extension(path);
   const auto starts = [&](const char* s) { return head.compare(0, std::strlen(s), s) == 0; };
   const auto text = [&] {
@@ -159,6 +214,7 @@ void check_mesh_file_header(const std::string& path) {
     const std::string word = first == std::string::npos ? "" : head.substr(first, 6);
     if (word.find("OFF") == std::string::npos) throw Error(path + ": not an OFF file");
   }
+  if (ext == ".off" || ext == ".ply") check_declared_counts(path, ext, head, size);
   if (ext == ".obj" && !text()) throw Error(path + ": not an OBJ file (binary bytes in a text format)");
   if (ext == ".stl") {
     std::uint32_t count = 0;
@@ -198,7 +254,6 @@ void write_mesh_file(const std::string& path, const TriangleMesh& mesh) {
 }
 
 TriangleMesh read_mesh_file(const std::string& path) {
-  if (!std::ifstream(path).good()) throw Error(path + ": cannot open file");
   check_mesh_file_header(path);
   OpenMeshTriMesh om;
   om.request_vertex_normals();

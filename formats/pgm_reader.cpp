@@ -3,7 +3,6 @@
 #include <mlfe/formats/raw_reader.h>
 
 #include <cctype>
-#include <fstream>
 
 #include "formats/volume_reader_detail.h"
 
@@ -11,8 +10,8 @@ namespace mlfe {
 using namespace volume_detail;
 
 ScalarGrid read_pgm(const std::string& path, const VolumeReadOptions& opts) {
-  const std::uint64_t fsize = file_size(path);
-  const std::string head = read_prefix(path, 4096);
+  const std::uint64_t fsize = regular_file_size(path);
+  const std::string head = read_file_prefix(path, 4096);
   if (head.size() < 2 || head[0] != 'P' || head[1] != '5') fail(path, "not a binary PGM file (no P5 magic)");
   std::size_t pos = 2;
   // Header fields are separated by whitespace and may be interleaved with # comments.
@@ -56,8 +55,8 @@ ScalarGrid read_pgm(const std::string& path, const VolumeReadOptions& opts) {
   grid.dims = dims;
   grid.source_type = type;
   allocate_values(grid);
-  std::ifstream in(path, std::ios::binary);
-  in.seekg(static_cast<std::streamoff>(pos));
+  RegularFile in(path);
+  in.seek(pos);
   read_raw_values(path, in, type, host_is_little_endian(), grid.values.data(), grid.values.size());
   if (fsize - pos > bytes) add_note(grid, "bytes after the first PGM image ignored");
   return grid;

@@ -11,24 +11,52 @@
 namespace mlfe {
 using namespace volume_detail;
 
+namespace {
+
+// The pixels IHDR declares, at their bit depth: a lower bound of what the image data inflates
+// to, interlaced or not (rows add filter bytes and padding on top).
+void check_png_data_size(const std::string& path, const std::string& ihdr, const std::string& idat) {
+  if (ihdr.size() != 13) return;  // libpng names the bad header
+  const auto* h = reinterpret_cast<const unsigned char*>(ihdr.data());
+  const auto be32 = [](const unsigned char* q) {
+    return (std::uint64_t(q[0]) << 24) | (std::uint64_t(q[1]) << 16) | (std::uint64_t(q[2]) << 8) | q[3];
+  };
+  static constexpr int kChannels[7] = {1, 0, 3, 1, 2, 0, 4};  // by colour type
+  const int channels = h[9] < 7 ? kChannels[h[9]] : 0;
+  const unsigned __int128 bits = static_cast<unsigned __int128>(be32(h) * be32(h + 4)) * h[8] * channels;
+  const std::uint64_t need = bits / 8 > UINT64_MAX ? UINT64_MAX : static_cast<std::uint64_t>(bits / 8);
+  const std::uint64_t held =
+      count_bytes(decoded_source(path, Compression::kZlib, memory_source(idat.data(), idat.size())), need);
+  if (held < need)
+    fail(path,
+         fmt::format("truncated PNG: {} x {} pixels need {} bytes of image data, the IDAT chunks hold {}",
+                     be32(h), be32(h + 4), need, held));
+}
+
+}  // namespace
+
 void check_png_chunks(const std::string& path, const std::string& bytes) {
   if (bytes.size() < 8 || std::memcmp(bytes.data(), "\x89PNG\r\n\x1a\n", 8) != 0)
     fail(path, "not a PNG file (wrong signature)");
   std::size_t at = 8;
+  std::string idat, ihdr;
   while (true) {
     if (bytes.size() - at < 12) fail(path, "truncated PNG (no IEND chunk)");
     const auto* p = reinterpret_cast<const unsigned char*>(bytes.data() + at);
     const std::uint64_t length = (std::uint64_t(p[0]) << 24) | (p[1] << 16) | (p[2] << 8) | p[3];
     if (length > bytes.size() - at - 12) fail(path, "truncated PNG (a chunk runs past the end)");
     const bool end = std::memcmp(p + 4, "IEND", 4) == 0;
+    if (std::memcmp(p + 4, "IDAT", 4) == 0) idat.append(bytes, at + 8, std::size_t(length));
+    if (std::memcmp(p + 4, "IHDR", 4) == 0 && ihdr.empty()) ihdr = bytes.substr(at + 8, std::size_t(length));
     at += 12 + std::size_t(length);
     if (end) break;
   }
   if (at != bytes.size()) fail(path, fmt::format("{} bytes after the PNG's IEND chunk", bytes.size() - at));
+  check_png_data_size(path, ihdr, idat);
 }
 
 ScalarGrid read_png(const std::string& path, const VolumeReadOptions& opts) {
-  const std::string data = read_whole_file(path, memory_limit(opts));
+  const std::string data = read_regular_file(path, memory_limit(opts), "the file");
   check_png_chunks(path, data);
   // The simplified libpng API keeps its setjmp handling inside libpng; errors come back as
   // a return value and image.message.

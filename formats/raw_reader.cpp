@@ -1,9 +1,9 @@
 #include <fmt/format.h>
 #include <mlfe/formats/raw_reader.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <vector>
 
@@ -12,17 +12,17 @@
 namespace mlfe {
 using namespace volume_detail;
 
-void read_raw_values(const std::string& path, std::istream& in, ScalarType t, bool swap, float* dst,
+void read_raw_values(const std::string& path, RegularFile& in, ScalarType t, bool swap, float* dst,
                      std::size_t n) {
   const std::size_t esize = static_cast<std::size_t>(scalar_type_size(t));
   const std::size_t chunk = (std::size_t(1) << 20) / esize;
   std::vector<char> buf(std::min(n, chunk) * esize);
   for (std::size_t done = 0; done < n;) {
     std::size_t m = std::min(chunk, n - done);
-    in.read(buf.data(), static_cast<std::streamsize>(m * esize));
-    if (static_cast<std::size_t>(in.gcount()) != m * esize)
-      fail(path, fmt::format("truncated: voxel data ends after {} of {} bytes", done * esize + in.gcount(),
-                             n * esize));
+    const std::size_t got = in.read(buf.data(), m * esize);
+    if (got != m * esize)
+      fail(path,
+           fmt::format("truncated: voxel data ends after {} of {} bytes", done * esize + got, n * esize));
     convert_to_float(buf.data(), t, swap, dst + done, m);
     done += m;
   }
@@ -30,15 +30,20 @@ void read_raw_values(const std::string& path, std::istream& in, ScalarType t, bo
 
 namespace {
 
+// Whatever exists under a sidecar's name is the sidecar: reading it then refuses a FIFO or a
+// device by name instead of waiting on it.
+bool exists(const std::string& p) {
+  struct stat st {};
+  return ::stat(p.c_str(), &st) == 0;
+}
+
 std::string find_sidecar(const std::string& path) {
-  std::ifstream a(path + ".json");
-  if (a) return path + ".json";
+  if (exists(path + ".json")) return path + ".json";
   auto dot = path.find_last_of('.');
   auto slash = path.find_last_of('/');
   if (dot != std::string::npos && (slash == std::string::npos || dot > slash)) {
     std::string p = path.substr(0, dot) + ".json";
-    std::ifstream b(p);
-    if (b) return p;
+    if (exists(p)) return p;
   }
   return "";
 }
@@ -63,7 +68,7 @@ std::array<double, N> number_array(const std::string& file, const nlohmann::json
 }  // namespace
 
 ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
-  const std::uint64_t fsize = file_size(path);
+  const std::uint64_t fsize = regular_file_size(path);
   ScalarGrid grid;
   std::array<std::int64_t, 3> dims{0, 0, 1};
   std::optional<ScalarType> type;
@@ -73,7 +78,7 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
 
   std::string sidecar = find_sidecar(path);
   if (!sidecar.empty()) {
-    std::string text = read_whole_file(sidecar, 1 << 20);
+    std::string text = read_regular_file(sidecar, 1 << 20, "a raw sidecar");
     nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
     if (j.is_discarded()) fail(sidecar, "bad JSON in raw sidecar");
     if (!j.is_object()) fail(sidecar, "raw sidecar must be a JSON object");
@@ -120,7 +125,8 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
       offset = o.get<std::int64_t>();
     }
     if (j.contains("space")) {
-      std::string s = j["space"].is_string() ? j["space"].get<std::string>() : "";
+      if (!j["space"].is_string()) fail(sidecar, "\"space\" must be \"RAS\" or \"LPS\"");
+      std::string s = j["space"].get<std::string>();
       for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
       if (s != "RAS" && s != "LPS" && !s.empty()) fail(sidecar, "\"space\" must be \"RAS\" or \"LPS\"");
       grid.space = s;
@@ -174,9 +180,8 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
   grid.dims = dims;
   grid.source_type = *type;
   allocate_values(grid);
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, "cannot open");
-  in.seekg(offset);
+  RegularFile in(path);
+  in.seek(static_cast<std::uint64_t>(offset));
   bool swap = (endian == "big") == host_is_little_endian();
   read_raw_values(path, in, *type, swap, grid.values.data(), grid.values.size());
   if (!sidecar.empty()) add_note(grid, "geometry from sidecar " + sidecar);

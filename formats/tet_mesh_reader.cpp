@@ -31,7 +31,7 @@ void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint6
 }  // namespace tet_mesh_detail
 
 std::string detect_tet_mesh_format(const std::string& path) {
-  const std::string head = volume_detail::read_prefix(path, 512);
+  const std::string head = read_file_prefix(path, 512);
   if (head.compare(0, 11, "$MeshFormat") == 0) return "msh";
   if (head.find("<VTKFile") != std::string::npos && head.find("UnstructuredGrid") != std::string::npos)
     return "vtu";
@@ -55,7 +55,7 @@ TetMesh read_tet_mesh(const std::string& path, const TetMeshReadOptions& options
   const std::uint64_t limit = options.max_bytes ? options.max_bytes : default_memory_limit();
   TetMesh m;
   try {
-    const std::string data = volume_detail::read_whole_file(path, limit);
+    const std::string data = read_regular_file(path, limit, "the file");
     m = format == "vtu" ? tet_mesh_detail::read_vtu(path, data, options, limit)
                         : tet_mesh_detail::read_msh(path, data, options, limit);
   } catch (const Error&) {

@@ -1,19 +1,19 @@
 #include <mlfe/core/base/error.h>
+#include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/transfer_function_io.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 namespace mlfe {
+namespace {
+// ParaView presets are a few kilobytes; the cap keeps a wrong file from being read whole.
+constexpr std::uint64_t kMaxPresetBytes = 64u << 20;
+}  // namespace
 
 TransferFunction read_paraview_transfer_function(const std::string& path, double unit_length) {
   auto fail = [&](const std::string& what) { throw Error(path + ": " + what); };
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail("cannot open transfer function file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  nlohmann::json j = nlohmann::json::parse(ss.str(), nullptr, false);
+  nlohmann::json j =
+      nlohmann::json::parse(read_regular_file(path, kMaxPresetBytes, "a transfer function"), nullptr, false);
   if (j.is_discarded()) fail("not valid JSON");
   if (j.is_array()) {
     if (j.empty()) fail("empty preset array");

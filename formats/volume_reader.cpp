@@ -12,7 +12,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -48,35 +47,6 @@ void fail(const std::string& path, const std::string& problem) {
   }
   while (!one.empty() && (one.back() == ' ' || one.back() == ';')) one.pop_back();
   throw Error(path + ": " + one);
-}
-
-std::uint64_t file_size(const std::string& path) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
-  if (!S_ISREG(st.st_mode)) fail(path, "not a regular file");
-  return static_cast<std::uint64_t>(st.st_size);
-}
-
-std::string read_prefix(const std::string& path, std::size_t n) {
-  file_size(path);  // names missing files and folders clearly
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
-  std::string s(n, '\0');
-  in.read(s.data(), static_cast<std::streamsize>(n));
-  s.resize(static_cast<std::size_t>(in.gcount()));
-  return s;
-}
-
-std::string read_whole_file(const std::string& path, std::uint64_t limit) {
-  std::uint64_t size = file_size(path);
-  if (size > limit)
-    fail(path, fmt::format("file has {} bytes but only {} bytes of memory are available", size, limit));
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, fmt::format("cannot open ({})", std::strerror(errno)));
-  std::string s(static_cast<std::size_t>(size), '\0');
-  in.read(s.data(), static_cast<std::streamsize>(size));
-  if (static_cast<std::uint64_t>(in.gcount()) != size) fail(path, "read error (file changed while reading?)");
-  return s;
 }
 
 std::optional<ScalarType> parse_scalar_type(const std::string& name) {
@@ -294,6 +264,7 @@ void check_transform(const ScalarGrid& grid) {
   for (double v : t.direction) ok = ok && std::isfinite(v);
   if (!ok)
     throw Error(grid.source + ": the index-to-physical transform has zero, negative or non-finite entries");
+  check_frame(grid.source, t.direction);
 }
 
 }  // namespace
@@ -310,7 +281,7 @@ std::size_t default_memory_limit() {
 }
 
 std::string detect_volume_format(const std::string& path) {
-  std::string head = read_prefix(path, 512);
+  std::string head = read_file_prefix(path, 512);
   std::string by_magic = format_by_magic(head);
   if (!by_magic.empty()) return by_magic;
   if (file_exists(path + ".json")) return "raw";
@@ -326,7 +297,7 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
     fail(path,
          "a tetrahedral mesh (.vtu/.msh): build, convert, iso and render read it; this needs a voxel volume");
   if (format.empty()) {
-    std::string head = read_prefix(path, 8);
+    std::string head = read_file_prefix(path, 8);
     std::string hex;
     for (unsigned char c : head) hex += fmt::format("{:02x}", c);
     fail(path, fmt::format("unrecognised volume format (magic bytes {}; extension unknown); give --raw-dims "

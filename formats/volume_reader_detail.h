@@ -2,6 +2,7 @@
 #pragma once
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <array>
@@ -15,13 +16,6 @@ namespace mlfe::volume_detail {
 
 /// Throws mlfe::Error("<path>: <problem>"), with line breaks in `problem` turned into "; ".
 [[noreturn]] void fail(const std::string& path, const std::string& problem);
-
-/// Size in bytes of the regular file at `path`; throws when it is missing or not a file.
-std::uint64_t file_size(const std::string& path);
-/// Up to `n` leading bytes of the file (fewer when the file is shorter).
-std::string read_prefix(const std::string& path, std::size_t n);
-/// The whole file; throws when it is larger than `limit` bytes.
-std::string read_whole_file(const std::string& path, std::uint64_t limit);
 
 /// "uint8"/"u8"/"uchar", ..., "float64"/"f64"/"double" (any case); nullopt when unknown.
 std::optional<ScalarType> parse_scalar_type(const std::string& name);

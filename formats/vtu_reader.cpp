@@ -4,7 +4,6 @@
 // appended data is not XML, so expat sees the document up to the AppendedData start tag only.
 #include <expat.h>
 #include <fmt/format.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <cctype>
@@ -434,17 +433,20 @@ class Reader {
       total = (nb - 1) * bs + tail;
     }
     if (total != bytes) fail(path_, fmt::format("{}: {} bytes where {} are expected", what, total, bytes));
-    out.resize(std::size_t(bytes));
-    std::uint64_t at = 0, pos = 0;
+    // Block by block, each inflated into memory that grows with its data: a header claiming
+    // gigabytes over a few compressed bytes fails at its first block.
+    std::uint64_t pos = 0;
     for (std::uint64_t b = 0; b < nb; ++b) {
       const std::uint64_t c = word(header.data() + (3 + b) * hs);
       const std::uint64_t want = b + 1 == nb && last ? last : bs;
       if (c > avail - pos) fail(path_, what + ": truncated compressed data");
-      uLongf got = uLongf(want);
-      if (c > std::numeric_limits<uLong>::max() ||
-          uncompress(out.data() + at, &got, p + pos, uLong(c)) != Z_OK || got != want)
+      std::vector<unsigned char> block;
+      try {
+        block = inflate_exactly(path_, p + pos, std::size_t(c), want);
+      } catch (const Error&) {
         fail(path_, fmt::format("{}: corrupt zlib block {}", what, b));
-      at += want;
+      }
+      out.insert(out.end(), block.begin(), block.end());
       pos += c;
     }
   }

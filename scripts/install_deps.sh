@@ -10,7 +10,7 @@ PKGS=(
   libopenmesh-dev libdraco-dev draco libtinygltf-dev libmeshoptimizer-dev
   libopenexr-dev openexr
   libcli11-dev nlohmann-json3-dev libfmt-dev
-  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev libexpat1-dev
+  libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev libbz2-dev libexpat1-dev
   googletest libgtest-dev libbenchmark-dev
   python3 python3-dev pybind11-dev python3-pybind11 python3-numpy
   python3-setuptools python3-pip python3-venv  # pip install . (pyproject.toml: setuptools runs CMake)

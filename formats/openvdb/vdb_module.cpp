@@ -117,8 +117,7 @@ class VdbChecker {
 };
 
 void check_vdb_magic(const std::string& path) {
-  file_size(path);
-  std::string head = read_prefix(path, 8);
+  std::string head = read_file_prefix(path, 8);
   if (head.size() < 8 || std::memcmp(head.data(), "\x20\x42\x44\x56\0\0\0\0", 8) != 0)
     fail(path, "not an OpenVDB file (wrong magic number)");
 }
@@ -127,7 +126,7 @@ void check_vdb_magic(const std::string& path) {
 // spread through the file (each grid's metadata sits before its tree).
 void check_vdb_structure(const std::string& path, const VolumeReadOptions& opts) {
   check_vdb_magic(path);
-  VdbChecker(path, read_whole_file(path, memory_limit(opts))).check();
+  VdbChecker(path, read_regular_file(path, memory_limit(opts), "the file")).check();
 }
 
 template <typename GridT, typename Convert>

@@ -13,6 +13,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -64,6 +65,7 @@ ChildRun run_in(const std::string& dir, const std::string& args, rlim_t fsize_li
       const rlimit r{fsize_limit, fsize_limit};
       setrlimit(RLIMIT_FSIZE, &r);
     }
+    alarm(120);  // a run that hangs (as on a FIFO) fails its case instead of the whole suite
     std::vector<std::string> words = split_args(args);
     words.insert(words.begin(), MLFE_BINARY);
     std::vector<char*> argv;
@@ -130,22 +132,69 @@ std::string nifti_file(float vox_offset, float bad) {
   return h + data;
 }
 
-/// A NRRD whose header claims `sizes` float voxels, with `payload` random bytes gzipped (they
-/// do not compress: the file is about `payload` bytes).
-std::string gzip_nrrd(const std::string& sizes, std::size_t payload) {
-  const std::string zeros = random_bytes(payload, 9);
+/// `data` deflated: a zlib stream, or with window_bits 15 + 16 a gzip one.
+std::string deflated(const std::string& data, int window_bits = 15) {
   z_stream z{};
-  deflateInit2(&z, 9, Z_DEFLATED, 15 + 16, 9, Z_DEFAULT_STRATEGY);  // +16: gzip wrapper
-  std::string out(deflateBound(&z, zeros.size()) + 64, '\0');
-  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(zeros.data()));
-  z.avail_in = static_cast<uInt>(zeros.size());
+  deflateInit2(&z, 9, Z_DEFLATED, window_bits, 9, Z_DEFAULT_STRATEGY);
+  std::string out(deflateBound(&z, data.size()) + 64, '\0');
+  z.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
+  z.avail_in = static_cast<uInt>(data.size());
   z.next_out = reinterpret_cast<Bytef*>(out.data());
   z.avail_out = static_cast<uInt>(out.size());
   deflate(&z, Z_FINISH);
   out.resize(z.total_out);
   deflateEnd(&z);
+  return out;
+}
+
+/// A NRRD whose header claims `sizes` float voxels, with `payload` random bytes gzipped (they
+/// do not compress: the file is about `payload` bytes).
+std::string gzip_nrrd(const std::string& sizes, std::size_t payload) {
   return "NRRD0004\ntype: float\ndimension: 3\nsizes: " + sizes + "\nendian: little\nencoding: gzip\n\n" +
-         out;
+         deflated(random_bytes(payload, 9), 15 + 16);
+}
+
+/// A NRRD of 4x4x4 uchar with the given extra header lines and raw data.
+std::string small_nrrd(const std::string& lines) {
+  return "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\n" + lines + "encoding: raw\n\n" +
+         std::string(64, '\1');
+}
+
+/// A NIfTI-1 header (348 bytes, "ni1": its voxels in a .img beside it) of 1200^3 uint8.
+std::string nifti_1200_cubed_header() {
+  std::string h = nifti_file(0, 1).substr(0, 348);
+  const std::int16_t dim[8] = {3, 1200, 1200, 1200, 1, 1, 1, 1};
+  for (int i = 0; i < 8; ++i) put<std::int16_t>(h, 40 + 2 * i, dim[i]);
+  put<std::int16_t>(h, 70, 2);  // uint8
+  put<std::int16_t>(h, 72, 8);
+  std::memcpy(h.data() + 344, "ni1\0", 4);
+  return h;
+}
+
+/// A PNG chunk: length, type, data, CRC.
+std::string png_chunk(const std::string& type, const std::string& data) {
+  std::string c(4, '\0');
+  const auto n = static_cast<std::uint32_t>(data.size());
+  for (int i = 0; i < 4; ++i) c[i] = char(n >> (24 - 8 * i));
+  c += type + data;
+  const auto crc = static_cast<std::uint32_t>(
+      crc32(0, reinterpret_cast<const Bytef*>(c.data() + 4), static_cast<uInt>(c.size() - 4)));
+  for (int i = 0; i < 4; ++i) c += char(crc >> (24 - 8 * i));
+  return c;
+}
+
+/// A fresh FIFO at `path` (no writer ever opens it: reading it would wait forever).
+void make_fifo(const std::string& path) { ASSERT_EQ(mkfifo(path.c_str(), 0644), 0) << path; }
+
+/// small_skull.mlfeh (version 1) with its direction matrix replaced and the CRC fixed.
+std::string mlfeh_with_direction(const std::array<double, 9>& direction) {
+  std::string f = read_bytes(test_data_path("small_skull.mlfeh"));
+  constexpr std::size_t kDirectionAt = 80;  // magic, version, dim, counts, spacing, origin
+  for (int i = 0; i < 9; ++i) put<double>(f, kDirectionAt + 8 * i, direction[i]);
+  const auto crc = static_cast<std::uint32_t>(
+      crc32(0, reinterpret_cast<const Bytef*>(f.data()), static_cast<uInt>(f.size() - 4)));
+  put<std::uint32_t>(f, f.size() - 4, crc);
+  return f;
 }
 
 void copy_in(const std::string& from, const std::string& dir, const std::string& name) {
@@ -509,6 +558,311 @@ std::vector<Case> battery() {
        2,
        "rand\\.png",
        {}},
+
+      // Issue 43. Reads are regular-file-only, wherever a file is named: refused at once, not waited on.
+      {"nrrd_detached_data_file_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/f.nhdr",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n"
+                     "data file: f.raw\n\n");
+         make_fifo(d + "/f.raw");
+       },
+       "info f.nhdr",
+       2,
+       "f\\.raw: not a regular file",
+       {}},
+      {"nrrd_gzip_data_file_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/f.nhdr",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: gzip\n"
+                     "data file: f.raw.gz\n\n");
+         make_fifo(d + "/f.raw.gz");
+       },
+       "convert f.nhdr --iso 0.5 -o o.glb",
+       2,
+       "f\\.raw\\.gz: not a regular file",
+       {"o.glb"}},
+      {"raw_sidecar_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/r.raw", std::string(64, '\1'));
+         make_fifo(d + "/r.raw.json");
+       },
+       "info r.raw",
+       2,
+       "r\\.raw\\.json: not a regular file",
+       {}},
+      {"analyze_img_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/v.hdr", nifti_1200_cubed_header());
+         make_fifo(d + "/v.img");
+       },
+       "info v.hdr",
+       2,
+       "v\\.img: not a regular file",
+       {}},
+      {"gltf_buffer_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf",
+                     R"({"asset":{"version":"2.0"},"buffers":[{"uri":"b.bin","byteLength":4}]})");
+         make_fifo(d + "/b.bin");
+       },
+       "compare a.gltf a.gltf",
+       2,
+       "b\\.bin: not a regular file",
+       {}},
+      {"gltf_buffer_is_dev_zero",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf",
+                     R"({"asset":{"version":"2.0"},"buffers":[{"uri":"b.bin","byteLength":4}]})");
+         fs::create_symlink("/dev/zero", d + "/b.bin");
+       },
+       "compare a.gltf a.gltf",
+       2,
+       "b\\.bin: not a regular file",
+       {},
+       100},
+      {"label_table_is_a_fifo",
+       [](const std::string& d) {
+         write_bytes(d + "/lab.nrrd", small_nrrd(""));
+         make_fifo(d + "/t.txt");
+       },
+       "convert lab.nrrd --labels --label-table t.txt -o o.glb",
+       2,
+       "t\\.txt: not a regular file",
+       {"o.glb"}},
+      {"transfer_function_is_a_fifo",
+       [](const std::string& d) { make_fifo(d + "/tf.json"); },
+       "render h.mlfeh -o x.exr --size 16x16 --tf tf.json",
+       2,
+       "tf\\.json: not a regular file",
+       {"x.exr"}},
+      {"mesh_is_a_fifo",
+       [](const std::string& d) { make_fifo(d + "/a.off"); },
+       "compare a.off a.off",
+       2,
+       "a\\.off: not a regular file",
+       {}},
+
+      // Relative paths in a header resolve against the header's folder, not the working folder
+      // (where a decoy of the same name and the wrong size lies).
+      {"nhdr_data_file_beside_the_header",
+       [](const std::string& d) {
+         fs::create_directory(d + "/sub");
+         write_bytes(d + "/sub/v.nhdr",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n"
+                     "data file: v.raw\n\n");
+         write_bytes(d + "/sub/v.raw", std::string(64, '\7'));
+         write_bytes(d + "/v.raw", "decoy");
+       },
+       "info sub/v.nhdr",
+       0,
+       "",
+       {}},
+
+      // Decoded sizes grow with the data decoded: a tiny file claiming 1200^3 voxels is refused
+      // with little memory.
+      {"nii_gz_claims_1200_cubed",
+       [](const std::string& d) {
+         std::string h = nifti_1200_cubed_header();
+         put<float>(h, 108, 352);
+         std::memcpy(h.data() + 344, "n+1\0", 4);
+         write_bytes(d + "/v.nii.gz", deflated(h + std::string(4, '\0') + std::string(100, '\1'), 15 + 16));
+       },
+       "info v.nii.gz",
+       2,
+       "v\\.nii\\.gz: truncated",
+       {},
+       100},
+      {"mha_compressed_claims_1200_cubed",
+       [](const std::string& d) {
+         write_bytes(d + "/v.mha",
+                     "ObjectType = Image\nNDims = 3\nDimSize = 1200 1200 1200\nElementType = "
+                     "MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\n" +
+                         deflated(std::string(100, '\1')));
+       },
+       "info v.mha",
+       2,
+       "v\\.mha: truncated",
+       {},
+       100},
+      {"nrrd_bzip2_claims_1200_cubed",
+       [](const std::string& d) {
+         // An empty bzip2 stream: the magic and the end-of-stream marker with CRC 0.
+         write_bytes(d + "/v.nrrd",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1200 1200 1200\n"
+                     "encoding: bzip2\n\n" +
+                         std::string("BZh9\x17\x72\x45\x38\x50\x90\0\0\0\0", 14));
+       },
+       "info v.nrrd",
+       2,
+       "v\\.nrrd: truncated.*bzip2 data holds 0",
+       {},
+       100},
+      {"nrrd_ascii_claims_1200_cubed",
+       [](const std::string& d) {
+         write_bytes(d + "/v.nrrd",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1200 1200 1200\n"
+                     "encoding: ascii\n\n1 2 3\n");
+       },
+       "info v.nrrd",
+       2,
+       "v\\.nrrd: truncated",
+       {},
+       100},
+      {"nrrd_hex_claims_1200_cubed",
+       [](const std::string& d) {
+         write_bytes(d + "/v.nrrd",
+                     "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1200 1200 1200\n"
+                     "encoding: hex\n\n0a0b0c\n");
+       },
+       "info v.nrrd",
+       2,
+       "v\\.nrrd: truncated",
+       {},
+       100},
+      {"png_ihdr_30000_squared",
+       [](const std::string& d) {
+         std::string ihdr(13, '\0');
+         for (int at : {0, 4}) put<std::uint32_t>(ihdr, at, __builtin_bswap32(30000));
+         ihdr[8] = 8;  // bit depth; colour type 0 (grey)
+         write_bytes(d + "/v.png", "\x89PNG\r\n\x1a\n" + png_chunk("IHDR", ihdr) +
+                                       png_chunk("IDAT", deflated(std::string(30001, '\0'))) +
+                                       png_chunk("IEND", ""));
+       },
+       "info v.png",
+       2,
+       "v\\.png: truncated PNG",
+       {},
+       100},
+      {"vtu_zlib_header_claims_100m_points",
+       [](const std::string& d) {
+         // One zlib block said to inflate to 100 M points x 3 x Float32 (1.2 GB); it holds 12 bytes.
+         const std::string block = deflated(std::string(12, '\0'));
+         std::string header(16, '\0');
+         put<std::uint32_t>(header, 0, 1);
+         put<std::uint32_t>(header, 4, 1200000000u);
+         put<std::uint32_t>(header, 8, 1200000000u);
+         put<std::uint32_t>(header, 12, static_cast<std::uint32_t>(block.size()));
+         write_bytes(d + "/v.vtu",
+                     "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
+                     "header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\"><UnstructuredGrid>"
+                     "<Piece NumberOfPoints=\"100000000\" NumberOfCells=\"1\"><Points><DataArray "
+                     "type=\"Float32\" NumberOfComponents=\"3\" format=\"appended\" offset=\"0\"/></Points>"
+                     "</Piece></UnstructuredGrid><AppendedData encoding=\"raw\">_" +
+                         header + block + "</AppendedData></VTKFile>");
+       },
+       "build v.vtu -o o.mlfeh",
+       2,
+       "v\\.vtu: ",
+       {"o.mlfeh"},
+       100},
+
+      // Declared counts in mesh headers are weighed against the file size first.
+      {"off_declares_a_million_vertices",
+       [](const std::string& d) { write_bytes(d + "/a.off", "OFF\n1000000 1 0\n0 0 0\n0 0 0\n"); },
+       "compare a.off a.off",
+       2,
+       "a\\.off: the OFF header's vertex count declares 1000000",
+       {}},
+      {"ply_vertex_count_negative",
+       [](const std::string& d) {
+         write_bytes(d + "/a.ply",
+                     "ply\nformat ascii 1.0\nelement vertex -3\nproperty float x\nproperty float y\n"
+                     "property float z\nelement face 0\nproperty list uchar int vertex_indices\n"
+                     "end_header\n");
+       },
+       "compare a.ply a.ply",
+       2,
+       "a\\.ply: .*'-3' is not a count",
+       {}},
+      {"ply_vertex_count_2e9",
+       [](const std::string& d) {
+         write_bytes(d + "/a.ply",
+                     "ply\nformat binary_little_endian 1.0\nelement vertex 2000000000\nproperty "
+                     "float x\nproperty float y\nproperty float z\nend_header\n" +
+                         std::string(12, '\0'));
+       },
+       "compare a.ply a.ply",
+       2,
+       "a\\.ply: the PLY element 'vertex' declares 2000000000",
+       {}},
+      {"ply_vertex_count_1e8",
+       [](const std::string& d) {
+         write_bytes(d + "/a.ply",
+                     "ply\nformat ascii 1.0\nelement vertex 100000000\nproperty float x\n"
+                     "property float y\nproperty float z\nend_header\n0 0 0\n");
+       },
+       "compare a.ply a.ply",
+       2,
+       "a\\.ply: the PLY element 'vertex' declares 100000000",
+       {}},
+
+      // Frames: a singular direction matrix is refused by every reader (it gave flat assets).
+      {"nifti_sform_two_equal_columns",
+       [](const std::string& d) {
+         std::string n = nifti_file(352, 1);
+         put<std::int16_t>(n, 254, 1);                                         // sform_code
+         const float rows[3][4] = {{1, 1, 0, 0}, {0, 0, 0, 0}, {0, 0, 1, 0}};  // columns 0 and 1 equal
+         for (int r = 0; r < 3; ++r)
+           for (int c = 0; c < 4; ++c) put<float>(n, 280 + 16 * r + 4 * c, rows[r][c]);
+         write_bytes(d + "/v.nii", n);
+       },
+       "convert v.nii --iso 3 -o o.glb",
+       2,
+       "v\\.nii: the direction matrix is singular",
+       {"o.glb"}},
+      {"nrrd_space_directions_two_equal",
+       [](const std::string& d) {
+         write_bytes(d + "/v.nrrd", small_nrrd("space: RAS\nspace directions: (1,0,0) (0,1,0) (0,1,0)\n"));
+       },
+       "info v.nrrd",
+       2,
+       "v\\.nrrd: the direction matrix is singular",
+       {}},
+      {"metaimage_transform_matrix_singular",
+       [](const std::string& d) {
+         write_bytes(d + "/v.mha",
+                     "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\nElementType = MET_UCHAR\n"
+                     "TransformMatrix = 1 0 0 1 0 0 0 0 1\nElementDataFile = LOCAL\n" +
+                         std::string(64, '\1'));
+       },
+       "info v.mha",
+       2,
+       "v\\.mha: the direction matrix is singular",
+       {}},
+      {"raw_sidecar_direction_singular",
+       [](const std::string& d) {
+         write_bytes(d + "/r.raw", std::string(64, '\1'));
+         write_bytes(d + "/r.raw.json",
+                     R"({"dims":[4,4,4],"dtype":"uint8","direction":[1,0,0, 0,1,1, 0,0,0]})");
+       },
+       "info r.raw",
+       2,
+       "r\\.raw: the direction matrix is singular",
+       {}},
+      {"raw_sidecar_space_is_a_number",
+       [](const std::string& d) {
+         write_bytes(d + "/r.raw", std::string(64, '\1'));
+         write_bytes(d + "/r.raw.json", R"({"dims":[4,4,4],"dtype":"uint8","space":5})");
+       },
+       "info r.raw",
+       2,
+       "r\\.raw\\.json: \"space\" must be",
+       {}},
+      {"mlfeh_direction_zero",
+       [](const std::string& d) { write_bytes(d + "/z.mlfeh", mlfeh_with_direction({})); },
+       "info z.mlfeh",
+       2,
+       "z\\.mlfeh: the direction matrix is singular",
+       {}},
+      {"mlfeh_direction_two_equal_columns",
+       [](const std::string& d) {
+         write_bytes(d + "/s.mlfeh", mlfeh_with_direction({1, 1, 0, 0, 0, 0, 0, 0, 1}));
+       },
+       "export s.mlfeh -o o.nrrd",
+       2,
+       "s\\.mlfeh: the direction matrix is singular",
+       {"o.nrrd"}},
 
       // Command-line spelling.
       {"unknown_command_suggestion", none, "conver ct.nrrd", 1, "did you mean convert\\?", {}},

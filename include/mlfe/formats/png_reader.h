@@ -16,6 +16,8 @@ ScalarGrid read_png(const std::string& path, const VolumeReadOptions& opts);
 /// Throws mlfe::Error unless `bytes` (the whole file `path`) is a PNG signature and a chain of
 /// chunks that lie within the file and end with IEND and nothing after it. libpng stops reading
 /// once it has the pixels, so a file cut after the image data would otherwise read as whole.
+/// The image data must also decode to at least the pixels IHDR declares: libpng allocates
+/// what IHDR claims before it finds the data short.
 void check_png_chunks(const std::string& path, const std::string& bytes);
 
 }  // namespace mlfe

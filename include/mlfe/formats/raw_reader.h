@@ -1,10 +1,10 @@
 // Headerless raw volumes described by a JSON sidecar (FILE.json) or by command-line flags.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/volume_reader.h>
 
 #include <cstddef>
-#include <istream>
 #include <string>
 
 namespace mlfe {
@@ -17,9 +17,10 @@ namespace mlfe {
 /// Throws mlfe::Error naming the data file or the sidecar and the problem.
 ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts);
 
-/// Reads n values of type t from `in` in chunks (so no second full-size buffer is needed),
-/// swapping bytes when `swap`, into dst. Throws "<path>: truncated ..." when the stream ends early.
-void read_raw_values(const std::string& path, std::istream& in, ScalarType t, bool swap, float* dst,
+/// Reads n values of type t from `in`'s read position in chunks (so no second full-size buffer
+/// is needed), swapping bytes when `swap`, into dst. Throws "<path>: truncated ..." when the
+/// file ends early.
+void read_raw_values(const std::string& path, RegularFile& in, ScalarType t, bool swap, float* dst,
                      std::size_t n);
 
 }  // namespace mlfe
