@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/zarr_reader.h>
 
 #include <algorithm>
 #include <cctype>
@@ -31,6 +32,7 @@ void check_mesh_memory(const std::string& path, std::uint64_t points, std::uint6
 }  // namespace tet_mesh_detail
 
 std::string detect_tet_mesh_format(const std::string& path) {
+  if (is_zarr_store(path)) return "";  // a folder of chunks, for the volume readers
   const std::string head = read_file_prefix(path, 512);
   if (head.compare(0, 11, "$MeshFormat") == 0) return "msh";
   if (head.find("<VTKFile") != std::string::npos && head.find("UnstructuredGrid") != std::string::npos)

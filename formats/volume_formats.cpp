@@ -8,6 +8,7 @@
 #include <mlfe/formats/png_reader.h>
 #include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/vdb_reader.h>
+#include <mlfe/formats/zarr_reader.h>
 
 #include <cctype>
 #include <cstdint>
@@ -74,6 +75,8 @@ const std::vector<VolumeFormatRow>& volume_formats() {
       {"metaimage", {".mha", ".mhd"}, {}, metaimage_magic, read_metaimage, nullptr},
       // Headerless: by extension, a "<file>.json" sidecar, or --raw-dims/--raw-type.
       {"raw", {".raw", ".bin", ".dat"}, {".raw"}, nullptr, read_raw, write_raw},
+      // A folder: recognised by its metadata files (is_zarr_store), not by magic bytes.
+      {"zarr", {".zarr"}, {}, nullptr, read_zarr, nullptr},
   };
   return rows;
 }

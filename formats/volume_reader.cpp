@@ -8,6 +8,7 @@
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/vdb_reader.h>
 #include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/zarr_reader.h>
 #include <sys/stat.h>
 
 #include <algorithm>
@@ -281,6 +282,7 @@ std::size_t default_memory_limit() {
 }
 
 std::string detect_volume_format(const std::string& path) {
+  if (is_zarr_store(path)) return "zarr";
   std::string head = read_file_prefix(path, 512);
   std::string by_magic = format_by_magic(head);
   if (!by_magic.empty()) return by_magic;

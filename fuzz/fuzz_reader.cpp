@@ -1,5 +1,6 @@
 // libFuzzer entry point for one reader: writes the input to a temporary file with the
-// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh).
+// extension of MLFE_FUZZ_EXT and reads it with mlfe::read_volume (mlfe::read_tet_mesh for vtu, msh;
+// for zarr, a store folder made from the input).
 // mlfe::Error is the expected outcome for bad input; anything else (a crash, a sanitizer report, another
 // exception, an exit from inside a library) is a finding.
 #include <mlfe/core/base/error.h>
@@ -10,6 +11,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -53,6 +56,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     write_file(raw + ".json", data, size);
     try {
       mlfe::read_volume(raw, opts);
+    } catch (const mlfe::Error&) {
+    }
+    return 0;
+  }
+  if (kind == "zarr") {
+    // The input is a plain Zarr array: its .zarray JSON, a NUL byte, then the bytes of chunk
+    // 0.0.0 (also as 0/0/0, for stores with "/" as separator). Other chunks are missing.
+    const std::uint8_t* nul = static_cast<const std::uint8_t*>(std::memchr(data, 0, size));
+    const std::size_t meta = nul ? static_cast<std::size_t>(nul - data) : size;
+    const std::string store = work_dir() + "input.zarr";
+    std::filesystem::remove_all(store);
+    std::filesystem::create_directories(store + "/0/0");
+    write_file(store + "/.zarray", data, meta);
+    const std::size_t rest = nul ? size - meta - 1 : 0;
+    write_file(store + "/0.0.0", nul ? nul + 1 : data, rest);
+    write_file(store + "/0/0/0", nul ? nul + 1 : data, rest);
+    try {
+      mlfe::read_volume(store, opts);
     } catch (const mlfe::Error&) {
     }
     return 0;

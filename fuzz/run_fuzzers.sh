@@ -20,7 +20,7 @@ TARGETS=("$@")
 # attribute list first, but OpenEXR's typed attributes (chlist) can run past their declared
 # size, so a corrupt file can still make it ask. Outside ASan that is an allocation that fails
 # or a read that fails, reported as bad input (exit 2).
-if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh hierarchy gltf label_table); fi
+if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh zarr hierarchy gltf label_table); fi
 
 command -v clang++ >/dev/null || { echo "run_fuzzers: clang++ not found (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 
@@ -43,6 +43,7 @@ seed_patterns() {
     image) echo "*.pgm *.png" ;;
     vtu) echo "*.vtu" ;;
     msh) echo "*.msh" ;;
+    zarr) echo "*.zarrfuzz" ;;
     hierarchy) echo "*.mlfeh" ;;
     draco) echo "*.drc" ;;
     gltf) echo "*.glb" ;;

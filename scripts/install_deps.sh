@@ -11,11 +11,13 @@ PKGS=(
   libopenexr-dev openexr
   libcli11-dev nlohmann-json3-dev libfmt-dev
   libnifti2-dev libteem-dev libzstd-dev zlib1g-dev libpng-dev libbz2-dev libexpat1-dev
+  libblosc-dev         # OME-Zarr chunks (formats/zarr_reader.cpp)
   googletest libgtest-dev libbenchmark-dev
   python3 python3-dev pybind11-dev python3-pybind11 python3-numpy
   python3-setuptools python3-pip python3-venv  # pip install . (pyproject.toml: setuptools runs CMake)
   python3-distributed  # mlfe.batch (Dask)
   python3-nibabel      # tests/python/test_package.py: the nibabel affine round trip
+  python3-zarr         # tests: OME-Zarr stores written by zarr-python
   clang libclang-rt-14-dev clang-format
   python3-vtk9  # tests/converters/export_command_test.cpp reads .vtu with VTK's XML reader
 )

@@ -130,9 +130,10 @@ void add_info_command(CLI::App& app) {
                                      "the levels, errors and sections of a hierarchy file");
   cmd->add_option(
          "FILE", args->file,
-         "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png) or hierarchy (.mlfeh)")
+         "volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw+json, pgm, png, OME-Zarr folder) or "
+         "hierarchy (.mlfeh)")
       ->required()
-      ->check(CLI::ExistingFile);
+      ->check(CLI::ExistingPath);
   add_volume_read_options(cmd, args->read);
   cmd->add_flag("--json", args->json, "print JSON instead of text");
   cmd->add_flag("--labels", args->labels, "a label map: list its labels with voxel counts, mm3 and names");

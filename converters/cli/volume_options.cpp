@@ -47,6 +47,9 @@ void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
       ->expected(2, 3);
   cmd->add_option("--raw-offset", opts.raw_offset, "raw data: bytes to skip before the voxels")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--zarr-level", opts.zarr_level,
+                  "OME-Zarr: the resolution level to read (0: full resolution)")
+      ->check(CLI::NonNegativeNumber);
 }
 
 namespace {

@@ -2,7 +2,8 @@
 //
 // Supported: OpenVDB (.vdb), raw + JSON sidecar (FILE.json next to FILE), NRRD (.nrrd/.nhdr,
 // via Teem), NIfTI-1/2 (.nii, .nii.gz, .hdr+.img, via libnifti2), MetaImage (.mha/.mhd),
-// binary PGM (P5, 8/16 bit) and grey PNG (8/16 bit, via libpng).
+// binary PGM (P5, 8/16 bit), grey PNG (8/16 bit, via libpng) and OME-Zarr 0.4 image folders
+// (formats/zarr_reader.h).
 //
 // Every reader validates before it allocates: magic, version, header, then the voxel count
 // and byte size with overflow checks against the file size and the memory limit. Bad input
@@ -33,6 +34,8 @@ struct VolumeReadOptions {
   std::string raw_endian = "little";                    ///< "little" or "big"
   std::optional<std::array<double, 3>> raw_spacing, raw_origin;
   std::int64_t raw_offset = 0;  ///< bytes to skip before the voxels
+  /// OME-Zarr: the resolution level to read (0: full resolution).
+  int zarr_level = 0;
   /// Upper bound in bytes for what reading may allocate; 0: MemAvailable from /proc/meminfo.
   std::size_t max_bytes = 0;
 };
@@ -46,7 +49,8 @@ struct VolumeReadOptions {
 /// grid would need more memory than opts.max_bytes (or MemAvailable).
 ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts = {});
 
-/// The format of `path`: "vdb", "nrrd", "nifti", "metaimage", "pgm", "png" or "raw", decided
+/// The format of `path`: "vdb", "nrrd", "nifti", "metaimage", "pgm", "png", "raw" or "zarr" (a
+/// folder holding OME-Zarr or Zarr v2 metadata), decided
 /// by magic bytes first and by extension second (a sidecar FILE.json means "raw").
 /// Returns "" when neither identifies a format. Throws mlfe::Error when `path` cannot be read.
 std::string detect_volume_format(const std::string& path);
