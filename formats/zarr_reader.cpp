@@ -348,10 +348,7 @@ void ZarrVolume::Impl::decode_chunk(const std::string& file, std::vector<unsigne
   // A compressed chunk is never much larger than its values (blosc and zstd add a header; an
   // incompressible zlib stream adds 5 bytes per 16 KiB block).
   const std::uint64_t limit = n + n / 64 + 4096;
-  const std::uint64_t size = file_size(file);
-  if (size > limit)
-    fail(file, fmt::format("chunk file of {} bytes, more than a chunk of {} bytes can need", size, n));
-  const std::string src = read_whole_file(file, limit);
+  const std::string src = read_regular_file(file, limit, "a Zarr chunk");
   if (array.compressor.empty()) {
     if (src.size() != n) fail(file, fmt::format("uncompressed chunk has {} bytes, not {}", src.size(), n));
     std::copy(src.begin(), src.end(), out.begin());
