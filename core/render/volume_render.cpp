@@ -5,6 +5,7 @@
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/huge_pages.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/fem/hierarchical_basis.h>
 #include <mlfe/core/field/field.h>
 #include <mlfe/core/render/volume_render.h>
@@ -26,7 +27,6 @@ namespace mlfe {
 
 namespace {
 
-using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // trace_ray's default for RenderOptions::skip_levels: skip a transparent ancestor only when it
@@ -35,19 +35,6 @@ constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // visible cell, 5 levels measured 3-5 % faster than 3 and the same as never skipping
 // (bench/RESULTS.md, render_bench).
 constexpr int kSkipLevels = 5;
-
-inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-inline Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-inline Vec3 axpy(const Vec3& o, double t, const Vec3& d) {
-  return {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
-}
-inline Vec3 normalized(const Vec3& a) {
-  const double n = std::sqrt(dot(a, a));
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
 
 // The face a ray o + t d leaves a tetrahedron through after t_in, and where (t_out): the
 // nearest plane n_i · x = h_i among the faces with n_i · d > 0, never `entry` (the face the ray
@@ -74,7 +61,7 @@ int exit_face(const Normal& normal, const double (&h)[4], const Vec3& o, const V
     for (int i = 0; i < 4; ++i) {
       if (i == entry) continue;
       const Vec3 n = normal(i);
-      const double den = dot(n, d) / std::sqrt(dot(n, n));
+      const double den = dot(n, d) / norm(n);
       if (den > best_den) {
         best_den = den;
         best = i;
@@ -678,7 +665,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       }
   if (clip_to)
     for (int a = 0; a < 3; ++a) hi_box_[a] = std::min(hi_box_[a], (*clip_to)[a]);
-  diag_ = std::sqrt(dot(sub(hi_box_, lo_box_), sub(hi_box_, lo_box_)));
+  diag_ = distance(hi_box_, lo_box_);
   // 5. the range grid: about one cell per 8 rendered elements (at most 64 along the longest
   // axis), each with the union of the ranges of the elements whose (padded) bounding boxes
   // overlap it; in the hierarchy's element order, in which its cells are stored.
@@ -803,7 +790,7 @@ double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::a
     t_delta[a] = grid_cell_[a] / std::abs(d[a]);
   }
   // Back off into the transparent cell before (by far more than locate's nudge).
-  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / std::sqrt(dot(d, d));
+  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / norm(d);
   double t = t0;
   while (true) {
     const std::size_t c = (std::size_t(i[2]) * grid_n_[1] + i[1]) * grid_n_[0] + i[0];
@@ -984,7 +971,7 @@ std::size_t TetRenderMesh::memory_bytes() const {
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
                                     ElemId hint) const {
-  const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
+  const Vec3 q = axpy(p, 1e-7 * diag_ / norm(d), d);
   Vec3 pts[4];
   // 1. climb from the hint to an ancestor containing q (none: start from T0).
   while (hint.valid()) {
@@ -1018,7 +1005,7 @@ std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::a
 
 std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<double, 3>& p,
                                      const std::array<double, 3>& d) const {
-  const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
+  const Vec3 q = axpy(p, 1e-7 * diag_ / norm(d), d);
   Vec3 pts[4];
   std::uint32_t r = start;
   for (int step = 0; step < 32; ++step) {
@@ -1139,8 +1126,7 @@ inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
   w.entered = TetRenderMesh::kNoNeighbor;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, w.res.t_near, w.res.t_far)) return false;
   w.res.hit = true;
-  w.eps = 1e-9 * (w.res.t_far - w.res.t_near +
-                  std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
+  w.eps = 1e-9 * (w.res.t_far - w.res.t_near + distance(m.box_hi(), m.box_lo()));
   w.bound = m.size() + 64;
   w.t = w.res.t_near;
   if (skip) {
