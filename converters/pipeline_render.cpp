@@ -32,13 +32,6 @@ std::string numbered(const std::string& path, int frame, int frames) {
       .string();
 }
 
-nlohmann::json tf_json(const TransferFunction& tf) {
-  return {{"name", tf.name},
-          {"RGBPoints", tf.color},
-          {"opacityPoints", tf.opacity},
-          {"opacityUnitLength", tf.unit_length}};
-}
-
 // The length an unstructured mesh's preset opacities refer to: the 10th percentile of its
 // edge lengths (TetMeshField::resolution(), the "voxel" of mlfe build on a mesh).
 double fine_edge_length(const Hierarchy<3>& h) {
@@ -165,7 +158,7 @@ ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, cons
   attr.strings = {
       {"mlfe/source", std::filesystem::path(source).filename().string()},
       {"mlfe/renderer", renderer},
-      {"mlfe/transferFunction", tf_json(tf).dump()},
+      {"mlfe/transferFunction", transfer_function_record(tf)},
       {"mlfe/zConvention",
        fmt::format(
            "Z = distance along the ray from its origin (camera position; orthographic: the image plane "
