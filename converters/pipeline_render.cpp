@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/render/volume_render.h>
 #include <mlfe/formats/exr_writer.h>
 #include <mlfe/formats/file_names.h>
@@ -24,24 +25,11 @@
 namespace mlfe::pipeline {
 namespace {
 
-using Vec3 = std::array<double, 3>;
-
-double distance(const Vec3& a, const Vec3& b) {
-  return std::sqrt(std::pow(a[0] - b[0], 2) + std::pow(a[1] - b[1], 2) + std::pow(a[2] - b[2], 2));
-}
-
 std::string numbered(const std::string& path, int frame, int frames) {
   if (frames <= 1) return path;
   const std::filesystem::path p(path);
   return (p.parent_path() / fmt::format("{}_{:04d}{}", p.stem().string(), frame, p.extension().string()))
       .string();
-}
-
-nlohmann::json tf_json(const TransferFunction& tf) {
-  return {{"name", tf.name},
-          {"RGBPoints", tf.color},
-          {"opacityPoints", tf.opacity},
-          {"opacityUnitLength", tf.unit_length}};
 }
 
 // The length an unstructured mesh's preset opacities refer to: the 10th percentile of its
@@ -114,12 +102,8 @@ Camera frame_camera(const RenderFileOptions& p, const Framing& framing, int fram
   if (p.up) cam.up = *p.up;
   const double dist = distance(cam.position, cam.target);
   if (!(dist > 0)) throw UsageError("--position and --target must differ");
-  const Vec3 f{cam.target[0] - cam.position[0], cam.target[1] - cam.position[1],
-               cam.target[2] - cam.position[2]};
-  const Vec3 side{f[1] * cam.up[2] - f[2] * cam.up[1], f[2] * cam.up[0] - f[0] * cam.up[2],
-                  f[0] * cam.up[1] - f[1] * cam.up[0]};
-  const double up_len = std::sqrt(cam.up[0] * cam.up[0] + cam.up[1] * cam.up[1] + cam.up[2] * cam.up[2]);
-  if (!(std::sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]) > 1e-9 * dist * up_len))
+  const Vec3 side = cross(sub(cam.target, cam.position), cam.up);
+  if (!(norm(side) > 1e-9 * dist * norm(cam.up)))
     throw UsageError("--up must not be parallel to the viewing direction (or zero)");
   cam.near_clip = std::max(dist - framing.radius, 1e-3 * framing.radius);
   cam.far_clip = dist + 2 * framing.radius;
@@ -174,7 +158,7 @@ ExrAttributes exr_attributes(const RenderFileOptions& p, const Camera& cam, cons
   attr.strings = {
       {"mlfe/source", std::filesystem::path(source).filename().string()},
       {"mlfe/renderer", renderer},
-      {"mlfe/transferFunction", tf_json(tf).dump()},
+      {"mlfe/transferFunction", transfer_function_record(tf)},
       {"mlfe/zConvention",
        fmt::format(
            "Z = distance along the ray from its origin (camera position; orthographic: the image plane "
@@ -303,8 +287,7 @@ Built built_of_mesh(const TetMesh& mesh) {
     }
     const auto& p0 = mesh.points[c[0].value];
     Vec3 e[3];
-    for (int k = 0; k < 3; ++k)
-      for (int a = 0; a < 3; ++a) e[k][a] = mesh.points[c[k + 1].value][a] - p0[a];
+    for (int k = 0; k < 3; ++k) e[k] = sub(mesh.points[c[k + 1].value], p0);
     const double volume = e[0][0] * (e[1][1] * e[2][2] - e[1][2] * e[2][1]) -
                           e[0][1] * (e[1][0] * e[2][2] - e[1][2] * e[2][0]) +
                           e[0][2] * (e[1][0] * e[2][1] - e[1][1] * e[2][0]);

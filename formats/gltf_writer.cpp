@@ -6,6 +6,7 @@
 // tinygltf symbol into the process (an ODR violation resolved by symbol interposition).
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
@@ -21,8 +22,6 @@
 
 namespace mlfe {
 namespace {
-
-using Vec3 = std::array<float, 3>;
 
 enum class Encoding { kFloat, kDraco, kQuantized };
 
@@ -103,7 +102,7 @@ Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std:
       for (int r = 0; r < 3; ++r)
         v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
     }
-    const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    const double len = norm(v);
     if (len > 1e-12 && std::isfinite(len)) {
       for (int k = 0; k < 3; ++k) out.normals[i][k] = float(v[k] / len);
       continue;
@@ -150,7 +149,7 @@ int add_accessor(tinygltf::Model& model, int view, int component, int type, std:
   return int(model.accessors.size() - 1);
 }
 
-void bounds(const std::vector<Vec3>& ps, std::vector<double>& lo, std::vector<double>& hi) {
+void bounds(const std::vector<std::array<float, 3>>& ps, std::vector<double>& lo, std::vector<double>& hi) {
   lo.assign(3, std::numeric_limits<double>::infinity());
   hi.assign(3, -std::numeric_limits<double>::infinity());
   for (const auto& p : ps)

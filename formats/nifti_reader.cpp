@@ -1,4 +1,5 @@
 #include <fmt/format.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/nifti_reader.h>
 #include <nifti2_io.h>
 #include <sys/stat.h>
@@ -214,11 +215,8 @@ void read_transform(const std::string& path, const nifti_image* nim, ScalarGrid&
       const auto& v = axes[1];
       double len2 = axes[2][0] * axes[2][0] + axes[2][1] * axes[2][1] + axes[2][2] * axes[2][2];
       if (!(len2 > 0) || !std::isfinite(len2)) {
-        std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                                u[0] * v[1] - u[1] * v[0]};
-        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        axes[2] = len > 0 ? std::array<double, 3>{n[0] / len, n[1] / len, n[2] / len}
-                          : std::array<double, 3>{0, 0, 1};
+        const Vec3 n = cross(u, v);
+        axes[2] = norm(n) > 0 ? normalized(n) : Vec3{0, 0, 1};
       }
     }
     set_axes(path, t, axes);

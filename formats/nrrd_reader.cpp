@@ -1,4 +1,5 @@
 #include <fmt/format.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/nrrd_reader.h>
 #include <teem/nrrd.h>
 
@@ -226,13 +227,8 @@ void read_transform(const std::string& path, const Nrrd* nrrd, unsigned dim, Sca
       // A height field in 3D space: the unused third axis is the unit normal.
       const auto& u = axes[0];
       const auto& v = axes[1];
-      std::array<double, 3> n{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                              u[0] * v[1] - u[1] * v[0]};
-      double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      if (len > 0)
-        axes[2] = {n[0] / len, n[1] / len, n[2] / len};
-      else
-        axes[2] = {0, 0, 1};
+      const Vec3 n = cross(u, v);
+      axes[2] = norm(n) > 0 ? normalized(n) : Vec3{0, 0, 1};
     }
     set_axes(path, t, axes);
     for (unsigned r = 0; r < sdim; ++r) {

@@ -49,4 +49,12 @@ TransferFunction read_paraview_transfer_function(const std::string& path, double
   return tf;
 }
 
+std::string transfer_function_record(const TransferFunction& tf) {
+  const nlohmann::json j = {{"name", tf.name},
+                            {"RGBPoints", tf.color},
+                            {"opacityPoints", tf.opacity},
+                            {"opacityUnitLength", tf.unit_length}};
+  return j.dump();
+}
+
 }  // namespace mlfe

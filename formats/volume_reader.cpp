@@ -1,4 +1,5 @@
 #include <fmt/format.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/metaimage_reader.h>
 #include <mlfe/formats/nifti_reader.h>
 #include <mlfe/formats/nrrd_reader.h>
@@ -160,7 +161,7 @@ void convert_to_float(const void* src, ScalarType t, bool swap, float* dst, std:
 void set_axes(const std::string& path, GridTransform& t, const std::array<std::array<double, 3>, 3>& axes) {
   for (int a = 0; a < 3; ++a) {
     const auto& v = axes[a];
-    double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    const double len = norm(v);
     if (!std::isfinite(len) || len <= 0.0)
       fail(path,
            fmt::format("axis {} has a zero or non-finite physical step ({}, {}, {})", a, v[0], v[1], v[2]));

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/mesh/hierarchy.h>
 #include <mlfe/core/mesh/mesh_quality.h>
 #include <mlfe/formats/hierarchy_io.h>
@@ -30,8 +31,6 @@ constexpr int kMaxLevels = 24;
 struct RefineArgs {
   std::string dim, box, toward, at, normal, radius, levels, output, hierarchy;
 };
-
-using Vec = std::array<double, 3>;
 
 // "a,b,c" -> exactly n finite numbers; the option name goes into the message.
 std::vector<double> parse_list(const std::string& option, const std::string& text, std::size_t n) {
@@ -72,21 +71,18 @@ int parse_int(const std::string& option, const std::string& text, int lo, int hi
   return static_cast<int>(v);
 }
 
-double dot(const Vec& a, const Vec& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-Vec sub(const Vec& a, const Vec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-
 // Squared distance from x to the simplex spanned by p[0..k): the projection onto the affine
 // hull if it lies inside, else the nearest of the facets (k ≤ 4, so the recursion is tiny).
-double dist2_to_simplex(const Vec* p, int k, const Vec& x) {
+double dist2_to_simplex(const Vec3* p, int k, const Vec3& x) {
   if (k == 1) {
-    const Vec d = sub(x, p[0]);
+    const Vec3 d = sub(x, p[0]);
     return dot(d, d);
   }
   // Normal equations G λ = r for x ≈ p0 + Σ λ_i (p_i − p0), solved by Gaussian elimination.
   const int m = k - 1;
   double g[3][4];
   for (int i = 0; i < m; ++i) {
-    const Vec ei = sub(p[i + 1], p[0]);
+    const Vec3 ei = sub(p[i + 1], p[0]);
     for (int j = 0; j < m; ++j) g[i][j] = dot(ei, sub(p[j + 1], p[0]));
     g[i][m] = dot(ei, sub(x, p[0]));
   }
@@ -107,21 +103,21 @@ double dist2_to_simplex(const Vec* p, int k, const Vec& x) {
   if (solved) {
     double lam0 = 1;
     bool inside = true;
-    Vec q = p[0];
+    Vec3 q = p[0];
     for (int i = 0; i < m; ++i) {
       const double l = g[i][m] / g[i][i];
       inside = inside && l >= 0;
       lam0 -= l;
-      for (int a = 0; a < 3; ++a) q[a] += l * (p[i + 1][a] - p[0][a]);
+      q = axpy(q, l, sub(p[i + 1], p[0]));
     }
     if (inside && lam0 >= 0) {
-      const Vec d = sub(x, q);
+      const Vec3 d = sub(x, q);
       return dot(d, d);
     }
   }
   double best = std::numeric_limits<double>::infinity();
   for (int drop = 0; drop < k; ++drop) {
-    Vec f[4];
+    Vec3 f[4];
     int n = 0;
     for (int i = 0; i < k; ++i)
       if (i != drop) f[n++] = p[i];
@@ -134,28 +130,28 @@ enum class Target { kPoint, kPlane, kSphere };
 
 struct Goal {
   Target target;
-  Vec at{0, 0, 0};
-  Vec normal{0, 0, 0};
+  Vec3 at{0, 0, 0};
+  Vec3 normal{0, 0, 0};
   double radius = 0;
 };
 
 template <int D>
 bool wanted(const Hierarchy<D>& h, ElemId e, const Goal& g) {
-  Vec p[D + 1];
+  Vec3 p[D + 1];
   for (int i = 0; i <= D; ++i) {
     p[i] = {0, 0, 0};
     for (int a = 0; a < D; ++a) p[i][a] = h.point(h.cell(e)[i])[a];
   }
   // A relative tolerance so that points on shared faces select the elements on both sides.
   double scale = 0;
-  for (int i = 1; i <= D; ++i) scale = std::max(scale, std::sqrt(dot(sub(p[i], p[0]), sub(p[i], p[0]))));
+  for (int i = 1; i <= D; ++i) scale = std::max(scale, distance(p[i], p[0]));
   const double eps = 1e-12 * scale;
   switch (g.target) {
     case Target::kPoint:
       return dist2_to_simplex(p, D + 1, g.at) <= eps * eps;
     case Target::kPlane: {
       double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-      for (const Vec& q : p) {
+      for (const Vec3& q : p) {
         const double s = dot(g.normal, sub(q, g.at));
         lo = std::min(lo, s);
         hi = std::max(hi, s);
@@ -164,7 +160,7 @@ bool wanted(const Hierarchy<D>& h, ElemId e, const Goal& g) {
     }
     case Target::kSphere: {
       double far = 0;
-      for (const Vec& q : p) far = std::max(far, std::sqrt(dot(sub(q, g.at), sub(q, g.at))));
+      for (const Vec3& q : p) far = std::max(far, distance(q, g.at));
       return far >= g.radius - eps && std::sqrt(dist2_to_simplex(p, D + 1, g.at)) <= g.radius + eps;
     }
   }

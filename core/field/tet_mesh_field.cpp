@@ -4,6 +4,7 @@
 // Detection" (2005), 5.1.5.
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/field/tet_mesh_field.h>
 
 #include <Eigen/Geometry>
@@ -16,28 +17,19 @@ namespace mlfe {
 
 namespace {
 
-using V3 = std::array<double, 3>;
-
-V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(const V3& a, const V3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-V3 axpy(const V3& p, double s, const V3& d) { return {p[0] + s * d[0], p[1] + s * d[1], p[2] + s * d[2]}; }
-
 // Face f of a tetrahedron is the one opposite its vertex f.
 constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 
-V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c) {
-  const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
   const double d1 = dot(ab, ap), d2 = dot(ac, ap);
   if (d1 <= 0 && d2 <= 0) return a;
-  const V3 bp = sub(p, b);
+  const Vec3 bp = sub(p, b);
   const double d3 = dot(ab, bp), d4 = dot(ac, bp);
   if (d3 >= 0 && d4 <= d3) return b;
   const double vc = d1 * d4 - d3 * d2;
   if (vc <= 0 && d1 >= 0 && d3 <= 0) return axpy(a, d1 / (d1 - d3), ab);
-  const V3 cp = sub(p, c);
+  const Vec3 cp = sub(p, c);
   const double d5 = dot(ab, cp), d6 = dot(ac, cp);
   if (d6 >= 0 && d5 <= d6) return c;
   const double vb = d5 * d2 - d1 * d6;
@@ -53,8 +45,8 @@ V3 closest_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c) {
 // Barycentric coordinates 1..3 of x are inv's rows applied to x - p0; returns the smallest of
 // all four.
 template <class T>
-double min_barycentric(const T& t, const V3& x) {
-  const V3 d = sub(x, t.p0);
+double min_barycentric(const T& t, const Vec3& x) {
+  const Vec3 d = sub(x, t.p0);
   const double l1 = t.inv[0] * d[0] + t.inv[1] * d[1] + t.inv[2] * d[2];
   const double l2 = t.inv[3] * d[0] + t.inv[4] * d[1] + t.inv[5] * d[2];
   const double l3 = t.inv[6] * d[0] + t.inv[7] * d[1] + t.inv[8] * d[2];
@@ -132,7 +124,7 @@ struct TetMeshField::FaceTree : Eigen::KdBVH<double, 3, std::uint32_t> {
 struct TetMeshField::ClosestFace {
   using Scalar = double;
   const TetMeshField& field;
-  V3 x;
+  Vec3 x;
   double best_d2 = std::numeric_limits<double>::infinity();
   Hit best{0, {0, 0, 0}};
 
@@ -144,9 +136,9 @@ struct TetMeshField::ClosestFace {
     const BoundaryFace& bf = field.boundary_[f];
     const auto& v = field.tets_[bf.tet].vertex;
     const int* k = kFaces[bf.face];
-    const V3 q =
+    const Vec3 q =
         closest_on_triangle(x, field.points_[v[k[0]]], field.points_[v[k[1]]], field.points_[v[k[2]]]);
-    const V3 d = sub(q, x);
+    const Vec3 d = sub(q, x);
     const double d2 = dot(d, d);
     if (d2 < best_d2 || (d2 == best_d2 && bf.tet < best.tet)) {
       best_d2 = d2;
@@ -187,18 +179,18 @@ std::vector<std::uint32_t> positive_volume_tets(const TetMesh& mesh, const std::
       if (v < 0 || std::size_t(v) >= np)
         throw Error(src + ": tetrahedron " + std::to_string(t) + " has point index " + std::to_string(v) +
                     " out of range (" + std::to_string(np) + " points)");
-    const V3 d1 = sub(mesh.points[c[1]], mesh.points[c[0]]), d2 = sub(mesh.points[c[2]], mesh.points[c[0]]),
-             d3 = sub(mesh.points[c[3]], mesh.points[c[0]]);
+    const Vec3 d1 = sub(mesh.points[c[1]], mesh.points[c[0]]), d2 = sub(mesh.points[c[2]], mesh.points[c[0]]),
+               d3 = sub(mesh.points[c[3]], mesh.points[c[0]]);
     double longest = std::max({dot(d1, d1), dot(d2, d2), dot(d3, d3)});
     for (const auto& [a, b] : {std::pair{1, 2}, std::pair{1, 3}, std::pair{2, 3}}) {
-      const V3 e = sub(mesh.points[c[a]], mesh.points[c[b]]);
+      const Vec3 e = sub(mesh.points[c[a]], mesh.points[c[b]]);
       longest = std::max(longest, dot(e, e));
     }
     const double det = dot(d1, cross(d2, d3));
     // The inverse and the gradient must be representable too (tiny tetrahedra, huge values).
     bool ok = longest > 0 && std::abs(det) > 1e-12 * longest * std::sqrt(longest);
     if (ok) {
-      const V3 r[3] = {cross(d2, d3), cross(d3, d1), cross(d1, d2)};
+      const Vec3 r[3] = {cross(d2, d3), cross(d3, d1), cross(d1, d2)};
       for (int k = 0; k < 3; ++k) {
         const double dv = mesh.values[c[k + 1]] - mesh.values[c[0]];
         for (int a = 0; a < 3; ++a) ok &= std::isfinite(r[k][a] / det) && std::isfinite(dv * (r[k][a] / det));
@@ -279,7 +271,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
   const std::vector<std::uint32_t> keep = positive_volume_tets(mesh, src, degenerate_);
 
   // Step 2: the box of the kept tetrahedra, and the local frame.
-  V3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   for (std::uint32_t t : keep)
     for (std::int32_t v : mesh.tets[t])
       for (int a = 0; a < 3; ++a) {
@@ -301,9 +293,9 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
     Tet T;
     T.vertex = c;
     T.p0 = points_[c[0]];
-    const V3 d1 = sub(points_[c[1]], T.p0), d2 = sub(points_[c[2]], T.p0), d3 = sub(points_[c[3]], T.p0);
+    const Vec3 d1 = sub(points_[c[1]], T.p0), d2 = sub(points_[c[2]], T.p0), d3 = sub(points_[c[3]], T.p0);
     const double det = dot(d1, cross(d2, d3));
-    const V3 r1 = cross(d2, d3), r2 = cross(d3, d1), r3 = cross(d1, d2);
+    const Vec3 r1 = cross(d2, d3), r2 = cross(d3, d1), r3 = cross(d1, d2);
     for (int a = 0; a < 3; ++a) {
       T.inv[a] = r1[a] / det;
       T.inv[3 + a] = r2[a] / det;
@@ -319,7 +311,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
       range_[0] = std::min(range_[0], mesh.values[c[i]]);
       range_[1] = std::max(range_[1], mesh.values[c[i]]);
       for (int j = i + 1; j < 4; ++j) {
-        const V3 e = sub(points_[c[i]], points_[c[j]]);
+        const Vec3 e = sub(points_[c[i]], points_[c[j]]);
         edges.push_back(std::sqrt(dot(e, e)));
       }
     }
@@ -349,7 +341,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
   const std::size_t cells = std::size_t(n_[0] * n_[1] * n_[2]);
   std::vector<std::uint64_t> count(cells + 1, 0);
   const auto tet_cells = [&](const Tet& T, std::int64_t i0[3], std::int64_t i1[3]) {
-    V3 tlo = points_[T.vertex[0]], thi = tlo;
+    Vec3 tlo = points_[T.vertex[0]], thi = tlo;
     for (int i = 1; i < 4; ++i)
       for (int a = 0; a < 3; ++a) {
         tlo[a] = std::min(tlo[a], points_[T.vertex[i]][a]);
@@ -392,7 +384,7 @@ TetMeshField::TetMeshField(const TetMesh& mesh) {
     ids[f] = f;
     const auto& v = tets_[boundary_[f].tet].vertex;
     for (int i = 0; i < 3; ++i) {
-      const V3& p = points_[v[kFaces[boundary_[f].face][i]]];
+      const Vec3& p = points_[v[kFaces[boundary_[f].face][i]]];
       boxes[f].extend(Eigen::Vector3d(p[0], p[1], p[2]));
     }
   }
@@ -408,7 +400,7 @@ std::int64_t TetMeshField::cell_of(const std::array<double, 3>& x, std::int64_t 
 }
 
 TetMeshField::Hit TetMeshField::locate(const std::array<double, 3>& x_in) const {
-  V3 x;
+  Vec3 x;
   for (int a = 0; a < 3; ++a) x[a] = std::clamp(x_in[a], 0.0, extent_[a]);
   std::int64_t c[3];
   const std::size_t cell = std::size_t(cell_of(x, c));
@@ -485,11 +477,11 @@ void TetMeshField::build_ranges() const {
   for (std::int64_t k = 0; k < n_[2]; ++k)
     for (std::int64_t j = 0; j < n_[1]; ++j)
       for (std::int64_t i = 0; i < n_[0]; ++i) {
-        const V3 m{(double(i) + 0.5) * cell_size_[0], (double(j) + 0.5) * cell_size_[1],
-                   (double(k) + 0.5) * cell_size_[2]};
-        const V3 d = sub(locate(m).at, m);
+        const Vec3 m{(double(i) + 0.5) * cell_size_[0], (double(j) + 0.5) * cell_size_[1],
+                     (double(k) + 0.5) * cell_size_[2]};
+        const Vec3 d = sub(locate(m).at, m);
         const double radius = std::sqrt(dot(d, d)) + diagonal;
-        V3 blo, bhi;
+        Vec3 blo, bhi;
         for (int a = 0; a < 3; ++a) {
           blo[a] = m[a] - radius;
           bhi[a] = m[a] + radius;

@@ -1,3 +1,4 @@
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/mesh/mesh_quality.h>
 
 #include <algorithm>
@@ -27,17 +28,7 @@ double min_angle_deg(const std::array<std::array<double, 2>, 3>& p) {
 double min_dihedral_deg(const std::array<std::array<double, 3>, 4>& p) {
   // Face normals (outward up to a common sign); the dihedral angle at the edge shared by
   // faces i and j is pi minus the angle between their outward normals.
-  auto sub = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
-    return std::array<double, 3>{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
-  };
-  auto cross = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
-    return std::array<double, 3>{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                                 a[0] * b[1] - a[1] * b[0]};
-  };
-  auto dot = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-  };
-  std::array<std::array<double, 3>, 4> n;
+  std::array<Vec3, 4> n;
   for (int f = 0; f < 4; ++f) {
     int idx[3], k = 0;
     for (int j = 0; j < 4; ++j)
@@ -45,9 +36,8 @@ double min_dihedral_deg(const std::array<std::array<double, 3>, 4>& p) {
     auto nf = cross(sub(p[idx[1]], p[idx[0]]), sub(p[idx[2]], p[idx[0]]));
     // Orient away from the opposite vertex.
     if (dot(nf, sub(p[f], p[idx[0]])) > 0) nf = {-nf[0], -nf[1], -nf[2]};
-    const double len = std::sqrt(dot(nf, nf));
-    if (len == 0) return 0.0;
-    n[f] = {nf[0] / len, nf[1] / len, nf[2] / len};
+    if (norm(nf) == 0) return 0.0;
+    n[f] = normalized(nf);
   }
   double best = 180.0;
   for (int i = 0; i < 4; ++i)

@@ -130,34 +130,61 @@ void TransferFunction::validate(const std::string& source) const {
   }
 }
 
-std::vector<std::string> transfer_function_presets() { return {"grey", "bone", "mri", "hot"}; }
+namespace {
+
+// A preset: its points at fractions f of the value range, (f, r, g, b) and (f, opacity).
+struct Preset {
+  const char* name;
+  std::vector<std::array<double, 4>> color;
+  std::vector<std::array<double, 2>> opacity;
+};
+
+// The presets, the one list of them: a new preset is a new row (the command line's help and the
+// unknown-name error list them through transfer_function_presets()).
+const std::vector<Preset>& presets() {
+  static const std::vector<Preset> table = {
+      // A linear grey ramp, linear opacity.
+      {"grey", {{0, 0, 0, 0}, {1, 1, 1, 1}}, {{0, 0}, {1, 0.2}}},
+      // Transparent below 45 % of the range, then ivory (CT bone).
+      {"bone",
+       {{0, 0.3, 0.1, 0.05}, {0.45, 0.9, 0.6, 0.4}, {1, 1, 1, 0.95}},
+       {{0, 0}, {0.45, 0}, {0.6, 0.3}, {1, 0.6}}},
+      // Soft tissue in warm tones, the brightest values opaque.
+      {"mri",
+       {{0, 0, 0, 0}, {0.3, 0.6, 0.3, 0.2}, {0.6, 0.95, 0.8, 0.6}, {1, 1, 1, 1}},
+       {{0, 0}, {0.15, 0}, {0.35, 0.05}, {0.7, 0.15}, {1, 0.4}}},
+      // Black, red, yellow, white.
+      {"hot", {{0, 0, 0, 0}, {0.4, 1, 0, 0}, {0.8, 1, 1, 0}, {1, 1, 1, 1}}, {{0, 0}, {1, 0.3}}},
+  };
+  return table;
+}
+
+}  // namespace
+
+std::vector<std::string> transfer_function_presets() {
+  std::vector<std::string> names;
+  for (const Preset& p : presets()) names.push_back(p.name);
+  return names;
+}
 
 TransferFunction transfer_function_preset(const std::string& name, double lo, double hi, double unit_length) {
   if (!(lo < hi) || !(unit_length > 0))
     throw Error("transfer function '" + name + "': needs a value range lo < hi and a positive unit length");
-  const double r = hi - lo;
-  auto at = [&](double f) { return lo + f * r; };
-  TransferFunction tf;
-  tf.unit_length = unit_length;
-  tf.name = name;
-  if (name == "grey") {
-    tf.color = {{at(0), 0, 0, 0}, {at(1), 1, 1, 1}};
-    tf.opacity = {{at(0), 0}, {at(1), 0.2}};
-  } else if (name == "bone") {
-    tf.color = {{at(0), 0.3, 0.1, 0.05}, {at(0.45), 0.9, 0.6, 0.4}, {at(1), 1, 1, 0.95}};
-    tf.opacity = {{at(0), 0}, {at(0.45), 0}, {at(0.6), 0.3}, {at(1), 0.6}};
-  } else if (name == "mri") {
-    tf.color = {{at(0), 0, 0, 0}, {at(0.3), 0.6, 0.3, 0.2}, {at(0.6), 0.95, 0.8, 0.6}, {at(1), 1, 1, 1}};
-    tf.opacity = {{at(0), 0}, {at(0.15), 0}, {at(0.35), 0.05}, {at(0.7), 0.15}, {at(1), 0.4}};
-  } else if (name == "hot") {
-    tf.color = {{at(0), 0, 0, 0}, {at(0.4), 1, 0, 0}, {at(0.8), 1, 1, 0}, {at(1), 1, 1, 1}};
-    tf.opacity = {{at(0), 0}, {at(1), 0.3}};
-  } else {
+  const auto preset =
+      std::find_if(presets().begin(), presets().end(), [&](const Preset& p) { return name == p.name; });
+  if (preset == presets().end()) {
     std::string list;
     for (const auto& p : transfer_function_presets()) list += (list.empty() ? "" : ", ") + p;
     throw Error("unknown transfer function preset '" + name + "' (presets: " + list +
                 "; or a ParaView .json)");
   }
+  const double r = hi - lo;
+  auto at = [&](double f) { return lo + f * r; };
+  TransferFunction tf;
+  tf.unit_length = unit_length;
+  tf.name = name;
+  for (const auto& c : preset->color) tf.color.push_back({at(c[0]), c[1], c[2], c[3]});
+  for (const auto& o : preset->opacity) tf.opacity.push_back({at(o[0]), o[1]});
   return tf;
 }
 

@@ -5,6 +5,7 @@
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/huge_pages.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/fem/hierarchical_basis.h>
 #include <mlfe/core/field/field.h>
 #include <mlfe/core/render/volume_render.h>
@@ -26,7 +27,6 @@ namespace mlfe {
 
 namespace {
 
-using Vec3 = std::array<double, 3>;
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // trace_ray's default for RenderOptions::skip_levels: skip a transparent ancestor only when it
@@ -35,19 +35,6 @@ constexpr int kFaceVerts[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 // visible cell, 5 levels measured 3-5 % faster than 3 and the same as never skipping
 // (bench/RESULTS.md, render_bench).
 constexpr int kSkipLevels = 5;
-
-inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-inline Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-inline Vec3 axpy(const Vec3& o, double t, const Vec3& d) {
-  return {o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]};
-}
-inline Vec3 normalized(const Vec3& a) {
-  const double n = std::sqrt(dot(a, a));
-  return {a[0] / n, a[1] / n, a[2] / n};
-}
 
 // The face a ray o + t d leaves a tetrahedron through after t_in, and where (t_out): the
 // nearest plane n_i · x = h_i among the faces with n_i · d > 0, never `entry` (the face the ray
@@ -74,7 +61,7 @@ int exit_face(const Normal& normal, const double (&h)[4], const Vec3& o, const V
     for (int i = 0; i < 4; ++i) {
       if (i == entry) continue;
       const Vec3 n = normal(i);
-      const double den = dot(n, d) / std::sqrt(dot(n, n));
+      const double den = dot(n, d) / norm(n);
       if (den > best_den) {
         best_den = den;
         best = i;
@@ -606,6 +593,20 @@ std::array<double, 3> world_to_local_direction(const GridTransform& t, const std
 
 // ---------------------------------------------------------------- render mesh
 
+namespace {
+
+// A uniform grid over a box of extent `ext`: per_axis cells along its longest axis, the other
+// axes in proportion (at least one cell each; a flat axis gets one cell of size 1).
+void shape_grid(const Vec3& ext, double per_axis, int (&n)[3], Vec3& cell) {
+  const double longest = std::max({ext[0], ext[1], ext[2]});
+  for (int a = 0; a < 3; ++a) {
+    n[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
+    cell[a] = ext[a] > 0 ? ext[a] / n[a] : 1.0;
+  }
+}
+
+}  // namespace
+
 TetRenderMesh::~TetRenderMesh() = default;
 
 // Defined ahead of its callers so that it is inlined (the range grid calls it six times per
@@ -614,24 +615,43 @@ inline int TetRenderMesh::grid_index(int a, double x) const {
   return std::clamp(int(std::floor((x - lo_box_[a]) / grid_cell_[a])), 0, grid_n_[a] - 1);
 }
 
+// The set-up, phase after phase, in the order what each phase reads forces: u before the
+// ranges, the render order before everything indexed by it (records, neighbours), the box before
+// the two grids over it, the neighbours before the boundary faces (the faces without one).
 TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& values, int level,
                              const std::array<double, 3>* clip_to, RayEntry entry)
     : h_(h), entry_(entry) {
   if (values.size() != h.vertex_count())
     throw Error("render: " + std::to_string(values.size()) + " values for a hierarchy of " +
                 std::to_string(h.vertex_count()) + " vertices");
-  const int finest = h.max_level();
+  select_values(values, level);
+  order_elements();
+  reserve_records();
+  find_neighbors();
+  bound_domain(clip_to);
+  build_range_grid();
+  if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
+}
+
+// u on T_k: on the finest level the values themselves; on a coarser one the hierarchical basis
+// without the surpluses of finer vertices, which is what T_k interpolates (so a coarse render
+// shows the coarse approximation, not the leaf values at coarse vertices).
+void TetRenderMesh::select_values(const std::vector<double>& values, int level) {
+  const int finest = h_.max_level();
   level_ = level < 0 || level >= finest ? finest : level;
-  // 1. u on T_k: the hierarchical basis without the surpluses of finer vertices.
   if (level_ < finest) {
-    coarse_values_ = hierarchical_reconstruct(h, hierarchical_decompose(h, values), level_);
+    coarse_values_ = hierarchical_reconstruct(h_, hierarchical_decompose(h_, values), level_);
     u_ = &coarse_values_;
   } else {
     u_ = &values;
   }
-  // 2. the rendered elements: their value ranges (elements of level ≤ k), render order and
-  // render indices.
-  const std::size_t ne = h.element_count();
+}
+
+// The rendered elements: their value ranges (every element of level ≤ k, for empty-space
+// skipping), their render order and their render indices. Everything after is indexed in render
+// order, so it comes first; its order is the memory layout the rays walk (tree_order's comment).
+void TetRenderMesh::order_elements() {
+  const std::size_t ne = h_.element_count();
   for (auto* a : {&lo_, &hi_}) {
     a->reserve(ne);
     advise_huge_pages(*a);
@@ -640,55 +660,67 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   render_of_.reserve(ne);
   advise_huge_pages(render_of_);
   render_of_.resize(ne);
-  rendered_ranges(h, level_, *u_, render_of_.data(), lo_.data(), hi_.data());
-  const std::size_t rendered = sweep_up(h, level_, render_of_.data(), lo_.data(), hi_.data());
+  rendered_ranges(h_, level_, *u_, render_of_.data(), lo_.data(), hi_.data());
+  const std::size_t rendered = sweep_up(h_, level_, render_of_.data(), lo_.data(), hi_.data());
   // Neighbour records pack 4 × index + face into 32 bits.
   if (rendered >= (std::size_t(1) << 30))
     throw Error("render: " + std::to_string(rendered) + " tetrahedra exceed the renderer's limit of 2^30");
-  tree_order(h, level_, render_of_.data(), rendered, elems_);
+  tree_order(h_, level_, render_of_.data(), rendered, elems_);
   if (entry_ == RayEntry::kBoundaryFaces) {
     // An unstructured mesh has no refinement tree to follow (T0 is the mesh): Z-order.
-    morton_order(h, elems_);
+    morton_order(h_, elems_);
     tbb::parallel_for(std::size_t(0), elems_.size(),
                       [&](std::size_t r) { render_of_[elems_[r]] = std::uint32_t(r); });
   }
-  // Records: address space only until build_chunk() writes them.
+}
+
+// The step records' address space and their chunks' flags, nothing computed: record() builds a
+// chunk on first use, so a small image never pays for the records its rays do not cross.
+void TetRenderMesh::reserve_records() {
   records_.resize(elems_.size());
   advise_huge_pages(records_);
   const std::size_t chunks = chunk_count();
   built_.reset(new std::atomic<bool>[chunks]);
   for (std::size_t c = 0; c < chunks; ++c) built_[c].store(false, std::memory_order_relaxed);
   build_once_.reset(new std::once_flag[chunks]);
-  // 3. face neighbours.
+}
+
+// Face neighbours of the rendered elements, up front unlike the records: matching a face needs
+// the whole mesh. An unstructured mesh that is not conforming is bad input, reported here.
+void TetRenderMesh::find_neighbors() {
   next_.resize(elems_.size());  // not initialised: face_adjacency sets every entry
   advise_huge_pages(next_);
   const std::size_t overshared =
-      face_adjacency(h, render_of_.data(), elems_.size(), next_, entry_ == RayEntry::kHierarchy);
+      face_adjacency(h_, render_of_.data(), elems_.size(), next_, entry_ == RayEntry::kHierarchy);
   if (overshared > 0 && entry_ == RayEntry::kBoundaryFaces)
     throw Error("render: " + std::to_string(overshared) +
                 " faces are shared by more than two tetrahedra (not a conforming mesh)");
-  // 4. the domain box (T0 spans it).
+}
+
+// The domain box rays are clipped to: T0 spans the domain, so its vertices bound it; `clip_to`
+// cuts it down to the data's box.
+void TetRenderMesh::bound_domain(const std::array<double, 3>* clip_to) {
   lo_box_.fill(std::numeric_limits<double>::infinity());
   hi_box_.fill(-std::numeric_limits<double>::infinity());
-  for (std::size_t e = 0; e < h.coarse_count(); ++e)
-    for (VertexId v : h.cell(ElemId(std::uint32_t(e))))
+  for (std::size_t e = 0; e < h_.coarse_count(); ++e)
+    for (VertexId v : h_.cell(ElemId(std::uint32_t(e))))
       for (int a = 0; a < 3; ++a) {
-        lo_box_[a] = std::min(lo_box_[a], h.point(v)[a]);
-        hi_box_[a] = std::max(hi_box_[a], h.point(v)[a]);
+        lo_box_[a] = std::min(lo_box_[a], h_.point(v)[a]);
+        hi_box_[a] = std::max(hi_box_[a], h_.point(v)[a]);
       }
   if (clip_to)
     for (int a = 0; a < 3; ++a) hi_box_[a] = std::min(hi_box_[a], (*clip_to)[a]);
-  diag_ = std::sqrt(dot(sub(hi_box_, lo_box_), sub(hi_box_, lo_box_)));
-  // 5. the range grid: about one cell per 8 rendered elements (at most 64 along the longest
-  // axis), each with the union of the ranges of the elements whose (padded) bounding boxes
-  // overlap it; in the hierarchy's element order, in which its cells are stored.
+  diag_ = distance(hi_box_, lo_box_);
+}
+
+// The range grid first_visible walks: about one cell per 8 rendered elements (at most 64 along
+// the longest axis), each with the union of the ranges of the elements whose (padded) bounding
+// boxes overlap it; in the hierarchy's element order, in which its cells are stored.
+void TetRenderMesh::build_range_grid() {
+  const std::size_t ne = h_.element_count();
   const Vec3 ext = sub(hi_box_, lo_box_);
   const double longest = std::max({ext[0], ext[1], ext[2]});
-  const double per_axis = std::clamp(std::cbrt(double(elems_.size()) / 8.0), 1.0, 64.0);
-  for (int a = 0; a < 3; ++a) {
-    grid_n_[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
-    grid_cell_[a] = ext[a] > 0 ? ext[a] / grid_n_[a] : 1.0;
-  }
+  shape_grid(ext, std::clamp(std::cbrt(double(elems_.size()) / 8.0), 1.0, 64.0), grid_n_, grid_cell_);
   const std::size_t cells = std::size_t(grid_n_[0]) * grid_n_[1] * grid_n_[2];
   grid_lo_.assign(cells, std::numeric_limits<float>::infinity());
   grid_hi_.assign(cells, -std::numeric_limits<float>::infinity());
@@ -697,10 +729,10 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
   // x ∓ pad are monotone in x, so that is the min (max) of its vertices' padded cells, found
   // once per vertex here instead of six divisions per element.
   for (int a = 0; a < 3; ++a) MLFE_CHECK(grid_n_[a] <= 256);
-  std::vector<std::array<std::uint8_t, 6>> vertex_cells(h.vertex_count());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h.vertex_count(), 4096), [&](const auto& range) {
+  std::vector<std::array<std::uint8_t, 6>> vertex_cells(h_.vertex_count());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, h_.vertex_count(), 4096), [&](const auto& range) {
     for (std::size_t v = range.begin(); v != range.end(); ++v) {
-      const auto& q = h.point(VertexId(std::uint32_t(v)));
+      const auto& q = h_.point(VertexId(std::uint32_t(v)));
       for (int a = 0; a < 3; ++a) {
         vertex_cells[v][a] = std::uint8_t(grid_index(a, q[a] - pad));
         vertex_cells[v][3 + a] = std::uint8_t(grid_index(a, q[a] + pad));
@@ -720,7 +752,7 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
     for (std::size_t i = k * per_chunk, end = std::min(ne, i + per_chunk); i < end; ++i) {
       if (render_of_[i] == kNone) continue;
       int c0[3] = {255, 255, 255}, c1[3] = {0, 0, 0};
-      for (VertexId v : h.cell(ElemId(std::uint32_t(i))))
+      for (VertexId v : h_.cell(ElemId(std::uint32_t(i))))
         for (int a = 0; a < 3; ++a) {
           c0[a] = std::min<int>(c0[a], vertex_cells[v.value][a]);
           c1[a] = std::max<int>(c1[a], vertex_cells[v.value][3 + a]);
@@ -739,8 +771,6 @@ TetRenderMesh::TetRenderMesh(const Hierarchy<3>& h, const std::vector<double>& v
       grid_lo_[c] = std::min(grid_lo_[c], part_lo[k][c]);
       grid_hi_[c] = std::max(grid_hi_[c], part_hi[k][c]);
     }
-  // 6. unstructured meshes: the boundary faces in their bucket grid.
-  if (entry_ == RayEntry::kBoundaryFaces) build_boundary_grid();
 }
 
 // One step record (see StepRecord): the face planes, u's plane and the neighbours of element r.
@@ -803,7 +833,7 @@ double TetRenderMesh::first_visible(const std::array<double, 3>& o, const std::a
     t_delta[a] = grid_cell_[a] / std::abs(d[a]);
   }
   // Back off into the transparent cell before (by far more than locate's nudge).
-  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / std::sqrt(dot(d, d));
+  const double back = 1e-3 * std::min({grid_cell_[0], grid_cell_[1], grid_cell_[2]}) / norm(d);
   double t = t0;
   while (true) {
     const std::size_t c = (std::size_t(i[2]) * grid_n_[1] + i[1]) * grid_n_[0] + i[0];
@@ -856,12 +886,8 @@ void TetRenderMesh::build_boundary_grid() {
   // of n³ buckets meets ~6 n² of them), at most 256 along the longest axis.
   const Vec3 ext = sub(hi_box_, lo_box_);
   const double longest = std::max({ext[0], ext[1], ext[2]});
-  const double per_axis = std::clamp(std::sqrt(double(g->faces.size()) / 8.0), 1.0, 256.0);
   g->lo = lo_box_;
-  for (int a = 0; a < 3; ++a) {
-    g->n[a] = std::max(1, int(std::ceil(per_axis * ext[a] / longest)));
-    g->cell[a] = ext[a] > 0 ? ext[a] / g->n[a] : 1.0;
-  }
+  shape_grid(ext, std::clamp(std::sqrt(double(g->faces.size()) / 8.0), 1.0, 256.0), g->n, g->cell);
   const std::size_t cells = std::size_t(g->n[0]) * g->n[1] * g->n[2];
   const double pad = 1e-7 * longest;
   // Calls visit(bucket) for every bucket face i's padded bounding box overlaps.
@@ -984,7 +1010,7 @@ std::size_t TetRenderMesh::memory_bytes() const {
 
 std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::array<double, 3>& d,
                                     ElemId hint) const {
-  const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
+  const Vec3 q = axpy(p, 1e-7 * diag_ / norm(d), d);
   Vec3 pts[4];
   // 1. climb from the hint to an ancestor containing q (none: start from T0).
   while (hint.valid()) {
@@ -1018,7 +1044,7 @@ std::uint32_t TetRenderMesh::locate(const std::array<double, 3>& p, const std::a
 
 std::uint32_t TetRenderMesh::walk_to(std::uint32_t start, const std::array<double, 3>& p,
                                      const std::array<double, 3>& d) const {
-  const Vec3 q = axpy(p, 1e-7 * diag_ / std::sqrt(dot(d, d)), d);
+  const Vec3 q = axpy(p, 1e-7 * diag_ / norm(d), d);
   Vec3 pts[4];
   std::uint32_t r = start;
   for (int step = 0; step < 32; ++step) {
@@ -1139,8 +1165,7 @@ inline bool begin_walk(const TetRenderMesh& m, const Vec3& o, const Vec3& d,
   w.entered = TetRenderMesh::kNoNeighbor;
   if (!clip_to_box(m.box_lo(), m.box_hi(), o, d, w.res.t_near, w.res.t_far)) return false;
   w.res.hit = true;
-  w.eps = 1e-9 * (w.res.t_far - w.res.t_near +
-                  std::sqrt(dot(sub(m.box_hi(), m.box_lo()), sub(m.box_hi(), m.box_lo()))));
+  w.eps = 1e-9 * (w.res.t_far - w.res.t_near + distance(m.box_hi(), m.box_lo()));
   w.bound = m.size() + 64;
   w.t = w.res.t_near;
   if (skip) {

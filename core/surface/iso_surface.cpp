@@ -1,6 +1,7 @@
 // Marching tetrahedra on the multilevel hierarchy (Grosso, Lürig & Ertl, IEEE Vis 1997, Sec. 5).
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/fem/hierarchical_basis.h>
 #include <mlfe/core/fem/p1_element.h>
 #include <mlfe/core/mesh/edge_map.h>
@@ -19,20 +20,13 @@ namespace mlfe {
 
 namespace {
 
-using V3 = std::array<double, 3>;
-V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 cross(const V3& a, const V3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-
 double det3(const std::array<double, 9>& m) {
   return m[0] * (m[4] * m[8] - m[5] * m[7]) - m[1] * (m[3] * m[8] - m[5] * m[6]) +
          m[2] * (m[3] * m[7] - m[4] * m[6]);
 }
 
-std::array<float, 3> to_float_unit(const V3& v) {
-  const double n = std::sqrt(dot(v, v));
+std::array<float, 3> to_float_unit(const Vec3& v) {
+  const double n = norm(v);
   if (n == 0) return {0.f, 0.f, 1.f};
   return {float(v[0] / n), float(v[1] / n), float(v[2] / n)};
 }
@@ -40,9 +34,9 @@ std::array<float, 3> to_float_unit(const V3& v) {
 // The crossing of f = iso nearest to x along the unit direction d, |t| <= reach: samples
 // every `step` outward on both sides (nearer first, + before - at equal distance), then
 // regula falsi (Illinois) in the first bracket. Returns false when there is none.
-bool nearest_crossing(const Field& f, double iso, const V3& x, const V3& d, double reach, double step,
+bool nearest_crossing(const Field& f, double iso, const Vec3& x, const Vec3& d, double reach, double step,
                       double& t) {
-  auto g = [&](double s) { return f.value({x[0] + s * d[0], x[1] + s * d[1], x[2] + s * d[2]}) - iso; };
+  auto g = [&](double s) { return f.value(axpy(x, s, d)) - iso; };
   const double g0 = g(0);
   if (g0 == 0) {
     t = 0;
@@ -85,33 +79,31 @@ bool nearest_crossing(const Field& f, double iso, const V3& x, const V3& d, doub
 
 // Moves the surface's vertices (local frame) onto f = iso along u's gradient; reverts the
 // vertices of any triangle the moves would flip or collapse, until none does.
-void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3>& grad,
-                  const TriangleMesh& mesh, std::vector<V3>& local) {
-  const std::vector<V3> original = local;
-  const V3 hi = f.extent();
+void snap_to_data(const Field& f, double iso, double reach, const std::vector<Vec3>& grad,
+                  const TriangleMesh& mesh, std::vector<Vec3>& local) {
+  const std::vector<Vec3> original = local;
+  const Vec3 hi = f.extent();
   const double step = f.resolution() / 4;
   // No crossing lies farther than the domain's diagonal: a larger reach only costs samples.
-  reach = std::min(reach, std::sqrt(dot(hi, hi)));
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, local.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-          const double len = std::sqrt(dot(grad[i], grad[i]));
-          if (!(len > 0)) continue;
-          const V3 d{grad[i][0] / len, grad[i][1] / len, grad[i][2] / len};
-          double t = 0;
-          if (!nearest_crossing(f, iso, original[i], d, reach, step, t)) continue;
-          const V3 q{original[i][0] + t * d[0], original[i][1] + t * d[1], original[i][2] + t * d[2]};
-          bool inside = true;
-          for (int k = 0; k < f.dim(); ++k) inside = inside && q[k] >= 0 && q[k] <= hi[k];
-          if (inside) local[i] = q;
-        }
-      });
+  reach = std::min(reach, norm(hi));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, local.size(), 1024), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (!(norm(grad[i]) > 0)) continue;
+      const Vec3 d = normalized(grad[i]);
+      double t = 0;
+      if (!nearest_crossing(f, iso, original[i], d, reach, step, t)) continue;
+      const Vec3 q = axpy(original[i], t, d);
+      bool inside = true;
+      for (int k = 0; k < f.dim(); ++k) inside = inside && q[k] >= 0 && q[k] <= hi[k];
+      if (inside) local[i] = q;
+    }
+  });
   for (bool changed = true; changed;) {
     changed = false;
     for (const auto& tri : mesh.triangles) {
-      const V3 before =
+      const Vec3 before =
           cross(sub(original[tri[1]], original[tri[0]]), sub(original[tri[2]], original[tri[0]]));
-      const V3 after = cross(sub(local[tri[1]], local[tri[0]]), sub(local[tri[2]], local[tri[0]]));
+      const Vec3 after = cross(sub(local[tri[1]], local[tri[0]]), sub(local[tri[2]], local[tri[0]]));
       if (dot(before, after) > 0.1 * std::sqrt(dot(before, before) * dot(after, after))) continue;
       for (auto v : tri)
         if (local[v] != original[v]) {
@@ -126,17 +118,17 @@ void snap_to_data(const Field& f, double iso, double reach, const std::vector<V3
 // leaves the lower faces: T0 starts at 0). Cut points are keyed by their surface edge and the
 // plane, computed from the lower vertex id, so neighbours share them bit for bit; vertices
 // no triangle uses any more are dropped, the others keep their order.
-void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad) {
+void clip_to_box(const Vec3& hi, TriangleMesh& mesh, std::vector<Vec3>& local, std::vector<Vec3>& grad) {
   double scale = 0;
   for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(hi[a]));
   const double eps = 1e-9 * scale;
-  auto inside = [&](const V3& p, int a) { return p[a] <= hi[a] + eps; };
+  auto inside = [&](const Vec3& p, int a) { return p[a] <= hi[a] + eps; };
   // On the lattice, surface vertices often lie on a face already (cut edges in it): an edge
   // from such a vertex leaves the box there, and a cut point would be a second vertex at its
   // position (a duplicate, and degenerate triangles around it).
-  auto on_face = [&](const V3& p, int a) { return std::abs(p[a] - hi[a]) <= eps; };
+  auto on_face = [&](const Vec3& p, int a) { return std::abs(p[a] - hi[a]) <= eps; };
   bool any_out = false;
-  for (const V3& p : local)
+  for (const Vec3& p : local)
     for (int a = 0; a < 3; ++a) any_out |= !inside(p, a);
   if (!any_out) return;
   std::unordered_map<std::uint64_t, std::uint32_t> cuts;  // (edge, plane) -> vertex
@@ -145,9 +137,9 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
     const std::uint64_t exact = (std::uint64_t(i) << 34) | (std::uint64_t(j) << 2) | std::uint64_t(a);
     auto it = cuts.find(exact);
     if (it != cuts.end()) return it->second;
-    const V3 pi = local[i], pj = local[j];
+    const Vec3 pi = local[i], pj = local[j];
     const double t = (hi[a] - pi[a]) / (pj[a] - pi[a]);
-    V3 p, g;
+    Vec3 p, g;
     for (int k = 0; k < 3; ++k) {
       p[k] = pi[k] + t * (pj[k] - pi[k]);
       g[k] = grad[i][k] + t * (grad[j][k] - grad[i][k]);
@@ -182,7 +174,7 @@ void clip_to_box(const V3& hi, TriangleMesh& mesh, std::vector<V3>& local, std::
   for (const auto& t : kept)
     for (auto i : t) remap[i] = 0;
   std::uint32_t n = 0;
-  std::vector<V3> nl, ng;
+  std::vector<Vec3> nl, ng;
   for (std::size_t i = 0; i < local.size(); ++i)
     if (remap[i] == 0) {
       remap[i] = n++;
@@ -232,14 +224,14 @@ struct OutVertex {
 // The output of one chunk of cut elements, its vertices numbered in order of first use.
 struct Chunk {
   std::vector<OutVertex> verts;
-  std::vector<V3> local;  // per vertex: its point on the cut edge, local frame
+  std::vector<Vec3> local;  // per vertex: its point on the cut edge, local frame
   std::vector<std::array<std::uint32_t, 3>> tris;
 };
 
 // The chunks' vertices merged, chunk by chunk, a vertex keeping the number of its first use, and
 // their triangles renumbered into `mesh`; `chunks` is released.
 void merge_chunks(std::vector<Chunk>& chunks, const std::vector<double>& u, double iso,
-                  std::vector<OutVertex>& verts, std::vector<V3>& local, TriangleMesh& mesh) {
+                  std::vector<OutVertex>& verts, std::vector<Vec3>& local, TriangleMesh& mesh) {
   const std::size_t nchunks = chunks.size();
   std::vector<std::vector<std::uint32_t>> to_global(nchunks);
   {
@@ -290,9 +282,9 @@ void merge_chunks(std::vector<Chunk>& chunks, const std::vector<double>& u, doub
 // vertices, as the volume-weighted mean of the gradients of all tetrahedra around them (those
 // have a vertex value inside [lo, hi] of the needed vertices, so the same range walk finds all
 // of them), then the gradients of u at the output vertices, interpolated along the cut edge.
-std::vector<V3> gradients_at(const Hierarchy<3>& h, int level, const std::vector<double>& u,
-                             const std::vector<float>& lo, const std::vector<float>& hi,
-                             const std::vector<OutVertex>& verts) {
+std::vector<Vec3> gradients_at(const Hierarchy<3>& h, int level, const std::vector<double>& u,
+                               const std::vector<float>& lo, const std::vector<float>& hi,
+                               const std::vector<OutVertex>& verts) {
   constexpr std::uint32_t kNotNeeded = ~std::uint32_t(0);
   std::vector<std::uint32_t> slot(h.vertex_count(), kNotNeeded);  // needed vertex -> acc slot
   std::vector<std::array<double, 4>> acc;                         // gradient sum, volume sum
@@ -322,7 +314,7 @@ std::vector<V3> gradients_at(const Hierarchy<3>& h, int level, const std::vector
                         for (std::size_t i = r.begin(); i != r.end(); ++i) {
                           const auto& c = h.cell(around[i]);
                           const P1Element<3> el = element_of(h, around[i]);
-                          V3 g{0, 0, 0};
+                          Vec3 g{0, 0, 0};
                           for (int j = 0; j < 4; ++j)
                             for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
                           weighted[i] = {el.measure * g[0], el.measure * g[1], el.measure * g[2], el.measure};
@@ -337,14 +329,14 @@ std::vector<V3> gradients_at(const Hierarchy<3>& h, int level, const std::vector
   }
   auto vertex_gradient = [&](VertexId v) {
     const auto& s = acc[slot[v.value]];
-    return s[3] > 0 ? V3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : V3{0, 0, 0};
+    return s[3] > 0 ? Vec3{s[0] / s[3], s[1] / s[3], s[2] / s[3]} : Vec3{0, 0, 0};
   };
 
   // 4. Gradients of u at the output vertices (interpolated along the cut edge).
-  std::vector<V3> grad(verts.size());
+  std::vector<Vec3> grad(verts.size());
   for (std::size_t i = 0; i < verts.size(); ++i) {
     const auto& ov = verts[i];
-    const V3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
+    const Vec3 ga = vertex_gradient(ov.a), gb = vertex_gradient(ov.b);
     grad[i] = {(1 - ov.t) * ga[0] + ov.t * gb[0], (1 - ov.t) * ga[1] + ov.t * gb[1],
                (1 - ov.t) * ga[2] + ov.t * gb[2]};
   }
@@ -358,7 +350,7 @@ namespace detail {
 // Drops the connected parts of `mesh` whose vertices (local frame) lie in fewer than
 // `min_cells` voxel cells, and the vertices only they used (from `local` and `grad` too).
 // Parts and order are a function of the mesh alone.
-Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector<V3>& grad,
+Dropped drop_small_parts(TriangleMesh& mesh, std::vector<Vec3>& local, std::vector<Vec3>& grad,
                          const std::array<double, 3>& spacing, std::size_t min_cells) {
   Dropped d;
   const std::size_t nv = local.size();
@@ -417,15 +409,15 @@ Dropped drop_small_parts(TriangleMesh& mesh, std::vector<V3>& local, std::vector
   return d;
 }
 
-void to_physical(TriangleMesh& mesh, const std::vector<V3>& local, const std::vector<V3>& grad,
+void to_physical(TriangleMesh& mesh, const std::vector<Vec3>& local, const std::vector<Vec3>& grad,
                  const GridTransform& transform, bool normals_toward_higher) {
   const double sign = normals_toward_higher ? 1.0 : -1.0;
   mesh.positions.resize(local.size());
   mesh.normals.resize(local.size());
   tbb::parallel_for(std::size_t(0), local.size(), [&](std::size_t i) {
-    const V3 p = transform.local_to_physical(local[i]);
+    const Vec3 p = transform.local_to_physical(local[i]);
     mesh.positions[i] = {float(p[0]), float(p[1]), float(p[2])};
-    const V3 n{sign * grad[i][0], sign * grad[i][1], sign * grad[i][2]};
+    const Vec3 n{sign * grad[i][0], sign * grad[i][1], sign * grad[i][2]};
     mesh.normals[i] = to_float_unit(transform.rotate(n));
   });
   // A reflecting transform (det < 0) turns counter-clockwise into clockwise.
@@ -489,13 +481,13 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   // number of its first use in the whole list, so the mesh is the one a single pass makes.
   // The gradient of u on each cut element orients its triangles; computed in parallel (the
   // element geometry is most of the work), used in order.
-  std::vector<V3> cut_grad(cut.size());
+  std::vector<Vec3> cut_grad(cut.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cut.size(), 2048),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const auto& c = h.cell(cut[i]);
                         const P1Element<3> el = element_of(h, cut[i]);
-                        V3 g{0, 0, 0};
+                        Vec3 g{0, 0, 0};
                         for (int j = 0; j < 4; ++j)
                           for (int k = 0; k < 3; ++k) g[k] += u[c[j].value] * el.grad[j][k];
                         cut_grad[i] = g;
@@ -511,8 +503,7 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
       ch.verts.push_back({a, b, t});
       const auto& pa = h.point(a);
       const auto& pb = h.point(b);
-      ch.local.push_back(
-          {pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1]), pa[2] + t * (pb[2] - pa[2])});
+      ch.local.push_back(axpy(pa, t, sub(pb, pa)));
     };
     EdgeMap on_edge;  // cut edge -> output vertex (flat hash: this runs once per cut edge)
     on_edge.reserve((last - first) * 2);
@@ -548,11 +539,11 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
                 out_vertex(c[up[1]], c[dn[1]]), out_vertex(c[up[1]], c[dn[0]])};
         corners = 4;
       }
-      const V3& g = cut_grad[ci];
-      const V3 want = opts.normals_toward_higher ? g : V3{-g[0], -g[1], -g[2]};
+      const Vec3& g = cut_grad[ci];
+      const Vec3 want = opts.normals_toward_higher ? g : Vec3{-g[0], -g[1], -g[2]};
       auto emit = [&](std::uint32_t i0, std::uint32_t i1, std::uint32_t i2) {
         if (i0 == i1 || i1 == i2 || i0 == i2) return;  // collapsed by a cut through a vertex
-        const V3 n = cross(sub(ch.local[i1], ch.local[i0]), sub(ch.local[i2], ch.local[i0]));
+        const Vec3 n = cross(sub(ch.local[i1], ch.local[i0]), sub(ch.local[i2], ch.local[i0]));
         if (dot(n, want) < 0) std::swap(i1, i2);
         ch.tris.push_back({i0, i1, i2});
       };
@@ -562,13 +553,13 @@ TriangleMesh IsoExtractor::extract(double iso, const GridTransform& transform, c
   });
   // Merge: chunk by chunk, a vertex keeps the number of its first use.
   std::vector<OutVertex> verts;
-  std::vector<V3> local;
+  std::vector<Vec3> local;
   TriangleMesh mesh;
   merge_chunks(chunks, u, iso, verts, local, mesh);
 
   // 3, 4. Vertex normals at the mesh vertices that carry output vertices; the gradients of u at
   // the output vertices.
-  std::vector<V3> grad = gradients_at(h, level, u, lo_, hi_, verts);
+  std::vector<Vec3> grad = gradients_at(h, level, u, lo_, hi_, verts);
   if (opts.clip) clip_to_box(opts.clip_to, mesh, local, grad);
   if (opts.snap_to && opts.snap_distance > 0)
     snap_to_data(*opts.snap_to, iso, opts.snap_distance, grad, mesh, local);
@@ -593,15 +584,15 @@ TriangleMesh height_field_surface(const Hierarchy<2>& h, const std::vector<doubl
   const std::vector<double>& u = lv < h.max_level() ? coarse : values;
   const auto elems = lv < h.max_level() ? h.level_elements(lv) : h.leaves();
   const auto& d = transform.direction;
-  const V3 up{d[2], d[5], d[8]};  // the third axis: heights go along it
+  const Vec3 up{d[2], d[5], d[8]};  // the third axis: heights go along it
   std::vector<std::uint32_t> remap(h.vertex_count(), ~0u);
   TriangleMesh mesh;
-  std::vector<V3> pos;
+  std::vector<Vec3> pos;
   auto vertex = [&](VertexId v) {
     if (remap[v.value] == ~0u) {
       remap[v.value] = static_cast<std::uint32_t>(pos.size());
       const auto& p = h.point(v);
-      V3 q = transform.local_to_physical({p[0], p[1], 0.0});
+      Vec3 q = transform.local_to_physical({p[0], p[1], 0.0});
       for (int k = 0; k < 3; ++k) q[k] += z_scale * u[v.value] * up[k];
       pos.push_back(q);
     }
@@ -615,9 +606,9 @@ TriangleMesh height_field_surface(const Hierarchy<2>& h, const std::vector<doubl
   }
   if (det3(transform.direction) < 0)
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
-  std::vector<V3> nsum(pos.size(), V3{0, 0, 0});
+  std::vector<Vec3> nsum(pos.size(), Vec3{0, 0, 0});
   for (const auto& t : mesh.triangles) {
-    const V3 n = cross(sub(pos[t[1]], pos[t[0]]), sub(pos[t[2]], pos[t[0]]));  // |n| = 2 area
+    const Vec3 n = cross(sub(pos[t[1]], pos[t[0]]), sub(pos[t[2]], pos[t[0]]));  // |n| = 2 area
     for (auto i : t)
       for (int k = 0; k < 3; ++k) nsum[i][k] += n[k];
   }

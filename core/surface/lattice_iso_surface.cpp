@@ -29,6 +29,7 @@
 //        c0 ---- c1
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/surface/iso_surface.h>
 #include <tbb/parallel_for.h>
 
@@ -45,7 +46,6 @@ namespace mlfe {
 
 namespace {
 
-using V3 = std::array<double, 3>;
 constexpr std::uint32_t kNoVertex = std::numeric_limits<std::uint32_t>::max();
 constexpr std::uint32_t kCentre = 1u << 31;  // a loop's centre vertex, numbered per plane
 
@@ -177,9 +177,9 @@ struct Lattice {
   }
 };
 
-V3 sample_gradient(const ScalarGrid& g, std::int64_t i, std::int64_t j, std::int64_t k) {
+Vec3 sample_gradient(const ScalarGrid& g, std::int64_t i, std::int64_t j, std::int64_t k) {
   const std::int64_t c[3] = {i, j, k};
-  V3 grad{0, 0, 0};
+  Vec3 grad{0, 0, 0};
   for (int a = 0; a < 3; ++a) {
     std::int64_t lo[3] = {i, j, k}, hi[3] = {i, j, k};
     lo[a] = std::max<std::int64_t>(0, c[a] - 1);
@@ -194,14 +194,14 @@ V3 sample_gradient(const ScalarGrid& g, std::int64_t i, std::int64_t j, std::int
 // and the centre vertices' positions and gradients.
 struct Plane {
   std::vector<std::array<std::uint32_t, 3>> tris;
-  std::vector<V3> centres, centre_grads;
+  std::vector<Vec3> centres, centre_grads;
 };
 
 // One cube's loops, fanned (or around a centre vertex) into the plane's triangles. `a`: the
 // corners' values - iso; `vertex(e)`: the id of the crossing on cube edge e.
 template <class VertexOf>
-void polygonise_cube(const float (&a)[8], VertexOf&& vertex, const std::vector<V3>& local,
-                     const std::vector<V3>& grad, Plane& plane) {
+void polygonise_cube(const float (&a)[8], VertexOf&& vertex, const std::vector<Vec3>& local,
+                     const std::vector<Vec3>& grad, Plane& plane) {
   const CubeLoops loops = trace_loops(a);
   for (int l = 0; l < loops.count; ++l) {
     const int* e = loops.edge[l];
@@ -214,7 +214,7 @@ void polygonise_cube(const float (&a)[8], VertexOf&& vertex, const std::vector<V
       continue;
     }
     // No fan stays off the faces: a vertex at the loop's centre, numbered after the edges'.
-    V3 c{0, 0, 0}, cg{0, 0, 0};
+    Vec3 c{0, 0, 0}, cg{0, 0, 0};
     for (int s = 0; s < n; ++s)
       for (int x = 0; x < 3; ++x) {
         c[x] += local[vertex(e[s])][x] / n;
@@ -230,7 +230,7 @@ void polygonise_cube(const float (&a)[8], VertexOf&& vertex, const std::vector<V
 // The plane of cubes between sample planes k and k + 1, row by row. `first`: each sample row's
 // first vertex id (count_crossings).
 Plane polygonise_plane(const Lattice& L, std::int64_t k, const std::vector<std::uint32_t>& first,
-                       const std::vector<V3>& local, const std::vector<V3>& grad) {
+                       const std::vector<Vec3>& local, const std::vector<Vec3>& grad) {
   Plane plane;
   const auto row = [&](std::int64_t j, std::int64_t kk) { return std::size_t(j + L.ny * kk); };
   // ids of the four sample rows around a row of cubes: [dj + 2 dk][3 i + axis].
@@ -302,14 +302,14 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
 
   // 2. Place: vertices numbered row by row, (i, axis) within a row; positions in the local
   // frame (index * spacing) and the samples' central-difference gradients along the edge.
-  std::vector<V3> local(nv), grad(nv);
+  std::vector<Vec3> local(nv), grad(nv);
   tbb::parallel_for(std::int64_t(0), L.nz, [&](std::int64_t k) {
     for (std::int64_t j = 0; j < L.ny; ++j)
       L.scan_row(j, k, first[row(j, k)], [&](std::int64_t i, int axis, std::uint32_t id) {
         std::int64_t b[3] = {i, j, k};
         ++b[axis];
         const double t = crossing(L.at(i, j, k), L.at(b[0], b[1], b[2]), iso);
-        const V3 g0 = sample_gradient(grid, i, j, k), g1 = sample_gradient(grid, b[0], b[1], b[2]);
+        const Vec3 g0 = sample_gradient(grid, i, j, k), g1 = sample_gradient(grid, b[0], b[1], b[2]);
         const double c[3] = {double(i), double(j), double(k)};
         for (int x = 0; x < 3; ++x) {
           local[id][x] = (c[x] + (x == axis ? t : 0.0)) * sp[x];

@@ -1,5 +1,6 @@
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/surface/mesh_distance.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -17,18 +18,7 @@
 namespace mlfe {
 namespace {
 
-using V3 = std::array<double, 3>;
-
-V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 add(const V3& a, const V3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-V3 scale(const V3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(const V3& a, const V3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-V3 to_v3(const std::array<float, 3>& p) { return {p[0], p[1], p[2]}; }
-
-double box_distance2(const V3& lo, const V3& hi, const V3& p) {
+double box_distance2(const Vec3& lo, const Vec3& hi, const Vec3& p) {
   double d2 = 0;
   for (int k = 0; k < 3; ++k) {
     const double d = std::max(std::max(lo[k] - p[k], 0.0), p[k] - hi[k]);
@@ -41,12 +31,12 @@ constexpr std::uint32_t kLeafSize = 4;
 
 /// Interpolated unit normal at barycentric `bary` of triangle t (vertex normals), or the
 /// zero vector when the interpolation cancels out.
-V3 interpolated_normal(const TriangleMesh& m, std::uint32_t t, const V3& bary) {
+Vec3 interpolated_normal(const TriangleMesh& m, std::uint32_t t, const Vec3& bary) {
   const auto& tri = m.triangles[t];
-  V3 n{0, 0, 0};
-  for (int c = 0; c < 3; ++c) n = add(n, scale(to_v3(m.normals[tri[c]]), bary[c]));
-  const double len = std::sqrt(dot(n, n));
-  return len > 0 ? scale(n, 1.0 / len) : V3{0, 0, 0};
+  Vec3 n{0, 0, 0};
+  for (int c = 0; c < 3; ++c) n = add(n, scale(to_vec3(m.normals[tri[c]]), bary[c]));
+  const double len = norm(n);
+  return len > 0 ? scale(n, 1.0 / len) : Vec3{0, 0, 0};
 }
 
 /// Sample indices sorted by the Morton code of their point on a 1024^3 grid over their box
@@ -55,7 +45,7 @@ std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& sample
   std::vector<std::uint32_t> order(samples.size());
   std::iota(order.begin(), order.end(), 0u);
   if (samples.empty()) return order;
-  V3 lo = samples[0].point, hi = lo;
+  Vec3 lo = samples[0].point, hi = lo;
   for (const auto& s : samples)
     for (int k = 0; k < 3; ++k) {
       lo[k] = std::min(lo[k], s.point[k]);
@@ -81,14 +71,14 @@ std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& sample
 
 // Ericson, Real-Time Collision Detection 5.1.5: the region tests avoid a division for the
 // common vertex/edge cases and stay exact for degenerate triangles.
-V3 closest_point_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c, V3& bary) {
-  const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary) {
+  const Vec3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
   const double d1 = dot(ab, ap), d2 = dot(ac, ap);
   if (d1 <= 0 && d2 <= 0) {
     bary = {1, 0, 0};
     return a;
   }
-  const V3 bp = sub(p, b);
+  const Vec3 bp = sub(p, b);
   const double d3 = dot(ab, bp), d4 = dot(ac, bp);
   if (d3 >= 0 && d4 <= d3) {
     bary = {0, 1, 0};
@@ -100,7 +90,7 @@ V3 closest_point_on_triangle(const V3& p, const V3& a, const V3& b, const V3& c,
     bary = {1 - v, v, 0};
     return add(a, scale(ab, v));
   }
-  const V3 cp = sub(p, c);
+  const Vec3 cp = sub(p, c);
   const double d5 = dot(ab, cp), d6 = dot(ac, cp);
   if (d6 >= 0 && d5 <= d6) {
     bary = {0, 0, 1};
@@ -191,7 +181,7 @@ TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
   // Step 2: corners in leaf order (a leaf's triangles adjacent in memory for the queries).
   tri_.resize(nt);
   for (std::size_t slot = 0; slot < nt; ++slot)
-    for (int c = 0; c < 3; ++c) tri_[slot][c] = to_v3(mesh.positions[mesh.triangles[id_[slot]][c]]);
+    for (int c = 0; c < 3; ++c) tri_[slot][c] = to_vec3(mesh.positions[mesh.triangles[id_[slot]][c]]);
 
   // Step 3: boxes bottom-up; children come after their parent, so a reverse sweep sees them
   // first. Double precision boxes contain the double corners exactly.
@@ -200,7 +190,7 @@ TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
     if (node.count > 0) {
       node.lo = node.hi = tri_[node.first][0];
       for (std::uint32_t s = node.first; s < node.first + node.count; ++s)
-        for (const V3& p : tri_[s])
+        for (const Vec3& p : tri_[s])
           for (int k = 0; k < 3; ++k) {
             node.lo[k] = std::min(node.lo[k], p[k]);
             node.hi[k] = std::max(node.hi[k], p[k]);
@@ -216,12 +206,12 @@ TriangleBvh::TriangleBvh(const TriangleMesh& mesh) {
   }
 }
 
-TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
+TriangleBvh::Hit TriangleBvh::closest(const Vec3& p) const {
   Hit hit;
   if (nodes_.empty()) return hit;
   double best2 = std::numeric_limits<double>::infinity();
   std::uint32_t best_tri = 0;
-  V3 best_point{}, best_bary{};
+  Vec3 best_point{}, best_bary{};
   std::uint32_t stack[128];
   int top = 0;
   stack[top++] = 0;
@@ -230,9 +220,9 @@ TriangleBvh::Hit TriangleBvh::closest(const V3& p) const {
     if (box_distance2(node.lo, node.hi, p) > best2) continue;
     if (node.count > 0) {
       for (std::uint32_t s = node.first; s < node.first + node.count; ++s) {
-        V3 bary;
-        const V3 q = closest_point_on_triangle(p, tri_[s][0], tri_[s][1], tri_[s][2], bary);
-        const V3 d = sub(p, q);
+        Vec3 bary;
+        const Vec3 q = closest_point_on_triangle(p, tri_[s][0], tri_[s][1], tri_[s][2], bary);
+        const Vec3 d = sub(p, q);
         const double d2 = dot(d, d);
         if (d2 < best2 || (d2 == best2 && id_[s] < best_tri)) {
           best2 = d2;
@@ -276,9 +266,9 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
     }
   for (std::size_t v = 0; v < mesh.positions.size(); ++v)
     if (first_tri[v] != TriId::kInvalidValue) {
-      V3 bary{0, 0, 0};
+      Vec3 bary{0, 0, 0};
       bary[corner[v]] = 1;
-      samples.push_back({to_v3(mesh.positions[v]), TriId(first_tri[v]), bary});
+      samples.push_back({to_vec3(mesh.positions[v]), TriId(first_tri[v]), bary});
     }
 
   // Step 2: area-weighted random points; the cumulative area table makes the choice of triangle
@@ -289,9 +279,9 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
   double total = 0;
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     const auto& tri = mesh.triangles[t];
-    const V3 a = to_v3(mesh.positions[tri[0]]);
-    const V3 n = cross(sub(to_v3(mesh.positions[tri[1]]), a), sub(to_v3(mesh.positions[tri[2]]), a));
-    total += 0.5 * std::sqrt(dot(n, n));
+    const Vec3 a = to_vec3(mesh.positions[tri[0]]);
+    const Vec3 n = cross(sub(to_vec3(mesh.positions[tri[1]]), a), sub(to_vec3(mesh.positions[tri[2]]), a));
+    total += 0.5 * norm(n);
     cumulative[t] = total;
   }
   if (!(total > 0) || options.area_samples == 0) return samples;
@@ -309,9 +299,9 @@ std::vector<SurfaceSample> sample_surface(const TriangleMesh& mesh, const Surfac
       v = 1 - v;
     }
     const auto& tri = mesh.triangles[t];
-    const V3 a = to_v3(mesh.positions[tri[0]]);
-    const V3 p = add(a, add(scale(sub(to_v3(mesh.positions[tri[1]]), a), u),
-                            scale(sub(to_v3(mesh.positions[tri[2]]), a), v)));
+    const Vec3 a = to_vec3(mesh.positions[tri[0]]);
+    const Vec3 p = add(a, add(scale(sub(to_vec3(mesh.positions[tri[1]]), a), u),
+                              scale(sub(to_vec3(mesh.positions[tri[2]]), a), v)));
     samples.push_back({p, TriId(std::uint32_t(t)), {1 - u - v, u, v}});
   }
   return samples;
@@ -339,8 +329,8 @@ OneSidedDistance one_sided_distance(const TriangleMesh& from, const std::vector<
       const std::size_t i = order[j];
       const SurfaceSample& s = samples[i];
       const TriangleBvh::Hit hit = to_bvh.closest(s.point);
-      const V3 n0 = interpolated_normal(from, s.triangle.value, s.bary);
-      const V3 n1 = interpolated_normal(to, hit.triangle.value, hit.bary);
+      const Vec3 n0 = interpolated_normal(from, s.triangle.value, s.bary);
+      const Vec3 n1 = interpolated_normal(to, hit.triangle.value, hit.bary);
       double angle = -1;
       if (dot(n0, n0) > 0 && dot(n1, n1) > 0)
         angle = std::acos(std::clamp(dot(n0, n1), -1.0, 1.0)) * (180.0 / M_PI);
@@ -432,11 +422,11 @@ double signed_volume(const TriangleMesh& mesh) {
   const auto box = bounding_box(mesh);
   // About the box centre: the sum is origin-independent for closed meshes, but far from the
   // origin each term is large and cancellation would eat the precision.
-  const V3 c = scale(add(box[0], box[1]), 0.5);
+  const Vec3 c = scale(add(box[0], box[1]), 0.5);
   double v = 0;
   for (const auto& t : mesh.triangles) {
-    const V3 a = sub(to_v3(mesh.positions[t[0]]), c), b = sub(to_v3(mesh.positions[t[1]]), c),
-             d = sub(to_v3(mesh.positions[t[2]]), c);
+    const Vec3 a = sub(to_vec3(mesh.positions[t[0]]), c), b = sub(to_vec3(mesh.positions[t[1]]), c),
+               d = sub(to_vec3(mesh.positions[t[2]]), c);
     v += dot(a, cross(b, d));
   }
   return v / 6.0;
@@ -445,9 +435,9 @@ double signed_volume(const TriangleMesh& mesh) {
 double surface_area(const TriangleMesh& mesh) {
   double area = 0;
   for (const auto& t : mesh.triangles) {
-    const V3 a = to_v3(mesh.positions[t[0]]);
-    const V3 n = cross(sub(to_v3(mesh.positions[t[1]]), a), sub(to_v3(mesh.positions[t[2]]), a));
-    area += 0.5 * std::sqrt(dot(n, n));
+    const Vec3 a = to_vec3(mesh.positions[t[0]]);
+    const Vec3 n = cross(sub(to_vec3(mesh.positions[t[1]]), a), sub(to_vec3(mesh.positions[t[2]]), a));
+    area += 0.5 * norm(n);
   }
   return area;
 }

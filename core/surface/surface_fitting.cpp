@@ -15,6 +15,7 @@
 // that would turn too far or leave a sample beyond the bound, until none does).
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/core/surface/mesh_distance.h>
 #include <mlfe/core/surface/surface_fitting.h>
 #include <tbb/blocked_range.h>
@@ -35,25 +36,12 @@
 namespace mlfe {
 namespace {
 
-using V3 = std::array<double, 3>;
-
-V3 to_v3(const std::array<float, 3>& p) { return {p[0], p[1], p[2]}; }
-V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 cross(const V3& a, const V3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-double distance(const V3& a, const V3& b) {
-  const V3 d = sub(a, b);
-  return std::sqrt(dot(d, d));
-}
-
 // A dense vertex, its weight and where on the coarse surface it is matched.
 struct Sample {
-  V3 p;
+  Vec3 p;
   double weight = 0;  // a third of the area of its triangles
   std::uint32_t triangle = 0;
-  V3 bary{};
+  Vec3 bary{};
   double distance = 0;  // to the matched point, before the fit
 };
 
@@ -64,8 +52,8 @@ struct Sample {
 class TriangleGrid {
  public:
   TriangleGrid(const TriangleMesh& m, double cell, double margin) : m_(m), cell_(cell), margin_(margin) {
-    lo_ = to_v3(m.positions[m.triangles[0][0]]);
-    V3 hi = lo_;
+    lo_ = to_vec3(m.positions[m.triangles[0][0]]);
+    Vec3 hi = lo_;
     for (const auto& t : m.triangles)
       for (auto v : t)
         for (int c = 0; c < 3; ++c) {
@@ -83,7 +71,7 @@ class TriangleGrid {
   }
 
   // The closest point when the cube of p settles it: true with triangle, weights and distance.
-  bool closest(const V3& p, std::uint32_t& tri, V3& bary, double& distance) const {
+  bool closest(const Vec3& p, std::uint32_t& tri, Vec3& bary, double& distance) const {
     std::int64_t at[3];
     double wall = std::numeric_limits<double>::infinity();
     for (int c = 0; c < 3; ++c) {
@@ -97,10 +85,10 @@ class TriangleGrid {
     for (std::uint32_t i = start_[cell]; i < start_[cell + 1]; ++i) {
       const std::uint32_t t = tris_[i];
       const auto& v = m_.triangles[t];
-      V3 b;
-      const V3 q = closest_point_on_triangle(p, to_v3(m_.positions[v[0]]), to_v3(m_.positions[v[1]]),
-                                             to_v3(m_.positions[v[2]]), b);
-      const V3 d = sub(p, q);
+      Vec3 b;
+      const Vec3 q = closest_point_on_triangle(p, to_vec3(m_.positions[v[0]]), to_vec3(m_.positions[v[1]]),
+                                               to_vec3(m_.positions[v[2]]), b);
+      const Vec3 d = sub(p, q);
       const double d2 = dot(d, d);
       if (d2 < best2 || (d2 == best2 && t < tri)) best2 = d2, tri = t, bary = b;
     }
@@ -140,7 +128,7 @@ class TriangleGrid {
 
   const TriangleMesh& m_;
   double cell_, margin_;
-  V3 lo_;
+  Vec3 lo_;
   std::int64_t n_[3];
   std::vector<std::uint32_t> start_, tris_;
 };
@@ -151,15 +139,15 @@ std::vector<Sample> match(const TriangleMesh& dense, const TriangleGrid& grid, c
   std::vector<double> weight(dense.positions.size(), 0.0);
   for (const auto& t : dense.triangles) {
     for (auto v : t) MLFE_CHECK(v < dense.positions.size());
-    const V3 a = to_v3(dense.positions[t[0]]), b = to_v3(dense.positions[t[1]]),
-             c = to_v3(dense.positions[t[2]]);
-    const V3 n = cross(sub(b, a), sub(c, a));
-    const double third = std::sqrt(dot(n, n)) / 6.0;
+    const Vec3 a = to_vec3(dense.positions[t[0]]), b = to_vec3(dense.positions[t[1]]),
+               c = to_vec3(dense.positions[t[2]]);
+    const Vec3 n = cross(sub(b, a), sub(c, a));
+    const double third = norm(n) / 6.0;
     for (auto v : t) weight[v] += third;
   }
   std::vector<Sample> samples;
   for (std::size_t v = 0; v < dense.positions.size(); ++v)
-    if (weight[v] > 0) samples.push_back({to_v3(dense.positions[v]), weight[v]});
+    if (weight[v] > 0) samples.push_back({to_vec3(dense.positions[v]), weight[v]});
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, samples.size(), 2048),
                     [&](const tbb::blocked_range<std::size_t>& r) {
@@ -204,8 +192,8 @@ Edges edges_of(const TriangleMesh& m) {
 // Steps 2 and 3: the normal equations of sum_s w_s |A_s x - p_s|^2 + k sum_(a,b) |x_a - x_b -
 // (x0_a - x0_b)|^2 over the free vertices (boundary ones moved to the right-hand side), solved
 // per axis by conjugate gradients from x0 (the current positions). Returns the new positions.
-std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& samples, const Edges& mesh_edges,
-                      const std::vector<V3>& x0, double spring) {
+std::vector<Vec3> solve(const TriangleMesh& coarse, const std::vector<Sample>& samples,
+                        const Edges& mesh_edges, const std::vector<Vec3>& x0, double spring) {
   const std::size_t n = x0.size();
   // Free vertices numbered 0..f-1.
   std::vector<int> slot(n, -1);
@@ -255,7 +243,7 @@ std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& sam
   std::vector<std::array<double, 9>>().swap(side);
   for (const auto& e : edges) {
     const int ia = slot[e[0]], ib = slot[e[1]];
-    const V3 d = sub(x0[e[0]], x0[e[1]]);
+    const Vec3 d = sub(x0[e[0]], x0[e[1]]);
     // k |x_a - x_b - d|^2: row a gets k (x_a - x_b) = k d, row b the negative.
     if (ia >= 0) {
       entries.emplace_back(ia, ia, k);
@@ -276,7 +264,7 @@ std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& sam
   cg.setTolerance(1e-6);
   cg.setMaxIterations(200);
   cg.compute(m);
-  std::vector<V3> x = x0;
+  std::vector<Vec3> x = x0;
   for (int c = 0; c < 3; ++c) {
     Eigen::VectorXd guess(f);
     for (std::size_t v = 0; v < n; ++v)
@@ -289,8 +277,8 @@ std::vector<V3> solve(const TriangleMesh& coarse, const std::vector<Sample>& sam
 }
 
 // The point of triangle t at barycentric weights b, with positions x.
-V3 at(const std::vector<V3>& x, const std::array<std::uint32_t, 3>& t, const V3& b) {
-  V3 p{};
+Vec3 at(const std::vector<Vec3>& x, const std::array<std::uint32_t, 3>& t, const Vec3& b) {
+  Vec3 p{};
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) p[c] += b[r] * x[t[r]][c];
   return p;
@@ -300,7 +288,7 @@ V3 at(const std::vector<V3>& x, const std::array<std::uint32_t, 3>& t, const V3&
 // every triangle a sample of which ends up beyond the bound, go back to x0. Returns how many
 // vertices went back.
 std::size_t guard(const TriangleMesh& coarse, const std::vector<Sample>& samples, const TriangleGrid& dense,
-                  const std::vector<V3>& x0, std::vector<V3>& x, const SurfaceFitOptions& o) {
+                  const std::vector<Vec3>& x0, std::vector<Vec3>& x, const SurfaceFitOptions& o) {
   const double min_cos = std::cos(o.max_normal_turn_degrees * M_PI / 180.0);
   const std::size_t nt = coarse.triangles.size(), nv = x.size();
   // Per triangle its samples and per vertex its triangles: after the first round only the
@@ -322,8 +310,8 @@ std::size_t guard(const TriangleMesh& coarse, const std::vector<Sample>& samples
   // A triangle that turns too far or leaves one of its samples beyond the bound.
   auto bad = [&](std::uint32_t ti) {
     const auto& t = coarse.triangles[ti];
-    const V3 n0 = cross(sub(x0[t[1]], x0[t[0]]), sub(x0[t[2]], x0[t[0]]));
-    const V3 n1 = cross(sub(x[t[1]], x[t[0]]), sub(x[t[2]], x[t[0]]));
+    const Vec3 n0 = cross(sub(x0[t[1]], x0[t[0]]), sub(x0[t[2]], x0[t[0]]));
+    const Vec3 n1 = cross(sub(x[t[1]], x[t[0]]), sub(x[t[2]], x[t[0]]));
     const double l0 = dot(n0, n0), l1 = dot(n1, n1);
     if (!(l1 > 0 && dot(n0, n1) >= min_cos * std::sqrt(l0 * l1)) && !(l0 == 0 && l1 == 0)) return true;
     for (std::uint32_t k = by_tri[ti]; k < by_tri[ti + 1]; ++k) {
@@ -347,7 +335,7 @@ std::size_t guard(const TriangleMesh& coarse, const std::vector<Sample>& samples
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t v = r.begin(); v != r.end(); ++v) {
                         std::uint32_t tri = 0;
-                        V3 bary;
+                        Vec3 bary;
                         double d = 0;
                         flag[v] = x[v] != x0[v] && !(dense.closest(x[v], tri, bary, d) && d <= o.tolerance);
                       }
@@ -377,7 +365,7 @@ std::size_t guard(const TriangleMesh& coarse, const std::vector<Sample>& samples
   return count;
 }
 
-double rms(const std::vector<Sample>& samples, const TriangleMesh& coarse, const std::vector<V3>* x) {
+double rms(const std::vector<Sample>& samples, const TriangleMesh& coarse, const std::vector<Vec3>* x) {
   double sum = 0, w = 0;
   for (const auto& s : samples) {
     const double d = x ? distance(at(*x, coarse.triangles[s.triangle], s.bary), s.p) : s.distance;
@@ -407,9 +395,9 @@ SurfaceFitReport fit_surface(TriangleMesh& coarse, const TriangleMesh& dense, co
                        [&] { dense_grid.emplace(TriangleGrid::within(dense, o.tolerance)); });
   const std::vector<Sample> samples = match(dense, *coarse_grid, *coarse_bvh);
   report.samples = samples.size();
-  std::vector<V3> x0(coarse.positions.size());
-  for (std::size_t v = 0; v < x0.size(); ++v) x0[v] = to_v3(coarse.positions[v]);
-  std::vector<V3> x = solve(coarse, samples, edges_of(coarse), x0, o.spring);
+  std::vector<Vec3> x0(coarse.positions.size());
+  for (std::size_t v = 0; v < x0.size(); ++v) x0[v] = to_vec3(coarse.positions[v]);
+  std::vector<Vec3> x = solve(coarse, samples, edges_of(coarse), x0, o.spring);
   // Positions are stored as floats: the guard checks what will be written.
   for (auto& p : x)
     for (auto& c : p) c = double(float(c));

@@ -135,5 +135,16 @@ TEST(ParaViewTransferFunction, ReadsRgbAndOpacityPoints) {
   fs::remove(path);
 }
 
+TEST(ParaViewTransferFunction, RecordIsCompactJsonWithSortedKeys) {
+  TransferFunction tf;
+  tf.name = "bone";
+  tf.color = {{0, 0.5, 0.25, 0}, {10, 1, 1, 1}};
+  tf.opacity = {{0, 0}, {10, 0.5}};
+  tf.unit_length = 2;
+  EXPECT_EQ(transfer_function_record(tf),
+            R"({"RGBPoints":[[0.0,0.5,0.25,0.0],[10.0,1.0,1.0,1.0]],"name":"bone",)"
+            R"("opacityPoints":[[0.0,0.0],[10.0,0.5]],"opacityUnitLength":2.0})");
+}
+
 }  // namespace
 }  // namespace mlfe

@@ -1,6 +1,6 @@
 // core/base: What every room stands on: CHECK for bugs, the one exception type for bad input (mlfe::Error,
-// with UsageError for options), default-initialized allocation, huge-page hints, and, inside
-// core/base/, counting sort and Morton order.
+// with UsageError for options), default-initialized allocation, huge-page hints, the arithmetic of
+// 3-vectors held as arrays (vec.h), and, inside core/base/, counting sort and Morton order.
 //
 // May include: nothing of the project.
 // (scripts/check_layering.py reads that line; docs/architecture.md draws the rooms.)

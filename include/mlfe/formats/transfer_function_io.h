@@ -5,6 +5,9 @@
 // (data values, linear RGB in [0, 1]) and "Points" = [x, opacity, midpoint, sharpness, …].
 // Only linear opacity segments (midpoint 0.5, sharpness 0, ParaView's default) are accepted:
 // other values would need ParaView's Hermite-shaped segments. "Name" becomes the name.
+//
+// Written: the record of a transfer function that rendered images carry, beside the reader so
+// that a new field of TransferFunction is read and recorded in one file.
 #pragma once
 #include <mlfe/core/render/transfer_function.h>
 
@@ -17,5 +20,10 @@ namespace mlfe {
 /// unreadable files, invalid JSON, missing or malformed arrays, non-linear opacity segments,
 /// or values that fail TransferFunction::validate.
 TransferFunction read_paraview_transfer_function(const std::string& path, double unit_length = 1.0);
+
+/// The record of `tf` that rendered images carry (OpenEXR attribute mlfe/transferFunction):
+/// compact JSON {"RGBPoints": [[value, r, g, b], ...], "name": ..., "opacityPoints": [[value,
+/// opacity], ...], "opacityUnitLength": ...}, keys sorted, so the same function gives the same text.
+std::string transfer_function_record(const TransferFunction& tf);
 
 }  // namespace mlfe

@@ -10,6 +10,8 @@ namespace mlfe {
 
 using Vec3 = std::array<double, 3>;
 
+/// A float point (how meshes store their positions and normals) widened to double.
+inline Vec3 to_vec3(const std::array<float, 3>& p) { return {p[0], p[1], p[2]}; }
 inline Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
 inline Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline Vec3 scale(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }

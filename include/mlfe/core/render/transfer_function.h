@@ -44,10 +44,9 @@ struct TransferFunction {
   void validate(const std::string& source) const;
 };
 
-/// Presets spanning a value range [lo, hi] (lo < hi): "grey" (linear grey ramp, linear
-/// opacity), "bone" (transparent below 45 % of the range, then ivory), "mri" (soft tissue in
-/// warm tones, brightest values opaque), "hot" (black-red-yellow-white). Opacities refer to
-/// `unit_length`. Throws mlfe::Error for an unknown name.
+/// The preset `name` (one of transfer_function_presets(); transfer_function.cpp's table says
+/// what each shows) spanning the value range [lo, hi], opacities referring to `unit_length`.
+/// Throws mlfe::Error unless lo < hi, unit_length > 0 and the name is known.
 TransferFunction transfer_function_preset(const std::string& name, double lo, double hi, double unit_length);
 /// Names accepted by transfer_function_preset.
 std::vector<std::string> transfer_function_presets();

@@ -263,6 +263,13 @@ class TetRenderMesh {
   std::array<double, 3> grid_cell_;
   std::vector<float> grid_lo_, grid_hi_;  // per cell of the range grid (empty: lo > hi)
   int grid_index(int a, double x) const;
+  // The constructor's phases, in the order it calls them.
+  void select_values(const std::vector<double>& values, int level);
+  void order_elements();
+  void reserve_records();
+  void find_neighbors();
+  void bound_domain(const std::array<double, 3>* clip_to);
+  void build_range_grid();
   void build_boundary_grid();
   RayEntry entry_ = RayEntry::kHierarchy;
   struct BoundaryGrid;
