@@ -70,7 +70,11 @@ std::vector<std::uint32_t> morton_order(const std::vector<SurfaceSample>& sample
 }  // namespace
 
 // Ericson, Real-Time Collision Detection 5.1.5: the region tests avoid a division for the
-// common vertex/edge cases and stay exact for degenerate triangles.
+// common vertex/edge cases. An edge's divisor is its squared length, so an edge region is only
+// taken for an edge of positive length: a zero-length edge (two corners that coincide, as
+// Draco's quantization makes them) would otherwise give 0/0, and the NaN distance would lose
+// every comparison in TriangleBvh::closest, hiding the triangle. The remaining tests then find
+// the closest point on the other edges.
 Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& bary) {
   const Vec3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
   const double d1 = dot(ab, ap), d2 = dot(ac, ap);
@@ -85,7 +89,7 @@ Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, cons
     return b;
   }
   const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+  if (vc <= 0 && d1 >= 0 && d3 <= 0 && d1 > d3) {
     const double v = d1 / (d1 - d3);
     bary = {1 - v, v, 0};
     return add(a, scale(ab, v));
@@ -97,13 +101,13 @@ Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, cons
     return c;
   }
   const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+  if (vb <= 0 && d2 >= 0 && d6 <= 0 && d2 > d6) {
     const double w = d2 / (d2 - d6);
     bary = {1 - w, 0, w};
     return add(a, scale(ac, w));
   }
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0 && (d4 - d3) + (d5 - d6) > 0) {
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     bary = {0, 1 - w, w};
     return add(b, scale(sub(c, b), w));

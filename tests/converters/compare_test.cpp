@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <numeric>
 #include <random>
@@ -218,6 +219,43 @@ TEST(CompareGltf, DracoAndPlainEncodingsOfOneSceneAreEqual) {
   EXPECT_EQ(r.kind, "gltf");
   EXPECT_TRUE(r.equal()) << r.summary();
   EXPECT_GT(r.report["primitives"][0]["hausdorff"].get<double>(), 0.0);  // Draco did quantize
+}
+
+/// lumpy_sphere with a sliver: vertex 0, a twin a few float steps from it (the same Draco grid
+/// point, so after decoding the two coincide) and a tip of its own outside the sphere. Draco
+/// makes such triangles out of an iso-surface's tiny ones; the tip lies on no other triangle.
+TriangleMesh sphere_with_sliver() {
+  TriangleMesh m = lumpy_sphere();
+  const std::array<float, 3> x = m.positions[0], centre{0.2f, 0.1f, 0.0f};
+  std::array<float, 3> twin = x, tip;
+  for (int i = 0; i < 4; ++i) twin[0] = std::nextafter(twin[0], 2.0f);
+  for (int k = 0; k < 3; ++k) tip[k] = centre[k] + 1.2f * (x[k] - centre[k]);
+  const auto n = std::uint32_t(m.positions.size());
+  m.positions.insert(m.positions.end(), {twin, tip});
+  m.normals.insert(m.normals.end(), {m.normals[0], m.normals[0]});
+  m.triangles.push_back({0, n, n + 1});
+  return m;
+}
+
+TEST(CompareGltf, IdenticalDracoFilesAreEqualAndAMovedVertexIsNot) {
+  TriangleMesh a = sphere_with_sliver();
+  GltfOptions draco;
+  draco.tolerance_mm = 0.001;
+  const std::string g1 = tmp("sliver.glb"), g2 = tmp("sliver_copy.glb"), moved = tmp("sliver_moved.glb");
+  write_gltf(g1, {surface_of(a, 1.0)}, draco);
+  std::filesystem::copy_file(g1, g2, std::filesystem::copy_options::overwrite_existing);
+  const CompareResult r = compare_files(g1, g2, {});
+  EXPECT_TRUE(r.equal()) << r.summary();
+  EXPECT_LT(r.report["primitives"][0]["hausdorff"].get<double>(), 1e-12);  // rounding of area samples
+
+  // The sliver's tip 0.1 mm sideways: only triangles with coinciding corners are near it.
+  a.positions.back()[2] += 0.1f;
+  write_gltf(moved, {surface_of(a, 1.0)}, draco);
+  CompareOptions o;
+  o.tolerance = 1e-5;  // metres: ten Draco steps
+  const CompareResult m = compare_files(g1, moved, o);
+  EXPECT_TRUE(mentions(m, "primitive 0: Hausdorff distance")) << m.summary();
+  EXPECT_GT(m.report["primitives"][0]["hausdorff"].get<double>(), 5e-5);
 }
 
 TEST(CompareGltf, MovedSurfaceAndChangedStructureAreReported) {

@@ -70,6 +70,24 @@ TEST(TriangleBvh, ClosestPointMatchesBruteForce) {
   }
 }
 
+TEST(TriangleBvh, TriangleWithCoincidingCornersIsItsSegment) {
+  // Draco's quantization makes such triangles; every corner order, points on and around them.
+  const std::array<float, 3> x{0.125f, 0.25f, 0.5f}, tip{1.125f, 0.5f, 0.5f};
+  TriangleMesh m;
+  m.positions = {x, x, tip};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 2.0);
+  for (const std::array<std::uint32_t, 3> t : {std::array<std::uint32_t, 3>{0, 1, 2}, {1, 2, 0}, {2, 0, 1}}) {
+    m.triangles = {t};
+    const TriangleBvh bvh(m);
+    EXPECT_EQ(bvh.closest({tip[0], tip[1], tip[2]}).distance, 0.0);
+    for (int i = 0; i < 100; ++i) {
+      const std::array<double, 3> p{u(rng), u(rng), u(rng)};
+      EXPECT_NEAR(bvh.closest(p).distance, brute_force_distance(m, p), 1e-12) << i;
+    }
+  }
+}
+
 TEST(MeshDistance, IdenticalMeshesAreAtDistanceZero) {
   const TriangleMesh m = test::icosphere(3, 1.0f);
   const MeshDistance d = mesh_distance(m, m, {});

@@ -16,7 +16,8 @@
 
 namespace mlfe {
 
-/// The closest point of triangle (a, b, c) to p, with its barycentric weights in `bary`.
+/// The closest point of triangle (a, b, c) to p, with its barycentric weights in `bary`; also
+/// when corners coincide (the triangle is then a segment or a point).
 std::array<double, 3> closest_point_on_triangle(const std::array<double, 3>& p,
                                                 const std::array<double, 3>& a,
                                                 const std::array<double, 3>& b,
