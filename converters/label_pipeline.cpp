@@ -49,7 +49,8 @@ std::vector<std::uint16_t> parse_label_list(const std::string& text) {
       used = 0;
     }
     if (s.empty() || used != s.size() || v < 0 || v > 65535)
-      throw Error(fmt::format("--labels: '{}' is not a label 0..65535 (expected e.g. 3,7-9)", s));
+      throw pipeline::OptionInputError(fmt::format("{}: '{}' is not a label 0..65535 (expected e.g. 3,7-9)",
+                                                   pipeline::option_ref("labels"), s));
     return v;
   };
   std::size_t start = 0;
@@ -59,7 +60,9 @@ std::vector<std::uint16_t> parse_label_list(const std::string& text) {
     const std::size_t dash = item.find('-', 1);
     const long long lo = number(item.substr(0, dash)),
                     hi = dash == std::string::npos ? lo : number(item.substr(dash + 1));
-    if (hi < lo) throw Error(fmt::format("--labels: range '{}' runs backwards", item));
+    if (hi < lo)
+      throw pipeline::OptionInputError(
+          fmt::format("{}: range '{}' runs backwards", pipeline::option_ref("labels"), item));
     for (long long v = lo; v <= hi; ++v) out.push_back(static_cast<std::uint16_t>(v));
     start = comma + 1;
   }
@@ -69,16 +72,6 @@ std::vector<std::uint16_t> parse_label_list(const std::string& text) {
 }
 
 namespace {
-
-void check_label_options(const LabelOptions& o) {
-  if (!(o.simplify >= 0) || !std::isfinite(o.simplify))
-    throw Error(fmt::format("simplify: expected a value >= 0, got {}", o.simplify));
-  if (!(o.max_offset >= 0) || !std::isfinite(o.max_offset))
-    throw Error(fmt::format("max offset: expected a value >= 0, got {}", o.max_offset));
-  if (o.smoothing_iterations < 0 || o.smoothing_iterations > 1000)
-    throw Error(fmt::format("smoothing iterations: expected 0..1000, got {}", o.smoothing_iterations));
-  if (!(o.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", o.tolerance));
-}
 
 // The named table, else one held in memory (a label hierarchy's), else the one beside the volume.
 LabelTable label_table_for(const LabelOptions& o, const ScalarGrid& grid,
@@ -108,7 +101,9 @@ std::vector<std::uint16_t> pick_labels(const LabelOptions& o,
                      source, absent.front()));
   std::vector<std::uint16_t> picked;
   for (auto l : o.labels) {
-    if (l == 0) throw Error("--labels: 0 is the background and has no surface");
+    if (l == 0)
+      throw pipeline::OptionInputError(pipeline::option_ref("labels") +
+                                       ": 0 is the background and has no surface");
     if (!present.count(l))
       warn(fmt::format("label {} is absent from {}", l, source));
     else
@@ -189,7 +184,7 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
   const std::string ext = lower_extension(out);
-  check_label_options(o);
+  pipeline::check_options(o);
   const std::function<void(const std::string&)> warn = [&](const std::string& w) {
     if (o.warn) o.warn(w);
   };
@@ -200,10 +195,9 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   const std::vector<std::uint16_t> picked = pick_labels(o, label_counts(g), table, grid.source, warn);
   const bool single = ext != ".glb" && ext != ".gltf";
   if (single && picked.size() != 1)
-    throw Error(
-        fmt::format("{}: {} writes one mesh, but {} labels are picked; pick one with --labels N or "
-                    "write .glb/.gltf",
-                    out, ext, picked.size()));
+    throw pipeline::OptionInputError(
+        fmt::format("{}: {} writes one mesh, but {} labels are picked; pick one with {} or write .glb/.gltf",
+                    out, ext, picked.size(), pipeline::option_ref("labels")));
   if (!o.labels.empty()) keep_labels(g, picked);
 
   // Step 2: small pieces take their surroundings' label; voxel counts after that.
@@ -235,7 +229,9 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   const auto t4 = std::chrono::steady_clock::now();
   const Structures st = structure_surfaces(x, picked, table, counts, grid.transform);
   // Picked labels whose every voxel min_component relabelled have no surface left.
-  if (st.surfaces.empty()) throw Error(grid.source + ": no structure left to write (see --min-component)");
+  if (st.surfaces.empty())
+    throw pipeline::OptionInputError(grid.source + ": no structure left to write (see " +
+                                     pipeline::option_ref("min_component") + ")");
   double smallest = grid.transform.spacing[0];
   for (double s : grid.transform.spacing) smallest = std::min(smallest, std::abs(s));
   const double tol = o.tolerance > 0 ? o.tolerance : smallest / 10.0;

@@ -67,27 +67,14 @@ std::string MemoryBudget::text() const {
 
 namespace {
 
-// Values the approximation needs in range; the command line checks the same bounds.
-void check_build_options(const BuildOptions& p, int dim) {
-  if (p.rms && !(p.rms->value > 0 && std::isfinite(p.rms->value)))
-    throw UsageError("--rms: expected one positive value, e.g. 0.5% or 2.0");
-  if (!(p.threshold >= 0) || !std::isfinite(p.threshold))
-    throw UsageError(fmt::format("--threshold: expected a finite value >= 0, got {}", p.threshold));
-  if (p.max_level < 0 || p.max_level > 40)
-    throw UsageError(fmt::format("--max-level: expected 0..40, got {}", p.max_level));
-  if (p.start_level < -1 || p.start_level > 12)
-    throw UsageError(fmt::format("--start-level: expected -1..12, got {}", p.start_level));
-  if (!(p.max_sample_error < 0 || std::isfinite(p.max_sample_error)))
-    throw UsageError("--max-error: expected a finite value >= 0");
-  if (!(p.surface_tolerance > 0) || !std::isfinite(p.surface_tolerance))
-    throw UsageError(
-        fmt::format("--surface-tolerance: expected a finite positive value, got {}", p.surface_tolerance));
-  // The budget counts the vertices of the whole mesh, and the coarsest one (the box as 6
-  // tetrahedra or 2 triangles) already has its corners; a smaller budget cannot be kept.
+// The budget counts the vertices of the whole mesh, and the coarsest one (the box as 6
+// tetrahedra or 2 triangles) already has its corners; a smaller budget cannot be kept.
+void check_vertex_budget(const BuildOptions& p, int dim) {
   const std::size_t corners = dim == 2 ? 4 : 8;
   if (p.max_vertices > 0 && p.max_vertices < corners)
-    throw UsageError(fmt::format("--max-vertices: the coarsest {}D mesh has {} vertices; got {}", dim,
-                                 corners, p.max_vertices));
+    throw pipeline::OptionError(fmt::format("{}: the coarsest {}D mesh has {} vertices; got {}",
+                                            pipeline::option_ref("max_vertices"), dim, corners,
+                                            p.max_vertices));
 }
 
 // Iso-values and no global target: the build refines for the surfaces alone (unless it is an
@@ -105,9 +92,18 @@ bool without_global_target(const BuildOptions& p, const std::vector<double>& iso
 void check_surface_option(const AssetOptions& a, bool have_samples) {
   if (a.surface != SurfaceSource::kSamples) return;
   if (!have_samples)
-    throw UsageError("--surface samples needs the volume's samples (a hierarchy file has none)");
+    throw pipeline::OptionError(pipeline::option_ref("surface") +
+                                " samples needs the volume's samples (a hierarchy file has none)");
   if (a.level >= 0)
-    throw UsageError("--surface samples extracts on the finest level; --level asks for another");
+    throw pipeline::OptionError(pipeline::option_ref("surface") + " samples extracts on the finest level; " +
+                                pipeline::option_ref("level") + " asks for another");
+}
+
+// 3D surfaces are the iso-surfaces of the values asked for.
+void require_iso(const std::vector<double>& iso) {
+  if (iso.empty())
+    throw pipeline::OptionInputError(pipeline::option_ref("iso") +
+                                     " is required for 3D volumes (the values to extract, e.g. 80 and 150)");
 }
 
 bool surfaces_from_samples(const AssetOptions& a, bool have_samples, bool surface_driven) {
@@ -119,8 +115,9 @@ bool surfaces_from_samples(const AssetOptions& a, bool have_samples, bool surfac
 void check_iso_in_range(const std::vector<double>& isos, double lo, double hi, const std::string& source) {
   for (double v : isos)
     if (!(v > lo && v < hi))
-      throw Error(fmt::format("{}: --iso {} is outside the data's range {:.6g} .. {:.6g} (no surface there)",
-                              source, v, lo, hi));
+      throw pipeline::OptionInputError(
+          fmt::format("{}: {} {} is outside the data's range {:.6g} .. {:.6g} (no surface there)", source,
+                      pipeline::option_ref("iso"), v, lo, hi));
 }
 
 // A grid build() and convert() can use (GridField relies on it), as the input they record.
@@ -185,9 +182,11 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
             const std::vector<double>& iso_values) {
   // RMS target of the default build relative to the noise (bench/RESULTS.md, noise).
   constexpr double kNoiseTargetFactor = 1.0;
-  for (double v : iso_values)
-    if (!std::isfinite(v)) throw UsageError("--iso: iso-values must be finite numbers");
-  check_build_options(p, f.dim());
+  AssetOptions isos;  // the iso-values' rules are the assets'
+  isos.iso = iso_values;
+  pipeline::check_options(isos);
+  pipeline::check_options(p);
+  check_vertex_budget(p, f.dim());
   Built b;
   b.transform = input.transform;
   b.space = input.space;
@@ -234,9 +233,10 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
     // peak at 428 MiB).
     const double room = 0.8 * double(budget) - input.bytes;
     if (room < 8.0 * 1024 * 1024)
-      throw Error(fmt::format(
-          "{}: the volume alone ({:.0f} MiB) leaves no room under --max-memory {} ({:.0f} MiB)", input.source,
-          input.bytes / 1048576.0, p.max_memory.text(), double(budget) / 1048576.0));
+      throw pipeline::OptionInputError(
+          fmt::format("{}: the volume alone ({:.0f} MiB) leaves no room under {} {} ({:.0f} MiB)",
+                      input.source, input.bytes / 1048576.0, pipeline::option_ref("max_memory"),
+                      p.max_memory.text(), double(budget) / 1048576.0));
     o.max_memory_bytes = static_cast<std::size_t>(room);
   }
   o.progress = p.progress;
@@ -433,19 +433,14 @@ double smallest_spacing(const GridTransform& t, int dim) {
 }  // namespace
 
 Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) {
-  if (p.lod < 0 || p.lod > 8) throw Error(fmt::format("lod: expected 0..8, got {}", p.lod));
-  if (!(p.simplify >= 0)) throw Error(fmt::format("simplify: expected a value >= 0, got {}", p.simplify));
-  if (!(p.snap >= 0 && p.snap <= 8)) throw Error(fmt::format("snap: expected 0..8 voxels, got {}", p.snap));
-  if (p.level < -1) throw Error(fmt::format("level: expected -1 (finest) or a level, got {}", p.level));
+  pipeline::check_options(p);
   const auto t0 = std::chrono::steady_clock::now();
   Surfaces out;
   std::vector<GltfSurface>& surfaces = out.surfaces;
   std::vector<double>& isos = out.iso_values;
   const int dim = b.dim();
   if (dim == 3) {
-    if (p.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
-    for (double v : p.iso)
-      if (!std::isfinite(v)) throw UsageError("--iso: iso-values must be finite numbers");
+    require_iso(p.iso);
     check_iso_in_range(p.iso, b.value_min, b.value_max, "the hierarchy");
     isos = p.iso;
     std::sort(isos.begin(), isos.end());
@@ -526,7 +521,6 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     so.kind = p.simplifier;
     so.tolerance = p.simplify * voxel;
     so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
-    if (!(p.ratio >= 0 && p.ratio <= 1)) throw Error(fmt::format("ratio: expected 0..1, got {}", p.ratio));
     so.ratio = p.ratio;
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
@@ -557,7 +551,6 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
   const std::string ext = lower_extension(out);
-  if (!(p.tolerance >= 0)) throw Error(fmt::format("tolerance: expected a value >= 0, got {}", p.tolerance));
   const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim()) / 10.0;
 
   // Extraction and simplification take most of the time, writing (Draco encoding) the rest.
@@ -662,7 +655,7 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   if (report) p.fraction_progress = report.share(0, 0.6).as_progress();
   std::vector<double> isos;
   if (f.dim() == 3) {
-    if (c.asset.iso.empty()) throw Error("--iso is required for 3D volumes (e.g. --iso 80,150)");
+    require_iso(c.asset.iso);
     isos = c.asset.iso;
   }
   // Surfaces from the samples (extract()'s choice, made here before the build) need no hierarchy:
@@ -671,10 +664,7 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   if (f.dim() == 3) check_surface_option(c.asset, grid && grid->dim == 3);
   const bool from_samples = surfaces_from_samples(c.asset, grid && grid->dim == 3, surface_driven);
   const bool hierarchy_needed = !from_samples || !c.hierarchy.empty() || c.keep_u || c.asset.lod > 0;
-  if (!hierarchy_needed) {
-    check_build_options(p, f.dim());  // what the build would refuse, refused all the same
-    p.max_level = 0;
-  }
+  if (!hierarchy_needed) p.max_level = 0;  // c.build's own max_level was checked by convert()
   ConvertResult result;
   Built& b = result.built;
   b = build(f, input, p, isos);
@@ -722,23 +712,31 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   return result;
 }
 
+// Before any work, so that convert_field's build at T0 (surfaces from the samples) refuses what
+// a full build would.
+void check_convert_options(const std::string& out, const ConvertOptions& c) {
+  check_output_path(out, kAssetExtensions);
+  pipeline::check_options(c.build);
+  pipeline::check_options(c.asset);
+}
+
 }  // namespace
 
 ConvertResult convert(const ScalarGrid& grid, const std::string& out, const ConvertOptions& c) {
-  check_output_path(out, kAssetExtensions);
+  check_convert_options(out, c);
   const FieldInput input = checked_grid_input(grid);
   return convert_field(GridField(grid), input, &grid, out, c);
 }
 
 ConvertResult convert(const TetMesh& mesh, const std::string& out, const ConvertOptions& c) {
-  check_output_path(out, kAssetExtensions);
+  check_convert_options(out, c);
   const TetMeshField f(mesh);
   return convert_field(f, mesh_input(f, mesh), nullptr, out, c);
 }
 
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read) {
-  check_output_path(out, kAssetExtensions);
+  check_convert_options(out, options);
   if (!options.hierarchy.empty()) check_output_path(options.hierarchy, {".mlfeh"});
   if (!options.report.empty()) check_output_path(options.report, {});
   if (!detect_tet_mesh_format(input).empty()) {

@@ -138,9 +138,9 @@ HierarchyFileFigures write_file(const FileJob& job, const Built& b, Approximatio
   fig.errors = measure(a.hierarchy, decoded_values(job, a, fig));
   // The promise of max_error, checked on exactly what a reader decodes, before writing.
   if (job.split && !(fig.errors.max <= job.options.max_error))
-    throw Error(
-        fmt::format("{}: the decoded samples are up to {:.6g} from the input, over --max-error {:.6g} ({})",
-                    job.output, fig.errors.max, job.options.max_error, b.stop_reason()));
+    throw OptionInputError(fmt::format(
+        "{}: the decoded samples are up to {:.6g} from the input, over {} {:.6g} ({})", job.output,
+        fig.errors.max, option_ref("max_error"), job.options.max_error, b.stop_reason()));
   // Step 3: the file.
   HierarchyWriteOptions wo;
   wo.version = 3;
@@ -262,11 +262,16 @@ BuildFileResult build_mesh(const std::string& input, const std::string& output, 
 void check_build_file_options(const BuildFileOptions& s, const std::string& output) {
   check_output_path(output, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
-  if (s.max_error >= 0 && s.psnr > 0) throw Error("build: give --max-error or --psnr, not both");
-  if (!(s.quantization_share >= 0 && s.quantization_share < 1))
-    throw Error("build: --quantization-share must be in [0, 1)");
-  if (!(s.max_error < 0 || std::isfinite(s.max_error)))
-    throw UsageError("--max-error: expected a finite value >= 0");
+  check_options(s);
+  if (s.max_error >= 0 && s.psnr > 0)
+    throw OptionInputError(
+        fmt::format("build: give {} or {}, not both", option_ref("max_error"), option_ref("psnr")));
+  if (s.labels && (s.max_error >= 0 || s.psnr > 0))
+    throw OptionInputError(fmt::format("build: {} stores the labels exactly (no {}, no {})",
+                                       option_ref("labels"), option_ref("max_error"), option_ref("psnr")));
+  if (!s.labels && !s.label_table.empty())
+    throw OptionInputError(
+        fmt::format("build: {} needs {}", option_ref("label_table"), option_ref("labels")));
 }
 
 }  // namespace
@@ -278,14 +283,14 @@ BuildFileResult build(const std::string& input, const std::string& output, const
   BuildFileOptions s = options;
   // The readers refuse, before allocating, a volume over the budget the build keeps to.
   if (s.read.max_bytes == 0) s.read.max_bytes = s.build.max_memory.bytes();
-  if (s.labels && (s.max_error >= 0 || s.psnr > 0))
-    throw Error("build: --labels stores the labels exactly (no --max-error, no --psnr)");
-  if (!s.labels && !s.label_table.empty()) throw Error("build: --label-table needs --labels");
   if (!detect_tet_mesh_format(input).empty()) {
-    if (s.labels) throw Error(input + ": --labels needs a volume (a label map), not a mesh");
+    if (s.labels)
+      throw OptionInputError(input + ": " + option_ref("labels") +
+                             " needs a volume (a label map), not a mesh");
     if (s.max_error >= 0)
-      throw Error(input +
-                  ": --max-error bounds the error at a volume's samples; for a mesh use --rms or --psnr");
+      throw OptionInputError(
+          fmt::format("{}: {} bounds the error at a volume's samples; for a mesh use {} or {}", input,
+                      option_ref("max_error"), option_ref("rms"), option_ref("psnr")));
     BuildFileResult r = build_mesh(input, output, s, report);
     report.finish("writing");
     return r;

@@ -34,12 +34,17 @@ void check_convert_outputs(const std::string& output, const ConvertFileOptions& 
 // convert with labels: a label map in, one surface per structure out.
 ConvertFileResult convert_label_map(const std::string& input, const std::string& output,
                                     const ConvertFileOptions& o) {
-  if (!o.asset.iso.empty()) throw UsageError("--labels: --labels and --iso exclude each other");
-  if (!o.render.empty()) throw UsageError("--labels: --labels writes no image (no --render)");
+  const std::string labels = option_ref("labels");
+  if (!o.asset.iso.empty())
+    throw OptionError(labels + ": " + labels + " and " + option_ref("iso") + " exclude each other");
+  if (!o.render.empty())
+    throw OptionError(labels + ": " + labels + " writes no image (no " + option_ref("render") + ")");
+  check_options(*o.labels);
   check_output_path(output, kAssetExtensions);
   if (!o.hierarchy.empty()) {
     if (is_hierarchy_file(input))
-      throw UsageError("--hierarchy: " + input + " is a hierarchy already (no --hierarchy)");
+      throw OptionError(option_ref("hierarchy") + ": " + input + " is a hierarchy already (no " +
+                        option_ref("hierarchy") + ")");
     check_output_path(o.hierarchy, {".mlfeh"});
   }
   if (!o.report.empty()) check_output_path(o.report, {});
@@ -102,7 +107,8 @@ void list_written(const std::string& output, const ConvertOptions& c, ConvertFil
 void check_volume_matches(const std::string& volume, const ScalarGrid& g, const std::string& hierarchy,
                           const Built& b) {
   if (b.dim() != 3 || g.dim != 3)
-    throw Error(volume + ": --volume needs a 3D volume and a 3D hierarchy (" + hierarchy + ")");
+    throw OptionInputError(volume + ": " + option_ref("volume") + " needs a 3D volume and a 3D hierarchy (" +
+                           hierarchy + ")");
   auto near = [](double x, double y) {
     return std::abs(x - y) <= 1e-6 * std::max({1.0, std::abs(x), std::abs(y)});
   };
@@ -128,6 +134,8 @@ void check_volume_matches(const std::string& volume, const ScalarGrid& g, const 
 }  // namespace
 
 ConvertFileResult convert(const std::string& input, const std::string& output, const ConvertFileOptions& o) {
+  check_options(o.build);
+  check_options(o.asset);
   if (o.labels) return convert_label_map(input, output, o);
   check_convert_outputs(output, o);
   const detail::Reporter report(o.progress);
@@ -172,7 +180,9 @@ ConvertFileResult convert(const std::string& input, const std::string& output, c
 
 ConvertFileResult iso(const std::string& input, const std::string& output, const IsoOptions& o) {
   if (!is_hierarchy_file(input)) {
-    if (!o.volume.empty()) throw Error("--volume is for a hierarchy input; " + input + " is a volume itself");
+    if (!o.volume.empty())
+      throw OptionInputError(option_ref("volume") + " is for a hierarchy input; " + input +
+                             " is a volume itself");
     ConvertFileOptions c;
     c.build = o.build;
     c.asset = o.asset;
@@ -185,6 +195,8 @@ ConvertFileResult iso(const std::string& input, const std::string& output, const
                                {"tool", std::string("mlfe ") + MLFE_VERSION}};
   check_output_path(output, kAssetExtensions);
   if (!o.report.empty()) check_output_path(o.report, {});
+  check_options(o.asset);
+  check_options(o.build);
   const detail::Reporter report(o.progress);
   report(0, "reading");
   std::optional<ScalarGrid> grid;

@@ -116,14 +116,13 @@ ExportResult export_hierarchy(const std::string& input, const std::string& outpu
   if (!is_mesh_output(ext) && !is_volume_output(output))
     throw Error(output + ": unknown output type '" + ext + "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_output_path(output, {});
-  if (options.level < -1)
-    throw UsageError("--level: expected a level >= 0, got " + std::to_string(options.level));
+  check_option("level", options.level);
   const detail::Reporter report(options.progress);
   report(0, "reading");
   const HierarchyFile f = read_hierarchy(input, options.level);
   if (options.level > f.file_levels)
-    throw UsageError(input + ": --level " + std::to_string(options.level) + " but the file has " +
-                     std::to_string(f.file_levels) + " levels");
+    throw OptionError(input + ": " + option_ref("level") + " " + std::to_string(options.level) +
+                      " but the file has " + std::to_string(f.file_levels) + " levels");
   ExportResult r;
   if (f.dim == 2)
     export_file<2>(input, output, f, r, report);

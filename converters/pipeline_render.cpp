@@ -101,10 +101,11 @@ Camera frame_camera(const RenderFileOptions& p, const Framing& framing, int fram
   if (p.target) cam.target = *p.target;
   if (p.up) cam.up = *p.up;
   const double dist = distance(cam.position, cam.target);
-  if (!(dist > 0)) throw UsageError("--position and --target must differ");
+  if (!(dist > 0))
+    throw OptionError(option_ref("position") + " and " + option_ref("target") + " must differ");
   const Vec3 side = cross(sub(cam.target, cam.position), cam.up);
   if (!(norm(side) > 1e-9 * dist * norm(cam.up)))
-    throw UsageError("--up must not be parallel to the viewing direction (or zero)");
+    throw OptionError(option_ref("up") + " must not be parallel to the viewing direction (or zero)");
   cam.near_clip = std::max(dist - framing.radius, 1e-3 * framing.radius);
   cam.far_clip = dist + 2 * framing.radius;
   return cam;
@@ -114,21 +115,15 @@ void check_render_options(const RenderFileOptions& p, const Built& b, const Scal
                           const std::string& source, RayEntry entry) {
   if (b.dim() != 3) throw Error(source + ": rendering needs a 3D volume or hierarchy");
   if (p.reference && !grid)
-    throw Error(source + (entry == RayEntry::kBoundaryFaces
-                              ? ": --reference needs a volume as input (a mesh is rendered as it is)"
-                              : ": --reference needs the volume itself as input, not a hierarchy"));
-  for (int s : p.size)
-    if (s < 1 || s > 16384)
-      throw UsageError(fmt::format("--size: expected WxH (1..16384), got {}x{}", p.size[0], p.size[1]));
-  if (p.frames < 1 || p.frames > 3600)
-    throw UsageError(fmt::format("--frames: expected 1..3600, got {}", p.frames));
-  // The orbit camera has its own target and up; silently dropping them would render another view.
-  if (!p.position && (p.target || p.up))
-    throw UsageError(std::string(p.up ? "--up" : "--target") + ": needs --position");
+    throw OptionInputError(source + ": " + option_ref("reference") +
+                           (entry == RayEntry::kBoundaryFaces
+                                ? " needs a volume as input (a mesh is rendered as it is)"
+                                : " needs the volume itself as input, not a hierarchy"));
+  check_options(p);
   const int max_level = b.get<3>().hierarchy.max_level();
   if (p.level < -1 || p.level > max_level)
-    throw UsageError(fmt::format("--level: expected -1 (finest) .. {} (the hierarchy's levels), got {}",
-                                 max_level, p.level));
+    throw OptionError(fmt::format("{}: expected -1 (finest) .. {} (the hierarchy's levels), got {}",
+                                  option_ref("level"), max_level, p.level));
 }
 
 RenderOptions ray_options(const RenderFileOptions& p) {
@@ -344,6 +339,7 @@ RenderResult render(const Built& b, const std::string& output, const RenderFileO
 RenderResult render(const std::string& input, const std::string& output, const RenderFileOptions& options) {
   check_output_path(output, {".exr"});
   if (!options.png.empty()) check_output_path(options.png, {".png"});
+  check_options(options);
   const detail::Reporter report(options.progress);
   report(0, "reading");
   RenderFileOptions o = options;

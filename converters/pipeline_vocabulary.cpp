@@ -2,6 +2,7 @@
 // option type and one name table per enum, for the command line, the Python module and the
 // provenance written into files.
 #include <fmt/format.h>
+#include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/pipeline.h>
@@ -9,6 +10,8 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <limits>
 #include <sstream>
 
 namespace mlfe {
@@ -33,7 +36,7 @@ std::vector<double> parse_values(const std::string& text, const std::string& opt
       if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
       out.push_back(v);
     } catch (const std::exception&) {
-      throw UsageError(fmt::format("{}: not a finite number: '{}'", option, item));
+      throw OptionError(fmt::format("{}: not a finite number: '{}'", option_ref(option), item));
     }
   }
   return out;
@@ -58,8 +61,9 @@ MemoryBudget parse_memory_budget(const std::string& text, const std::string& opt
     v.clear();
   }
   if (v.size() != 1 || v[0] < 0 || (m.percent_of_ram && v[0] > 100))
-    throw UsageError(option + ": expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" +
-                     text + "'");
+    throw OptionError(option_ref(option) +
+                      ": expected a percentage of RAM (50%), bytes with K/M/G (6G), or 0; got '" + text +
+                      "'");
   m.amount = v[0];
   return m;
 }
@@ -75,7 +79,7 @@ RmsTarget parse_rms(const std::string& text, const std::string& option) {
     v.clear();
   }
   if (v.size() != 1 || v[0] <= 0)
-    throw UsageError(option + ": expected one positive value, e.g. 0.5% or 2.0");
+    throw OptionError(option_ref(option) + ": expected one positive value, e.g. 0.5% or 2.0");
   return RmsTarget{v[0], percent};
 }
 
@@ -88,12 +92,12 @@ double parse_percent(const std::string& text, const std::string& option) {
     if (used == s.size() && v >= 0 && std::isfinite(v)) return v;
   } catch (const std::exception&) {
   }
-  throw UsageError(option + ": expected a percentage such as 2% (got '" + text + "')");
+  throw OptionError(option_ref(option) + ": expected a percentage such as 2% (got '" + text + "')");
 }
 
 std::array<double, 3> parse_vector3(const std::string& text, const std::string& option) {
   const auto v = parse_values(text, option);
-  if (v.size() != 3) throw UsageError(option + ": expected x,y,z, got '" + text + "'");
+  if (v.size() != 3) throw OptionError(option_ref(option) + ": expected x,y,z, got '" + text + "'");
   return {v[0], v[1], v[2]};
 }
 
@@ -102,7 +106,7 @@ std::array<int, 2> parse_image_size(const std::string& text, const std::string& 
   char x = 0, rest = 0;
   if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &rest) != 3 || (x != 'x' && x != 'X') || w < 1 ||
       h < 1 || w > 16384 || h > 16384)
-    throw UsageError(option + ": expected WxH (1..16384), got '" + text + "'");
+    throw OptionError(option_ref(option) + ": expected WxH (1..16384), got '" + text + "'");
   return {w, h};
 }
 
@@ -168,7 +172,7 @@ E parse_enum(const std::string& text, const std::string& option) {
     if (text == e.name) return e.value;
   std::string choices;
   for (const auto& e : enum_names<E>()) choices += (choices.empty() ? "" : ", ") + std::string(e.name);
-  throw UsageError(fmt::format("{}: expected one of {}; got '{}'", option, choices, text));
+  throw OptionError(fmt::format("{}: expected one of {}; got '{}'", option_ref(option), choices, text));
 }
 
 template <class E>
@@ -183,6 +187,202 @@ std::vector<std::string> enum_name_list() {
   std::vector<std::string> names;
   for (const auto& e : enum_names<E>()) names.emplace_back(e.name);
   return names;
+}
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr char kMark = '\x1f';  // around an option's name in a message (option_ref)
+
+template <class E>
+OptionSpec enum_option(const char* name, const char* flag) {
+  OptionSpec o{name, flag};
+  o.choices = &enum_name_list<E>;
+  return o;
+}
+
+}  // namespace
+
+const std::vector<OptionSpec>& option_table() {
+  static const std::vector<OptionSpec> t = {
+      // BuildOptions
+      {"rms", "--rms"},
+      {"threshold", "--threshold", 0, kInf},
+      {"max_vertices", "--max-vertices"},
+      {"max_level", "--max-level", 0, 40},
+      {"start_level", "--start-level", -1, 12},
+      enum_option<Norm>("norm", "--norm"),
+      enum_option<Preconditioner>("preconditioner", "--preconditioner"),
+      {"surface_tolerance", "--surface-tolerance", 0, kInf, true},
+      {"max_sample_error", "--max-error", 0, kInf, false, false, "max_error"},
+      {"max_memory", "--max-memory"},
+      // AssetOptions
+      {"iso", "--iso"},
+      {"tolerance", "--tolerance", 0, kInf},
+      {"lod", "--lod", 0, 8},
+      {"simplify", "--simplify", 0, kInf},
+      {"ratio", "--ratio", 0, 1},
+      enum_option<Simplifier>("simplifier", "--simplifier"),
+      enum_option<VertexPlacement>("placement", "--placement"),
+      {"snap", "--snap", 0, 8},
+      {"min_component", "--min-component"},
+      enum_option<Normals>("normals", "--normals"),
+      {"level", "--level", -1, 40},
+      enum_option<SurfaceSource>("surface", "--surface"),
+      // LabelOptions
+      {"labels", "--labels"},
+      {"label_table", "--label-table"},
+      {"smoothing_iterations", "--smooth-iterations", 0, 1000, false, false, "smooth_iterations"},
+      {"max_offset", "--max-offset", 0, kInf},
+      // BuildFileOptions, ConvertFileOptions, IsoOptions
+      {"max_error", "--max-error", 0, kInf},
+      {"psnr", "--psnr", 0, kInf},
+      {"quantization_share", "--quantization-share", 0, 1, false, true},
+      {"hierarchy", "--hierarchy"},
+      {"render", "--render"},
+      {"volume", "--volume"},
+      // RenderFileOptions
+      {"tf_unit", "--tf-unit", 0, kInf},
+      enum_option<Projection>("camera", "--camera"),
+      {"elevation", "--elevation", -90, 90},
+      {"position", "--position"},
+      {"target", "--target"},
+      {"up", "--up"},
+      {"size", "--size"},
+      {"reference", "--reference"},
+      enum_option<RayAccumulator::Rule>("integration", "--integration"),
+      {"frames", "--frames", 1, 3600},
+      {"background", "--background"},
+      {"stop_opacity", "--stop-opacity", 0, 1},
+      {"z_opacity", "--z-opacity", 0, 1},
+      // CompareOptions
+      {"count_tolerance", "--count-tolerance"},
+  };
+  return t;
+}
+
+const OptionSpec& option_spec(const std::string& name) {
+  for (const OptionSpec& o : option_table())
+    if (name == o.name) return o;
+  MLFE_CHECK_MSG(false, name.c_str());
+  std::abort();
+}
+
+const OptionSpec* option_by_flag(const std::string& flag) {
+  for (const OptionSpec& o : option_table())
+    if (flag == o.flag) return &o;
+  return nullptr;
+}
+
+const char* OptionSpec::spelled(Spelling s) const {
+  switch (s) {
+    case Spelling::kCommandLine:
+      return flag;
+    case Spelling::kPython:
+      return keyword ? keyword : name;
+    case Spelling::kLibrary:
+      break;
+  }
+  return name;
+}
+
+std::string OptionSpec::values() const {
+  if (choices) {
+    std::string list;
+    for (const std::string& c : choices()) list += (list.empty() ? "" : ", ") + c;
+    return "one of " + list;
+  }
+  if (min > -kInf && max < kInf) {
+    if (!min_excluded && !max_excluded) return fmt::format("{}..{}", min, max);
+    return fmt::format("a value in {}{}, {}{}", min_excluded ? "(" : "[", min, max, max_excluded ? ")" : "]");
+  }
+  if (min > -kInf) return fmt::format("a finite value {} {}", min_excluded ? ">" : ">=", min);
+  return "";
+}
+
+std::string option_ref(const std::string& name) {
+  return kMark + std::string(option_spec(name).name) + kMark;
+}
+
+std::string OptionError::spell_marked(const std::string& marked, Spelling s) {
+  std::string out;
+  std::size_t at = 0;
+  for (std::size_t open = marked.find(kMark); open != std::string::npos; open = marked.find(kMark, at)) {
+    const std::size_t close = marked.find(kMark, open + 1);
+    MLFE_CHECK(close != std::string::npos);
+    out += marked.substr(at, open - at);
+    out += option_spec(marked.substr(open + 1, close - open - 1)).spelled(s);
+    at = close + 1;
+  }
+  return out + marked.substr(at);
+}
+
+std::string OptionMessage::spelled(Spelling s) const { return OptionError::spell_marked(marked_, s); }
+
+std::string message(const std::exception& e, Spelling s) {
+  if (const auto* m = dynamic_cast<const OptionMessage*>(&e)) return m->spelled(s);
+  return e.what();
+}
+
+void check_option(const std::string& name, double value) {
+  const OptionSpec& o = option_spec(name);
+  MLFE_CHECK(!o.choices && o.values() != "");
+  const bool low_ok = o.min_excluded ? value > o.min : value >= o.min;
+  const bool high_ok = o.max_excluded ? value < o.max : value <= o.max;
+  if (!(std::isfinite(value) && low_ok && high_ok))
+    throw OptionError(fmt::format("{}: expected {}, got {}", option_ref(name), o.values(), value));
+}
+
+void check_options(const BuildOptions& o) {
+  if (o.rms && !(o.rms->value > 0 && std::isfinite(o.rms->value)))
+    throw OptionError(option_ref("rms") + ": expected one positive value, e.g. 0.5% or 2.0");
+  check_option("threshold", o.threshold);
+  check_option("max_level", o.max_level);
+  check_option("start_level", o.start_level);
+  check_option("surface_tolerance", o.surface_tolerance);
+  if (!(o.max_sample_error < 0)) check_option("max_sample_error", o.max_sample_error);  // < 0: off
+}
+
+void check_options(const AssetOptions& o) {
+  for (double v : o.iso)
+    if (!std::isfinite(v)) throw OptionError(option_ref("iso") + ": iso-values must be finite numbers");
+  check_option("tolerance", o.tolerance);
+  check_option("lod", o.lod);
+  check_option("simplify", o.simplify);
+  check_option("ratio", o.ratio);
+  check_option("snap", o.snap);
+  check_option("level", o.level);
+}
+
+void check_options(const LabelOptions& o) {
+  check_option("simplify", o.simplify);
+  check_option("max_offset", o.max_offset);
+  check_option("smoothing_iterations", o.smoothing_iterations);
+  check_option("tolerance", o.tolerance);
+}
+
+void check_options(const RenderFileOptions& o) {
+  check_option("tf_unit", o.tf_unit);
+  check_option("elevation", o.elevation);
+  check_option("level", o.level);
+  for (int s : o.size)
+    if (s < 1 || s > 16384)
+      throw OptionError(
+          fmt::format("{}: expected WxH (1..16384), got {}x{}", option_ref("size"), o.size[0], o.size[1]));
+  check_option("frames", o.frames);
+  check_option("stop_opacity", o.stop_opacity);
+  check_option("z_opacity", o.z_opacity);
+  // The orbit camera has its own target and up; silently dropping them would render another view.
+  if (!o.position && (o.target || o.up))
+    throw OptionError(option_ref(o.up ? "up" : "target") + ": needs " + option_ref("position"));
+  check_options(o.build);
+}
+
+void check_options(const BuildFileOptions& o) {
+  if (!(o.max_error < 0)) check_option("max_error", o.max_error);  // < 0: off
+  check_option("psnr", o.psnr);
+  check_option("quantization_share", o.quantization_share);
+  check_options(o.build);
 }
 
 #define MLFE_PIPELINE_ENUM(E)                                                   \

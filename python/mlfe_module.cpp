@@ -890,8 +890,16 @@ PYBIND11_MODULE(_mlfe, m) {
       "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
       "arguments.";
   m.attr("__version__") = MLFE_VERSION;
-  py::register_exception<Error>(m, "Error", PyExc_ValueError);
-  // Registered after Error: pybind11 tries the later translators first.
+  static PyObject* const error = py::register_exception<Error>(m, "Error", PyExc_ValueError).ptr();
+  // Registered after Error (pybind11 tries the later translators first): messages that name
+  // options name them by their keywords, from the library's table.
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const pipeline::OptionMessage& e) {
+      PyErr_SetString(error, e.spelled(pipeline::Spelling::kPython).c_str());
+    }
+  });
   py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
 
   m.def("read_volume", &read_volume_py, py::arg("path"));

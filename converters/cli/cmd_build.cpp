@@ -64,18 +64,16 @@ void add_build_command(CLI::App& app) {
   cmd->add_option("-o,--output", state->output, "hierarchy file (.mlfeh)")->required();
   cmd->add_option("--report", state->options.report, "JSON report of the build");
   cmd->add_option(
-         "--max-error", state->options.max_error,
-         "every sample (voxel) of the decoded file within this of the input (data units; 0 on integer "
-         "data: lossless); without it, the least-squares build of --rms with values quantized to half "
-         "its RMS error")
-      ->check(CLI::NonNegativeNumber);
+      "--max-error", state->options.max_error,
+      "every sample (voxel) of the decoded file within this of the input (data units; 0 on integer "
+      "data: lossless); without it, the least-squares build of --rms with values quantized to half "
+      "its RMS error");
   cmd->add_option("--quantization-share", state->options.quantization_share,
                   "with --max-error: the share of it spent on quantizing values, the rest on interpolation "
                   "(integer data: rounded down to an integer)")
       ->capture_default_str();
   cmd->add_option("--psnr", state->options.psnr,
-                  "value quantization error alone at this PSNR (dB over the value range)")
-      ->check(CLI::PositiveNumber);
+                  "value quantization error alone at this PSNR (dB over the value range)");
   add_build_options(cmd, state->params);
   cmd->add_flag("--labels", state->options.labels,
                 "a label map: stored exactly (refined where labels meet) with its label table");

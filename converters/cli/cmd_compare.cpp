@@ -4,8 +4,8 @@
 // to 2 so that 1 always means "different").
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
-#include <mlfe/pipeline/compare.h>
 #include <mlfe/pipeline.h>
+#include <mlfe/pipeline/compare.h>
 
 #include <memory>
 #include <optional>
@@ -34,7 +34,7 @@ void run_compare(CompareArgs& a) {
   o.value_max = a.value_max;
   o.value_rms = a.value_rms;
   if (!a.count_tolerance.empty())
-    o.count_tolerance_percent = pipeline::parse_percent(a.count_tolerance, "--count-tolerance");
+    o.count_tolerance_percent = pipeline::parse_percent(a.count_tolerance, "count_tolerance");
   check_distinct_files({{"EXPECTED", a.expected}, {"ACTUAL", a.actual}}, {{"--report", a.report}});
   const CompareResult r = pipeline::compare(a.expected, a.actual, o, a.report);
   if (r.equal()) {

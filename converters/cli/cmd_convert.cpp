@@ -73,7 +73,7 @@ void run_convert_labels(const ConvertState& s) {
   c.hierarchy = s.hierarchy;
   c.report = s.report;
   c.read = s.read;
-  c.build.max_memory = parse_memory_budget(s.params.max_memory, "--max-memory");
+  c.build.max_memory = parse_memory_budget(s.params.max_memory, "max_memory");
   c.progress = progress_display("mlfe convert", s.params.quiet);
   const pipeline::ConvertFileResult r = pipeline::convert(s.input, s.output, c);
   const nlohmann::json& summary = r.asset;

@@ -49,8 +49,7 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("-o,--output", state->output,
                   "output (.nii.gz, .nii, .nrrd, .raw + .raw.json, .vdb, .vtu, .msh)")
       ->required();
-  cmd->add_option("--level", state->level, "use levels 0..K only (default: all)")
-      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--level", state->level, "use levels 0..K only (default: all)");
   cmd->callback([state] { run_export(*state); });
 }
 

@@ -23,7 +23,7 @@ void run_iso(const ConvertState& s) {
                        {{"--output", s.output}, {"--report", s.report}});
   pipeline::IsoOptions o;
   o.asset = asset_options(s.asset);
-  o.build.max_memory = parse_memory_budget(s.params.max_memory, "--max-memory");
+  o.build.max_memory = parse_memory_budget(s.params.max_memory, "max_memory");
   o.read = s.read;
   o.volume = s.volume;
   o.report = s.report;

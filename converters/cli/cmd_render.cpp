@@ -22,14 +22,10 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
       ->capture_default_str();
   cmd->add_option("--tf-unit", p.tf_unit,
                   "length (mm) the opacities refer to (0: one voxel for presets, a mesh's fine edge for "
-                  "presets on a .vtu/.msh, 1 for ParaView files)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--camera", p.camera, "projection")
-      ->check(CLI::IsMember(pipeline::enum_name_list<pipeline::Projection>()))
-      ->capture_default_str();
+                  "presets on a .vtu/.msh, 1 for ParaView files)");
+  cmd->add_option("--camera", p.camera, "projection")->capture_default_str();
   cmd->add_option("--azimuth", p.azimuth, "degrees about +z (0: looking along +y)");
-  cmd->add_option("--elevation", p.elevation, "degrees above the horizontal plane")
-      ->check(CLI::Range(-90.0, 90.0));
+  cmd->add_option("--elevation", p.elevation, "degrees above the horizontal plane");
   cmd->add_option("--position", p.position, "camera position x,y,z (physical frame; replaces the orbit)");
   cmd->add_option("--target", p.target, "point looked at, x,y,z (default: the volume's centre)");
   cmd->add_option("--up", p.up, "up direction x,y,z (default 0,0,1)");
@@ -42,20 +38,15 @@ void add_render_options(CLI::App* cmd, RenderParams& p) {
          "--integration", p.integration,
          "segment integration: pre-integrated with the tabulated mean transmittance, with the exact one, "
          "or the trapezoid rule")
-      ->check(CLI::IsMember(pipeline::enum_name_list<RayAccumulator::Rule>()))
       ->capture_default_str();
   cmd->add_flag("--shading", p.shading, "shade with the per-tetrahedron gradient (headlight)");
   cmd->add_flag("--no-skip", p.no_skip, "no empty-space skipping");
   cmd->add_option("--png", p.png, "also write an sRGB PNG preview over the background");
-  cmd->add_option("--frames", p.frames, "turntable: this many frames around +z, numbered files")
-      ->check(CLI::Range(1, 3600));
+  cmd->add_option("--frames", p.frames, "turntable: this many frames around +z, numbered files");
   cmd->add_option("--background", p.background, "PNG background, linear r,g,b in [0,1]")
       ->capture_default_str();
-  cmd->add_option("--stop-opacity", p.stop_opacity, "early ray termination")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
+  cmd->add_option("--stop-opacity", p.stop_opacity, "early ray termination")->capture_default_str();
   cmd->add_option("--z-opacity", p.z_opacity, "Z is where the accumulated opacity reaches this")
-      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
 }
 
@@ -63,21 +54,21 @@ pipeline::RenderFileOptions render_options(const RenderParams& p) {
   pipeline::RenderFileOptions o;
   o.tf = p.tf;
   o.tf_unit = p.tf_unit;
-  o.camera = pipeline::parse_enum<pipeline::Projection>(p.camera, "--camera");
+  o.camera = pipeline::parse_enum<pipeline::Projection>(p.camera, "camera");
   o.azimuth = p.azimuth;
   o.elevation = p.elevation;
-  if (!p.position.empty()) o.position = pipeline::parse_vector3(p.position, "--position");
-  if (!p.target.empty()) o.target = pipeline::parse_vector3(p.target, "--target");
-  if (!p.up.empty()) o.up = pipeline::parse_vector3(p.up, "--up");
-  o.size = pipeline::parse_image_size(p.size, "--size");
+  if (!p.position.empty()) o.position = pipeline::parse_vector3(p.position, "position");
+  if (!p.target.empty()) o.target = pipeline::parse_vector3(p.target, "target");
+  if (!p.up.empty()) o.up = pipeline::parse_vector3(p.up, "up");
+  o.size = pipeline::parse_image_size(p.size, "size");
   o.level = p.level;
   o.reference = p.reference;
-  o.integration = pipeline::parse_enum<RayAccumulator::Rule>(p.integration, "--integration");
+  o.integration = pipeline::parse_enum<RayAccumulator::Rule>(p.integration, "integration");
   o.shading = p.shading;
   o.skip_empty = !p.no_skip;
   o.png = p.png;
   o.frames = p.frames;
-  o.background = pipeline::parse_vector3(p.background, "--background");
+  o.background = pipeline::parse_vector3(p.background, "background");
   o.stop_opacity = p.stop_opacity;
   o.z_opacity = p.z_opacity;
   return o;

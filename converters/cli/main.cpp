@@ -51,6 +51,16 @@ void require_finite_numbers(CLI::App& app) {
       if (opt->get_type_name().rfind("FLOAT", 0) == 0) opt->check(finite);
 }
 
+// The values an option of the library's table takes, in its help ("INT:0..40"); the library
+// checks them when the command calls it.
+void describe_values(CLI::App& app) {
+  for (CLI::App* cmd : app.get_subcommands([](CLI::App*) { return true; }))
+    for (CLI::Option* opt : cmd->get_options([](CLI::Option*) { return true; }))
+      for (const auto& name : opt->get_lnames())
+        if (const auto* spec = mlfe::pipeline::option_by_flag("--" + name); spec && !spec->values().empty())
+          opt->type_name(opt->get_type_name() + ":" + spec->values());
+}
+
 std::size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<std::size_t> row(b.size() + 1);
   for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
@@ -127,6 +137,7 @@ int main(int argc, char** argv) {
   std::stable_sort(registry.begin(), registry.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   for (const auto& entry : registry) entry.second(app);
+  describe_values(app);  // before the finite check joins the type names
   require_finite_numbers(app);
 
   std::unique_ptr<tbb::global_control> threads;
@@ -153,10 +164,10 @@ int main(int argc, char** argv) {
     mlfe::cli::status_line("mlfe: interrupted");
     return 130;
   } catch (const mlfe::UsageError& e) {
-    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
+    mlfe::cli::status_line("mlfe: " + mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine));
     return app.got_subcommand("compare") ? 2 : 1;
   } catch (const mlfe::Error& e) {
-    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
+    mlfe::cli::status_line("mlfe: " + mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine));
     return 2;
   } catch (const std::bad_alloc&) {
     mlfe::cli::status_line("mlfe: out of memory");

@@ -20,9 +20,8 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
                   "target RMS error: a percentage of the value range (\"0.5%\") or an absolute value in data "
                   "units [default: 0.5% without --iso; with --iso, refinement follows the surfaces]");
   cmd->add_option(
-         "--threshold", p.threshold,
-         "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms")
-      ->check(CLI::NonNegativeNumber);
+      "--threshold", p.threshold,
+      "the paper's rule: refine elements whose RMS error exceeds this (data units); replaces --rms");
   cmd->add_option("--max-vertices", p.max_vertices,
                   "vertex budget (never exceeded; at least the coarsest mesh's 8 vertices, 4 for a 2D height "
                   "field) [default: none]")
@@ -35,22 +34,16 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
                              text + "'";
           },
           "N"));
-  cmd->add_option("--max-level", p.max_level, "deepest refinement level")
-      ->check(CLI::Range(0, 40))
-      ->capture_default_str();
+  cmd->add_option("--max-level", p.max_level, "deepest refinement level")->capture_default_str();
   cmd->add_option("--start-level", p.start_level,
-                  "uniform levels before adapting (-1: until edges <= 16 voxels)")
-      ->check(CLI::Range(-1, 12));
+                  "uniform levels before adapting (-1: until edges <= 16 voxels)");
   cmd->add_option("--norm", p.norm, "l2 (the paper) or h1: (u,v) + s^2 (grad u, grad v), s = voxel spacing")
-      ->check(CLI::IsMember(pipeline::enum_name_list<Norm>()))
       ->capture_default_str();
   cmd->add_option("--preconditioner", p.preconditioner,
                   "CG preconditioner (auto: Jacobi for least squares at the samples, else BPX)")
-      ->check(CLI::IsMember(pipeline::enum_name_list<Preconditioner>()))
       ->capture_default_str();
   cmd->add_option("--surface-tolerance", p.surface_tolerance,
                   "with iso-values: refine until surfaces are within this many voxels")
-      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   cmd->add_flag(
       "--check-u", p.check_against_u,
@@ -67,12 +60,10 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
 void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option("--iso", p.iso, "iso-values, comma separated (3D volumes)");
   cmd->add_option("--tolerance", p.tolerance,
-                  "position tolerance in mm for Draco/quantization (default: voxel/10)")
-      ->check(CLI::NonNegativeNumber);
+                  "position tolerance in mm for Draco/quantization (default: voxel/10)");
   cmd->add_flag("--no-draco", p.no_draco, "glTF with plain float buffers");
   cmd->add_flag("--quantize", p.quantize, "glTF with KHR_mesh_quantization (with --no-draco)");
-  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)")
-      ->check(CLI::Range(0, 8));
+  cmd->add_option("--lod", p.lod, "add this many coarser levels from the hierarchy (glTF)");
   cmd->add_option("--decimate", p.decimate,
                   "reduce every surface to this many triangles (OpenMesh quadric decimater)");
   cmd->add_option(
@@ -80,12 +71,10 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "simplify every surface while it stays within this many voxels of the extracted one (0: the raw "
          "extraction; with --labels: the RMS distance to the smoothed interfaces each merge may reach, "
          "default 0.34)")
-      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--ratio", p.ratio,
                   "--simplify stops at this fraction of each extracted surface's triangles, or earlier where "
                   "its bound binds (0: the bound alone; iso-surfaces)")
-      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_option(
          "--simplifier", p.simplifier,
@@ -95,7 +84,6 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
          "estimated, seconds for millions of triangles, but it may pinch the surface: non-manifold edges, "
          "counted in the report) or auto (bounded up to 200000 extracted triangles; above, fast to half "
          "the tolerance and then bounded, or fast all the way with --ratio below 0.05)")
-      ->check(CLI::IsMember(pipeline::enum_name_list<Simplifier>()))
       ->capture_default_str();
   cmd->add_option("--placement", p.placement,
                   "--simplify's vertex placement: input (every vertex stays an extracted one), optimal "
@@ -103,14 +91,12 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "least squares: "
                   "fewer triangles at the same tolerance, closer to the data) or auto "
                   "(optimal, input with --normals gradient)")
-      ->check(CLI::IsMember(pipeline::enum_name_list<VertexPlacement>()))
       ->capture_default_str();
   cmd->add_option(
          "--snap", p.snap,
          "surfaces from the hierarchy: move their vertices onto the volume's own iso-surface, at most this "
          "many voxels along the approximation's gradient (0: keep the approximation's surface; needs the "
          "volume; surfaces from the samples are on it already)")
-      ->check(CLI::Range(0.0, 8.0))
       ->capture_default_str();
   cmd->add_option("--min-component", p.min_component,
                   "drop connected parts of a surface whose vertices lie in fewer than this many voxels "
@@ -122,16 +108,13 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "vertex normals: gradient (the approximation's gradients, the paper's; kept through "
                   "--simplify), surface (area-weighted from the written triangles; smaller Draco files) "
                   "or auto (gradient, surface after --simplify/--decimate)")
-      ->check(CLI::IsMember(pipeline::enum_name_list<Normals>()))
       ->capture_default_str();
   cmd->add_option("--z-scale", p.z_scale, "2D height fields: height per data unit")->capture_default_str();
-  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)")
-      ->check(CLI::Range(-1, 40));
+  cmd->add_option("--level", p.level, "extract on this hierarchy level (-1: finest)");
   cmd->add_option("--surface", p.surface,
                   "3D surfaces from: samples (marching cubes on the volume's samples, the hierarchy's finest "
                   "level without building it), hierarchy (marching tetrahedra on the hierarchy's level, the "
                   "paper's) or auto (samples when the volume is at hand and the finest level is asked)")
-      ->check(CLI::IsMember(pipeline::enum_name_list<SurfaceSource>()))
       ->capture_default_str();
 }
 
@@ -217,13 +200,13 @@ void print_warnings(const std::vector<std::string>& warnings) {
 BuildOptions build_options(const BuildParams& p) {
   BuildOptions o;
   // --threshold replaces --rms, whose text is then not read.
-  if (!p.rms.empty() && p.threshold <= 0) o.rms = pipeline::parse_rms(p.rms, "--rms");
+  if (!p.rms.empty() && p.threshold <= 0) o.rms = pipeline::parse_rms(p.rms, "rms");
   o.threshold = p.threshold;
   o.max_vertices = p.max_vertices;
   o.max_level = p.max_level;
   o.start_level = p.start_level;
-  o.norm = pipeline::parse_enum<Norm>(p.norm, "--norm");
-  o.preconditioner = pipeline::parse_enum<Preconditioner>(p.preconditioner, "--preconditioner");
+  o.norm = pipeline::parse_enum<Norm>(p.norm, "norm");
+  o.preconditioner = pipeline::parse_enum<Preconditioner>(p.preconditioner, "preconditioner");
   o.surface_tolerance = p.surface_tolerance;
   o.check_against_u = p.check_against_u;
   o.max_memory = parse_memory_budget(p.max_memory);
@@ -261,7 +244,7 @@ void warn_if_memory_limited(const Built& b, const std::string& source, const std
 
 AssetOptions asset_options(const AssetParams& p) {
   AssetOptions o;
-  if (!p.iso.empty()) o.iso = parse_values(p.iso, "--iso");
+  if (!p.iso.empty()) o.iso = parse_values(p.iso, "iso");
   o.tolerance = p.tolerance;
   o.draco = !p.no_draco;
   o.quantize = p.quantize;
@@ -269,15 +252,15 @@ AssetOptions asset_options(const AssetParams& p) {
   o.decimate = p.decimate;
   o.simplify = p.simplify;
   o.ratio = p.ratio;
-  o.simplifier = pipeline::parse_enum<Simplifier>(p.simplifier, "--simplifier");
+  o.simplifier = pipeline::parse_enum<Simplifier>(p.simplifier, "simplifier");
   o.snap = p.snap;
   o.min_component = p.min_component;
   o.normals_toward_higher = p.normals_toward_higher;
-  o.normals = pipeline::parse_enum<Normals>(p.normals, "--normals");
-  o.placement = pipeline::parse_enum<VertexPlacement>(p.placement, "--placement");
+  o.normals = pipeline::parse_enum<Normals>(p.normals, "normals");
+  o.placement = pipeline::parse_enum<VertexPlacement>(p.placement, "placement");
   o.z_scale = p.z_scale;
   o.level = p.level;
-  o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "--surface");
+  o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "surface");
   return o;
 }
 

@@ -5,6 +5,7 @@
 // mlfe::Error with a one-line message; nothing is printed (progress goes to the callbacks).
 #pragma once
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/usage_error.h>
 #include <mlfe/core/fem/approximation.h>
 #include <mlfe/core/fem/hierarchy_resample.h>
 #include <mlfe/core/field/scalar_grid.h>
@@ -24,6 +25,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -417,15 +419,89 @@ using mlfe::Cancelled;
 using mlfe::CancelToken;
 using mlfe::Progress;
 
+// ---- the options by name: one table for the library, the command line and Python ----
+
+/// Who names an option in a message.
+enum class Spelling {
+  kLibrary,      ///< the options struct's field: "max_level", "smoothing_iterations"
+  kCommandLine,  ///< the flag: "--max-level", "--smooth-iterations"
+  kPython,       ///< the keyword: "max_level", "smooth_iterations"
+};
+
+/// One option of the calls, its names and the values it takes: numbers in [min, max] (an end
+/// left out with min_excluded / max_excluded; finite either way), an enum's names (choices),
+/// or neither (the option has a parse function, or no values to check).
+struct OptionSpec {
+  const char* name;  ///< the library's: the field of the options struct
+  const char* flag;  ///< the command line's
+  double min = -std::numeric_limits<double>::infinity();
+  double max = std::numeric_limits<double>::infinity();
+  bool min_excluded = false, max_excluded = false;
+  const char* keyword = nullptr;                    ///< Python's, when it differs from name
+  std::vector<std::string> (*choices)() = nullptr;  ///< enum_name_list<E> of an enum option
+
+  /// The option as `s` spells it.
+  const char* spelled(Spelling s) const;
+  /// What it takes, as messages and the command line's help say it: "0..40", "a finite value
+  /// >= 0", "one of l2, h1"; "" for neither a range nor choices.
+  std::string values() const;
+};
+
+/// Every option that has a range or choices or that a message names, once. A new ranged option
+/// is a row here and a check_option call where the library takes its value.
+const std::vector<OptionSpec>& option_table();
+/// The row of the library's `name`; a name the table lacks is a bug (CHECK).
+const OptionSpec& option_spec(const std::string& name);
+/// The row whose flag is `flag`, or nullptr.
+const OptionSpec* option_by_flag(const std::string& flag);
+
+/// `name` (a row of the table) marked in a message, so that each front end reads it in its own
+/// spelling (OptionMessage); the library's what() shows `name`.
+std::string option_ref(const std::string& name);
+
+/// A message that names options (option_ref), in each front end's spelling.
+class OptionMessage {
+ public:
+  std::string spelled(Spelling s) const;
+
+ protected:
+  explicit OptionMessage(std::string marked) : marked_(std::move(marked)) {}
+
+ private:
+  std::string marked_;
+};
+
+/// A bad option value, or options that cannot go together (a usage error).
+class OptionError : public UsageError, public OptionMessage {
+ public:
+  explicit OptionError(const std::string& marked)
+      : UsageError(spell_marked(marked, Spelling::kLibrary)), OptionMessage(marked) {}
+  /// The message `marked` (option_ref) as `s` spells its options.
+  static std::string spell_marked(const std::string& marked, Spelling s);
+};
+
+/// An mlfe::Error (bad input, not usage) whose message names options: an iso-value the data
+/// never crosses, an option the input cannot take.
+class OptionInputError : public Error, public OptionMessage {
+ public:
+  explicit OptionInputError(const std::string& marked)
+      : Error(OptionError::spell_marked(marked, Spelling::kLibrary)), OptionMessage(marked) {}
+};
+
+/// The message of `e` as `s` spells options: OptionMessage's, else e.what().
+std::string message(const std::exception& e, Spelling s);
+
+/// Throws OptionError naming `name` unless `value` is in its row's range.
+void check_option(const std::string& name, double value);
+
 // ---- the option vocabulary: one parse function per option type, for the CLI and Python ----
-// `option` names the option in messages as the caller spells it ("--max-memory" on the command
-// line, "max_memory" in Python). Each throws mlfe::UsageError on bad text.
+// `option` is the option's name in the table; each throws OptionError naming it on bad text.
 
 /// "50%" (of the machine's RAM), bytes with an optional K/M/G suffix ("6G", "512m", "1000"),
 /// or "0" (no budget).
-MemoryBudget parse_memory_budget(const std::string& text, const std::string& option = "--max-memory");
+MemoryBudget parse_memory_budget(const std::string& text, const std::string& option = "max_memory");
 /// "0.5%" (of the value range) or an absolute value "2.0"; positive.
-RmsTarget parse_rms(const std::string& text, const std::string& option = "--rms");
+RmsTarget parse_rms(const std::string& text, const std::string& option = "rms");
 /// "2%" or "2": a non-negative percentage.
 double parse_percent(const std::string& text, const std::string& option);
 /// "80,150": finite numbers, comma separated (empty text: none).
@@ -433,7 +509,7 @@ std::vector<double> parse_values(const std::string& text, const std::string& opt
 /// "x,y,z": exactly three finite numbers.
 std::array<double, 3> parse_vector3(const std::string& text, const std::string& option);
 /// "WxH", 1..16384 each.
-std::array<int, 2> parse_image_size(const std::string& text, const std::string& option = "--size");
+std::array<int, 2> parse_image_size(const std::string& text, const std::string& option = "size");
 
 /// The projection of render's camera.
 enum class Projection { kOrtho, kPerspective };
@@ -450,7 +526,7 @@ struct EnumName {
 template <class E>
 const std::vector<EnumName<E>>& enum_names();
 
-/// The value named `text`; throws mlfe::UsageError naming `option` and the choices otherwise.
+/// The value named `text`; throws OptionError naming `option` and the choices otherwise.
 template <class E>
 E parse_enum(const std::string& text, const std::string& option);
 /// The name of `value`.
@@ -704,6 +780,18 @@ struct ExportResult {
 /// .vdb) or its leaf mesh with values and levels (.vtu .msh), in the file's frame.
 ExportResult export_hierarchy(const std::string& input, const std::string& output,
                               const ExportOptions& options = {});
+
+// ---- option checks ----
+// Each call checks its options with these before any work: every value in its row's range in
+// option_table(), and the pairs that cannot go together. Each throws OptionError.
+
+void check_options(const BuildOptions& o);
+void check_options(const AssetOptions& o);
+void check_options(const LabelOptions& o);
+/// With o.build (a volume input is built first); `level` against the hierarchy is render's own.
+void check_options(const RenderFileOptions& o);
+/// With o.build.
+void check_options(const BuildFileOptions& o);
 
 // ---- compare ----
 

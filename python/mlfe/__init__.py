@@ -33,11 +33,9 @@ the callback, or Ctrl-C, cancels the same way and is raised as it is.
 """
 from __future__ import annotations
 
-import functools
 import math
 import numbers
 import os
-import re
 
 import numpy as np
 
@@ -69,35 +67,6 @@ __all__ = [
 ]
 
 _SPACES = ("", "RAS", "LPS")
-
-
-# ---------------------------------------------------------------------------------------------
-# Messages: the library shares its checks with the command line, whose messages name flags
-# (--max-level); Python callers see the keyword (max_level) instead.
-_FLAG = re.compile(r"(?<![\w/.-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
-_ISO_EXAMPLE = re.compile(r"e\.g\. --iso ([0-9.,]+)")
-
-
-def _keyword_message(text):
-    text = _ISO_EXAMPLE.sub(lambda m: "e.g. iso=[%s]" % m.group(1).replace(",", ", "), text)
-    return _FLAG.sub(lambda m: m.group(1).replace("-", "_"), text)
-
-
-def _library_call(f):
-    """Runs a call into the extension, rewording command-line flags in its errors."""
-
-    @functools.wraps(f)
-    def wrapper(*args, **kwargs):
-        try:
-            return f(*args, **kwargs)
-        except Error as e:
-            text = str(e)
-            fixed = _keyword_message(text)
-            if fixed == text:
-                raise
-            raise Error(fixed) from None
-
-    return wrapper
 
 
 # ---------------------------------------------------------------------------------------------
@@ -336,7 +305,6 @@ class Mesh:
     def space(self):
         return self._m.space
 
-    @_library_call
     def write(self, path, *, draco=True, quantize=False, tolerance=0.0):
         """Writes the surfaces by extension: .glb/.gltf (one node per surface; Draco unless
         ``draco=False``, ``quantize`` for KHR_mesh_quantization), .drc, .ply, .obj, .stl, .off
@@ -367,7 +335,7 @@ class Hierarchy:
     def __init__(self, source):
         path = _fspath(source)
         if path is not None:
-            source = _library_call(_mlfe.load)(path)
+            source = _mlfe.load(path)
         elif not isinstance(source, _mlfe.Hierarchy):
             raise Error("Hierarchy: expected a .mlfeh path (or use mlfe.build), got %r" % (source,))
         self._h = source
@@ -439,7 +407,6 @@ class Hierarchy:
         info = self._h.file_info
         return {} if info is None else info.get("metadata", {})
 
-    @_library_call
     def extract(self, iso=None, *, progress=None, **options):
         """The iso-surfaces at ``iso`` (a number or a list) as a :class:`Mesh`, extracted as
         ``mlfe iso``/``mlfe convert`` do. Options (the command line's, as keywords): simplify,
@@ -450,7 +417,6 @@ class Hierarchy:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
         return Mesh(self._h.extract(isos or [], progress, **options))
 
-    @_library_call
     def write(self, path, *, iso=None, progress=None, **options):
         """Extracts and writes the surfaces to ``path`` by extension, as ``mlfe iso``; returns
         the asset summary. Options as :meth:`extract` plus tolerance, draco, quantize, lod."""
@@ -463,7 +429,6 @@ class Hierarchy:
         """Ray-casts u through the tetrahedral mesh, as ``mlfe render``; see :func:`render`."""
         return render(self, out, progress=progress, **options)
 
-    @_library_call
     def export(self, path, *, level=-1, progress=None):
         """Writes the approximation as ``mlfe export`` does: on the voxel grid it was built from
         (.nii.gz .nii .nrrd .raw .vdb) or as its leaf mesh with values and levels (.vtu .msh), in
@@ -482,7 +447,6 @@ class Hierarchy:
             if os.path.exists(tmp):
                 os.remove(tmp)
 
-    @_library_call
     def save(self, path):
         """Writes the hierarchy file (.mlfeh), as ``mlfe build -o``."""
         self._h.save(os.fspath(path))
@@ -494,7 +458,6 @@ class Hierarchy:
 
 
 # ---------------------------------------------------------------------------------------------
-@_library_call
 def read_volume(path):
     """Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png) as a
     :class:`Volume` in the file's frame: values float32 indexed ``[i, j, k]`` (a view of the
@@ -505,14 +468,12 @@ def read_volume(path):
                   info={k: info[k] for k in ("format", "source_type", "notes")})
 
 
-@_library_call
 def load(path):
     """Loads a hierarchy file (.mlfeh) written by ``mlfe build``/``convert --hierarchy`` or
     :meth:`Hierarchy.save`."""
     return Hierarchy(_mlfe.load(os.fspath(path)))
 
 
-@_library_call
 def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None, progress=None,
           **options):
     """Builds the adaptive approximation of ``volume`` as ``mlfe build`` does: a volume file, a
@@ -526,7 +487,6 @@ def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine
     return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), progress=progress, **frame, **options))
 
 
-@_library_call
 def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
             hierarchy=None, report=None, progress=None, **options):
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
@@ -575,7 +535,6 @@ class CompareResult:
             self.kind, len(self.differences), "; ".join("%s: %s" % d for d in self.differences[:3]))
 
 
-@_library_call
 def compare(expected, actual, **options):
     """Compares two outputs by content, as ``mlfe compare EXPECTED ACTUAL``: files (meshes,
     glTF, EXR/PNG images, volumes, hierarchies; the kind from their contents) or two
@@ -597,7 +556,6 @@ def compare(expected, actual, **options):
     return CompareResult(*_mlfe.compare_files(os.fspath(expected), os.fspath(actual), **options))
 
 
-@_library_call
 def read_image(path):
     """Reads an OpenEXR (as ``mlfe render`` writes: half R, G, B, A premultiplied and float Z)
     or PNG image: a dict with ``format``, ``channels`` (name → float32 array (height, width),
@@ -642,7 +600,6 @@ class RenderResult:
             f["width"], f["height"], len(self.frames), self.tetrahedra, self.written)
 
 
-@_library_call
 def render(source, out=None, *, progress=None, **options):
     """Ray-cast images, as ``mlfe render``: ``source`` a :class:`Hierarchy`, a ``.mlfeh`` file,
     a volume (file, :class:`Volume`, array with its frame keywords), built first with the
@@ -678,7 +635,6 @@ def render(source, out=None, *, progress=None, **options):
     return RenderResult(_mlfe.render(h._h, None if out is None else os.fspath(out), progress, **render_opts))
 
 
-@_library_call
 def export(hierarchy, out, *, level=-1, progress=None):
     """``mlfe export``: a hierarchy (file or :class:`Hierarchy`) on its voxel grid or as its
     leaf mesh; see :meth:`Hierarchy.export`."""
@@ -691,7 +647,6 @@ def export(hierarchy, out, *, level=-1, progress=None):
     return _mlfe.export_hierarchy(path, os.fspath(out), int(level), progress)
 
 
-@_library_call
 def info(source, *, labels=False, label_table=None):
     """What a volume or hierarchy holds, as ``mlfe info --json`` prints it: for a file (read by
     its contents), a dict with format, dims, spacing, origin, direction, space, type, range,

@@ -92,8 +92,40 @@ TEST(PipelineVocabulary, SizesPercentagesListsAndEnumsParseOneWay) {
   EXPECT_EQ(message([] { pipeline::parse_rms("-1%", "rms"); }).rfind("rms:", 0), 0u);
   EXPECT_EQ(message([] { pipeline::parse_values("1,x", "iso"); }).rfind("iso:", 0), 0u);
   EXPECT_EQ(message([] { pipeline::parse_vector3("1,2", "up"); }).rfind("up:", 0), 0u);
-  EXPECT_EQ(message([] { pipeline::parse_image_size("0x3"); }).rfind("--size:", 0), 0u);
+  EXPECT_EQ(message([] { pipeline::parse_image_size("0x3"); }).rfind("size:", 0), 0u);
   EXPECT_NE(message([] { pipeline::parse_enum<Norm>("l3", "norm"); }).find("l2, h1"), std::string::npos);
+}
+
+// One table names every option: the library's messages use its names, and each front end reads
+// them in its own spelling.
+TEST(PipelineCalls, OptionMessagesInEachFrontEndsSpelling) {
+  LabelOptions o;
+  o.smoothing_iterations = 1001;
+  try {
+    pipeline::check_options(o);
+    ADD_FAILURE() << "no error";
+  } catch (const UsageError& e) {
+    EXPECT_STREQ(e.what(), "smoothing_iterations: expected 0..1000, got 1001");
+    EXPECT_EQ(pipeline::message(e, pipeline::Spelling::kCommandLine),
+              "--smooth-iterations: expected 0..1000, got 1001");
+    EXPECT_EQ(pipeline::message(e, pipeline::Spelling::kPython),
+              "smooth_iterations: expected 0..1000, got 1001");
+  }
+  pipeline::RenderFileOptions r;
+  r.build.surface_tolerance = 0;
+  try {
+    pipeline::check_options(r);
+    ADD_FAILURE() << "no error";
+  } catch (const UsageError& e) {
+    EXPECT_EQ(pipeline::message(e, pipeline::Spelling::kCommandLine),
+              "--surface-tolerance: expected a finite value > 0, got 0");
+  }
+  for (const auto& spec : pipeline::option_table()) {
+    EXPECT_EQ(&pipeline::option_spec(spec.name), &spec) << spec.name << " is named twice";
+    EXPECT_EQ(std::string(spec.flag).rfind("--", 0), 0u) << spec.flag;
+  }
+  EXPECT_EQ(pipeline::option_spec("quantization_share").values(), "a value in [0, 1)");
+  EXPECT_EQ(pipeline::option_spec("norm").values(), "one of l2, h1");
 }
 
 TEST(PipelineCalls, ConvertReportsOrderedFractionsAndGivesTheCommandLinesBytes) {

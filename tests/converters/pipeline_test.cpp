@@ -130,15 +130,15 @@ TEST(Pipeline, BadInputThrowsBeforeWriting) {
   short_grid.dims = {4, 4, 8};
   short_grid.values.resize(100);
   expect_error([&] { convert(short_grid, out, o); }, "100 values do not fill dims 4x4x8");
-  expect_error([&] { convert(kSkull, out, ConvertOptions{}); }, "--iso is required");
+  expect_error([&] { convert(kSkull, out, ConvertOptions{}); }, "iso is required");
   expect_error([&] { convert(kSkull, scratch() + "/no/such/folder/x.glb", o); }, "does not exist");
   expect_error([&] { convert(kSkull, scratch() + "/x.xyz", o); }, "unknown output type '.xyz'");
   ConvertOptions bad = o;
   bad.build.max_level = 41;
-  expect_error([&] { convert(kSkull, out, bad); }, "--max-level");
+  expect_error([&] { convert(kSkull, out, bad); }, "max_level: expected 0..40, got 41");
   bad = o;
   bad.build.rms = RmsTarget{-1, true};
-  expect_error([&] { convert(kSkull, out, bad); }, "--rms");
+  expect_error([&] { convert(kSkull, out, bad); }, "rms: expected one positive value");
   bad = o;
   bad.asset.lod = 9;
   expect_error([&] { convert(kSkull, out, bad); }, "lod");
