@@ -1,6 +1,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/mesh_distance.h>
+#include <mlfe/core/surface/triangle_mesh.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/gltf_reader.h>
@@ -704,21 +705,10 @@ CompareResult compare_files(const std::string& expected, const std::string& actu
       // A glTF against a plain mesh file: all primitives of the glTF merged into one mesh.
       auto load = [](const std::string& path, Kind k) {
         if (k != Kind::kGltf) return read_any_mesh(path);
-        TriangleMesh merged;
-        bool normals = true;
         const GltfAsset asset = read_gltf(path);
-        for (const auto& p : asset.primitives) normals = normals && !p.mesh_data.normals.empty();
-        for (const auto& p : asset.primitives) {
-          const auto base = std::uint32_t(merged.positions.size());
-          merged.positions.insert(merged.positions.end(), p.mesh_data.positions.begin(),
-                                  p.mesh_data.positions.end());
-          if (normals)
-            merged.normals.insert(merged.normals.end(), p.mesh_data.normals.begin(),
-                                  p.mesh_data.normals.end());
-          for (auto t : p.mesh_data.triangles)
-            merged.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-        }
-        return merged;
+        std::vector<const TriangleMesh*> parts;
+        for (const auto& p : asset.primitives) parts.push_back(&p.mesh_data);
+        return merge_meshes(parts);
       };
       r = compare_meshes(load(expected, ke), load(actual, ka), options, "");
       break;

@@ -4,12 +4,11 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/labels/label_surface.h>
 #include <mlfe/core/simplify/simplifier.h>
+#include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/label_table.h>
-#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 
@@ -155,28 +154,6 @@ Structures structure_surfaces(const LabelInterfaces& x, const std::vector<std::u
   return out;
 }
 
-// One glTF scene of every structure, or the single structure's mesh in any other format.
-void write_structures(const std::string& out, const std::vector<GltfSurface>& surfaces, const LabelOptions& o,
-                      double tol, const nlohmann::json& provenance, const std::string& space) {
-  const std::string ext = lower_extension(out);
-  if (ext == ".glb" || ext == ".gltf") {
-    GltfOptions go;
-    go.draco = o.draco;
-    go.quantize = o.quantize;
-    go.tolerance_mm = tol;
-    go.space = space;
-    go.extras = provenance;
-    go.extras["tolerance_mm"] = tol;
-    write_gltf(out, surfaces, go);
-  } else if (ext == ".drc") {
-    DracoOptions d;
-    d.tolerance = tol;
-    write_draco_file(out, surfaces.front().mesh, d);
-  } else {
-    write_mesh_file(out, surfaces.front().mesh);
-  }
-}
-
 }  // namespace
 
 nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, const LabelOptions& o,
@@ -247,7 +224,8 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
                          {"simplify_voxels", o.simplify},
                          {"min_component_voxels", o.min_component}};
   if (provenance.is_object()) prov.merge_patch(provenance);
-  write_structures(out, st.surfaces, o, tol, prov, grid.space);
+  // One glTF scene of every structure, or the single structure's mesh (checked above).
+  write_asset(st.surfaces, out, {o.draco, o.quantize, tol, grid.space, prov});
   const double write_s = seconds_since(t4);
 
   nlohmann::json removed_json = nlohmann::json::object();

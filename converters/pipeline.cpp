@@ -5,8 +5,8 @@
 #include <mlfe/core/field/noise_estimate.h>
 #include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
@@ -28,8 +28,6 @@
 namespace mlfe {
 
 namespace fs = std::filesystem;
-
-const std::vector<std::string> kAssetExtensions = {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"};
 
 void check_output_path(const std::string& path, const std::vector<std::string>& extensions) {
   const std::string ext = lower_extension(path);
@@ -409,19 +407,7 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
   return r;
 }
 
-namespace {
-
-TriangleMesh merge(const std::vector<GltfSurface>& surfaces) {
-  TriangleMesh m;
-  for (const auto& s : surfaces) {
-    const TriangleMesh& p = s.mesh;
-    const auto base = static_cast<std::uint32_t>(m.positions.size());
-    m.positions.insert(m.positions.end(), p.positions.begin(), p.positions.end());
-    m.normals.insert(m.normals.end(), p.normals.begin(), p.normals.end());
-    for (auto t : p.triangles) m.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
-  return m;
-}
+namespace {}
 
 // The voxel size tolerances are expressed in: the smallest spacing of the data's axes (mm).
 double smallest_spacing(const GridTransform& t, int dim) {
@@ -550,7 +536,6 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
                             const nlohmann::json& provenance, const ScalarGrid* grid) {
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
-  const std::string ext = lower_extension(out);
   const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim()) / 10.0;
 
   // Extraction and simplification take most of the time, writing (Draco encoding) the rest.
@@ -586,35 +571,18 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
     }
     total += s.mesh.triangles.size();
   }
-  if (ext == ".glb" || ext == ".gltf") {
-    GltfOptions o;
-    o.draco = p.draco;
-    o.quantize = p.quantize;
-    o.tolerance_mm = tol;
-    o.space = b.space;
-    o.extras = provenance;
-    o.extras["tolerance_mm"] = tol;
-    o.extras["iso_values"] = extracted.iso_values;
-    o.extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
-    o.extras["simplify_voxels"] = p.simplify;
-    if (p.simplify > 0) o.extras["simplifier"] = to_string(p.simplifier);
-    if (p.simplify > 0 && b.dim() == 3) o.extras["simplify_ratio"] = p.ratio;
-    if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
-      o.extras["placement"] = to_string(extracted.placement);
-    o.extras["normals"] = to_string(extracted.normals);
-    if (b.dim() == 3) o.extras["surface"] = to_string(extracted.source);
-    write_gltf(out, surfaces, o);
-  } else {
-    // Single-mesh formats: all surfaces in one mesh.
-    const TriangleMesh all = merge(surfaces);
-    if (ext == ".drc") {
-      DracoOptions o;
-      o.tolerance = tol;
-      write_draco_file(out, all, o);
-    } else {
-      write_mesh_file(out, all);
-    }
-  }
+  // The glTF's asset.extras (the other formats have no place for them).
+  nlohmann::json extras = provenance;
+  extras["iso_values"] = extracted.iso_values;
+  extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
+  extras["simplify_voxels"] = p.simplify;
+  if (p.simplify > 0) extras["simplifier"] = to_string(p.simplifier);
+  if (p.simplify > 0 && b.dim() == 3) extras["simplify_ratio"] = p.ratio;
+  if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
+    extras["placement"] = to_string(extracted.placement);
+  extras["normals"] = to_string(extracted.normals);
+  if (b.dim() == 3) extras["surface"] = to_string(extracted.source);
+  write_asset(surfaces, out, {p.draco, p.quantize, tol, b.space, extras});
   report.finish("writing");
   summary["output"] = out;
   if (b.dim() == 3) summary["surface"] = to_string(extracted.source);

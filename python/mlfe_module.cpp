@@ -6,10 +6,8 @@
 // owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
 #include <mlfe/core/base/error.h>
-#include <mlfe/formats/draco_io.h>
-#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
-#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
 #include <mlfe/version.h>
@@ -282,47 +280,18 @@ struct PyBuilt {
 // Extracted surfaces (one per iso-value, or the height field) with what writing them needs.
 struct PyMesh {
   std::vector<GltfSurface> surfaces;
-  TriangleMesh merged;  // all surfaces in one mesh, as the single-mesh formats store them
+  TriangleMesh merged;  // merged_mesh(surfaces): what the single-mesh formats store
   std::string space;
   double default_tolerance = 0;  // a tenth of the smallest voxel spacing
   nlohmann::json extras;         // provenance for glTF
 };
 
-TriangleMesh merge_surfaces(const std::vector<GltfSurface>& surfaces) {
-  TriangleMesh all;
-  for (const auto& s : surfaces) {
-    const auto base = std::uint32_t(all.positions.size());
-    all.positions.insert(all.positions.end(), s.mesh.positions.begin(), s.mesh.positions.end());
-    all.normals.insert(all.normals.end(), s.mesh.normals.begin(), s.mesh.normals.end());
-    for (const auto& t : s.mesh.triangles) all.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
-  if (all.normals.size() != all.positions.size()) all.normals.clear();
-  return all;
-}
-
-// Writes extracted surfaces by extension as write_assets does: glTF with one node per surface,
-// the other formats one merged mesh.
+// Writes extracted surfaces as write_assets does (write_asset), with the extraction's default tolerance.
 void write_mesh(const PyMesh& m, const std::string& path, bool draco, bool quantize, double tolerance) {
   check_output_path(path, kAssetExtensions);
   if (!(tolerance >= 0)) throw Error("tolerance: expected a value >= 0");
   const double tol = tolerance > 0 ? tolerance : m.default_tolerance;
-  const std::string ext = lower_extension(path);
-  if (ext == ".glb" || ext == ".gltf") {
-    GltfOptions o;
-    o.draco = draco;
-    o.quantize = quantize;
-    o.tolerance_mm = tol;
-    o.space = m.space;
-    o.extras = m.extras;
-    o.extras["tolerance_mm"] = tol;
-    write_gltf(path, m.surfaces, o);
-  } else if (ext == ".drc") {
-    DracoOptions o;
-    o.tolerance = tol;
-    write_draco_file(path, m.merged, o);
-  } else {
-    write_mesh_file(path, m.merged);
-  }
+  write_asset(m.surfaces, path, {draco, quantize, tol, m.space, m.extras});
 }
 
 // Leaf simplices of `b` as an (m, dim + 1) array of vertex indices.
@@ -741,7 +710,7 @@ void bind_hierarchy(py::module_& m) {
                              {"iso_values", s.iso_values},
                              {"normals", pipeline::enum_name(s.normals)}};
              mesh->surfaces = std::move(s.surfaces);
-             mesh->merged = merge_surfaces(mesh->surfaces);
+             mesh->merged = merged_mesh(mesh->surfaces);
              mesh->space = b.built->space;
              const auto& sp = b.built->transform.spacing;
              mesh->default_tolerance =
@@ -890,6 +859,7 @@ PYBIND11_MODULE(_mlfe, m) {
       "The compiled core of the mlfe package; use the package `mlfe`, which documents and checks its "
       "arguments.";
   m.attr("__version__") = MLFE_VERSION;
+  m.attr("asset_extensions") = py::tuple(py::cast(kAssetExtensions));  // for mlfe.batch's checks
   static PyObject* const error = py::register_exception<Error>(m, "Error", PyExc_ValueError).ptr();
   // Registered after Error (pybind11 tries the later translators first): messages that name
   // options name them by their keywords, from the library's table.

@@ -1,5 +1,5 @@
-// Area-weighted vertex normals of an indexed triangle mesh, its spatial (Morton) order, and its
-// topology counted.
+// Area-weighted vertex normals of an indexed triangle mesh, meshes merged into one, its spatial
+// (Morton) order, and its topology counted.
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/triangle_mesh.h>
@@ -23,6 +23,32 @@
 namespace mlfe {
 
 using Vec3 = Eigen::Vector3d;
+
+TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts) {
+  TriangleMesh all;
+  std::size_t vertices = 0, triangles = 0;
+  for (const TriangleMesh* p : parts) {
+    MLFE_CHECK(p);
+    vertices += p->positions.size();
+    triangles += p->triangles.size();
+  }
+  if (vertices > std::numeric_limits<std::uint32_t>::max())
+    throw Error("merging meshes: " + std::to_string(vertices) + " vertices do not fit 32-bit indices");
+  all.positions.reserve(vertices);
+  all.triangles.reserve(triangles);
+  for (const TriangleMesh* p : parts) {
+    const auto base = std::uint32_t(all.positions.size());
+    all.positions.insert(all.positions.end(), p->positions.begin(), p->positions.end());
+    all.normals.insert(all.normals.end(), p->normals.begin(), p->normals.end());
+    for (const auto& t : p->triangles) all.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  // Dropped rather than kept misaligned: a writer rejects a normal count that is neither 0 nor
+  // one per position, and glTF readers give NORMAL to some primitives only. The assets' own
+  // surfaces never get here with mixed normals (every extraction path gives each vertex one,
+  // and the label pipeline merges a single structure), so no written file changes by this.
+  if (all.normals.size() != all.positions.size()) all.normals.clear();
+  return all;
+}
 
 TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   const std::size_t nv = mesh.positions.size();

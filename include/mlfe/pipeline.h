@@ -14,6 +14,7 @@
 #include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
 #include <mlfe/core/surface/triangle_mesh.h>
+#include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/tet_mesh_reader.h>
@@ -308,11 +309,8 @@ Surfaces extract(const Built& b, const AssetOptions& o, const ScalarGrid* grid =
 /// that its folder exists; throws mlfe::Error naming the path otherwise.
 void check_output_path(const std::string& path, const std::vector<std::string>& extensions);
 
-/// The output types of write_assets.
-extern const std::vector<std::string> kAssetExtensions;
-
-/// Extracts the surfaces of `b` (extract()) and writes them to `out` by extension (.glb .gltf
-/// .drc .ply .obj .stl .off; one merged mesh for the single-mesh formats), atomically.
+/// Extracts the surfaces of `b` (extract()) and writes them to `out` with write_asset
+/// (<mlfe/formats/asset_writer.h>: by extension, one of kAssetExtensions), atomically.
 /// `provenance` goes into the glTF's extras. Returns a JSON summary (triangles per surface,
 /// bytes, seconds).
 nlohmann::json write_assets(const std::string& out, const Built& b, const AssetOptions& o,

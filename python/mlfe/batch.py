@@ -193,8 +193,8 @@ def convert(inputs, out_dir, *, iso=None, asset_ext=".glb", hierarchy=False, rep
     .drc .ply .obj .stl .off); ``scheduler`` None (a LocalCluster of ``n_workers`` processes),
     an address or a ``distributed.Client``; ``on_row(row)`` is called as each scan finishes.
     See the module documentation for names, resuming and the summary."""
-    if asset_ext.lower() not in (".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"):
-        raise mlfe.Error("asset_ext: expected .glb .gltf .drc .ply .obj .stl .off, got %r" % asset_ext)
+    if asset_ext.lower() not in mlfe._mlfe.asset_extensions:
+        raise mlfe.Error("asset_ext: expected %s, got %r" % (" ".join(mlfe._mlfe.asset_extensions), asset_ext))
     for key in ("hierarchy", "report", "out"):
         if key in options:
             raise mlfe.Error("%s: the batch names each scan's outputs (see hierarchy=True, report=True)" % key)

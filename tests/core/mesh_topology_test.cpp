@@ -1,5 +1,5 @@
 // mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone;
-// spatially_ordered keeps the surface.
+// spatially_ordered keeps the surface; merge_meshes.
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/triangle_mesh.h>
@@ -18,12 +18,6 @@ TriangleMesh tetrahedron(float dx = 0) {
   m.positions = {{dx, 0, 0}, {dx + 1, 0, 0}, {dx, 1, 0}, {dx, 0, 1}};
   m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
   return m;
-}
-
-void append(TriangleMesh& a, const TriangleMesh& b) {
-  const auto base = static_cast<std::uint32_t>(a.positions.size());
-  a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
-  for (auto t : b.triangles) a.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
 }
 
 TEST(MeshTopology, ClosedTetrahedronIsWeldedAndManifold) {
@@ -59,9 +53,9 @@ TEST(MeshTopology, FinsAndPinchesAreNonManifold) {
   EXPECT_TRUE(bad[0] && bad[1] && !bad[2] && !bad[3] && !bad[4]);
 
   // Two tetrahedra touching at one vertex (welded by position): a pinched vertex.
-  TriangleMesh pinch = tetrahedron();
-  TriangleMesh other = tetrahedron(-1);  // its vertex 1 is at the first one's vertex 0
-  append(pinch, other);
+  const TriangleMesh one = tetrahedron();
+  const TriangleMesh other = tetrahedron(-1);  // its vertex 1 is at the first one's vertex 0
+  const TriangleMesh pinch = merge_meshes({&one, &other});
   const MeshTopology p = mesh_topology(pinch);
   EXPECT_EQ(p.duplicate_vertices, 1u);
   EXPECT_EQ(p.non_manifold_vertices, 1u);
@@ -137,6 +131,31 @@ TEST(SpatiallyOrdered, KeepsEveryTriangleAndItsOrientation) {
               *std::min_element(o.triangles[f].begin(), o.triangles[f].end()));
   m.triangles.push_back({0, 1, std::uint32_t(m.positions.size())});
   EXPECT_THROW(spatially_ordered(m), Error);
+}
+
+TEST(MergeMeshes, AppendsInOrderWithShiftedTriangles) {
+  TriangleMesh a = tetrahedron(), b = tetrahedron(5);
+  compute_area_weighted_normals(a);
+  compute_area_weighted_normals(b);
+  const TriangleMesh empty;
+  const TriangleMesh m = merge_meshes({&a, &empty, &b});
+  ASSERT_EQ(m.positions.size(), 8u);
+  ASSERT_EQ(m.normals.size(), 8u);
+  ASSERT_EQ(m.triangles.size(), 8u);
+  EXPECT_EQ(m.positions[4], b.positions[0]);
+  EXPECT_EQ(m.normals[5], b.normals[1]);
+  EXPECT_EQ(m.triangles[3], a.triangles[3]);
+  EXPECT_EQ(m.triangles[7], (std::array<std::uint32_t, 3>{5, 6, 7}));
+  EXPECT_TRUE(merge_meshes({}).positions.empty());
+}
+
+TEST(MergeMeshes, DropsNormalsThatSomeVerticesLack) {
+  TriangleMesh a = tetrahedron();
+  const TriangleMesh b = tetrahedron(5);
+  compute_area_weighted_normals(a);
+  const TriangleMesh m = merge_meshes({&a, &b});
+  EXPECT_EQ(m.positions.size(), 8u);
+  EXPECT_TRUE(m.normals.empty());
 }
 
 }  // namespace

@@ -23,6 +23,12 @@ struct TriangleMesh {
 /// triangle indices out of range.
 void compute_area_weighted_normals(TriangleMesh& mesh);
 
+/// The parts in one mesh, in order: positions appended, each part's triangles shifted by the
+/// vertices before it. Normals are kept when every vertex has one and dropped otherwise, so the
+/// result is a valid TriangleMesh even when only some parts carry normals. Throws mlfe::Error
+/// when the vertices do not fit 32-bit indices. (CHECKs that no part is null.)
+TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts);
+
 /// The same surface with its vertices in Morton (Z-curve) order of their positions on a 1024³
 /// grid over the bounding box (ties in input order) and its triangles ordered by their first
 /// vertex in that order (ties in input order); each triangle keeps its corners' cyclic order,

@@ -1,0 +1,44 @@
+// write_asset: the asset extensions mapped to the glTF, Draco and OpenMesh writers.
+#include <mlfe/core/base/error.h>
+#include <mlfe/formats/asset_writer.h>
+#include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/file_names.h>
+#include <mlfe/formats/openmesh_io.h>
+
+#include <algorithm>
+
+namespace mlfe {
+
+const std::vector<std::string> kAssetExtensions = {".glb", ".gltf", ".drc", ".ply", ".obj", ".stl", ".off"};
+
+TriangleMesh merged_mesh(const std::vector<GltfSurface>& surfaces) {
+  std::vector<const TriangleMesh*> parts;
+  parts.reserve(surfaces.size());
+  for (const auto& s : surfaces) parts.push_back(&s.mesh);
+  return merge_meshes(parts);
+}
+
+void write_asset(const std::vector<GltfSurface>& surfaces, const std::string& path,
+                 const AssetWriteOptions& options) {
+  const std::string ext = lower_extension(path);
+  if (std::find(kAssetExtensions.begin(), kAssetExtensions.end(), ext) == kAssetExtensions.end())
+    throw Error(path + ": not an asset type (expected .glb, .gltf, .drc, .ply, .obj, .stl or .off)");
+  if (ext == ".glb" || ext == ".gltf") {
+    GltfOptions o;
+    o.draco = options.draco;
+    o.quantize = options.quantize;
+    o.tolerance_mm = options.tolerance_mm;
+    o.space = options.space;
+    o.extras = options.extras;
+    o.extras["tolerance_mm"] = options.tolerance_mm;
+    write_gltf(path, surfaces, o);
+  } else if (ext == ".drc") {
+    DracoOptions o;
+    o.tolerance = options.tolerance_mm;
+    write_draco_file(path, merged_mesh(surfaces), o);
+  } else {
+    write_mesh_file(path, merged_mesh(surfaces));
+  }
+}
+
+}  // namespace mlfe
