@@ -407,7 +407,7 @@ nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, co
   return r;
 }
 
-namespace {}
+namespace {
 
 // The voxel size tolerances are expressed in: the smallest spacing of the data's axes (mm).
 double smallest_spacing(const GridTransform& t, int dim) {
