@@ -125,10 +125,12 @@ const std::vector<EnumName<Preconditioner>>& enum_names<Preconditioner>() {
 }
 template <>
 const std::vector<EnumName<Simplifier>>& enum_names<Simplifier>() {
-  static const std::vector<EnumName<Simplifier>> t = {{Simplifier::kAuto, "auto"},
-                                                      {Simplifier::kFast, "fast"},
-                                                      {Simplifier::kBounded, "bounded"},
-                                                      {Simplifier::kMeshopt, "meshopt"}};
+  // core/simplify names its kinds; a new one appears here without an edit.
+  static const std::vector<EnumName<Simplifier>> t = [] {
+    std::vector<EnumName<Simplifier>> names;
+    for (const auto& [kind, name] : simplifier_names()) names.push_back({kind, name});
+    return names;
+  }();
   return t;
 }
 template <>

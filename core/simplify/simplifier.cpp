@@ -39,6 +39,14 @@ TriangleMesh simplify_auto(const TriangleMesh& m, SimplifyOptions o, double rati
 
 }  // namespace
 
+const std::vector<std::pair<Simplifier, const char*>>& simplifier_names() {
+  static const std::vector<std::pair<Simplifier, const char*>> names = {{Simplifier::kAuto, "auto"},
+                                                                        {Simplifier::kFast, "fast"},
+                                                                        {Simplifier::kBounded, "bounded"},
+                                                                        {Simplifier::kMeshopt, "meshopt"}};
+  return names;
+}
+
 TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o) {
   if (o.kind == Simplifier::kMeshopt) return simplify_fast(mesh, o.tolerance);
   SimplifyOptions so;

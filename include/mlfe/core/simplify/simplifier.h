@@ -8,6 +8,8 @@
 #include <mlfe/core/surface/triangle_mesh.h>
 
 #include <cstddef>
+#include <utility>
+#include <vector>
 
 namespace mlfe {
 
@@ -17,6 +19,11 @@ namespace mlfe {
 /// triangles but it may pinch the surface (non-manifold spots); kAuto: bounded, but fast for
 /// surfaces of over 200 000 triangles with a ratio below 5 % (topology kept either way).
 enum class Simplifier { kAuto, kFast, kBounded, kMeshopt };
+
+/// Every kind with its name ("auto", "fast", "bounded", "meshopt"), in the order the options
+/// list them: the command line's --simplifier and Python's simplifier= take their names from it,
+/// so a new simplifier is a value above, a row here and a case in simplify().
+const std::vector<std::pair<Simplifier, const char*>>& simplifier_names();
 
 struct SimplifierOptions {
   Simplifier kind = Simplifier::kAuto;
