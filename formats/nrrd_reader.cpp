@@ -10,7 +10,7 @@
 #include <memory>
 #include <mutex>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

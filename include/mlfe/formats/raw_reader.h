@@ -1,7 +1,7 @@
 // Headerless raw volumes described by a JSON sidecar (FILE.json) or by command-line flags.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <cstddef>
 #include <istream>
