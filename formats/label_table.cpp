@@ -4,6 +4,7 @@
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/label_table.h>
 #include <mlfe/formats/safe_read.h>
+#include <mlfe/formats/volume_formats.h>
 
 #include <charconv>
 #include <cmath>
@@ -211,13 +212,12 @@ LabelTable parse_text(const std::string& bytes, const std::string& source, const
                                                : "mricron");
 }
 
+// The name without its scan ending (the table's compound ".nii.gz" whole) or its last extension.
 std::string volume_stem(const std::string& path) {
   std::string name = fs::path(path).filename().string();
   std::string lower = name;
   for (auto& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  for (const char* ext :
-       {".nii.gz", ".nii", ".nrrd", ".nhdr", ".mha", ".mhd", ".vdb", ".raw", ".hdr", ".img"}) {
-    const std::string e = ext;
+  for (const std::string& e : scan_extensions()) {
     if (lower.size() > e.size() && lower.compare(lower.size() - e.size(), e.size(), e) == 0)
       return name.substr(0, name.size() - e.size());
   }

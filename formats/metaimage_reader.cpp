@@ -12,7 +12,7 @@
 #include <sstream>
 #include <vector>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

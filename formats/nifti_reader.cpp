@@ -13,7 +13,7 @@
 #include <mutex>
 #include <vector>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

@@ -4,7 +4,7 @@
 
 #include <cctype>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <vector>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

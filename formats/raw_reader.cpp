@@ -7,7 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

@@ -2,16 +2,16 @@
 // and the checks every mesh passes before the finite-element core sees it.
 #include <fmt/format.h>
 #include <mlfe/formats/tet_mesh_reader.h>
-#include <mlfe/formats/volume_reader.h>
 #include <mlfe/formats/zarr_reader.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstring>
 #include <new>
 
+#include "formats/reader_helpers.h"
 #include "formats/tet_mesh_reader_detail.h"
-#include "formats/volume_reader_detail.h"
 
 namespace mlfe {
 
@@ -37,10 +37,13 @@ std::string detect_tet_mesh_format(const std::string& path) {
   if (head.compare(0, 11, "$MeshFormat") == 0) return "msh";
   if (head.find("<VTKFile") != std::string::npos && head.find("UnstructuredGrid") != std::string::npos)
     return "vtu";
-  std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (ext == ".vtu") return "vtu";
-  if (ext == ".msh") return "msh";
+  std::string lower = path;
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  for (const char* ext : tet_mesh_detail::kTetMeshExtensions) {
+    const std::size_t n = std::strlen(ext);
+    if (lower.size() >= n && lower.compare(lower.size() - n, n, ext) == 0) return ext + 1;
+  }
   return "";
 }
 

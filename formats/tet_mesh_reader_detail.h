@@ -3,6 +3,7 @@
 #pragma once
 #include <mlfe/formats/tet_mesh_reader.h>
 
+#include <array>
 #include <cctype>
 #include <charconv>
 #include <cstdint>
@@ -10,6 +11,9 @@
 #include <system_error>
 
 namespace mlfe::tet_mesh_detail {
+
+/// The file name endings of the tetrahedral mesh formats, each a dot and the format's name.
+inline constexpr std::array<const char*, 2> kTetMeshExtensions = {".vtu", ".msh"};
 
 /// The mesh in the VTK XML UnstructuredGrid held in `data` (the whole file).
 TetMesh read_vtu(const std::string& path, const std::string& data, const TetMeshReadOptions& options,

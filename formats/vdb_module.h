@@ -4,7 +4,7 @@
 // start-up (77 ms of `mlfe --version`) whether or not it ever saw a VDB file. Not public API.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <cstddef>
 #include <string>
@@ -26,6 +26,10 @@ constexpr int kVdbModuleAbi = 1;
 
 /// The module's file name; it lies beside libmlfe_formats.
 constexpr const char* kVdbModuleName = "libmlfe_openvdb.so";
+
+/// Writes `grid` as a .vdb file through the module (formats/vdb_reader.cpp loads it), for the
+/// table of volume formats; throws mlfe::Error naming `path` when the module cannot be loaded.
+void write_vdb(const std::string& path, const ScalarGrid& grid);
 
 }  // namespace mlfe::volume_detail
 

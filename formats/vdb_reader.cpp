@@ -4,9 +4,8 @@
 
 #include <string>
 
+#include "formats/reader_helpers.h"
 #include "formats/vdb_module.h"
-#include "formats/volume_formats.h"
-#include "formats/volume_reader_detail.h"
 
 namespace mlfe {
 namespace {

@@ -1,6 +1,5 @@
-// The table of volume formats (formats/volume_formats.h) and their magic bytes.
-#include "formats/volume_formats.h"
-
+// The table of volume formats (formats/volume_formats_detail.h), their magic bytes, and what it
+// tells the rest of mlfe (<mlfe/formats/volume_formats.h>).
 #include <mlfe/formats/metaimage_reader.h>
 #include <mlfe/formats/nifti_reader.h>
 #include <mlfe/formats/nrrd_reader.h>
@@ -8,11 +7,16 @@
 #include <mlfe/formats/png_reader.h>
 #include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/vdb_reader.h>
+#include <mlfe/formats/volume_formats.h>
 #include <mlfe/formats/zarr_reader.h>
 
 #include <cctype>
 #include <cstdint>
 #include <cstring>
+
+#include "formats/tet_mesh_reader_detail.h"
+#include "formats/vdb_module.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe::volume_detail {
 namespace {
@@ -67,16 +71,23 @@ bool metaimage_magic(const std::string& head) {
 
 const std::vector<VolumeFormatRow>& volume_formats() {
   static const std::vector<VolumeFormatRow> rows = {
-      {"nrrd", {".nrrd", ".nhdr"}, {".nrrd"}, nrrd_magic, read_nrrd, write_nrrd},
-      {"vdb", {".vdb"}, {".vdb"}, vdb_magic, read_vdb, write_vdb},
-      {"png", {".png"}, {}, png_magic, read_png, nullptr},
-      {"pgm", {".pgm"}, {}, pgm_magic, read_pgm, nullptr},
-      {"nifti", {".nii", ".hdr", ".img"}, {".nii.gz", ".nii"}, nifti_magic, read_nifti, write_nifti},
-      {"metaimage", {".mha", ".mhd"}, {}, metaimage_magic, read_metaimage, nullptr},
+      // name, read extensions, scan endings, write extensions, magic, reader, writer
+      {"nrrd", {".nrrd", ".nhdr"}, {".nrrd", ".nhdr"}, {".nrrd"}, nrrd_magic, read_nrrd, write_nrrd},
+      {"vdb", {".vdb"}, {".vdb"}, {".vdb"}, vdb_magic, read_vdb, write_vdb},
+      {"png", {".png"}, {}, {}, png_magic, read_png, nullptr},
+      {"pgm", {".pgm"}, {}, {}, pgm_magic, read_pgm, nullptr},
+      {"nifti",
+       {".nii", ".hdr", ".img"},
+       {".nii.gz", ".nii"},
+       {".nii.gz", ".nii"},
+       nifti_magic,
+       read_nifti,
+       write_nifti},
+      {"metaimage", {".mha", ".mhd"}, {".mha", ".mhd"}, {}, metaimage_magic, read_metaimage, nullptr},
       // Headerless: by extension, a "<file>.json" sidecar, or --raw-dims/--raw-type.
-      {"raw", {".raw", ".bin", ".dat"}, {".raw"}, nullptr, read_raw, write_raw},
+      {"raw", {".raw", ".bin", ".dat"}, {}, {".raw"}, nullptr, read_raw, write_raw},
       // A folder: recognised by its metadata files (is_zarr_store), not by magic bytes.
-      {"zarr", {".zarr"}, {}, nullptr, read_zarr, nullptr},
+      {"zarr", {".zarr"}, {}, {}, nullptr, read_zarr, nullptr},
   };
   return rows;
 }
@@ -88,3 +99,18 @@ const VolumeFormatRow* volume_format(const std::string& name) {
 }
 
 }  // namespace mlfe::volume_detail
+
+namespace mlfe {
+
+const std::vector<std::string>& scan_extensions() {
+  static const std::vector<std::string> endings = [] {
+    std::vector<std::string> e;
+    for (const auto& row : volume_detail::volume_formats())
+      e.insert(e.end(), row.scan_extensions.begin(), row.scan_extensions.end());
+    e.insert(e.end(), tet_mesh_detail::kTetMeshExtensions.begin(), tet_mesh_detail::kTetMeshExtensions.end());
+    return e;
+  }();
+  return endings;
+}
+
+}  // namespace mlfe

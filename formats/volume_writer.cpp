@@ -1,4 +1,5 @@
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/volume_writer.h>
@@ -13,8 +14,10 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
-#include "formats/volume_formats.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe {
 namespace {
@@ -173,7 +176,11 @@ void write_volume(const std::string& path, const ScalarGrid& g) {
     fail(path,
          fmt::format("{} values for a {} x {} x {} grid", g.values.size(), g.dims[0], g.dims[1], g.dims[2]));
   if (const auto* row = writer_of(path)) return row->write(path, g);
-  fail(path, "unknown volume type (.nii, .nii.gz, .nrrd, .raw, .vdb)");
+  std::vector<std::string> written;
+  for (const auto& row : volume_detail::volume_formats())
+    written.insert(written.end(), row.write_extensions.begin(), row.write_extensions.end());
+  std::sort(written.begin(), written.end());
+  fail(path, fmt::format("unknown volume type ({})", fmt::join(written, ", ")));
 }
 
 }  // namespace mlfe

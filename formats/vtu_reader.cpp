@@ -14,8 +14,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "formats/reader_helpers.h"
 #include "formats/tet_mesh_reader_detail.h"
-#include "formats/volume_reader_detail.h"
 
 namespace mlfe::tet_mesh_detail {
 

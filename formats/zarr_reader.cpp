@@ -17,7 +17,7 @@
 #include <optional>
 #include <vector>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 namespace {

@@ -8,6 +8,7 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/volume_formats.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
 #include <mlfe/version.h>
@@ -874,6 +875,8 @@ PYBIND11_MODULE(_mlfe, m) {
 
   m.def("read_volume", &read_volume_py, py::arg("path"));
   m.def("load", &load_py, py::arg("path"));
+  // mlfe.batch's scans in a folder: the endings of the table of volume formats.
+  m.def("scan_extensions", [] { return scan_extensions(); });
 
   bind_mesh(m);
   bind_hierarchy(m);

@@ -7,7 +7,8 @@ formats/, converters/ (the pipelines, <mlfe/pipeline.h>, <mlfe/pipeline/...>), c
 and python/. A room of core/ may include what its room header's "May include:" line names
 besides itself; ALLOWED below says it for the units above core. Prints each include that breaks
 it (path:line: unit -> unit) and exits 1 if there is one; an include of a header that does
-not exist in the tree is reported too (a stale path after a move).
+not exist in the tree is reported too (a stale path after a move), and so is an include of
+<mlfe/formats/volume_reader.h> inside formats/ other than by its own source (FORMATS_TOP).
 
 Usage: scripts/check_layering.py [ROOT]
 """
@@ -25,6 +26,10 @@ ALLOWED = {
     "cli": CORE | {"formats", "converters"},
     "python": CORE | {"formats", "converters"},
 }
+# Inside formats/: read_volume (volume_reader.h) picks a reader through the table of volume
+# formats (formats/volume_formats.cpp), so it sits above the readers; only its own source
+# includes it there. The readers take their types from volume_read_options.h.
+FORMATS_TOP = {"include/mlfe/formats/volume_reader.h": {"formats/volume_reader.cpp"}}
 MAY_INCLUDE = re.compile(r"^// May include: (.*)\.$", re.M)
 
 
@@ -104,6 +109,9 @@ def main():
                     bad += 1
                 elif to != unit and to not in ALLOWED[unit]:
                     print(f"{rel}:{n}: {unit} -> {to} ({m.group(2)}) breaks the layering")
+                    bad += 1
+                elif unit == "formats" and rel not in FORMATS_TOP.get(file.relative_to(root).as_posix(), (rel,)):
+                    print(f"{rel}:{n}: formats -> {m.group(2)}, the dispatcher above the readers")
                     bad += 1
     if bad:
         print(f"check_layering: {bad} include(s) out of place (scripts/check_layering.py, docs/architecture.md)")

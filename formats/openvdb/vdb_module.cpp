@@ -15,7 +15,7 @@
 #include <cstring>
 #include <mutex>
 
-#include "formats/volume_reader_detail.h"
+#include "formats/reader_helpers.h"
 
 namespace mlfe {
 using namespace volume_detail;

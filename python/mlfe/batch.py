@@ -35,8 +35,9 @@ import mlfe
 
 __all__ = ["BatchResult", "convert", "find_scans", "VOLUME_SUFFIXES"]
 
-#: File name endings read as scans when a folder is given (lower case).
-VOLUME_SUFFIXES = (".nii.gz", ".nii", ".nrrd", ".nhdr", ".mha", ".mhd", ".vdb", ".vtu", ".msh")
+#: File name endings read as scans when a folder is given (lower case): the volume files that are
+#: a scan by themselves and the tetrahedral meshes, from the library's table of formats.
+VOLUME_SUFFIXES = tuple(mlfe._mlfe.scan_extensions())
 
 _COLUMNS = ("input", "status", "outputs", "triangles", "bytes", "vertices", "seconds", "message")
 

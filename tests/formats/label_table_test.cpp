@@ -87,6 +87,8 @@ TEST(LabelTable, JhuAtlasNamesWithColoursFromTheLutBeside) {
 
 TEST(LabelTable, FoundBesideTheVolumeByStem) {
   EXPECT_EQ(find_label_table(kDir + "atlas_jhu_wm_labels_1mm.nii.gz"), kDir + "atlas_jhu_wm_labels_1mm.txt");
+  // The compound ending whole, in any case (scan_extensions()).
+  EXPECT_EQ(find_label_table(kDir + "atlas_jhu_wm_labels_1mm.NII.GZ"), kDir + "atlas_jhu_wm_labels_1mm.txt");
   EXPECT_EQ(find_label_table(kDir + "no_such_volume.nrrd"), "");
 }
 

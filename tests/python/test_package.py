@@ -386,6 +386,21 @@ class BatchTest(unittest.TestCase):
             f.write(struct.pack("<i", 348) + b"\0" * 100)  # a truncated NIfTI header
         return study
 
+    def test_find_scans_takes_whole_scans_in_any_case(self):
+        """find_scans (VOLUME_SUFFIXES, from the library's table of formats) takes the files that
+        are a scan by themselves, compound .nii.gz whole and in any case, and none of the rest."""
+        import mlfe.batch
+
+        scans = ["a.nii.gz", "B.NII", "c.Nrrd", "d.nhdr", "e.mha", "f.MHD", "g.vdb", "h.vtu", "i.msh",
+                 "j.NII.GZ"]
+        others = ["k.hdr", "k.img", "l.raw", "l.raw.json", "m.png", "n.pgm", "o.nrrd.gz", "p.bin", "q.dat",
+                  "r.txt", "nii", "s.nii.gz.json"]
+        for name in scans + others:
+            open(os.path.join(self.dir, name), "wb").close()
+        found = [os.path.basename(p) for p in mlfe.batch.find_scans(self.dir)]
+        self.assertEqual(found, sorted(scans))
+        self.assertEqual(mlfe.batch._stem(os.path.join(self.dir, "j.NII.GZ")), "j")
+
     def test_batch_on_a_local_cluster(self):
         import mlfe.batch
 

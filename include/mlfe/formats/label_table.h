@@ -54,8 +54,9 @@ LabelTable parse_label_table(const std::string& bytes, const std::string& file_n
 /// .lut of the same stem beside it. Throws mlfe::Error for unreadable or bad files.
 LabelTable read_label_table(const std::string& path);
 
-/// The table beside a volume: the first existing file of the volume's stem (name without
-/// ".nii.gz", ".nrrd", ...) with extension .json, .ctbl, .txt, .label or .lut; "" when none.
+/// The table beside a volume: the first existing file of the volume's stem (its name without a
+/// scan ending of scan_extensions(), ".nii.gz" whole, or else its last extension) with extension
+/// .json, .ctbl, .txt, .label or .lut; "" when none.
 std::string find_label_table(const std::string& volume_path);
 
 }  // namespace mlfe

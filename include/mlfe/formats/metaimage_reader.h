@@ -1,7 +1,7 @@
 // MetaImage (.mha with the data in the same file, .mhd with a separate data file).
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 

@@ -1,7 +1,7 @@
 // NIfTI-1 and NIfTI-2 (.nii, .nii.gz, .hdr+.img, also Analyze 7.5 pairs) via libnifti2.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 

@@ -1,7 +1,7 @@
 // NRRD volumes and height fields (.nrrd with attached data, .nhdr with detached data) via Teem.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 

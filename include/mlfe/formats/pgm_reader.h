@@ -1,7 +1,7 @@
 // Binary PGM (P5) height fields, 8 or 16 bit.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 

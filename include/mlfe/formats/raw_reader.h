@@ -2,7 +2,7 @@
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/safe_read.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <cstddef>
 #include <string>

@@ -14,7 +14,7 @@
 // one line "<file>: <problem>".
 #pragma once
 #include <mlfe/core/field/tet_mesh_field.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <cstddef>
 #include <string>

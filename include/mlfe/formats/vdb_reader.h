@@ -1,7 +1,7 @@
 // OpenVDB volumes (.vdb): level sets, fog volumes and other scalar grids.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 #include <vector>

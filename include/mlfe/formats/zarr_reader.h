@@ -23,7 +23,7 @@
 // the chunk's (a lying shape or truncated chunk is an error naming the chunk file).
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <array>
 #include <cstdint>

@@ -1,10 +1,12 @@
 // The one table of volume formats: name, file name extensions, magic bytes, reader and writer.
 // read_volume (formats/volume_reader.cpp) detects a file's format from it, write_volume
-// (formats/volume_writer.cpp) picks the writer from it; a new format is one row here, its reader
-// (and writer), and a fuzz entry (fuzz/CMakeLists.txt). Not part of the public API.
+// (formats/volume_writer.cpp) picks the writer from it, and scan_extensions()
+// (<mlfe/formats/volume_formats.h>) answers mlfe.batch and the label tables from it. A new format
+// is its reader (formats/<name>_reader.cpp and include/mlfe/formats/<name>_reader.h) and one row
+// in formats/volume_formats.cpp. Not part of the public API.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <string>
 #include <vector>
@@ -15,6 +17,10 @@ struct VolumeFormatRow {
   const char* name;  ///< ScalarGrid::format: "nrrd", "nifti", ...
   /// Extensions read_volume recognises (lower case, after dropping a trailing ".gz").
   std::vector<const char*> read_extensions;
+  /// The endings (lower case, matched whole, a ".gz" included) of this format's files that are a
+  /// scan by themselves, for scan_extensions(); not the halves of a pair (.hdr/.img), raw data
+  /// that needs a sidecar, or 2D images.
+  std::vector<const char*> scan_extensions;
   /// Extensions write_volume writes (lower case, matched at the end of the name); empty: none.
   std::vector<const char*> write_extensions;
   /// Whether a file's first bytes (up to 512) are this format's; nullptr: no magic (raw).
@@ -29,10 +35,10 @@ const std::vector<VolumeFormatRow>& volume_formats();
 /// The row named `name`, or nullptr.
 const VolumeFormatRow* volume_format(const std::string& name);
 
-// The writers of the table's rows (formats/volume_writer.cpp); each writes atomically.
+// The writers of the table's rows (formats/volume_writer.cpp; write_vdb: formats/vdb_module.h);
+// each writes atomically.
 void write_nifti(const std::string& path, const ScalarGrid& grid);
 void write_nrrd(const std::string& path, const ScalarGrid& grid);
 void write_raw(const std::string& path, const ScalarGrid& grid);
-void write_vdb(const std::string& path, const ScalarGrid& grid);
 
 }  // namespace mlfe::volume_detail

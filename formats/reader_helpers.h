@@ -1,9 +1,10 @@
-// Helpers shared by the volume readers in formats/*_reader.cpp. Not part of the public API.
+// Helpers shared by the readers in formats/*_reader.cpp (formats/reader_helpers.cpp): errors,
+// bounded file reading, overflow and memory checks, value conversion. Not part of the public API.
 #pragma once
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/safe_read.h>
-#include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_read_options.h>
 
 #include <array>
 #include <cstddef>
