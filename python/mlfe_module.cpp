@@ -125,18 +125,24 @@ BuildOptions build_options(Options& kw) {
   return o;
 }
 
-AssetOptions asset_options(Options& kw) {
-  AssetOptions o;
+// The keywords iso-surface and label assets share (AssetOptions and LabelOptions name them alike).
+template <class O>
+void get_asset_keywords(Options& kw, O& o) {
   kw.get("tolerance", o.tolerance);
   kw.get("draco", o.draco);
   kw.get("quantize", o.quantize);
+  kw.get("simplify", o.simplify);
+  kw.get("min_component", o.min_component);
+}
+
+AssetOptions asset_options(Options& kw) {
+  AssetOptions o;
+  get_asset_keywords(kw, o);
   kw.get("lod", o.lod);
   kw.get("decimate", o.decimate);
-  kw.get("simplify", o.simplify);
   kw.get("ratio", o.ratio);
   get_enum(kw, "simplifier", o.simplifier);
   kw.get("snap", o.snap);
-  kw.get("min_component", o.min_component);
   kw.get("normals_toward_higher", o.normals_toward_higher);
   get_enum(kw, "normals", o.normals);
   get_enum(kw, "placement", o.placement);
@@ -408,13 +414,9 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
       o.labels.push_back(static_cast<std::uint16_t>(l));
     }
   if (kw.has("label_table")) o.table = fspath(kw.take("label_table"));
-  kw.get("min_component", o.min_component);
+  get_asset_keywords(kw, o);
   kw.get("smooth_iterations", o.smoothing_iterations);
   kw.get("max_offset", o.max_offset);
-  kw.get("simplify", o.simplify);
-  kw.get("tolerance", o.tolerance);
-  kw.get("draco", o.draco);
-  kw.get("quantize", o.quantize);
   kw.finish();
   const std::string out_path = fspath(out);
   check_output_path(out_path, kAssetExtensions);
