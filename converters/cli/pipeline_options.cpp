@@ -10,6 +10,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <sstream>
 
@@ -132,6 +133,19 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "level without building it), hierarchy (marching tetrahedra on the hierarchy's level, the "
                   "paper's) or auto (samples when the volume is at hand and the finest level is asked)")
       ->check(CLI::IsMember(pipeline::enum_name_list<SurfaceSource>()))
+      ->capture_default_str();
+  cmd->add_option(
+         "--bricks", p.bricks,
+         "simplify surfaces from the samples in bricks of this many samples per edge, a power of two "
+         "(e.g. 64): threads work on bricks, the seams are simplified after (0: the whole surface at once)")
+      ->check(CLI::Validator(
+          [](const std::string& text) -> std::string {
+            char* end = nullptr;
+            const long long b = std::strtoll(text.c_str(), &end, 10);
+            const bool ok = end != text.c_str() && *end == '\0' && (b == 0 || (b >= 2 && (b & (b - 1)) == 0));
+            return ok ? "" : "expected 0 or a power of two of at least 2, got " + text;
+          },
+          "0|2^k"))
       ->capture_default_str();
 }
 
@@ -278,6 +292,7 @@ AssetOptions asset_options(const AssetParams& p) {
   o.z_scale = p.z_scale;
   o.level = p.level;
   o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "--surface");
+  o.bricks = p.bricks;
   return o;
 }
 

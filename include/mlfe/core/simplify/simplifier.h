@@ -8,6 +8,7 @@
 #include <mlfe/core/surface/triangle_mesh.h>
 
 #include <cstddef>
+#include <vector>
 
 namespace mlfe {
 
@@ -38,6 +39,12 @@ struct SimplifierOptions {
 /// on the thread count. Throws mlfe::Error as the chosen algorithm does (a tolerance that is not
 /// positive and finite, an index out of range, ...).
 TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o);
+
+/// The runs of simplify_within that simplify() makes, in order, for a surface of `triangles`
+/// triangles and `o.kind` (kMeshopt: none, it is not simplify_within): one for kFast and
+/// kBounded, kAuto's one or two by size (see simplify()); min_triangles is `o.ratio` of
+/// `triangles`. Between two runs simplify() orders the vertices spatially (spatially_ordered).
+std::vector<SimplifyOptions> simplify_stages(const SimplifierOptions& o, std::size_t triangles);
 
 /// Simplifies the interface complex `x` in place within `o.tolerance`, keeping its interfaces
 /// shared and every region's surface closed; returns the vertices removed. kAuto and kFast:
