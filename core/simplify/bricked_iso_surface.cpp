@@ -20,9 +20,14 @@ using Id32 = std::uint32_t;
 constexpr Id32 kNone = std::numeric_limits<Id32>::max();
 
 // Rings of triangles around the face vertices that the seam pass simplifies again: one ring
-// holds the face vertices' own triangles; the second frees their neighbours, which the brick
-// pass could not collapse onto the locked face vertices.
+// holds the face vertices' own triangles; the second lets the collapses that remove a face
+// vertex also move its neighbours, whose rim would otherwise be locked.
 constexpr int kSeamRings = 2;
+
+// A brick's estimated run starts with the Simplifier's blocks whatever its size: the brick is
+// the unit of parallelism, and inside it the blocks' sequential cheapest-first collapses do the
+// work with less overhead than the passes.
+constexpr std::size_t kBrickBlocksFrom = 0;
 
 // The lattice's bricks: cubes per axis, bricks per axis, and the brick edge in cubes.
 struct BrickGrid {
@@ -126,8 +131,19 @@ BrickResult simplify_brick(Part part, const std::vector<std::uint8_t>& face,
                            std::vector<SimplifyOptions> stages, double ratio) {
   BrickResult r;
   SimplifyCarry carry;
-  for (auto& s : stages) s.min_triangles = std::size_t(ratio * double(part.mesh.triangles.size()));
+  for (auto& s : stages) {
+    s.min_triangles = std::size_t(ratio * double(part.mesh.triangles.size()));
+    s.blocks_from = kBrickBlocksFrom;
+  }
   for (const SimplifyOptions& s : stages) {
+    if (&s != &stages.front()) {
+      // As simplify() does between its runs; the vertices keep their whole surface's numbers.
+      std::vector<Id32> order;
+      part.mesh = spatially_ordered(part.mesh, &order);
+      std::vector<Id32> vertex(order.size());
+      for (std::size_t i = 0; i < order.size(); ++i) vertex[i] = part.vertex[order[i]];
+      part.vertex = std::move(vertex);
+    }
     carry.locked.resize(part.vertex.size());
     for (std::size_t i = 0; i < part.vertex.size(); ++i) carry.locked[i] = face[part.vertex[i]];
     const TriangleMesh in = std::move(part.mesh);

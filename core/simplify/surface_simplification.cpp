@@ -258,7 +258,7 @@ class Simplifier {
     SimplifyStats st;
     for (int round = 0; round < 2; ++round) {
       // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
-      if (round == 0 && !opts_.verify_bound && faces_.size() >= kBlocksFrom)
+      if (round == 0 && !opts_.verify_bound && faces_.size() >= opts_.blocks_from)
         for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
       collapse_all(st.passes, st.collapses);
       if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
@@ -372,6 +372,7 @@ class Simplifier {
   void classify_vertices() {
     const std::size_t nv = pos_.size();
     locked_.assign(nv, 0);
+    held_.assign(nv, 0);
     boundary_.assign(nv, 0);
     tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 1024), [&](const tbb::blocked_range<Index>& r) {
       std::vector<Neighbour> n;
@@ -379,7 +380,7 @@ class Simplifier {
         if (vf_.size(v) == 0) continue;
         if (!single_fan(v, n)) locked_[v] = 1;  // single_fan() leaves v's neighbours in n
         boundary_[v] = on_boundary(n);
-        if (carry_ && !carry_->locked.empty() && carry_->locked[v]) locked_[v] = 1;
+        if (carry_ && !carry_->locked.empty() && carry_->locked[v]) locked_[v] = held_[v] = 1;
       }
     });
   }
@@ -1054,7 +1055,9 @@ class Simplifier {
   // vertices, both unlocked, the key's sums commutative), so one evaluation serves both ends.
   double edge_cost(Index v0, Index w, bool boundary0, Vec3& p, bool* symmetric = nullptr) const {
     if (symmetric) *symmetric = false;
-    if (locked_[w] || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
+    // A held vertex takes half-edge collapses (place() leaves it where it is); a non-manifold
+    // star takes none.
+    if ((locked_[w] && !held_[w]) || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
     p = place(v0, w, boundary0, symmetric);
     if (symmetric) *symmetric = *symmetric && !locked_[v0];
     const double cost = eval_sum(quadric_[v0], quadric_[w], p);
@@ -1138,7 +1141,7 @@ class Simplifier {
   // *symmetric: the minimum of the summed quadrics was taken (the same for place(v1, v0)).
   Vec3 place(Index v0, Index v1, bool boundary0, bool* symmetric = nullptr) const {
     if (symmetric) *symmetric = false;
-    if (!optimal_ || boundary0 || boundary_[v1]) return pos_[v1];
+    if (!optimal_ || boundary0 || boundary_[v1] || held_[v1]) return pos_[v1];
     Quadric q = quadric_[v0];
     q.add(quadric_[v1]);
     const auto& a = q.q;
@@ -1401,11 +1404,12 @@ class Simplifier {
   std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
   std::vector<uint8_t> face_alive_, locked_, dirty_, stuck_;
-  std::vector<Index> dirty_list_;                 // the vertices with dirty_ set
-  std::vector<uint8_t> screened_;                 // passed the full checks since its last key
-  std::vector<Index> keyed_;                      // pass in which the key was last computed
-  std::vector<Index> found_, found_in_;           // the target a check found, and its pass
-  Index pass_ = 0;                                // the current pass (from 1)
+  std::vector<uint8_t> held_;            // locked by SimplifyCarry: never moves or vanishes, takes collapses
+  std::vector<Index> dirty_list_;        // the vertices with dirty_ set
+  std::vector<uint8_t> screened_;        // passed the full checks since its last key
+  std::vector<Index> keyed_;             // pass in which the key was last computed
+  std::vector<Index> found_, found_in_;  // the target a check found, and its pass
+  Index pass_ = 0;                       // the current pass (from 1)
   std::vector<std::pair<double, Index>> sorted_;  // candidates by (key, vertex)
   std::size_t alive_faces_ = 0;
   std::vector<Quadric> quadric_;
@@ -1420,8 +1424,6 @@ class Simplifier {
   std::vector<std::size_t> removed_faces_;
   // Step 1 (simplify_blocks): the blocks' cube edge in mean input edge lengths.
   static constexpr double kBlockEdges = 48;
-  // Meshes from this many triangles start with the blocks (smaller ones take a second or less).
-  static constexpr std::size_t kBlocksFrom = 100000;
   static constexpr double kBlockFloorShare = 1.5;
   std::vector<Index> inside_;           // per vertex: its block, kNone on a block's border
   std::vector<Index> best_;             // per vertex inside a block: the neighbour giving its key

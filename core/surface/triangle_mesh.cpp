@@ -24,7 +24,7 @@ namespace mlfe {
 
 using Vec3 = Eigen::Vector3d;
 
-TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
+TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old) {
   const std::size_t nv = mesh.positions.size();
   for (const auto& t : mesh.triangles)
     if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
@@ -65,6 +65,7 @@ TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   std::vector<std::uint64_t>().swap(key);
   std::vector<std::uint32_t> index(nv);  // old -> new
   for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
+  if (new_to_old) *new_to_old = order;
   TriangleMesh out;
   out.positions.resize(nv);
   for (std::size_t i = 0; i < nv; ++i) out.positions[i] = mesh.positions[order[i]];

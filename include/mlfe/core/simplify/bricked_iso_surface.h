@@ -17,8 +17,9 @@
 // each brick stopping at `ratio` of its own triangles), with the face vertices hard-locked
 // (SimplifyCarry::locked). The Simplifier alone would not do: it lets a boundary vertex slide
 // along a boundary edge (collapse onto its neighbour there), and the two bricks would slide
-// differently. Locked, a face vertex neither moves nor vanishes nor takes a collapse, so the
-// boundary polylines of neighbouring bricks stay identical and the weld stays exact.
+// differently. Locked, a face vertex neither moves nor vanishes (its neighbours may still
+// collapse onto it, leaving it in place), so the boundary polylines of neighbouring bricks stay
+// identical and the weld stays exact.
 //
 // Seam pass. Locked face vertices leave the surface dense along the brick faces. The strips
 // there (the triangles around the face vertices, kSeamRings rings deep) are simplified once

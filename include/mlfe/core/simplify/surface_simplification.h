@@ -30,6 +30,11 @@ struct SimplifyOptions {
   /// squared distance to its planes stays within tolerance²): several times faster, the topology
   /// checks unchanged, the bound no longer guaranteed.
   bool verify_bound = true;
+  /// With an estimated bound, meshes of at least this many triangles start with the blocks of
+  /// space (core/simplify/surface_simplification.cpp), each simplified on its own, cheapest
+  /// collapse first, before the parallel passes (smaller ones take a second or less in the
+  /// passes alone).
+  std::size_t blocks_from = 100000;
 };
 
 struct SimplifyStats {
@@ -43,9 +48,11 @@ struct SimplifyStats {
 /// points carried over from an earlier simplification, so that the bound stays measured
 /// against the surface that one started from.
 struct SimplifyCarry {
-  /// In: empty, or one per input vertex; 1 where the vertex never moves, is never removed and
-  /// takes no collapse (flips may still change its triangles). Unlike a boundary vertex, which
-  /// may slide along the boundary, it stays exactly as it is.
+  /// In: empty, or one per input vertex; 1 where the vertex never moves and is never removed
+  /// (a neighbour may still collapse onto it, the half-edge way, leaving it in place; flips
+  /// may change its triangles but not flip its edges). Unlike a boundary vertex, which may
+  /// slide along the boundary, it stays exactly as it is, and so do the boundary edges between
+  /// two such vertices.
   std::vector<std::uint8_t> locked;
   /// In (verified bound only): when `point_face` is not empty, the bound's points, in place of
   /// the input's vertices; each lies within the tolerance of the input triangle `point_face`
