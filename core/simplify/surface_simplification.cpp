@@ -837,7 +837,7 @@ class Simplifier {
           while (fg[ia] != a) ++ia;
           if (fg[(ia + 2) % 3] != b) continue;  // inconsistent orientation
           const Index d = fg[(ia + 1) % 3];
-          if (d == c || stamp_[d] == stamp) continue;
+          if (d == c || stamp_[d] == stamp || (held_[c] && held_[d])) continue;
           if (valence[a] <= 3 || valence[b] <= 3) continue;
           const int before =
               dev(a, valence[a]) + dev(b, valence[b]) + dev(c, valence[c]) + dev(d, valence[d]);
@@ -1237,8 +1237,12 @@ class Simplifier {
       for (const auto& x : s.n0)
         if (x.faces == 1 && x.v != v1 && segment_distance2(pos_[v0], pos_[v1], pos_[x.v]) > tol2_) return -1;
     int common = 0;
-    for (const auto& x : s.n0)
-      if (x.v != v1 && faces_on_edge(s.n1, x.v) > 0) ++common;
+    for (const auto& x : s.n0) {
+      const bool shared = x.v != v1 && faces_on_edge(s.n1, x.v) > 0;
+      common += shared;
+      // Held vertices gain no edge between them: the part this mesh is glued to may hold it.
+      if (held_[v1] && held_[x.v] && x.v != v1 && !shared) return -1;
+    }
     return common == edge_faces ? edge_faces : -1;
   }
 

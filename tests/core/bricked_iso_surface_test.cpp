@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <map>
 #include <numeric>
+#include <random>
 #include <utility>
 
 #include "tests/core/test_hierarchies.h"
@@ -127,6 +128,17 @@ TEST(BrickedIsoSurface, SphereAsUnbricked) {
   const Extraction e = extract(sphere(13.3, {19.6, 20.2, 19.1}), 0.0);
   for (Placement p : {Placement::kInputVertex, Placement::kOptimal}) expect_as_unbricked(e, 16, p);
   expect_as_unbricked(e, 8, Placement::kInputVertex);
+}
+
+// Noise wrinkles the surface along every brick face: collapses onto the held face vertices
+// must not join two of them by an edge the neighbouring brick also has (non-manifold seams).
+TEST(BrickedIsoSurface, NoisySphereInSmallBricksAsUnbricked) {
+  ScalarGrid g = sphere(13.3, {19.6, 20.2, 19.1});
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> noise(-0.45f, 0.45f);
+  for (float& v : g.values) v += noise(rng);
+  const Extraction e = extract(std::move(g), 0.0);
+  for (std::int64_t brick : {8, 16}) expect_as_unbricked(e, brick, Placement::kOptimal);
 }
 
 TEST(BrickedIsoSurface, TorusAcrossBrickCornersAsUnbricked) {

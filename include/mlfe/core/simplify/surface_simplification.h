@@ -52,7 +52,8 @@ struct SimplifyCarry {
   /// (a neighbour may still collapse onto it, the half-edge way, leaving it in place; flips
   /// may change its triangles but not flip its edges). Unlike a boundary vertex, which may
   /// slide along the boundary, it stays exactly as it is, and so do the boundary edges between
-  /// two such vertices.
+  /// two such vertices; no collapse or flip joins two of them by a new edge (the other part
+  /// glued along them may have that edge).
   std::vector<std::uint8_t> locked;
   /// In (verified bound only): when `point_face` is not empty, the bound's points, in place of
   /// the input's vertices; each lies within the tolerance of the input triangle `point_face`
