@@ -3,6 +3,7 @@
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/core/field/field.h>
 #include <mlfe/core/field/noise_estimate.h>
+#include <mlfe/core/simplify/bricked_iso_surface.h>
 #include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
 #include <mlfe/formats/asset_writer.h>
@@ -424,6 +425,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
   Surfaces out;
   std::vector<GltfSurface>& surfaces = out.surfaces;
   std::vector<double>& isos = out.iso_values;
+  // Per surface, its vertices' places on the lattice (bricks only).
+  std::vector<std::vector<LatticePlace>> places;
   const int dim = b.dim();
   if (dim == 3) {
     require_iso(p.iso);
@@ -435,6 +438,11 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     out.source = surfaces_from_samples(p, have_samples, b.surface_driven) ? SurfaceSource::kSamples
                                                                           : SurfaceSource::kHierarchy;
     const bool from_samples = out.source == SurfaceSource::kSamples;
+    if (p.bricks != 0 && !from_samples)
+      throw pipeline::OptionError(
+          pipeline::option_ref("bricks") +
+          ": the bricks are the samples' lattice; surfaces from the hierarchy have none");
+    places.resize(p.bricks != 0 ? isos.size() : 0);
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
@@ -474,7 +482,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       IsoOptions o = options(level);
       o.dropped = &dropped;
       // On the samples the surface is the data's own: nothing to snap or clip.
-      s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o) : x->extract(isos[i], b.transform, o);
+      s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o, places.empty() ? nullptr : &places[i])
+                            : x->extract(isos[i], b.transform, o);
       out.dropped.push_back(dropped);
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
         s.lods.push_back(x->extract(isos[i], b.transform, options(level - 2 * k)));
@@ -511,7 +520,8 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (!m.triangles.empty()) m = simplify(m, so);
+      if (m.triangles.empty()) return;
+      m = places.empty() ? simplify(m, so) : simplify_in_bricks(m, places[i], grid->dims, so, p.bricks);
     });
   }
   if (p.decimate > 0)

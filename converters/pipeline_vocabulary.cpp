@@ -230,6 +230,7 @@ const std::vector<OptionSpec>& option_table() {
       {"min_component", "--min-component"},
       enum_option<Normals>("normals", "--normals"),
       {"level", "--level", -1, 40},
+      {"bricks", "--bricks", 0, 1 << 20},
       enum_option<SurfaceSource>("surface", "--surface"),
       // LabelOptions
       {"labels", "--labels"},
@@ -354,6 +355,10 @@ void check_options(const AssetOptions& o) {
   check_option("ratio", o.ratio);
   check_option("snap", o.snap);
   check_option("level", o.level);
+  check_option("bricks", o.bricks);
+  if (o.bricks == 1 || (o.bricks & (o.bricks - 1)) != 0)
+    throw OptionError(fmt::format("{}: expected 0 or a power of two of at least 2, got {}",
+                                  option_ref("bricks"), o.bricks));
 }
 
 void check_options(const LabelOptions& o) {

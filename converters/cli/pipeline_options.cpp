@@ -10,6 +10,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <sstream>
 
@@ -115,6 +116,11 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
                   "3D surfaces from: samples (marching cubes on the volume's samples, the hierarchy's finest "
                   "level without building it), hierarchy (marching tetrahedra on the hierarchy's level, the "
                   "paper's) or auto (samples when the volume is at hand and the finest level is asked)")
+      ->capture_default_str();
+  cmd->add_option(
+         "--bricks", p.bricks,
+         "simplify surfaces from the samples in bricks of this many samples per edge, a power of two "
+         "(e.g. 64): threads work on bricks, the seams are simplified after (0: the whole surface at once)")
       ->capture_default_str();
 }
 
@@ -261,6 +267,7 @@ AssetOptions asset_options(const AssetParams& p) {
   o.z_scale = p.z_scale;
   o.level = p.level;
   o.surface = pipeline::parse_enum<SurfaceSource>(p.surface, "surface");
+  o.bricks = p.bricks;
   return o;
 }
 

@@ -5,6 +5,7 @@
 #include <mlfe/pipeline.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -73,6 +74,7 @@ struct AssetParams {
   std::string placement = "auto";  ///< "auto", "input", "optimal"
   double z_scale = 1.0;
   int level = -1;
+  std::int64_t bricks = 0;
   std::string surface = "auto";  ///< "auto", "samples", "hierarchy"
 };
 

@@ -8,7 +8,7 @@ namespace mlfe {
 
 namespace {
 
-// auto: up to 200 000 triangles, the verified bound (about a second or two at ~10 µs per
+// auto's stages: up to 200 000 triangles, the verified bound (about a second or two at ~10 µs per
 // triangle). Above, first the same topology-preserving collapses with the error estimated from
 // the quadrics to half the tolerance (most of the collapses, cheaply; no flips, which are
 // sequential and which the second stage does), then the verified bound to the tolerance and
@@ -19,22 +19,19 @@ namespace {
 // σ 1.5 head). Below a 5 % ratio the verified bound's late passes take minutes, so the estimate
 // goes all the way (meshoptimizer is faster still, but pinches the surface into thousands of
 // non-manifold edges and keeps twice the triangles).
-TriangleMesh simplify_auto(const TriangleMesh& m, SimplifyOptions o, double ratio) {
+std::vector<SimplifyOptions> auto_stages(SimplifyOptions o, std::size_t triangles, double ratio) {
   constexpr std::size_t kBoundedUpTo = 200000;
   constexpr double kBoundedDownTo = 0.05;
-  if (m.triangles.size() <= kBoundedUpTo) {
+  if (triangles <= kBoundedUpTo) {
     o.verify_bound = true;
-    return simplify_within(m, o);
+    return {o};
   }
-  if (ratio < kBoundedDownTo) return simplify_within(m, o);
+  if (ratio < kBoundedDownTo) return {o};
   SimplifyOptions first = o;
   first.tolerance = o.tolerance / 2;
   first.flip_edges = false;  // the second stage flips; flips are sequential
-  // The first stage keeps the extraction's vertex order (slices); the second walks one-rings
-  // in cost order, and runs faster (σ 3 head: 1.3x) on vertices in spatial order.
-  const TriangleMesh pre = spatially_ordered(simplify_within(m, first));
   o.verify_bound = true;
-  return simplify_within(pre, o);
+  return {first, o};
 }
 
 }  // namespace
@@ -47,15 +44,23 @@ const std::vector<std::pair<Simplifier, const char*>>& simplifier_names() {
   return names;
 }
 
-TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o) {
-  if (o.kind == Simplifier::kMeshopt) return simplify_fast(mesh, o.tolerance);
+std::vector<SimplifyOptions> simplify_stages(const SimplifierOptions& o, std::size_t triangles) {
+  if (o.kind == Simplifier::kMeshopt) return {};
   SimplifyOptions so;
   so.tolerance = o.tolerance;
   so.placement = o.placement;
-  so.min_triangles = std::size_t(o.ratio * double(mesh.triangles.size()));
+  so.min_triangles = std::size_t(o.ratio * double(triangles));
   so.verify_bound = o.kind == Simplifier::kBounded;
-  TriangleMesh out =
-      o.kind == Simplifier::kAuto ? simplify_auto(mesh, so, o.ratio) : simplify_within(mesh, so);
+  return o.kind == Simplifier::kAuto ? auto_stages(so, triangles, o.ratio) : std::vector<SimplifyOptions>{so};
+}
+
+TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o) {
+  if (o.kind == Simplifier::kMeshopt) return simplify_fast(mesh, o.tolerance);
+  const std::vector<SimplifyOptions> stages = simplify_stages(o, mesh.triangles.size());
+  // The first stage keeps the extraction's vertex order (slices); the next walk one-rings in
+  // cost order, and run faster (σ 3 head: 1.3x) on vertices in spatial order.
+  TriangleMesh out = simplify_within(mesh, stages[0]);
+  for (std::size_t s = 1; s < stages.size(); ++s) out = simplify_within(spatially_ordered(out), stages[s]);
   if (o.placement == Placement::kOptimal) {
     SurfaceFitOptions fo;
     fo.tolerance = o.tolerance;

@@ -241,8 +241,8 @@ class Simplifier {
  public:
   // Reading the input, then the adjacency, the quadrics, the points of the bound and the locked
   // vertices that every pass reads; every vertex starts dirty, so the first pass keys them all.
-  Simplifier(const TriangleMesh& mesh, const SimplifyOptions& opts)
-      : opts_(opts), optimal_(opts.placement == Placement::kOptimal) {
+  Simplifier(const TriangleMesh& mesh, const SimplifyOptions& opts, SimplifyCarry* carry)
+      : opts_(opts), optimal_(opts.placement == Placement::kOptimal), carry_(carry) {
     read_input(mesh);
     build_vertex_faces();
     init_quadrics();
@@ -258,7 +258,7 @@ class Simplifier {
     SimplifyStats st;
     for (int round = 0; round < 2; ++round) {
       // Blocks, then blocks shifted by half their size: the first ones' seams inside the second.
-      if (round == 0 && !opts_.verify_bound && faces_.size() >= kBlocksFrom)
+      if (round == 0 && !opts_.verify_bound && faces_.size() >= opts_.blocks_from)
         for (double shift : {0.0, 0.5}) simplify_blocks(shift, st.collapses);
       collapse_all(st.passes, st.collapses);
       if (alive_faces_ <= opts_.min_triangles || !opts_.flip_edges) break;
@@ -276,11 +276,18 @@ class Simplifier {
     const std::size_t nv = mesh.positions.size();
     if (nv >= kNone) throw Error("simplification: too many vertices");
     faces_.reserve(mesh.triangles.size());
-    for (const auto& t : mesh.triangles) {
+    const bool carried = carry_ && !carry_->point_face.empty();
+    std::vector<Index> face_of(carried ? mesh.triangles.size() : 0, kNone);
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+      const auto& t = mesh.triangles[i];
       if (t[0] >= nv || t[1] >= nv || t[2] >= nv) throw Error("simplification: triangle index out of range");
       if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+      if (carried) face_of[i] = Index(faces_.size());
       faces_.push_back({t[0], t[1], t[2]});
     }
+    if (carried) read_carried_points(face_of);
+    if (carry_ && !carry_->locked.empty() && carry_->locked.size() != nv)
+      throw Error("simplification: the locked flags are not one per vertex");
     if (faces_.size() >= kNone) throw Error("simplification: too many triangles");
     // The input surface is only read by the verified bound's checks.
     if (optimal_ && opts_.verify_bound) input_faces_ = faces_;
@@ -300,6 +307,24 @@ class Simplifier {
     alive_faces_ = faces_.size();
     tol2_ = opts_.tolerance * opts_.tolerance;
     cos_max_turn_ = std::cos(opts_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+  }
+
+  // The bound's points carried in (SimplifyCarry), attached to the faces their input triangles
+  // became (`face_of`: per input triangle, its face or kNone).
+  void read_carried_points(const std::vector<Index>& face_of) {
+    if (!opts_.verify_bound) throw Error("simplification: carried points need the verified bound");
+    if (carry_->points.size() != carry_->point_face.size())
+      throw Error("simplification: carried points and their triangles differ in number");
+    carried_.resize(carry_->points.size());
+    carried_owner_.resize(carry_->points.size());
+    for (std::size_t p = 0; p < carried_.size(); ++p) {
+      const std::uint32_t t = carry_->point_face[p];
+      if (t >= face_of.size() || face_of[t] == kNone)
+        throw Error("simplification: a carried point's triangle is out of range or degenerate");
+      const auto& q = carry_->points[p];
+      carried_[p] = Vec3(q[0], q[1], q[2]);
+      carried_owner_[p] = face_of[t];
+    }
   }
 
   // Each vertex sums the planes of its faces in face order, in parallel: the same sums for any
@@ -332,6 +357,10 @@ class Simplifier {
         input_vf_.offset.push_back(input_vf_.offset.back() + vf_.count[v]);
       input_vf_.items = vf_.items;  // as just built: contiguous, in vertex order
     }
+    if (carry_ && !carry_->point_face.empty()) {
+      owner_ = std::move(carried_owner_);
+      return;
+    }
     owner_.assign(nv, kNone);
     for (Index v = 0; v < nv && opts_.verify_bound; ++v)
       if (vf_.size(v) > 0) owner_[v] = *vf_.begin(v);
@@ -343,6 +372,7 @@ class Simplifier {
   void classify_vertices() {
     const std::size_t nv = pos_.size();
     locked_.assign(nv, 0);
+    held_.assign(nv, 0);
     boundary_.assign(nv, 0);
     tbb::parallel_for(tbb::blocked_range<Index>(0, Index(nv), 1024), [&](const tbb::blocked_range<Index>& r) {
       std::vector<Neighbour> n;
@@ -350,6 +380,7 @@ class Simplifier {
         if (vf_.size(v) == 0) continue;
         if (!single_fan(v, n)) locked_[v] = 1;  // single_fan() leaves v's neighbours in n
         boundary_[v] = on_boundary(n);
+        if (carry_ && !carry_->locked.empty() && carry_->locked[v]) locked_[v] = held_[v] = 1;
       }
     });
   }
@@ -806,7 +837,7 @@ class Simplifier {
           while (fg[ia] != a) ++ia;
           if (fg[(ia + 2) % 3] != b) continue;  // inconsistent orientation
           const Index d = fg[(ia + 1) % 3];
-          if (d == c || stamp_[d] == stamp) continue;
+          if (d == c || stamp_[d] == stamp || (held_[c] && held_[d])) continue;
           if (valence[a] <= 3 || valence[b] <= 3) continue;
           const int before =
               dev(a, valence[a]) + dev(b, valence[b]) + dev(c, valence[c]) + dev(d, valence[d]);
@@ -1024,7 +1055,9 @@ class Simplifier {
   // vertices, both unlocked, the key's sums commutative), so one evaluation serves both ends.
   double edge_cost(Index v0, Index w, bool boundary0, Vec3& p, bool* symmetric = nullptr) const {
     if (symmetric) *symmetric = false;
-    if (locked_[w] || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
+    // A held vertex takes half-edge collapses (place() leaves it where it is); a non-manifold
+    // star takes none.
+    if ((locked_[w] && !held_[w]) || (in_blocks_ && inside_[w] != inside_[v0])) return kNoKey;
     p = place(v0, w, boundary0, symmetric);
     if (symmetric) *symmetric = *symmetric && !locked_[v0];
     const double cost = eval_sum(quadric_[v0], quadric_[w], p);
@@ -1108,7 +1141,7 @@ class Simplifier {
   // *symmetric: the minimum of the summed quadrics was taken (the same for place(v1, v0)).
   Vec3 place(Index v0, Index v1, bool boundary0, bool* symmetric = nullptr) const {
     if (symmetric) *symmetric = false;
-    if (!optimal_ || boundary0 || boundary_[v1]) return pos_[v1];
+    if (!optimal_ || boundary0 || boundary_[v1] || held_[v1]) return pos_[v1];
     Quadric q = quadric_[v0];
     q.add(quadric_[v1]);
     const auto& a = q.q;
@@ -1204,8 +1237,12 @@ class Simplifier {
       for (const auto& x : s.n0)
         if (x.faces == 1 && x.v != v1 && segment_distance2(pos_[v0], pos_[v1], pos_[x.v]) > tol2_) return -1;
     int common = 0;
-    for (const auto& x : s.n0)
-      if (x.v != v1 && faces_on_edge(s.n1, x.v) > 0) ++common;
+    for (const auto& x : s.n0) {
+      const bool shared = x.v != v1 && faces_on_edge(s.n1, x.v) > 0;
+      common += shared;
+      // Held vertices gain no edge between them: the part this mesh is glued to may hold it.
+      if (held_[v1] && held_[x.v] && x.v != v1 && !shared) return -1;
+    }
     return common == edge_faces ? edge_faces : -1;
   }
 
@@ -1276,6 +1313,7 @@ class Simplifier {
     // p lies near the edge v0 v1: the input triangles around those two input vertices first,
     // then those around the points attached to their faces.
     if (near(v1) || near(v0)) return true;
+    if (!carried_.empty()) return false;  // carried points are no input vertices
     for (Index v : {v1, v0})
       for (const Index* f = vf_.begin(v); f != vf_.end(v); ++f)
         for (const Index* q = points_begin(*f); q != points_end(*f); ++q)
@@ -1286,7 +1324,8 @@ class Simplifier {
   // Squared distance from input vertex `point` (its input position) to triangle t after move
   // m (nullptr: the current geometry).
   double distance2(Index point, const std::array<Index, 3>& t, const Move* m = nullptr) const {
-    return point_triangle_distance2(points_[point], at(t[0], m), at(t[1], m), at(t[2], m));
+    const Vec3& q = carried_.empty() ? points_[point] : carried_[point];
+    return point_triangle_distance2(q, at(t[0], m), at(t[1], m), at(t[2], m));
   }
 
   // Some target face lies within the tolerance of the point after move m; `first` (a target
@@ -1335,7 +1374,24 @@ class Simplifier {
     // the survivor's normal at a point within the tolerance; the CLI then writes surface
     // normals instead.)
     if (normals_.empty()) compute_area_weighted_normals(out);
+    if (carry_) report_carry(index);
     return out;
+  }
+
+  // SimplifyCarry's outputs: `index` maps each vertex to its output vertex (kNone: gone).
+  void report_carry(const std::vector<Index>& index) const {
+    carry_->source.clear();
+    for (Index v = 0; v < Index(index.size()); ++v)
+      if (index[v] != kNone) carry_->source.push_back(v);
+    carry_->point_face.clear();
+    if (!opts_.verify_bound) return;
+    std::vector<Index> output_face(faces_.size(), kNone);
+    Index next = 0;
+    for (std::size_t f = 0; f < faces_.size(); ++f)
+      if (face_alive_[f]) output_face[f] = next++;
+    carry_->point_face.resize(owner_.size(), kNone);
+    for (std::size_t p = 0; p < owner_.size(); ++p)
+      if (owner_[p] != kNone) carry_->point_face[p] = output_face[owner_[p]];
   }
 
   SimplifyOptions opts_;
@@ -1343,17 +1399,21 @@ class Simplifier {
   std::vector<Vec3> pos_;
   std::vector<Vec3> points_;  // input positions: the points kept within the bound
   bool optimal_ = false;
+  SimplifyCarry* carry_ = nullptr;
+  std::vector<Vec3> carried_;         // the carried points, in place of points_ (SimplifyCarry)
+  std::vector<Index> carried_owner_;  // their faces, until attach_points()
   std::vector<std::array<Index, 3>> input_faces_;
   Csr input_vf_;  // input vertex -> input faces
   std::vector<uint8_t> boundary_;
   std::vector<std::array<float, 3>> normals_;  // input normals (empty: area-weighted output)
   std::vector<std::array<Index, 3>> faces_;
   std::vector<uint8_t> face_alive_, locked_, dirty_, stuck_;
-  std::vector<Index> dirty_list_;                 // the vertices with dirty_ set
-  std::vector<uint8_t> screened_;                 // passed the full checks since its last key
-  std::vector<Index> keyed_;                      // pass in which the key was last computed
-  std::vector<Index> found_, found_in_;           // the target a check found, and its pass
-  Index pass_ = 0;                                // the current pass (from 1)
+  std::vector<uint8_t> held_;            // locked by SimplifyCarry: never moves or vanishes, takes collapses
+  std::vector<Index> dirty_list_;        // the vertices with dirty_ set
+  std::vector<uint8_t> screened_;        // passed the full checks since its last key
+  std::vector<Index> keyed_;             // pass in which the key was last computed
+  std::vector<Index> found_, found_in_;  // the target a check found, and its pass
+  Index pass_ = 0;                       // the current pass (from 1)
   std::vector<std::pair<double, Index>> sorted_;  // candidates by (key, vertex)
   std::size_t alive_faces_ = 0;
   std::vector<Quadric> quadric_;
@@ -1368,8 +1428,6 @@ class Simplifier {
   std::vector<std::size_t> removed_faces_;
   // Step 1 (simplify_blocks): the blocks' cube edge in mean input edge lengths.
   static constexpr double kBlockEdges = 48;
-  // Meshes from this many triangles start with the blocks (smaller ones take a second or less).
-  static constexpr std::size_t kBlocksFrom = 100000;
   static constexpr double kBlockFloorShare = 1.5;
   std::vector<Index> inside_;           // per vertex: its block, kNone on a block's border
   std::vector<Index> best_;             // per vertex inside a block: the neighbour giving its key
@@ -1384,12 +1442,13 @@ class Simplifier {
 
 }  // namespace
 
-TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts, SimplifyStats* stats) {
+TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts, SimplifyStats* stats,
+                             SimplifyCarry* carry) {
   if (!(opts.tolerance > 0) || !std::isfinite(opts.tolerance))
     throw Error("simplification: the tolerance must be positive and finite");
   if (!(opts.max_normal_turn_degrees > 0) || !(opts.max_normal_turn_degrees <= 180))
     throw Error("simplification: the normal turn limit must be in (0, 180] degrees");
-  return Simplifier(mesh, opts).run(stats);
+  return Simplifier(mesh, opts, carry).run(stats);
 }
 
 }  // namespace mlfe

@@ -278,9 +278,30 @@ Plane polygonise_plane(const Lattice& L, std::int64_t k, const std::vector<std::
   return plane;
 }
 
+// Each vertex's place, read back from its local position (c + t e_axis) * spacing: along the
+// axes where it is an integer lattice coordinate it is one to rounding, and t stays 1/1024 off
+// the samples. A loop's centre averages vertices on at least two faces of each axis' pair (a
+// loop never lies in one face), so no coordinate of it comes nearer than 1/12288 to a sample.
+std::vector<LatticePlace> lattice_places(const std::vector<V3>& local, const std::array<double, 3>& sp) {
+  std::vector<LatticePlace> places(local.size());
+  tbb::parallel_for(std::size_t(0), local.size(), [&](std::size_t v) {
+    int integral = 0, free_axis = 3;
+    for (int x = 0; x < 3; ++x) {
+      const double q = local[v][x] / sp[x], r = std::round(q);
+      const bool on = std::abs(q - r) < 1e-6;
+      places[v].at[x] = std::int32_t(on ? r : std::floor(q));
+      integral += on;
+      if (!on) free_axis = x;
+    }
+    places[v].axis = integral == 2 ? free_axis : 3;
+  });
+  return places;
+}
+
 }  // namespace
 
-TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts) {
+TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts,
+                                 std::vector<LatticePlace>* places) {
   MLFE_CHECK(grid.dim == 3);
   MLFE_CHECK(grid.values.size() == std::size_t(grid.voxel_count()));
   const Lattice L{grid, iso, grid.dims[0], grid.dims[1], grid.dims[2]};
@@ -347,6 +368,8 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
     const Dropped d = detail::drop_small_parts(mesh, local, grad, sp, opts.min_component);
     if (opts.dropped) *opts.dropped = d;
   }
+
+  if (places) *places = lattice_places(local, sp);
 
   // 5. Physical positions and normals (the samples' gradients). Loops are traced with normals
   // toward lower values, so toward higher ones reverses them.

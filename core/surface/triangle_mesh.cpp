@@ -50,7 +50,7 @@ TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts) {
   return all;
 }
 
-TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
+TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old) {
   const std::size_t nv = mesh.positions.size();
   for (const auto& t : mesh.triangles)
     if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
@@ -91,6 +91,7 @@ TriangleMesh spatially_ordered(const TriangleMesh& mesh) {
   std::vector<std::uint64_t>().swap(key);
   std::vector<std::uint32_t> index(nv);  // old -> new
   for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
+  if (new_to_old) *new_to_old = order;
   TriangleMesh out;
   out.positions.resize(nv);
   for (std::size_t i = 0; i < nv; ++i) out.positions[i] = mesh.positions[order[i]];

@@ -283,6 +283,10 @@ struct AssetOptions {
   /// (IsoExtractor, the paper's); kAuto: the samples when the volume is at hand and the finest
   /// level is asked, else the hierarchy. LODs always come from the hierarchy.
   SurfaceSource surface = SurfaceSource::kAuto;
+  /// Simplify 3D surfaces from the samples in bricks of this many samples per edge (a power of
+  /// two; core/simplify/bricked_iso_surface.h): threads over bricks, the same output for any
+  /// thread count. 0: the whole surface at once.
+  std::int64_t bricks = 0;
   /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
   /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.
   Progress progress;

@@ -8,22 +8,12 @@
 #include <functional>
 #include <random>
 
+#include "tests/core/test_hierarchies.h"
+
 namespace mlfe {
 namespace {
 
-ScalarGrid grid(std::array<std::int64_t, 3> dims, std::array<double, 3> spacing,
-                const std::function<double(std::int64_t, std::int64_t, std::int64_t)>& f) {
-  ScalarGrid g;
-  g.dim = 3;
-  g.dims = dims;
-  g.transform.spacing = spacing;
-  g.values.resize(std::size_t(dims[0] * dims[1] * dims[2]));
-  for (std::int64_t k = 0; k < dims[2]; ++k)
-    for (std::int64_t j = 0; j < dims[1]; ++j)
-      for (std::int64_t i = 0; i < dims[0]; ++i)
-        g.values[std::size_t(i + dims[0] * (j + dims[1] * k))] = float(f(i, j, k));
-  return g;
-}
+using test::function_grid;
 
 // Closed or cut only by the volume's faces, welded, manifold, consistently oriented.
 void expect_clean(const TriangleMesh& m, const ScalarGrid& g, bool closed) {
@@ -58,7 +48,7 @@ std::size_t winding_against_normals(const TriangleMesh& m) {
 
 TEST(LatticeIsoSurface, SphereIsClosedAccurateAndFacesLowerValues) {
   const double r = 6.3;
-  const ScalarGrid g = grid({19, 20, 21}, {1, 1, 1}, [&](auto i, auto j, auto k) {
+  const ScalarGrid g = function_grid({19, 20, 21}, {1, 1, 1}, [&](auto i, auto j, auto k) {
     return 100 - std::sqrt((i - 9.2) * (i - 9.2) + (j - 9.6) * (j - 9.6) + (k - 10.1) * (k - 10.1)) * 10;
   });
   const TriangleMesh m = lattice_iso_surface(g, 100 - r * 10);
@@ -95,7 +85,7 @@ TEST(LatticeIsoSurface, NoiseGivesAClosedManifoldSurfaceWhateverTheAmbiguousFace
     std::mt19937 rng(seed);
     std::normal_distribution<double> noise(0, 1);
     const std::array<std::int64_t, 3> dims{13, 11, 9};
-    const ScalarGrid g = grid(dims, {1, 1, 1}, [&](auto i, auto j, auto k) {
+    const ScalarGrid g = function_grid(dims, {1, 1, 1}, [&](auto i, auto j, auto k) {
       const bool border =
           i == 0 || j == 0 || k == 0 || i == dims[0] - 1 || j == dims[1] - 1 || k == dims[2] - 1;
       const double x = noise(rng);
@@ -122,7 +112,7 @@ TEST(LatticeIsoSurface, NoiseGivesAClosedManifoldSurfaceWhateverTheAmbiguousFace
 
 TEST(LatticeIsoSurface, OddAnisotropicVolumeIsCutOnlyAtItsFacesAndVerticesLieOnLatticeEdges) {
   const std::array<double, 3> sp{0.7, 1.3, 2.9};
-  const ScalarGrid g = grid({8, 13, 6}, sp, [&](auto i, auto j, auto k) {
+  const ScalarGrid g = function_grid({8, 13, 6}, sp, [&](auto i, auto j, auto k) {
     return std::sin(0.9 * i) + std::cos(0.7 * j) + 0.4 * k + 0.1 * ((i * 7 + j * 3 + k) % 5);
   });
   const TriangleMesh m = lattice_iso_surface(g, 1.1);
@@ -140,7 +130,7 @@ TEST(LatticeIsoSurface, OddAnisotropicVolumeIsCutOnlyAtItsFacesAndVerticesLieOnL
 
 TEST(LatticeIsoSurface, SingleSampleSpikeAndIsoValuesOnSamples) {
   // One sample above a flat volume: its surface is the octahedron around it.
-  const ScalarGrid spike = grid(
+  const ScalarGrid spike = function_grid(
       {5, 5, 5}, {1, 1, 1}, [](auto i, auto j, auto k) { return i == 2 && j == 2 && k == 2 ? 10.0 : 0.0; });
   const TriangleMesh m = lattice_iso_surface(spike, 5.0);
   EXPECT_EQ(m.positions.size(), 6u);
@@ -148,7 +138,7 @@ TEST(LatticeIsoSurface, SingleSampleSpikeAndIsoValuesOnSamples) {
   expect_clean(m, spike, true);
   // Integer data at an integer iso-value: crossings at samples move off them, no duplicates.
   const ScalarGrid steps =
-      grid({9, 9, 9}, {1, 1, 1}, [](auto i, auto j, auto k) { return double((i + j + k) % 4); });
+      function_grid({9, 9, 9}, {1, 1, 1}, [](auto i, auto j, auto k) { return double((i + j + k) % 4); });
   const TriangleMesh s = lattice_iso_surface(steps, 2.0);
   ASSERT_GT(s.triangles.size(), 0u);
   expect_clean(s, steps, false);
@@ -157,7 +147,7 @@ TEST(LatticeIsoSurface, SingleSampleSpikeAndIsoValuesOnSamples) {
 TEST(LatticeIsoSurface, SameBytesWithOneAndTwoThreadsAndSmallPartsDropped) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(0, 1);
-  const ScalarGrid g = grid({40, 33, 27}, {1, 1, 1}, [&](auto, auto, auto) { return u(rng); });
+  const ScalarGrid g = function_grid({40, 33, 27}, {1, 1, 1}, [&](auto, auto, auto) { return u(rng); });
   TriangleMesh one, two;
   {
     tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);

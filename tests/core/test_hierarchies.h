@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -26,6 +27,21 @@ inline ScalarGrid random_grid(int dim, std::array<std::int64_t, 3> dims, std::ar
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> u(-50.f, 50.f);
   for (float& v : g.values) v = integers ? std::round(u(rng)) : u(rng);
+  return g;
+}
+
+/// A 3D grid of f(i, j, k) at every sample.
+inline ScalarGrid function_grid(std::array<std::int64_t, 3> dims, std::array<double, 3> spacing,
+                                const std::function<double(std::int64_t, std::int64_t, std::int64_t)>& f) {
+  ScalarGrid g;
+  g.dim = 3;
+  g.dims = dims;
+  g.transform.spacing = spacing;
+  g.values.resize(std::size_t(dims[0] * dims[1] * dims[2]));
+  for (std::int64_t k = 0; k < dims[2]; ++k)
+    for (std::int64_t j = 0; j < dims[1]; ++j)
+      for (std::int64_t i = 0; i < dims[0]; ++i)
+        g.values[std::size_t(i + dims[0] * (j + dims[1] * k))] = float(f(i, j, k));
   return g;
 }
 

@@ -5,7 +5,10 @@
 #pragma once
 #include <mlfe/core/surface/triangle_mesh.h>
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
+#include <vector>
 
 namespace mlfe {
 
@@ -27,12 +30,42 @@ struct SimplifyOptions {
   /// squared distance to its planes stays within tolerance²): several times faster, the topology
   /// checks unchanged, the bound no longer guaranteed.
   bool verify_bound = true;
+  /// With an estimated bound, meshes of at least this many triangles start with the blocks of
+  /// space (core/simplify/surface_simplification.cpp), each simplified on its own, cheapest
+  /// collapse first, before the parallel passes (smaller ones take a second or less in the
+  /// passes alone).
+  std::size_t blocks_from = 100000;
 };
 
 struct SimplifyStats {
   std::size_t passes = 0;     ///< rounds of independent collapses
   std::size_t collapses = 0;  ///< vertices removed
   std::size_t flips = 0;      ///< valence-improving edge flips
+};
+
+/// What simplify_within shares with the simplifications of the neighbouring parts of one surface
+/// (core/simplify/bricked_iso_surface.h): vertices held where the parts meet, and the bound's
+/// points carried over from an earlier simplification, so that the bound stays measured
+/// against the surface that one started from.
+struct SimplifyCarry {
+  /// In: empty, or one per input vertex; 1 where the vertex never moves and is never removed
+  /// (a neighbour may still collapse onto it, the half-edge way, leaving it in place; flips
+  /// may change its triangles but not flip its edges). Unlike a boundary vertex, which may
+  /// slide along the boundary, it stays exactly as it is, and so do the boundary edges between
+  /// two such vertices; no collapse or flip joins two of them by a new edge (the other part
+  /// glued along them may have that edge).
+  std::vector<std::uint8_t> locked;
+  /// In (verified bound only): when `point_face` is not empty, the bound's points, in place of
+  /// the input's vertices; each lies within the tolerance of the input triangle `point_face`
+  /// names (one that has no repeated index). The reverse check of a moved survivor then looks
+  /// at the input triangles around the collapse's own two vertices only.
+  std::vector<std::array<float, 3>> points;
+  /// In: see `points`. Out (verified bound): per point (the input's vertices when no points came
+  /// in; an input vertex no triangle uses gets UINT32_MAX), the output triangle it lies within
+  /// the tolerance of. Empty with an estimated bound, which keeps no points.
+  std::vector<std::uint32_t> point_face;
+  /// Out: per output vertex, the input vertex it is (the survivor of its collapses).
+  std::vector<std::uint32_t> source;
 };
 
 /// Simplifies `mesh` by edge collapses, cheapest quadric error first (Garland & Heckbert 1997),
@@ -68,8 +101,11 @@ struct SimplifyStats {
 /// - Throws mlfe::Error for a tolerance that is not positive and finite, an index out of range,
 ///   a non-finite position used by a triangle, or a normal count that is neither 0 nor one per
 ///   vertex.
+/// - `carry` (may be null): see SimplifyCarry; throws mlfe::Error when its sizes do not fit the
+///   mesh, when a point's triangle is out of range or degenerate, or for points with an
+///   estimated bound.
 TriangleMesh simplify_within(const TriangleMesh& mesh, const SimplifyOptions& opts,
-                             SimplifyStats* stats = nullptr);
+                             SimplifyStats* stats = nullptr, SimplifyCarry* carry = nullptr);
 
 /// Fast simplification with meshoptimizer's meshopt_simplify (A. Kapoulkine; quadric-ordered
 /// edge collapses onto input vertices): collapses while meshoptimizer's own error estimate

@@ -18,6 +18,7 @@
 #include <mlfe/core/surface/triangle_mesh.h>
 
 #include <array>
+#include <cstdint>
 #include <vector>
 
 namespace mlfe {
@@ -77,6 +78,14 @@ class IsoExtractor {
   mutable std::size_t visited_ = 0;
 };
 
+/// Where a vertex of lattice_iso_surface lies on the samples' lattice: on the edge from sample
+/// `at` to its neighbour along `axis` (0, 1, 2), or, with axis 3, inside the cube whose lowest
+/// corner is `at` (the centre of a loop no fan could triangulate).
+struct LatticePlace {
+  std::array<std::int32_t, 3> at{0, 0, 0};
+  int axis = 0;
+};
+
 /// The iso-surface of the samples themselves (their trilinear interpolant), by marching cubes on
 /// the grid's lattice: the finest level of a hierarchy on the samples' lattice, without building
 /// it (core/surface/lattice_iso_surface.cpp). One vertex per lattice edge the iso-value crosses (a sample
@@ -86,7 +95,9 @@ class IsoExtractor {
 /// and normals (the samples' central-difference gradients, interpolated along the edge) are
 /// mapped through grid.transform. Of `opts`, only normals_toward_higher, min_component and
 /// dropped apply. Vertex and triangle order are a function of the grid alone. grid.dim must be 3.
-TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts = {});
+/// `places` (may be null) receives each output vertex's LatticePlace.
+TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts = {},
+                                 std::vector<LatticePlace>* places = nullptr);
 
 /// A 2D height field as a surface: the leaf triangles (or T_level) lifted to z = z_scale·u,
 /// mapped through the transform's x/y part (z added along the third axis of the direction),

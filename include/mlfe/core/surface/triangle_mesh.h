@@ -35,8 +35,8 @@ TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts);
 /// so orientation is kept, and normals follow their vertices. Neighbouring vertices then lie
 /// near each other in memory: algorithms that walk one-rings in random order (the verified
 /// simplification) run faster. A function of the mesh alone. Throws mlfe::Error for triangle
-/// indices out of range.
-TriangleMesh spatially_ordered(const TriangleMesh& mesh);
+/// indices out of range. `new_to_old` (may be null) receives, per output vertex, its input vertex.
+TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old = nullptr);
 
 /// What makes an indexed triangle mesh one welded, manifold surface, counted (for tests and
 /// reports). Vertices are first welded by exact position, since a writer or viewer sees a seam

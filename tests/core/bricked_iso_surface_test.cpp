@@ -1,0 +1,188 @@
+// simplify_in_bricks (core/simplify/bricked_iso_surface.cpp): the bricked simplification of a
+// lattice iso-surface against the whole surface's, on shapes that cross the bricks' faces,
+// edges and corners.
+#include <gtest/gtest.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/core/simplify/bricked_iso_surface.h>
+#include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/mesh_distance.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <numeric>
+#include <random>
+#include <utility>
+
+#include "tests/core/test_hierarchies.h"
+#include "tests/test_meshes.h"
+
+namespace mlfe {
+namespace {
+
+// Euler characteristic and connected parts of the triangles.
+struct Shape {
+  long euler = 0;
+  std::size_t parts = 0;
+};
+
+Shape shape_of(const TriangleMesh& m) {
+  std::vector<std::size_t> up(m.positions.size());
+  std::iota(up.begin(), up.end(), 0);
+  auto find = [&](std::size_t v) {
+    while (up[v] != v) v = up[v] = up[up[v]];
+    return v;
+  };
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+  std::vector<char> used(m.positions.size(), 0);
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+      ++edges[{std::min(a, b), std::max(a, b)}];
+      used[a] = 1;
+      up[find(a)] = find(b);
+    }
+  Shape s;
+  for (std::size_t v = 0; v < used.size(); ++v) {
+    s.euler += used[v];
+    s.parts += used[v] && find(v) == v;
+  }
+  s.euler += long(m.triangles.size()) - long(edges.size());
+  return s;
+}
+
+struct Extraction {
+  ScalarGrid grid;
+  TriangleMesh mesh;
+  std::vector<LatticePlace> places;
+};
+
+Extraction extract(ScalarGrid g, double iso) {
+  Extraction e;
+  e.grid = std::move(g);
+  e.mesh = lattice_iso_surface(e.grid, iso, {}, &e.places);
+  return e;
+}
+
+SimplifierOptions options(Placement placement) {
+  SimplifierOptions o;
+  o.tolerance = 0.3;
+  o.ratio = 0.1;
+  o.placement = placement;
+  return o;
+}
+
+// The bricked result against the whole surface's: the same topology, closed, welded (no crack,
+// no vertex twice along a face), manifold, every extracted vertex within the bound, and near
+// the unbricked simplification.
+void expect_as_unbricked(const Extraction& e, std::int64_t brick, Placement placement) {
+  const SimplifierOptions o = options(placement);
+  BrickStats stats;
+  const TriangleMesh bricked = simplify_in_bricks(e.mesh, e.places, e.grid.dims, o, brick, &stats);
+  const TriangleMesh whole = simplify(e.mesh, o);
+  EXPECT_GT(stats.bricks, 1u);
+  EXPECT_GT(stats.face_vertices, 0u);
+  const MeshTopology t = mesh_topology(bricked);
+  EXPECT_TRUE(t.welded_manifold()) << t.duplicate_vertices << " duplicates, " << t.non_manifold_edges
+                                   << " non-manifold edges, " << t.non_manifold_vertices << " vertices, "
+                                   << t.inconsistent_edges << " flips";
+  EXPECT_EQ(t.boundary_edges, 0u);
+  const Shape a = shape_of(bricked), b = shape_of(whole), in = shape_of(e.mesh);
+  EXPECT_EQ(a.euler, in.euler);
+  EXPECT_EQ(a.parts, in.parts);
+  EXPECT_EQ(b.euler, in.euler);
+  EXPECT_EQ(signed_volume(bricked) > 0, signed_volume(e.mesh) > 0);  // orientation kept
+  EXPECT_LE(test::one_sided_hausdorff(e.mesh, bricked), o.tolerance * (1 + 1e-4));
+  // As close to the extraction, both ways, as the whole surface's simplification.
+  const double d = mesh_distance(e.mesh, bricked, {20000, 17}).hausdorff(),
+               d_whole = mesh_distance(e.mesh, whole, {20000, 17}).hausdorff();
+  std::printf(
+      "brick %lld: %zu -> %zu triangles (whole: %zu; seams %zu -> %zu), Hausdorff %.3f (whole: %.3f)\n",
+      static_cast<long long>(brick), e.mesh.triangles.size(), bricked.triangles.size(),
+      whole.triangles.size(), stats.seam_triangles, stats.seam_output, d, d_whole);
+  EXPECT_LE(d, 1.5 * std::max(o.tolerance, d_whole));
+  // The seams end about as sparse as the rest.
+  EXPECT_LE(double(bricked.triangles.size()), 1.25 * double(whole.triangles.size()));
+}
+
+ScalarGrid sphere(double r, std::array<double, 3> c) {
+  return test::function_grid({40, 41, 39}, {1, 1, 1}, [&](auto i, auto j, auto k) {
+    return std::hypot(double(i) - c[0], double(j) - c[1], double(k) - c[2]) - r;
+  });
+}
+
+// A torus around the corner (16, 16, 16) of eight 16-sample bricks, tilted so its tube crosses
+// their faces at slants.
+ScalarGrid torus() {
+  return test::function_grid({36, 34, 35}, {1, 1, 1}, [](auto i, auto j, auto k) {
+    const double x = double(i) - 16.2, y = double(j) - 15.9, z = double(k) - 16.1;
+    const double c = std::cos(0.5), s = std::sin(0.5);
+    const double u = x, v = c * y - s * z, w = s * y + c * z;
+    return std::hypot(std::hypot(u, v) - 9.0, w) - 3.2;
+  });
+}
+
+TEST(BrickedIsoSurface, SphereAsUnbricked) {
+  const Extraction e = extract(sphere(13.3, {19.6, 20.2, 19.1}), 0.0);
+  for (Placement p : {Placement::kInputVertex, Placement::kOptimal}) expect_as_unbricked(e, 16, p);
+  expect_as_unbricked(e, 8, Placement::kInputVertex);
+}
+
+// Noise wrinkles the surface along every brick face: collapses onto the held face vertices
+// must not join two of them by an edge the neighbouring brick also has (non-manifold seams).
+TEST(BrickedIsoSurface, NoisySphereInSmallBricksAsUnbricked) {
+  ScalarGrid g = sphere(13.3, {19.6, 20.2, 19.1});
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> noise(-0.45f, 0.45f);
+  for (float& v : g.values) v += noise(rng);
+  const Extraction e = extract(std::move(g), 0.0);
+  for (std::int64_t brick : {8, 16}) expect_as_unbricked(e, brick, Placement::kOptimal);
+}
+
+TEST(BrickedIsoSurface, TorusAcrossBrickCornersAsUnbricked) {
+  const Extraction e = extract(torus(), 0.0);
+  EXPECT_EQ(shape_of(e.mesh).euler, 0);
+  for (Placement p : {Placement::kInputVertex, Placement::kOptimal}) expect_as_unbricked(e, 16, p);
+}
+
+// One sample above the iso-value on a shared sample plane: a tiny closed surface whose
+// vertices are nearly all face vertices, beside a sphere so the bricks have work.
+TEST(BrickedIsoSurface, SingleVoxelSpikeOnABrickFaceSurvives) {
+  ScalarGrid g = sphere(8.2, {24.4, 24.6, 23.7});
+  for (float& v : g.values) v = -v;  // inside above the iso-value, like the spike
+  g.values[std::size_t(16 + 40 * (5 + 41 * 6))] = 100.0f;
+  const Extraction e = extract(std::move(g), 0.0);
+  EXPECT_EQ(shape_of(e.mesh).parts, 2u);
+  expect_as_unbricked(e, 16, Placement::kOptimal);
+  expect_as_unbricked(e, 16, Placement::kInputVertex);
+}
+
+TEST(BrickedIsoSurface, SameBytesForAnyThreadCount) {
+  const Extraction e = extract(torus(), 0.0);
+  const SimplifierOptions o = options(Placement::kOptimal);
+  std::vector<TriangleMesh> out;
+  for (int threads : {1, 2, 7}) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    out.push_back(simplify_in_bricks(e.mesh, e.places, e.grid.dims, o, 8));
+  }
+  for (std::size_t i = 1; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].positions, out[0].positions);
+    EXPECT_EQ(out[i].normals, out[0].normals);
+    EXPECT_EQ(out[i].triangles, out[0].triangles);
+  }
+}
+
+TEST(BrickedIsoSurface, RejectsWhatCannotBeBricked) {
+  const Extraction e = extract(sphere(5.0, {10, 10, 10}), 0.0);
+  SimplifierOptions o = options(Placement::kInputVertex);
+  EXPECT_THROW(simplify_in_bricks(e.mesh, e.places, e.grid.dims, o, 12), Error);
+  EXPECT_THROW(simplify_in_bricks(e.mesh, e.places, e.grid.dims, o, 1), Error);
+  EXPECT_THROW(simplify_in_bricks(e.mesh, {}, e.grid.dims, o, 16), Error);
+  o.kind = Simplifier::kMeshopt;
+  EXPECT_THROW(simplify_in_bricks(e.mesh, e.places, e.grid.dims, o, 16), Error);
+}
+
+}  // namespace
+}  // namespace mlfe
