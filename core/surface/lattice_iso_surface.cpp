@@ -282,7 +282,7 @@ Plane polygonise_plane(const Lattice& L, std::int64_t k, const std::vector<std::
 // axes where it is an integer lattice coordinate it is one to rounding, and t stays 1/1024 off
 // the samples. A loop's centre averages vertices on at least two faces of each axis' pair (a
 // loop never lies in one face), so no coordinate of it comes nearer than 1/12288 to a sample.
-std::vector<LatticePlace> lattice_places(const std::vector<V3>& local, const std::array<double, 3>& sp) {
+std::vector<LatticePlace> lattice_places(const std::vector<Vec3>& local, const std::array<double, 3>& sp) {
   std::vector<LatticePlace> places(local.size());
   tbb::parallel_for(std::size_t(0), local.size(), [&](std::size_t v) {
     int integral = 0, free_axis = 3;
