@@ -189,8 +189,11 @@ std::vector<unsigned char> read_exactly(const std::string& path, const ByteSourc
     if (done == out.size())
       out.resize(static_cast<std::size_t>(
           std::min<std::uint64_t>(bytes, std::max<std::uint64_t>(kChunk, 2 * done))));
-    const std::size_t got = in(out.data() + done, out.size() - static_cast<std::size_t>(done));
+    const std::size_t asked = out.size() - static_cast<std::size_t>(done);
+    const std::size_t got = in(out.data() + done, asked);
     if (got == 0) fail(path, fmt::format("truncated {} ({} of {} bytes)", what, done, bytes));
+    // More than asked is a library's error code cast to size_t (znzread passes gzread's -1 on).
+    if (got > asked) fail(path, fmt::format("corrupt {} (decoding failed after {} bytes)", what, done));
     done += got;
   }
   return out;
@@ -200,8 +203,9 @@ std::uint64_t count_bytes(const ByteSource& in, std::uint64_t enough) {
   std::vector<unsigned char> scratch(kChunk);
   std::uint64_t seen = 0;
   while (seen < enough) {
-    const std::size_t got = in(scratch.data(), std::min<std::uint64_t>(scratch.size(), enough - seen));
-    if (got == 0) break;
+    const std::size_t asked = std::min<std::uint64_t>(scratch.size(), enough - seen);
+    const std::size_t got = in(scratch.data(), asked);
+    if (got == 0 || got > asked) break;  // the end, or an error code cast to size_t
     seen += got;
   }
   return seen;
