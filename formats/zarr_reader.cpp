@@ -418,7 +418,10 @@ void copy_chunk(const ZarrVolume::Impl& z, const std::array<std::int64_t, 3>& c,
     to[a] = std::min(hi[a], (c[a] + 1) * z.chunk[a]);
   }
   const std::string file = z.chunk_file(c);
-  const bool present = is_file(file) || fs::exists(file);
+  // Missing means "no such file"; anything else (a folder, no permission) is left to the read,
+  // which names it.
+  std::error_code ec;
+  const bool present = fs::exists(file, ec) || ec;
   std::vector<unsigned char> bytes;
   if (present) {
     z.decode_chunk(file, bytes);
