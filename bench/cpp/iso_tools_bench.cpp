@@ -22,8 +22,9 @@
 #include <meshoptimizer.h>
 #include <mlfe/core/fem/approximation.h>
 #include <mlfe/core/field/field.h>
-#include <mlfe/core/simplify/surface_simplification.h>
+#include <mlfe/core/simplify/simplifier.h>
 #include <mlfe/core/surface/iso_surface.h>
+#include <mlfe/core/surface/surface_fitting.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/volume_reader.h>
@@ -70,6 +71,7 @@ static int usage() {
                "       iso_tools_bench [--threads N] extract HIER.mlfeh ISO OUT.ply [SIMPLIFY_VOXELS [VOLUME "
                "SNAP_VOXELS [input|optimal]]]\n"
                "       iso_tools_bench [--threads N] cubes VOL ISO OUT.ply\n"
+               "       iso_tools_bench [--threads N] stages VOL ISO SIMPLIFY_VOXELS\n"
                "       iso_tools_bench meshopt IN.ply TARGET_TRIANGLES OUT.ply\n");
   return 1;
 }
@@ -267,6 +269,34 @@ int main(int argc, char** argv) {
              {"absolute_error", err * meshopt_simplifyScale(&in.positions[0][0], in.positions.size(), 12)},
              {"vertices", m.positions.size()},
              {"triangles", m.triangles.size()}};
+    } else if (mode == "stages" && args.size() == 4) {
+      // stages VOL ISO VOXELS: the default simplification's runs timed one by one (auto, ratio 0.1,
+      // optimal placement) on the lattice surface, for where convert's time goes.
+      const ScalarGrid g = read_volume(args[1]);
+      auto t0 = Clock::now();
+      const TriangleMesh m = lattice_iso_surface(g, std::atof(args[2].c_str()));
+      out = {{"extract_seconds", since(t0)}, {"triangles", m.triangles.size()}};
+      SimplifierOptions so;
+      so.tolerance = std::atof(args[3].c_str()) *
+                     std::min({g.transform.spacing[0], g.transform.spacing[1], g.transform.spacing[2]});
+      so.ratio = 0.1;
+      so.placement = Placement::kOptimal;
+      const auto stages = simplify_stages(so, m.triangles.size());
+      TriangleMesh s = m;
+      for (std::size_t k = 0; k < stages.size(); ++k) {
+        t0 = Clock::now();
+        if (k > 0) s = spatially_ordered(s);
+        const double t_order = since(t0);
+        t0 = Clock::now();
+        s = simplify_within(s, stages[k]);
+        out["stage" + std::to_string(k)] = {
+            {"order_seconds", t_order}, {"seconds", since(t0)}, {"triangles", s.triangles.size()}};
+      }
+      t0 = Clock::now();
+      SurfaceFitOptions fo;
+      fo.tolerance = so.tolerance;
+      fit_surface(s, m, fo);
+      out["fit_seconds"] = since(t0);
     } else if (mode == "cubes" && args.size() == 4) {
       // cubes VOL ISO OUT.ply: mlfe's marching cubes on the samples' lattice
       const ScalarGrid g = read_volume(args[1]);
