@@ -12,6 +12,7 @@
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
 #include <mlfe/formats/openmesh_io.h>
+#include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>
 #include <sys/resource.h>
@@ -22,6 +23,8 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
+#include <mutex>
 #include <optional>
 
 #include "converters/progress_reporter.h"
@@ -417,6 +420,52 @@ double smallest_spacing(const GridTransform& t, int dim) {
   return s;
 }
 
+// Gradient normals hold at extracted vertices only, so they keep the vertices in place.
+VertexPlacement resolved_placement(const AssetOptions& p) {
+  return p.placement != VertexPlacement::kAuto ? p.placement
+         : p.normals == Normals::kGradient     ? VertexPlacement::kInput
+                                               : VertexPlacement::kOptimal;
+}
+
+SimplifierOptions simplifier_options(const AssetOptions& p, double voxel) {
+  SimplifierOptions so;
+  so.kind = p.simplifier;
+  so.tolerance = p.simplify * voxel;
+  so.placement =
+      resolved_placement(p) == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
+  so.ratio = p.ratio;
+  return so;
+}
+
+// Surface i of `count` iso-surfaces: its name, and its colour. Surfaces that enclose others are
+// translucent so the inner ones stay visible: with normals toward lower values the innermost
+// surface is the highest iso-value.
+void style_iso_surface(GltfSurface& s, double iso, std::size_t i, std::size_t count, bool toward_higher) {
+  s.iso_value = iso;
+  s.name = fmt::format("iso {}", iso);
+  const bool innermost = toward_higher ? i == 0 : i + 1 == count;
+  static const std::array<std::array<float, 3>, 4> palette{
+      {{0.93f, 0.87f, 0.75f}, {0.85f, 0.45f, 0.40f}, {0.45f, 0.60f, 0.85f}, {0.55f, 0.80f, 0.50f}}};
+  const auto& c = palette[(count - 1 - i) % palette.size()];
+  s.color = {c[0], c[1], c[2], innermost ? 1.0f : 0.35f};
+}
+
+// After extraction: decimation, and the normals the options resolve to (out.normals).
+void finish_surfaces(Surfaces& out, const AssetOptions& p) {
+  if (p.decimate > 0)
+    for (auto& s : out.surfaces)
+      if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
+  // decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
+  out.normals = p.decimate > 0 || (p.normals == Normals::kAuto && p.simplify > 0) ? Normals::kSurface
+                : p.normals == Normals::kAuto                                     ? Normals::kGradient
+                                                                                  : p.normals;
+  if (out.normals == Normals::kSurface)
+    for (auto& s : out.surfaces) {
+      compute_area_weighted_normals(s.mesh);
+      for (auto& lod : s.lods) compute_area_weighted_normals(lod);
+    }
+}
+
 }  // namespace
 
 Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) {
@@ -425,8 +474,10 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
   Surfaces out;
   std::vector<GltfSurface>& surfaces = out.surfaces;
   std::vector<double>& isos = out.iso_values;
-  // Per surface, its vertices' places on the lattice (bricks only).
-  std::vector<std::vector<LatticePlace>> places;
+  // Surfaces extracted and simplified brick by brick (bricked_iso_surface).
+  bool bricked = false;
+  out.placement = resolved_placement(p);
+  const SimplifierOptions so = simplifier_options(p, smallest_spacing(b.transform, b.dim()));
   const int dim = b.dim();
   if (dim == 3) {
     require_iso(p.iso);
@@ -442,7 +493,11 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       throw pipeline::OptionError(
           pipeline::option_ref("bricks") +
           ": the bricks are the samples' lattice; surfaces from the hierarchy have none");
-    places.resize(p.bricks != 0 ? isos.size() : 0);
+    if (p.bricks != 0 && p.min_component > 0)
+      throw pipeline::OptionError(pipeline::option_ref("bricks") + ": " +
+                                  pipeline::option_ref("min_component") +
+                                  " needs the whole surface (a part may span bricks); use one or the other");
+    bricked = p.bricks != 0 && p.simplify > 0;
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
@@ -476,24 +531,25 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     for (std::size_t i = 0; i < isos.size(); ++i) {
       if (p.progress && !p.progress(0.5 * double(i) / double(isos.size()), "extracting")) throw Cancelled();
       GltfSurface s;
-      s.iso_value = isos[i];
-      s.name = fmt::format("iso {}", isos[i]);
+      style_iso_surface(s, isos[i], i, isos.size(), p.normals_toward_higher);
       Dropped dropped;
       IsoOptions o = options(level);
       o.dropped = &dropped;
-      // On the samples the surface is the data's own: nothing to snap or clip.
-      s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o, places.empty() ? nullptr : &places[i])
-                            : x->extract(isos[i], b.transform, o);
+      if (bricked) {
+        BrickedIsoOptions bo;
+        bo.iso = isos[i];
+        bo.normals_toward_higher = p.normals_toward_higher;
+        bo.simplifier = so;
+        BrickStats stats;
+        s.mesh = bricked_iso_surface(grid_windows(*grid), grid->dims, p.bricks, bo, &stats);
+        dropped.kept_parts = stats.parts;
+      } else {
+        // On the samples the surface is the data's own: nothing to snap or clip.
+        s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o) : x->extract(isos[i], b.transform, o);
+      }
       out.dropped.push_back(dropped);
       for (int k = 1; k <= p.lod && level - 2 * k >= 0; ++k)
         s.lods.push_back(x->extract(isos[i], b.transform, options(level - 2 * k)));
-      // Surfaces that enclose others are translucent so the inner ones stay visible: with
-      // normals toward lower values the innermost surface is the highest iso-value.
-      const bool innermost = p.normals_toward_higher ? i == 0 : i + 1 == isos.size();
-      static const std::array<std::array<float, 3>, 4> palette{
-          {{0.93f, 0.87f, 0.75f}, {0.85f, 0.45f, 0.40f}, {0.45f, 0.60f, 0.85f}, {0.55f, 0.80f, 0.50f}}};
-      const auto& c = palette[(isos.size() - 1 - i) % palette.size()];
-      s.color = {c[0], c[1], c[2], innermost ? 1.0f : 0.35f};
       surfaces.push_back(std::move(s));
     }
   } else {
@@ -504,57 +560,31 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     s.color = {0.70f, 0.72f, 0.60f, 1.0f};
     surfaces.push_back(std::move(s));
   }
-  // Gradient normals hold at extracted vertices only, so they keep the vertices in place.
-  out.placement = p.placement != VertexPlacement::kAuto ? p.placement
-                  : p.normals == Normals::kGradient     ? VertexPlacement::kInput
-                                                        : VertexPlacement::kOptimal;
   out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (p.progress && !p.progress(0.5, "simplifying")) throw Cancelled();
-  if (p.simplify > 0) {
-    const double voxel = smallest_spacing(b.transform, dim);
-    SimplifierOptions so;
-    so.kind = p.simplifier;
-    so.tolerance = p.simplify * voxel;
-    so.placement = out.placement == VertexPlacement::kOptimal ? Placement::kOptimal : Placement::kInputVertex;
-    so.ratio = p.ratio;
+  if (p.simplify > 0 && !bricked) {
     // Surfaces are independent: one task each, and each simplification is parallel inside.
     tbb::parallel_for(std::size_t(0), surfaces.size(), [&](std::size_t i) {
       auto& m = surfaces[i].mesh;
-      if (m.triangles.empty()) return;
-      m = places.empty() ? simplify(m, so) : simplify_in_bricks(m, places[i], grid->dims, so, p.bricks);
+      if (!m.triangles.empty()) m = simplify(m, so);
     });
   }
-  if (p.decimate > 0)
-    for (auto& s : surfaces)
-      if (s.mesh.triangles.size() > p.decimate) s.mesh = decimate_to(s.mesh, p.decimate);
-  // decimate (OpenMesh) moves vertices, so only surface normals fit what it writes.
-  out.normals = p.decimate > 0 || (p.normals == Normals::kAuto && p.simplify > 0) ? Normals::kSurface
-                : p.normals == Normals::kAuto                                     ? Normals::kGradient
-                                                                                  : p.normals;
-  if (out.normals == Normals::kSurface)
-    for (auto& s : surfaces) {
-      compute_area_weighted_normals(s.mesh);
-      for (auto& lod : s.lods) compute_area_weighted_normals(lod);
-    }
+  finish_surfaces(out, p);
   out.simplify_seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - out.extract_seconds;
   if (p.progress && !p.progress(1.0, "simplifying")) throw Cancelled();
   return out;
 }
 
-nlohmann::json write_assets(const std::string& out, const Built& b, const AssetOptions& p,
-                            const nlohmann::json& provenance, const ScalarGrid* grid) {
-  const auto t0 = std::chrono::steady_clock::now();
-  check_output_path(out, kAssetExtensions);
-  const double tol = p.tolerance > 0 ? p.tolerance : smallest_spacing(b.transform, b.dim()) / 10.0;
+namespace {
 
-  // Extraction and simplification take most of the time, writing (Draco encoding) the rest.
-  const pipeline::detail::Reporter report(p.progress);
-  AssetOptions extract_options = p;
-  extract_options.progress = report.share(0, 0.8).as_progress();
-  const Surfaces extracted = extract(b, extract_options, grid);
+// The extracted surfaces of a volume of `dim` dimensions (voxel: its smallest spacing) written
+// to `out`, and write_assets' summary; `t0`: when the call began.
+nlohmann::json write_surfaces(const std::string& out, const Surfaces& extracted, const AssetOptions& p,
+                              const nlohmann::json& provenance, int dim, double voxel,
+                              const std::string& space, std::chrono::steady_clock::time_point t0) {
+  const double tol = p.tolerance > 0 ? p.tolerance : voxel / 10.0;
   const std::vector<GltfSurface>& surfaces = extracted.surfaces;
-  report(0.8, "writing");
 
   nlohmann::json summary;
   nlohmann::json per = nlohmann::json::array();
@@ -587,15 +617,14 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   extras["snapped_to_data_voxels"] = extracted.snapped ? p.snap : 0.0;
   extras["simplify_voxels"] = p.simplify;
   if (p.simplify > 0) extras["simplifier"] = to_string(p.simplifier);
-  if (p.simplify > 0 && b.dim() == 3) extras["simplify_ratio"] = p.ratio;
+  if (p.simplify > 0 && dim == 3) extras["simplify_ratio"] = p.ratio;
   if (p.simplify > 0 && p.simplifier != Simplifier::kMeshopt)
     extras["placement"] = to_string(extracted.placement);
   extras["normals"] = to_string(extracted.normals);
-  if (b.dim() == 3) extras["surface"] = to_string(extracted.source);
-  write_asset(surfaces, out, {p.draco, p.quantize, tol, b.space, extras});
-  report.finish("writing");
+  if (dim == 3) extras["surface"] = to_string(extracted.source);
+  write_asset(surfaces, out, {p.draco, p.quantize, tol, space, extras});
   summary["output"] = out;
-  if (b.dim() == 3) summary["surface"] = to_string(extracted.source);
+  if (dim == 3) summary["surface"] = to_string(extracted.source);
   summary["surfaces"] = per;
   summary["triangles"] = total;
   summary["bytes"] = written_file_size(out);
@@ -605,6 +634,113 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
       {"extract", extracted.extract_seconds},
       {"simplify", extracted.simplify_seconds},
       {"write", summary["seconds"].get<double>() - extracted.extract_seconds - extracted.simplify_seconds}};
+  return summary;
+}
+
+// Reads the windows of `v` for bricked_iso_surface, noting the values' range as they pass.
+struct RangedWindows {
+  const VolumeWindows& v;
+  std::mutex mutex;
+  float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
+  WindowReader reader() {
+    return [this](const std::array<std::int64_t, 3>& a, const std::array<std::int64_t, 3>& b) {
+      ScalarGrid w = v.read(a, b);
+      const auto [mn, mx] = std::minmax_element(w.values.begin(), w.values.end());
+      const std::lock_guard<std::mutex> lock(mutex);
+      lo = std::min(lo, *mn);
+      hi = std::max(hi, *mx);
+      return w;
+    };
+  }
+};
+
+}  // namespace
+
+nlohmann::json write_assets(const std::string& out, const Built& b, const AssetOptions& p,
+                            const nlohmann::json& provenance, const ScalarGrid* grid) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check_output_path(out, kAssetExtensions);
+  // Extraction and simplification take most of the time, writing (Draco encoding) the rest.
+  const pipeline::detail::Reporter report(p.progress);
+  AssetOptions extract_options = p;
+  extract_options.progress = report.share(0, 0.8).as_progress();
+  const Surfaces extracted = extract(b, extract_options, grid);
+  report(0.8, "writing");
+  nlohmann::json summary = write_surfaces(out, extracted, p, provenance, b.dim(),
+                                          smallest_spacing(b.transform, b.dim()), b.space, t0);
+  report.finish("writing");
+  return summary;
+}
+
+Surfaces extract(const VolumeWindows& v, const AssetOptions& p) {
+  pipeline::check_options(p);
+  const ScalarGrid& frame = v.frame();
+  if (frame.dim != 3)
+    throw pipeline::OptionError(pipeline::option_ref("bricks") + ": a 2D height field has no bricks");
+  if (p.bricks == 0 || p.simplify <= 0 || p.lod > 0 || p.level >= 0 ||
+      p.surface == SurfaceSource::kHierarchy || p.min_component > 0)
+    throw pipeline::OptionError(
+        pipeline::option_ref("bricks") +
+        ": a volume read in bricks gives simplified surfaces of its samples at the finest "
+        "level, with no LODs and no part-size floor");
+  require_iso(p.iso);
+  const auto t0 = std::chrono::steady_clock::now();
+  Surfaces out;
+  out.iso_values = p.iso;
+  std::sort(out.iso_values.begin(), out.iso_values.end());
+  out.source = SurfaceSource::kSamples;
+  out.placement = resolved_placement(p);
+  RangedWindows windows{v};
+  const WindowReader read = windows.reader();
+  BrickedIsoOptions bo;
+  bo.normals_toward_higher = p.normals_toward_higher;
+  bo.simplifier = simplifier_options(p, smallest_spacing(frame.transform, 3));
+  std::mutex progress_mutex;
+  const std::size_t n = out.iso_values.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    GltfSurface s;
+    style_iso_surface(s, out.iso_values[i], i, n, p.normals_toward_higher);
+    bo.iso = out.iso_values[i];
+    BrickStats stats;
+    s.mesh =
+        bricked_iso_surface(read, frame.dims, p.bricks, bo, &stats, [&](std::size_t done, std::size_t total) {
+          const std::lock_guard<std::mutex> lock(progress_mutex);
+          if (p.progress && !p.progress((double(i) + double(done) / double(total)) / double(n), "extracting"))
+            throw Cancelled();
+          return true;
+        });
+    Dropped kept;
+    kept.kept_parts = stats.parts;
+    out.dropped.push_back(kept);
+    out.surfaces.push_back(std::move(s));
+    // The data's range is known once every brick was read: an iso-value outside it is refused
+    // as the unbricked path refuses it, before anything is written.
+    check_iso_in_range(p.iso, windows.lo, windows.hi, frame.source);
+  }
+  out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  finish_surfaces(out, p);
+  out.simplify_seconds = 0;  // inside the bricks, with the extraction
+  return out;
+}
+
+bool reads_in_bricks(const BuildOptions& b, const AssetOptions& a, bool whole_volume_outputs) {
+  const bool surface_driven = without_global_target(b, a.iso) && b.max_sample_error < 0;
+  return a.bricks != 0 && !whole_volume_outputs && a.simplify > 0 && a.lod == 0 && a.min_component == 0 &&
+         surfaces_from_samples(a, true, surface_driven);
+}
+
+nlohmann::json write_assets(const std::string& out, const VolumeWindows& v, const AssetOptions& p,
+                            const nlohmann::json& provenance) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check_output_path(out, kAssetExtensions);
+  const pipeline::detail::Reporter report(p.progress);
+  AssetOptions extract_options = p;
+  extract_options.progress = report.share(0, 0.9).as_progress();
+  const Surfaces extracted = extract(v, extract_options);
+  report(0.9, "writing");
+  nlohmann::json summary = write_surfaces(out, extracted, p, provenance, 3,
+                                          smallest_spacing(v.frame().transform, 3), v.frame().space, t0);
+  report.finish("writing");
   return summary;
 }
 

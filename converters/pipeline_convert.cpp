@@ -94,6 +94,40 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
   return r;
 }
 
+// convert with the volume read window by window (reads_in_bricks): no hierarchy, the asset and
+// the report.
+ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& input,
+                                    const std::string& output, const ConvertFileOptions& o,
+                                    const detail::Reporter& report) {
+  ConvertFileResult r;
+  nlohmann::json prov = {{"input", std::filesystem::path(input).filename().string()},
+                         {"tool", std::string("mlfe ") + MLFE_VERSION},
+                         {"refinement", "none: the samples' surfaces, read and simplified in bricks"},
+                         {"bricks", o.asset.bricks}};
+  if (o.provenance.is_object()) prov.merge_patch(o.provenance);
+  AssetOptions asset = o.asset;
+  if (report) asset.progress = report.share(0.02, 1).as_progress();
+  detail::OutputGuard written;
+  r.asset = write_assets(output, v, asset, prov);
+  r.written.push_back(output);
+  written.add(output);
+  if (!o.report.empty()) {
+    const ScalarGrid& f = v.frame();
+    nlohmann::json rep = {{"input", input},
+                          {"dims", f.dims},
+                          {"spacing", f.transform.spacing},
+                          {"format", f.format},
+                          {"read_in_windows", v.streamed()},
+                          {"asset", r.asset}};
+    rep["peak_rss_mb"] = peak_rss_mb();
+    write_json(o.report, rep);
+    r.written.push_back(o.report);
+    written.add(o.report);
+  }
+  written.release();
+  return r;
+}
+
 // The written files of a conversion, in the order the command line lists them.
 void list_written(const std::string& output, const ConvertOptions& c, ConvertFileResult& r) {
   r.written.push_back(output);
@@ -140,6 +174,15 @@ ConvertFileResult convert(const std::string& input, const std::string& output, c
   check_convert_outputs(output, o);
   const detail::Reporter report(o.progress);
   report(0, "reading");
+  if (detect_tet_mesh_format(input).empty() &&
+      reads_in_bricks(o.build, o.asset, !o.render.empty() || !o.hierarchy.empty())) {
+    const VolumeWindows v(input, budgeted(o.read, o.build));
+    if (v.frame().dim == 3) {
+      ConvertFileResult r = convert_in_bricks(v, input, output, o, report);
+      report.finish("writing");
+      return r;
+    }
+  }
   ConvertOptions c;
   c.build = o.build;
   c.asset = o.asset;

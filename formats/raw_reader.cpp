@@ -1,4 +1,5 @@
 #include <fmt/format.h>
+#include <mlfe/core/base/check.h>
 #include <mlfe/formats/raw_reader.h>
 #include <sys/stat.h>
 
@@ -67,9 +68,10 @@ std::array<double, N> number_array(const std::string& file, const nlohmann::json
 
 }  // namespace
 
-ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
+RawLayout raw_layout(const std::string& path, const VolumeReadOptions& opts) {
   const std::uint64_t fsize = regular_file_size(path);
-  ScalarGrid grid;
+  RawLayout layout;
+  ScalarGrid& grid = layout.frame;
   std::array<std::int64_t, 3> dims{0, 0, 1};
   std::optional<ScalarType> type;
   std::string endian = "little";
@@ -175,17 +177,41 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
          fmt::format(
              "size mismatch: {} x {} x {} {} voxels after a {}-byte offset need {} bytes, the file has {}",
              dims[0], dims[1], dims[2], scalar_type_name(*type), offset, bytes + offset, fsize));
-  check_memory(path, checked_bytes(path, voxels, 4), opts, "the float32 grid");
-
   grid.dims = dims;
   grid.source_type = *type;
+  if (!sidecar.empty()) add_note(grid, "geometry from sidecar " + sidecar);
+  layout.offset = static_cast<std::uint64_t>(offset);
+  layout.swap = (endian == "big") == host_is_little_endian();
+  return layout;
+}
+
+ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
+  RawLayout layout = raw_layout(path, opts);
+  ScalarGrid& grid = layout.frame;
+  check_memory(path, checked_bytes(path, grid.voxel_count(), 4), opts, "the float32 grid");
   allocate_values(grid);
   RegularFile in(path);
-  in.seek(static_cast<std::uint64_t>(offset));
-  bool swap = (endian == "big") == host_is_little_endian();
-  read_raw_values(path, in, *type, swap, grid.values.data(), grid.values.size());
-  if (!sidecar.empty()) add_note(grid, "geometry from sidecar " + sidecar);
-  return grid;
+  in.seek(layout.offset);
+  read_raw_values(path, in, grid.source_type, layout.swap, grid.values.data(), grid.values.size());
+  return std::move(layout.frame);
+}
+
+void read_raw_box(const std::string& path, const RawLayout& layout, const std::array<std::int64_t, 3>& lo,
+                  const std::array<std::int64_t, 3>& hi, float* dst) {
+  const auto& d = layout.frame.dims;
+  for (int a = 0; a < 3; ++a) MLFE_CHECK(0 <= lo[a] && lo[a] < hi[a] && hi[a] <= d[a]);
+  const std::uint64_t esize = std::uint64_t(scalar_type_size(layout.frame.source_type));
+  const std::size_t row = std::size_t(hi[0] - lo[0]);
+  std::vector<char> buf(row * esize);
+  RegularFile in(path);
+  for (std::int64_t k = lo[2]; k < hi[2]; ++k)
+    for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
+      in.seek(layout.offset + esize * std::uint64_t(lo[0] + d[0] * (j + d[1] * k)));
+      if (in.read(buf.data(), buf.size()) != buf.size())
+        fail(path, "truncated: the voxel data ended while reading a box (the file shrank?)");
+      convert_to_float(buf.data(), layout.frame.source_type, layout.swap, dst, row);
+      dst += row;
+    }
 }
 
 }  // namespace mlfe

@@ -2,15 +2,19 @@
 // (formats/volume_formats.cpp) and calls that row's reader, then checks what every reader
 // returns.
 #include <fmt/format.h>
+#include <mlfe/core/base/check.h>
 #include <mlfe/core/base/vec.h>
+#include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/tet_mesh_reader.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/formats/zarr_reader.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <new>
+#include <optional>
 
 #include "formats/reader_helpers.h"
 #include "formats/volume_formats_detail.h"
@@ -68,7 +72,10 @@ void convert_space(ScalarGrid& grid, const std::string& requested) {
   grid.space = target;
 }
 
-void check_finite_values(ScalarGrid& grid, const VolumeReadOptions& opts) {
+// Replaces or refuses NaN/Inf values; `at` is the grid's first sample's index in the volume
+// (a window's), for the message. Returns how many there were.
+std::int64_t check_finite_values(ScalarGrid& grid, const VolumeReadOptions& opts,
+                                 const std::array<std::int64_t, 3>& at = {0, 0, 0}) {
   std::int64_t bad = 0, first = -1;
   for (std::size_t i = 0; i < grid.values.size(); ++i) {
     if (!std::isfinite(grid.values[i])) {
@@ -77,15 +84,14 @@ void check_finite_values(ScalarGrid& grid, const VolumeReadOptions& opts) {
       if (opts.nan_as) grid.values[i] = static_cast<float>(*opts.nan_as);
     }
   }
-  if (bad == 0) return;
+  if (bad == 0 || opts.nan_as) return bad;
   const std::int64_t nx = grid.dims[0], ny = grid.dims[1];
   std::int64_t fi = first % nx, fj = (first / nx) % ny, fk = first / (nx * ny);
-  if (!opts.nan_as)
-    throw Error(
-        fmt::format("{}: {} voxels are NaN or infinite (first at index {},{},{}); use --nan-as VALUE "
-                    "to replace them",
-                    grid.source, bad, fi, fj, fk));
-  add_note(grid, fmt::format("{} NaN/Inf voxels replaced by {}", bad, *opts.nan_as));
+  throw Error(
+      fmt::format("{}: {} voxels {}are NaN or infinite (first at index {},{},{}); use --nan-as VALUE "
+                  "to replace them",
+                  grid.source, bad, at == std::array<std::int64_t, 3>{0, 0, 0} ? "" : "of a box ", fi + at[0],
+                  fj + at[1], fk + at[2]));
 }
 
 void check_transform(const ScalarGrid& grid) {
@@ -144,9 +150,94 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
   if (static_cast<std::int64_t>(grid.values.size()) != grid.voxel_count())
     fail(path, "internal error: voxel count does not match dimensions");
   check_transform(grid);
-  check_finite_values(grid, opts);
+  if (const std::int64_t bad = check_finite_values(grid, opts))
+    add_note(grid, fmt::format("{} NaN/Inf voxels replaced by {}", bad, *opts.nan_as));
   convert_space(grid, opts.space);
   return grid;
+}
+
+struct VolumeWindows::Impl {
+  ScalarGrid frame;
+  VolumeReadOptions opts;
+  std::optional<ZarrVolume> zarr;
+  std::optional<RawLayout> raw;
+  ScalarGrid whole;  // the formats without box reads
+};
+
+VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& opts)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.opts = opts;
+  const std::string format = detect_volume_format(path);
+  try {
+    if (format == "zarr") {
+      m.zarr.emplace(path, opts.zarr_level);
+      m.frame.dims = m.zarr->dims();
+      m.frame.transform = m.zarr->transform();
+      m.frame.source_type = m.zarr->type();
+      m.frame.notes = m.zarr->notes();
+    } else if (format == "raw" || (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty()))) {
+      m.raw = raw_layout(path, opts);
+      m.frame = m.raw->frame;
+    }
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    fail(path, "out of memory while reading");
+  } catch (const std::exception& e) {
+    fail(path, e.what());
+  }
+  if (!m.zarr && !m.raw) {
+    m.whole = read_volume(path, opts);
+    m.frame = m.whole;
+    m.frame.values = {};
+    return;
+  }
+  m.frame.format = m.zarr ? "zarr" : "raw";
+  m.frame.source = path;
+  if (m.frame.dims[2] == 1) m.frame.dim = 2;
+  check_transform(m.frame);
+  convert_space(m.frame, opts.space);
+}
+
+VolumeWindows::~VolumeWindows() = default;
+VolumeWindows::VolumeWindows(VolumeWindows&&) noexcept = default;
+VolumeWindows& VolumeWindows::operator=(VolumeWindows&&) noexcept = default;
+
+const ScalarGrid& VolumeWindows::frame() const { return impl_->frame; }
+
+bool VolumeWindows::streamed() const { return impl_->whole.values.empty(); }
+
+ScalarGrid VolumeWindows::read(const std::array<std::int64_t, 3>& lo,
+                               const std::array<std::int64_t, 3>& hi) const {
+  const Impl& m = *impl_;
+  for (int a = 0; a < 3; ++a) MLFE_CHECK(0 <= lo[a] && lo[a] < hi[a] && hi[a] <= m.frame.dims[a]);
+  ScalarGrid w;
+  if (m.zarr) {
+    VolumeReadOptions o = m.opts;
+    w = m.zarr->read_box(lo, hi, o);
+  } else {
+    w.dims = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+    w.values.resize(std::size_t(w.voxel_count()));
+    const ScalarGrid& from = m.whole;
+    if (m.raw) {
+      read_raw_box(m.frame.source, *m.raw, lo, hi, w.values.data());
+    } else {
+      float* to = w.values.data();
+      for (std::int64_t k = lo[2]; k < hi[2]; ++k)
+        for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
+          const float* row = &m.whole.values[std::size_t(lo[0] + from.dims[0] * (j + from.dims[1] * k))];
+          to = std::copy(row, row + w.dims[0], to);
+        }
+    }
+  }
+  w.dim = 3;
+  w.transform = m.frame.transform;
+  w.space = m.frame.space;
+  w.source = m.frame.source;
+  w.source_type = m.frame.source_type;
+  if (m.whole.values.empty()) check_finite_values(w, m.opts, lo);
+  return w;
 }
 
 }  // namespace mlfe

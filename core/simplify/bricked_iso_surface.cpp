@@ -6,11 +6,15 @@
 #include <mlfe/core/simplify/surface_simplification.h>
 #include <mlfe/core/surface/surface_fitting.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <string>
+#include <unordered_map>
 
 namespace mlfe {
 
@@ -23,71 +27,6 @@ constexpr Id32 kNone = std::numeric_limits<Id32>::max();
 // holds the face vertices' own triangles; the second lets the collapses that remove a face
 // vertex also move its neighbours, whose rim would otherwise be locked.
 constexpr int kSeamRings = 2;
-
-// A brick's estimated run starts with the Simplifier's blocks whatever its size: the brick is
-// the unit of parallelism, and inside it the blocks' sequential cheapest-first collapses do the
-// work with less overhead than the passes.
-constexpr std::size_t kBrickBlocksFrom = 0;
-
-// The lattice's bricks: cubes per axis, bricks per axis, and the brick edge in cubes.
-struct BrickGrid {
-  std::array<std::int64_t, 3> samples{}, count{};
-  std::int64_t edge = 0;
-
-  // A lattice coordinate on a sample plane that two bricks share.
-  bool shared_plane(int axis, std::int64_t c) const {
-    return c > 0 && c < samples[axis] - 1 && c % edge == 0;
-  }
-  std::size_t brick_of_cube(const std::array<std::int64_t, 3>& c) const {
-    return std::size_t(c[0] / edge + count[0] * (c[1] / edge + count[1] * (c[2] / edge)));
-  }
-  std::size_t bricks() const { return std::size_t(count[0] * count[1] * count[2]); }
-};
-
-BrickGrid brick_grid(const std::array<std::int64_t, 3>& dims, std::int64_t brick) {
-  if (brick < 2 || (brick & (brick - 1)) != 0)
-    throw Error("bricks: the brick edge must be a power of two of at least 2, got " + std::to_string(brick));
-  BrickGrid g;
-  g.samples = dims;
-  g.edge = brick;
-  for (int x = 0; x < 3; ++x) g.count[x] = std::max<std::int64_t>(1, (dims[x] - 1 + brick - 1) / brick);
-  return g;
-}
-
-// Per vertex: 1 where it lies on a lattice edge in a sample plane two bricks share.
-std::vector<std::uint8_t> face_vertices(const std::vector<LatticePlace>& places, const BrickGrid& g) {
-  std::vector<std::uint8_t> face(places.size(), 0);
-  for (std::size_t v = 0; v < places.size(); ++v) {
-    const LatticePlace& p = places[v];
-    for (int x = 0; x < 3; ++x) {
-      if (p.at[x] < 0 || p.at[x] >= g.samples[x] || p.axis < 0 || p.axis > 3)
-        throw Error("bricks: a vertex's lattice place lies outside the lattice");
-      if (p.axis < 3 && x != p.axis && g.shared_plane(x, p.at[x])) face[v] = 1;
-    }
-  }
-  return face;
-}
-
-// Per brick, its triangles in input order. A triangle's cube is, along each axis, the least
-// lower coordinate of its vertices' places: an edge vertex lies on the cube's lower or upper
-// face (or along the axis, at the cube's own coordinate), a centre vertex inside, and no
-// triangle has all three corners on one face of its cube (the extraction draws no diagonal in
-// a face).
-std::vector<std::vector<Id32>> triangles_by_brick(const TriangleMesh& mesh,
-                                                  const std::vector<LatticePlace>& places,
-                                                  const BrickGrid& g) {
-  std::vector<std::vector<Id32>> by_brick(g.bricks());
-  for (Id32 t = 0; t < Id32(mesh.triangles.size()); ++t) {
-    std::array<std::int64_t, 3> cube{};
-    for (int x = 0; x < 3; ++x) {
-      std::int64_t c = std::numeric_limits<std::int64_t>::max();
-      for (Id32 v : mesh.triangles[t]) c = std::min<std::int64_t>(c, places[v].at[x]);
-      cube[x] = std::min(c, g.samples[x] - 2);
-    }
-    by_brick[g.brick_of_cube(cube)].push_back(t);
-  }
-  return by_brick;
-}
 
 // A part of the surface taken out to be simplified on its own: its mesh, and per vertex the
 // whole surface's vertex it is.
@@ -117,61 +56,112 @@ Part cut_out(const TriangleMesh& m, const std::vector<Id32>& tris, std::vector<I
   return p;
 }
 
-// A brick after the brick pass: its simplified mesh, per output vertex the input vertex it is,
-// and the last run's points with the output triangles they are attached to.
-struct BrickResult {
+// One brick's runs: simplify()'s for a big surface (a brick is part of one: kAuto's estimated
+// run first, then the verified one), each stopping at `ratio` of the brick's triangles and
+// starting with the blocks whatever the brick's size (the brick is the unit of parallelism,
+// and inside it the blocks' sequential cheapest-first collapses do the work with less overhead
+// than the passes).
+std::vector<SimplifyOptions> brick_stages(const SimplifierOptions& o, std::size_t triangles) {
+  constexpr std::size_t kBigSurface = std::size_t(1) << 31;
+  std::vector<SimplifyOptions> stages = simplify_stages(o, kBigSurface);
+  for (auto& s : stages) {
+    s.min_triangles = std::size_t(o.ratio * double(triangles));
+    s.blocks_from = 0;
+  }
+  return stages;
+}
+
+// The brick's simplified surface: per output vertex the extracted vertex it is, and the last
+// run's points with the output triangles they are attached to (verified bound).
+struct Simplified {
   TriangleMesh mesh;
   std::vector<Id32> vertex;
   std::vector<std::array<float, 3>> points;
   std::vector<Id32> point_face;
 };
 
-// One brick through `stages` (simplify_stages), its face vertices locked in every run.
-BrickResult simplify_brick(Part part, const std::vector<std::uint8_t>& face,
-                           std::vector<SimplifyOptions> stages, double ratio) {
-  BrickResult r;
+// `mesh` through `stages`, the vertices flagged in `face` locked in every run.
+Simplified run_stages(const TriangleMesh& mesh, const std::vector<std::uint8_t>& face,
+                      const std::vector<SimplifyOptions>& stages) {
+  Simplified r;
+  r.mesh = mesh;
+  r.vertex.resize(mesh.positions.size());
+  std::iota(r.vertex.begin(), r.vertex.end(), Id32(0));
   SimplifyCarry carry;
-  for (auto& s : stages) {
-    s.min_triangles = std::size_t(ratio * double(part.mesh.triangles.size()));
-    s.blocks_from = kBrickBlocksFrom;
-  }
   for (const SimplifyOptions& s : stages) {
     if (&s != &stages.front()) {
-      // As simplify() does between its runs; the vertices keep their whole surface's numbers.
+      // As simplify() does between its runs.
       std::vector<Id32> order;
-      part.mesh = spatially_ordered(part.mesh, &order);
+      r.mesh = spatially_ordered(r.mesh, &order);
       std::vector<Id32> vertex(order.size());
-      for (std::size_t i = 0; i < order.size(); ++i) vertex[i] = part.vertex[order[i]];
-      part.vertex = std::move(vertex);
+      for (std::size_t i = 0; i < order.size(); ++i) vertex[i] = r.vertex[order[i]];
+      r.vertex = std::move(vertex);
     }
-    carry.locked.resize(part.vertex.size());
-    for (std::size_t i = 0; i < part.vertex.size(); ++i) carry.locked[i] = face[part.vertex[i]];
-    const TriangleMesh in = std::move(part.mesh);
-    part.mesh = simplify_within(in, s, nullptr, &carry);
-    // The last run's points are its input's vertices.
-    r.points = in.positions;
+    carry.locked.resize(r.vertex.size());
+    for (std::size_t i = 0; i < r.vertex.size(); ++i) carry.locked[i] = face[r.vertex[i]];
+    const TriangleMesh in = std::move(r.mesh);
+    r.mesh = simplify_within(in, s, nullptr, &carry);
+    r.points = in.positions;  // the last run's points are its input's vertices
     std::vector<Id32> vertex(carry.source.size());
-    for (std::size_t i = 0; i < vertex.size(); ++i) vertex[i] = part.vertex[carry.source[i]];
-    part.vertex = std::move(vertex);
+    for (std::size_t i = 0; i < vertex.size(); ++i) vertex[i] = r.vertex[carry.source[i]];
+    r.vertex = std::move(vertex);
   }
-  r.mesh = std::move(part.mesh);
-  r.vertex = std::move(part.vertex);
   r.point_face = std::move(carry.point_face);
   if (r.point_face.empty()) r.points.clear();
-  // Points on no triangle (none in an extraction) carry nothing.
-  std::size_t kept = 0;
-  for (std::size_t p = 0; p < r.point_face.size(); ++p)
-    if (r.point_face[p] != kNone) {
-      r.points[kept] = r.points[p];
-      r.point_face[kept++] = r.point_face[p];
-    }
-  r.points.resize(kept);
-  r.point_face.resize(kept);
   return r;
 }
 
-// The welded surface: the bricks' meshes joined by the extracted vertex each vertex is, with
-// the points and per vertex whether it is a face vertex.
+// Triangles within kSeamRings rings of a vertex flagged in `face` (1 per triangle). A face
+// vertex's ring in the welded surface is its rings in the bricks that share it, and every other
+// vertex is in one brick only: a brick's own strips are its share of the welded surface's.
+std::vector<std::uint8_t> strip_triangles(const TriangleMesh& m, std::vector<std::uint8_t> near) {
+  std::vector<std::uint8_t> strip(m.triangles.size(), 0);
+  for (int ring = 0; ring < kSeamRings; ++ring) {
+    for (std::size_t t = 0; t < strip.size(); ++t)
+      for (Id32 v : m.triangles[t])
+        if (near[v] == 1) strip[t] = 1;
+    for (std::size_t t = 0; t < strip.size(); ++t)
+      if (strip[t])
+        for (Id32 v : m.triangles[t]) near[v] = near[v] ? near[v] : 2;
+    for (auto& n : near) n = n ? 1 : 0;
+  }
+  return strip;
+}
+
+// The least-squares refit of the triangles outside the strips to the brick's extraction, as
+// simplify() ends with kOptimal. Cut out, the strips' rim lies on the cut's boundary, which
+// fit_surface keeps: the strips, and the points attached to them, stay as they are for the seam
+// pass.
+void refit_outside_strips(TriangleMesh& mesh, const std::vector<std::uint8_t>& strip,
+                          const TriangleMesh& dense, double tolerance) {
+  std::vector<Id32> outside;
+  for (Id32 t = 0; t < Id32(strip.size()); ++t)
+    if (!strip[t]) outside.push_back(t);
+  if (outside.empty()) return;
+  std::vector<Id32> map(mesh.positions.size());
+  Part part = cut_out(mesh, outside, map);
+  SurfaceFitOptions fo;
+  fo.tolerance = tolerance;
+  fit_surface(part.mesh, dense, fo);
+  for (std::size_t i = 0; i < part.vertex.size(); ++i)
+    mesh.positions[part.vertex[i]] = part.mesh.positions[i];
+}
+
+// A sample coordinate on a plane two bricks share.
+bool shared_plane(const BrickLayout& l, int axis, std::int64_t c) {
+  return c > 0 && c < l.dims[axis] - 1 && c % l.edge == 0;
+}
+
+// A vertex on a lattice edge that lies in a shared sample plane.
+bool on_shared_plane(const BrickLayout& l, const LatticePlace& p) {
+  if (p.axis < 0 || p.axis > 2) return false;
+  for (int x = 0; x < 3; ++x)
+    if (x != p.axis && shared_plane(l, x, p.at[x])) return true;
+  return false;
+}
+
+// The welded surface: the bricks' meshes joined at their face vertices, with the points and per
+// vertex whether it is a face vertex.
 struct Welded {
   TriangleMesh mesh;
   std::vector<std::uint8_t> face;
@@ -179,51 +169,83 @@ struct Welded {
   std::vector<Id32> point_face;
 };
 
-Welded weld(const std::vector<BrickResult>& bricks, const std::vector<std::uint8_t>& face, std::size_t nv,
-            bool normals) {
+struct PlaceKey {
+  std::int32_t at[3];
+  int axis;
+  bool operator==(const PlaceKey& o) const {
+    return at[0] == o.at[0] && at[1] == o.at[1] && at[2] == o.at[2] && axis == o.axis;
+  }
+};
+struct PlaceHash {
+  std::size_t operator()(const PlaceKey& k) const {
+    std::uint64_t h = std::uint64_t(std::uint32_t(k.at[0]));
+    h = h * 0x9E3779B97F4A7C15ull ^ std::uint32_t(k.at[1]);
+    h = h * 0x9E3779B97F4A7C15ull ^ std::uint32_t(k.at[2]);
+    h = h * 0x9E3779B97F4A7C15ull ^ std::uint32_t(k.axis);
+    return std::size_t(h ^ (h >> 29));
+  }
+};
+
+Welded weld(const std::vector<BrickPart>& parts) {
   Welded w;
-  std::vector<Id32> id(nv, kNone);
-  for (const BrickResult& b : bricks) {
+  std::unordered_map<PlaceKey, Id32, PlaceHash> joined;
+  std::vector<Id32> uses;  // per welded face vertex, how many parts have it
+  for (const BrickPart& b : parts) {
+    if (b.face_place.size() != b.mesh.positions.size())
+      throw Error("bricks: a brick's face places are not one per vertex");
+    if (b.mesh.positions.empty()) continue;
+    const bool normals = !b.mesh.normals.empty();
+    if (normals != !w.mesh.normals.empty() && !w.mesh.positions.empty())
+      throw Error("bricks: the bricks' parts disagree on normals");
+    if (normals && b.mesh.normals.size() != b.mesh.positions.size())
+      throw Error("bricks: a brick's normals are not one per vertex");
     const Id32 base = Id32(w.mesh.triangles.size());
-    for (std::size_t i = 0; i < b.vertex.size(); ++i) {
-      Id32& to = id[b.vertex[i]];
-      if (to != kNone) {
-        // Only a face vertex is in two bricks, and it is locked: the same everywhere.
-        MLFE_CHECK(face[b.vertex[i]] && w.mesh.positions[to] == b.mesh.positions[i]);
-        continue;
+    std::vector<Id32> id(b.mesh.positions.size());
+    for (std::size_t i = 0; i < id.size(); ++i) {
+      const LatticePlace& p = b.face_place[i];
+      if (p.axis >= 0) {
+        const auto [it, fresh] =
+            joined.try_emplace(PlaceKey{{p.at[0], p.at[1], p.at[2]}, p.axis}, Id32(w.mesh.positions.size()));
+        id[i] = it->second;
+        if (!fresh) {
+          if (w.mesh.positions[id[i]] != b.mesh.positions[i])
+            throw Error(
+                "bricks: two bricks' parts place a shared vertex differently (parts of different volumes?)");
+          ++uses[id[i]];
+          continue;
+        }
+      } else {
+        id[i] = Id32(w.mesh.positions.size());
       }
-      to = Id32(w.mesh.positions.size());
       w.mesh.positions.push_back(b.mesh.positions[i]);
       if (normals) w.mesh.normals.push_back(b.mesh.normals[i]);
-      w.face.push_back(face[b.vertex[i]]);
+      w.face.push_back(p.axis >= 0);
+      uses.push_back(1);
     }
-    for (const auto& t : b.mesh.triangles)
-      w.mesh.triangles.push_back({id[b.vertex[t[0]]], id[b.vertex[t[1]]], id[b.vertex[t[2]]]});
+    for (const auto& t : b.mesh.triangles) {
+      for (Id32 v : t)
+        if (v >= id.size()) throw Error("bricks: a brick's triangle index is out of range");
+      w.mesh.triangles.push_back({id[t[0]], id[t[1]], id[t[2]]});
+    }
+    if (b.points.size() != b.point_face.size())
+      throw Error("bricks: a brick's points and their faces differ in number");
     w.points.insert(w.points.end(), b.points.begin(), b.points.end());
-    for (Id32 f : b.point_face) w.point_face.push_back(base + f);
+    for (Id32 f : b.point_face) {
+      if (f >= b.mesh.triangles.size()) throw Error("bricks: a brick's point is attached to no triangle");
+      w.point_face.push_back(base + f);
+    }
   }
+  for (std::size_t v = 0; v < w.face.size(); ++v)
+    if (w.face[v] && uses[v] < 2)
+      throw Error(
+          "bricks: a vertex on a shared face is in one brick's part only (parts of different volumes?)");
   return w;
-}
-
-// The seam strips: triangles within kSeamRings rings of a face vertex (1 per triangle).
-std::vector<std::uint8_t> strip_triangles(const Welded& w) {
-  std::vector<std::uint8_t> near = w.face, strip(w.mesh.triangles.size(), 0);
-  for (int ring = 0; ring < kSeamRings; ++ring) {
-    for (std::size_t t = 0; t < strip.size(); ++t)
-      for (Id32 v : w.mesh.triangles[t])
-        if (near[v] == 1) strip[t] = 1;
-    for (std::size_t t = 0; t < strip.size(); ++t)
-      if (strip[t])
-        for (Id32 v : w.mesh.triangles[t]) near[v] = near[v] ? near[v] : 2;
-    for (auto& n : near) n = n ? 1 : 0;
-  }
-  return strip;
 }
 
 // The seam pass: the strips simplified with their rim locked and the points attached to them,
 // under `opts` (the brick pass's last run) down to `budget` triangles of the whole surface.
 TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, BrickStats& stats) {
-  const std::vector<std::uint8_t> strip = strip_triangles(w);
+  const std::vector<std::uint8_t> strip = strip_triangles(w.mesh, w.face);
   std::vector<Id32> inside, outside;
   for (Id32 t = 0; t < Id32(strip.size()); ++t) (strip[t] ? inside : outside).push_back(t);
   std::vector<Id32> map(w.mesh.positions.size(), kNone);
@@ -278,49 +300,169 @@ TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, Brick
   return out;
 }
 
+// Connected parts of the triangles (joined through shared vertices).
+std::size_t count_parts(const TriangleMesh& m) {
+  std::vector<Id32> up(m.positions.size());
+  std::iota(up.begin(), up.end(), Id32(0));
+  auto find = [&](Id32 v) {
+    while (up[v] != v) v = up[v] = up[up[v]];
+    return v;
+  };
+  std::vector<std::uint8_t> used(m.positions.size(), 0);
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) {
+      used[t[k]] = 1;
+      up[find(t[k])] = find(t[(k + 1) % 3]);
+    }
+  std::size_t parts = 0;
+  for (Id32 v = 0; v < Id32(up.size()); ++v) parts += used[v] && find(v) == v;
+  return parts;
+}
+
 }  // namespace
 
-TriangleMesh simplify_in_bricks(const TriangleMesh& mesh, const std::vector<LatticePlace>& places,
-                                const std::array<std::int64_t, 3>& dims, const SimplifierOptions& o,
-                                std::int64_t brick, BrickStats* stats) {
-  if (o.kind == Simplifier::kMeshopt)
+void BrickLayout::samples(std::size_t b, std::array<std::int64_t, 3>& lo,
+                          std::array<std::int64_t, 3>& hi) const {
+  MLFE_CHECK(b < bricks());
+  std::int64_t rest = std::int64_t(b);
+  for (int x = 0; x < 3; ++x) {
+    const std::int64_t c = rest % count[x];
+    rest /= count[x];
+    lo[x] = c * edge;
+    hi[x] = std::min(lo[x] + edge, dims[x] - 1) + 1;
+  }
+}
+
+void BrickLayout::window(std::size_t b, std::array<std::int64_t, 3>& lo,
+                         std::array<std::int64_t, 3>& hi) const {
+  samples(b, lo, hi);
+  for (int x = 0; x < 3; ++x) {
+    lo[x] = std::max<std::int64_t>(0, lo[x] - 1);
+    hi[x] = std::min(dims[x], hi[x] + 1);
+  }
+}
+
+BrickLayout brick_layout(const std::array<std::int64_t, 3>& dims, std::int64_t edge) {
+  if (edge < 2 || (edge & (edge - 1)) != 0)
+    throw Error("bricks: the brick edge must be a power of two of at least 2, got " + std::to_string(edge));
+  BrickLayout l;
+  l.dims = dims;
+  l.edge = edge;
+  for (int x = 0; x < 3; ++x) {
+    if (dims[x] < 2) throw Error("bricks: a volume of fewer than 2 samples along an axis has no cubes");
+    if (dims[x] > std::numeric_limits<std::int32_t>::max())
+      throw Error("bricks: more than 2^31 samples along an axis");
+    l.count[x] = (dims[x] - 1 + edge - 1) / edge;
+  }
+  return l;
+}
+
+BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b,
+                     const BrickedIsoOptions& o) {
+  if (o.simplifier.kind == Simplifier::kMeshopt)
     throw Error(
         "bricks: the meshopt simplifier cannot lock the bricks' face vertices (use auto, fast or bounded)");
-  if (places.size() != mesh.positions.size())
-    throw Error("bricks: the lattice places are not one per vertex");
-  if (!(o.tolerance > 0) || !std::isfinite(o.tolerance))
+  if (!(o.simplifier.tolerance > 0) || !std::isfinite(o.simplifier.tolerance))
     throw Error("simplification: the tolerance must be positive and finite");
-  const BrickGrid g = brick_grid(dims, brick);
-  for (const auto& t : mesh.triangles)
-    for (Id32 v : t)
-      if (v >= mesh.positions.size()) throw Error("bricks: triangle index out of range");
-  const std::vector<std::uint8_t> face = face_vertices(places, g);
-  const std::vector<std::vector<Id32>> by_brick = triangles_by_brick(mesh, places, g);
-  // The whole surface's runs (kAuto decides by its size), each brick to its share of the ratio.
-  const std::vector<SimplifyOptions> stages = simplify_stages(o, mesh.triangles.size());
+  if (b >= layout.bricks()) throw Error("bricks: brick " + std::to_string(b) + " is not in the layout");
+  std::array<std::int64_t, 3> wlo, whi, lo, hi;
+  layout.window(b, wlo, whi);
+  layout.samples(b, lo, hi);
+  for (int x = 0; x < 3; ++x)
+    if (window.dim != 3 || window.dims[x] != whi[x] - wlo[x] ||
+        window.values.size() != std::size_t(window.voxel_count()))
+      throw Error("bricks: brick " + std::to_string(b) + "'s window has the wrong size");
+  // 1. Extract the brick's part of the surface.
+  BrickPart part;
+  std::vector<LatticePlace> places;
+  IsoOptions io;
+  io.normals_toward_higher = o.normals_toward_higher;
+  const TriangleMesh extracted =
+      lattice_iso_surface(window, wlo, {lo[0] - wlo[0], lo[1] - wlo[1], lo[2] - wlo[2]},
+                          {hi[0] - wlo[0], hi[1] - wlo[1], hi[2] - wlo[2]}, o.iso, io, &places);
+  part.extracted_triangles = extracted.triangles.size();
+  if (extracted.triangles.empty()) return part;
+  // 2. Lock the face vertices and simplify.
+  std::vector<std::uint8_t> face(places.size());
+  for (std::size_t v = 0; v < places.size(); ++v) face[v] = on_shared_plane(layout, places[v]);
+  Simplified s = run_stages(extracted, face, brick_stages(o.simplifier, extracted.triangles.size()));
+  // 3. Refit outside the strips.
+  std::vector<std::uint8_t> out_face(s.vertex.size());
+  for (std::size_t i = 0; i < s.vertex.size(); ++i) out_face[i] = face[s.vertex[i]];
+  const std::vector<std::uint8_t> strip = strip_triangles(s.mesh, out_face);
+  if (o.simplifier.placement == Placement::kOptimal)
+    refit_outside_strips(s.mesh, strip, extracted, o.simplifier.tolerance);
+  // 4. Keep what the join needs: the face vertices' places, the points on the strips.
+  part.face_place.resize(s.vertex.size());
+  for (std::size_t i = 0; i < s.vertex.size(); ++i)
+    if (out_face[i])
+      part.face_place[i] = places[s.vertex[i]];
+    else
+      part.face_place[i].axis = -1;
+  for (std::size_t p = 0; p < s.point_face.size(); ++p)
+    if (s.point_face[p] != kNone && strip[s.point_face[p]]) {
+      part.points.push_back(s.points[p]);
+      part.point_face.push_back(s.point_face[p]);
+    }
+  part.mesh = std::move(s.mesh);
+  return part;
+}
 
-  std::vector<BrickResult> results(by_brick.size());
-  tbb::parallel_for(std::size_t(0), by_brick.size(), std::size_t(1), [&](std::size_t b) {
-    if (by_brick[b].empty()) return;
-    std::vector<Id32> map(mesh.positions.size());
-    results[b] = simplify_brick(cut_out(mesh, by_brick[b], map), face, stages, o.ratio);
-  });
-
+TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickedIsoOptions& o, BrickStats* stats) {
   BrickStats st;
-  for (const auto& b : by_brick) st.bricks += !b.empty();
-  for (std::uint8_t f : face) st.face_vertices += f;
-  Welded w = weld(results, face, mesh.positions.size(), !mesh.normals.empty());
-  results.clear();
-  st.welded_triangles = w.mesh.triangles.size();
-  TriangleMesh out =
-      seam_pass(std::move(w), stages.back(), std::size_t(o.ratio * double(mesh.triangles.size())), st);
-  if (o.placement == Placement::kOptimal) {
-    SurfaceFitOptions fo;
-    fo.tolerance = o.tolerance;
-    fit_surface(out, mesh, fo);
+  for (const BrickPart& p : parts) {
+    st.bricks += !p.mesh.triangles.empty();
+    st.extracted_triangles += p.extracted_triangles;
   }
+  Welded w = weld(parts);
+  parts.clear();
+  for (std::uint8_t f : w.face) st.face_vertices += f;
+  st.welded_triangles = w.mesh.triangles.size();
+  const std::vector<SimplifyOptions> stages = brick_stages(o.simplifier, st.extracted_triangles);
+  TriangleMesh out = seam_pass(std::move(w), stages.back(), stages.back().min_triangles, st);
+  st.parts = count_parts(out);
   if (stats) *stats = st;
   return out;
+}
+
+WindowReader grid_windows(const ScalarGrid& grid) {
+  MLFE_CHECK(grid.dim == 3);
+  return [&grid](const std::array<std::int64_t, 3>& lo, const std::array<std::int64_t, 3>& hi) {
+    ScalarGrid w;
+    w.dims = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+    w.transform = grid.transform;
+    w.values.resize(std::size_t(w.voxel_count()));
+    float* to = w.values.data();
+    for (std::int64_t k = lo[2]; k < hi[2]; ++k)
+      for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
+        const float* row = &grid.values[std::size_t(lo[0] + grid.dims[0] * (j + grid.dims[1] * k))];
+        to = std::copy(row, row + w.dims[0], to);
+      }
+    return w;
+  };
+}
+
+TriangleMesh bricked_iso_surface(const WindowReader& read, const std::array<std::int64_t, 3>& dims,
+                                 std::int64_t edge, const BrickedIsoOptions& o, BrickStats* stats,
+                                 const BrickProgress& progress) {
+  const BrickLayout layout = brick_layout(dims, edge);
+  std::vector<BrickPart> parts(layout.bricks());
+  std::atomic<std::size_t> done{0};
+  std::atomic<bool> stop{false};
+  tbb::parallel_for(std::size_t(0), parts.size(), std::size_t(1), [&](std::size_t b) {
+    if (stop) return;
+    // Isolated: a thread waiting inside a brick's parallel parts takes no other brick, so no
+    // more windows are held than threads run.
+    tbb::this_task_arena::isolate([&] {
+      std::array<std::int64_t, 3> lo, hi;
+      layout.window(b, lo, hi);
+      parts[b] = brick_pass(read(lo, hi), layout, b, o);
+    });
+    const std::size_t n = ++done;
+    if (progress && !progress(n, parts.size())) stop = true;
+  });
+  if (stop) throw Error("bricks: cancelled");
+  return join_bricks(std::move(parts), o, stats);
 }
 
 }  // namespace mlfe

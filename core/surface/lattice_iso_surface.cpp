@@ -155,12 +155,16 @@ double crossing(double a, double b, double iso) {
   return std::clamp((iso - a) / (b - a), kOff, 1 - kOff);
 }
 
+// The samples [lo, lo + n) of `g`, indexed from lo.
 struct Lattice {
   const ScalarGrid& g;
   double iso;
   std::int64_t nx, ny, nz;
+  std::array<std::int64_t, 3> lo{0, 0, 0};
   std::int64_t rows() const { return ny * nz; }
-  float at(std::int64_t i, std::int64_t j, std::int64_t k) const { return g.at(i, j, k); }
+  float at(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return g.at(i + lo[0], j + lo[1], k + lo[2]);
+  }
   bool up(std::int64_t i, std::int64_t j, std::int64_t k) const { return double(at(i, j, k)) > iso; }
   // Crossings of the row (j, k)'s edges leaving each sample along +x, +y, +z, in order
   // (i, axis): ids[3 i + axis] = first + rank, kNoVertex where there is none.
@@ -300,11 +304,14 @@ std::vector<LatticePlace> lattice_places(const std::vector<Vec3>& local, const s
 
 }  // namespace
 
-TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts,
-                                 std::vector<LatticePlace>* places) {
-  MLFE_CHECK(grid.dim == 3);
-  MLFE_CHECK(grid.values.size() == std::size_t(grid.voxel_count()));
-  const Lattice L{grid, iso, grid.dims[0], grid.dims[1], grid.dims[2]};
+namespace {
+
+// The surface of the samples [lo, lo + n) of `grid` (gradients from `grid`'s samples around
+// them), positions at the lattice coordinates lo + offset + index.
+TriangleMesh extract_lattice(const ScalarGrid& grid, const std::array<std::int64_t, 3>& lo,
+                             const std::array<std::int64_t, 3>& n, const std::array<std::int64_t, 3>& offset,
+                             double iso, const IsoOptions& opts, std::vector<LatticePlace>* places) {
+  const Lattice L{grid, iso, n[0], n[1], n[2], lo};
   const auto& sp = grid.transform.spacing;
   const auto row = [&](std::int64_t j, std::int64_t k) { return std::size_t(j + L.ny * k); };
 
@@ -330,8 +337,10 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
         std::int64_t b[3] = {i, j, k};
         ++b[axis];
         const double t = crossing(L.at(i, j, k), L.at(b[0], b[1], b[2]), iso);
-        const Vec3 g0 = sample_gradient(grid, i, j, k), g1 = sample_gradient(grid, b[0], b[1], b[2]);
-        const double c[3] = {double(i), double(j), double(k)};
+        const Vec3 g0 = sample_gradient(grid, i + lo[0], j + lo[1], k + lo[2]),
+                   g1 = sample_gradient(grid, b[0] + lo[0], b[1] + lo[1], b[2] + lo[2]);
+        const double c[3] = {double(i + lo[0] + offset[0]), double(j + lo[1] + offset[1]),
+                             double(k + lo[2] + offset[2])};
         for (int x = 0; x < 3; ++x) {
           local[id][x] = (c[x] + (x == axis ? t : 0.0)) * sp[x];
           grad[id][x] = (1 - t) * g0[x] + t * g1[x];
@@ -377,6 +386,25 @@ TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOp
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
   detail::to_physical(mesh, local, grad, grid.transform, opts.normals_toward_higher);
   return mesh;
+}
+
+}  // namespace
+
+TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts,
+                                 std::vector<LatticePlace>* places) {
+  MLFE_CHECK(grid.dim == 3);
+  MLFE_CHECK(grid.values.size() == std::size_t(grid.voxel_count()));
+  return extract_lattice(grid, {0, 0, 0}, grid.dims, {0, 0, 0}, iso, opts, places);
+}
+
+TriangleMesh lattice_iso_surface(const ScalarGrid& window, const std::array<std::int64_t, 3>& window_at,
+                                 const std::array<std::int64_t, 3>& lo, const std::array<std::int64_t, 3>& hi,
+                                 double iso, const IsoOptions& opts, std::vector<LatticePlace>* places) {
+  MLFE_CHECK(window.dim == 3);
+  MLFE_CHECK(window.values.size() == std::size_t(window.voxel_count()));
+  for (int x = 0; x < 3; ++x) MLFE_CHECK(0 <= lo[x] && lo[x] < hi[x] && hi[x] <= window.dims[x]);
+  return extract_lattice(window, lo, {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]}, window_at, iso, opts,
+                         places);
 }
 
 }  // namespace mlfe

@@ -283,9 +283,10 @@ struct AssetOptions {
   /// (IsoExtractor, the paper's); kAuto: the samples when the volume is at hand and the finest
   /// level is asked, else the hierarchy. LODs always come from the hierarchy.
   SurfaceSource surface = SurfaceSource::kAuto;
-  /// Simplify 3D surfaces from the samples in bricks of this many samples per edge (a power of
-  /// two; core/simplify/bricked_iso_surface.h): threads over bricks, the same output for any
-  /// thread count. 0: the whole surface at once.
+  /// Extract and simplify 3D surfaces from the samples in bricks of this many samples per edge
+  /// (a power of two; core/simplify/bricked_iso_surface.h): threads over bricks, the same output
+  /// for any thread count. When no output needs the whole volume (see reads_in_bricks), convert
+  /// reads it window by window and builds no hierarchy. 0: the whole surface at once.
   std::int64_t bricks = 0;
   /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
   /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.
@@ -319,6 +320,25 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
 /// bytes, seconds).
 nlohmann::json write_assets(const std::string& out, const Built& b, const AssetOptions& o,
                             const nlohmann::json& provenance, const ScalarGrid* grid = nullptr);
+
+/// Extracts the iso-surfaces o.iso of the volume `v` in bricks of o.bricks samples
+/// (core/simplify/bricked_iso_surface.h), reading it window by window: the volume is never
+/// held whole when v.streamed(), and no hierarchy is built. The surfaces are the samples' (as
+/// SurfaceSource::kSamples), simplified (o.simplify > 0), at the finest level, without LODs or a
+/// part-size floor: other options throw pipeline::OptionError. An iso-value outside the data's
+/// range throws pipeline::OptionInputError once the bricks have been read. o.progress counts
+/// bricks ("extracting"); returning false throws Cancelled.
+Surfaces extract(const VolumeWindows& v, const AssetOptions& o);
+
+/// True when convert() with these options reads the volume brick by brick (extract(const
+/// VolumeWindows&, ...)): a.bricks set, the surfaces the samples' (AssetOptions::surface), simplified,
+/// at the finest level, no LODs or part-size floor, and no output that holds the hierarchy or
+/// needs the whole volume (`whole_volume_outputs`: a hierarchy file, an image, u kept).
+bool reads_in_bricks(const BuildOptions& b, const AssetOptions& a, bool whole_volume_outputs);
+
+/// write_assets for a volume read in bricks: extract(v, o), then the same file and summary.
+nlohmann::json write_assets(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
+                            const nlohmann::json& provenance);
 
 struct ConvertOptions {
   BuildOptions build;

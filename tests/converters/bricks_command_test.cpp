@@ -49,10 +49,11 @@ TEST(BricksCommand, AsCleanAsUnbrickedAndAboutItsSize) {
   for (const char* b : {"8", "16", "32"}) {
     const json bricked = convert(std::string("--bricks ") + b, scratch() + "/bricked" + b + ".glb");
     // The same welded manifold; the surface's cuts by the volume's faces (boundary edges) may
-    // keep a vertex more or less.
+    // keep a few vertices more (where a brick face meets the volume's face they are held until
+    // the seam pass).
     json t = bricked["topology"], w = whole["topology"];
     EXPECT_GT(t["boundary_edges"].get<int>(), 0);
-    EXPECT_LE(t["boundary_edges"].get<double>(), 1.5 * w["boundary_edges"].get<double>());
+    EXPECT_LE(t["boundary_edges"].get<double>(), 2 * w["boundary_edges"].get<double>());
     t.erase("boundary_edges");
     w.erase("boundary_edges");
     EXPECT_EQ(t, w) << "--bricks " << b;

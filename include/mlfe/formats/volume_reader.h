@@ -11,6 +11,9 @@
 #include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/formats/volume_read_options.h>
 
+#include <array>
+#include <cstdint>
+#include <memory>
 #include <string>
 
 namespace mlfe {
@@ -28,5 +31,34 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts = 
 /// decided by magic bytes first and by extension second (a sidecar FILE.json means "raw").
 /// Returns "" when neither identifies a format. Throws mlfe::Error when `path` cannot be read.
 std::string detect_volume_format(const std::string& path);
+
+/// A volume opened for reading box by box (`mlfe convert --bricks`): its frame at once, its
+/// samples window by window. Raw volumes and OME-Zarr stores are read box by box from the file
+/// (only a window's voxels in memory); the other formats are read whole once and their windows
+/// copied from memory. A window holds the values read_volume would give there.
+class VolumeWindows {
+ public:
+  /// Opens `path` as read_volume reads it (the same checks of header and frame, `opts.space`
+  /// applied), reading no voxels where the format allows. Throws as read_volume does.
+  VolumeWindows(const std::string& path, const VolumeReadOptions& opts);
+  ~VolumeWindows();
+  VolumeWindows(VolumeWindows&&) noexcept;
+  VolumeWindows& operator=(VolumeWindows&&) noexcept;
+
+  /// The volume as read_volume returns it, without values (dims, transform, space,
+  /// source_type, format, source, notes, dim).
+  const ScalarGrid& frame() const;
+  /// True when windows are read from the file, false when the volume is held in memory.
+  bool streamed() const;
+  /// The samples [lo, hi) (inside frame().dims) as a grid with frame()'s transform. NaN/Inf
+  /// voxels are replaced by opts.nan_as or throw "<path>: ... NaN or infinite (first at index
+  /// i,j,k) ..." with the volume's index. Thread-safe.
+  ScalarGrid read(const std::array<std::int64_t, 3>& lo, const std::array<std::int64_t, 3>& hi) const;
+
+  struct Impl;  ///< formats/volume_reader.cpp
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace mlfe

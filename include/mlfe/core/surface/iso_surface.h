@@ -99,6 +99,18 @@ struct LatticePlace {
 TriangleMesh lattice_iso_surface(const ScalarGrid& grid, double iso, const IsoOptions& opts = {},
                                  std::vector<LatticePlace>* places = nullptr);
 
+/// The part of lattice_iso_surface of a bigger grid that the samples [lo, hi) of `window` span
+/// (the cubes between them), where `window` holds the bigger grid's samples from lattice
+/// coordinate `window_at` on and has its transform. Positions, normals and places are the bigger
+/// grid's, to the bit, when `window` also holds the samples next to [lo, hi) that the bigger grid
+/// has (the gradients' central differences read them): so parts extracted from neighbouring
+/// windows meet exactly. Vertex and triangle order are a function of the samples in [lo, hi).
+/// lo < hi <= window.dims per axis (CHECK).
+TriangleMesh lattice_iso_surface(const ScalarGrid& window, const std::array<std::int64_t, 3>& window_at,
+                                 const std::array<std::int64_t, 3>& lo, const std::array<std::int64_t, 3>& hi,
+                                 double iso, const IsoOptions& opts = {},
+                                 std::vector<LatticePlace>* places = nullptr);
+
 /// A 2D height field as a surface: the leaf triangles (or T_level) lifted to z = z_scale·u,
 /// mapped through the transform's x/y part (z added along the third axis of the direction),
 /// normals from the lifted triangles, area-weighted. For DEMs and images.
