@@ -32,6 +32,7 @@ from scipy import ndimage
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BRAIN = os.path.normpath(os.path.join(ROOT, "..", "shared", "data", "mri_colin27_brain.nii.gz"))
 
+SEED = 20261123
 LAYERS = [  # (outer distance mm, T1 value)
     (2.0, 25.0), (4.0, 12.0), (6.0, 70.0), (8.0, 12.0), (10.0, 60.0), (13.5, 125.0), (15.0, 75.0)]
 
@@ -47,10 +48,12 @@ def read_nifti(path):
     return a.reshape(dims[3], dims[2], dims[1]).astype(np.float32), pix[1:4], b[:348]
 
 
-def write_nifti(path, vol, spacing, template):
-    """uint8 NIfTI-1 with the template's header, dims, spacing and sform/qform scaled."""
+def nifti_header(template, shape, spacing, origin=None):
+    """uint8 NIfTI-1 header (348 bytes) from the template's: dims (shape is z, y, x), spacing,
+    sform's rotation/scaling part scaled by the spacing ratio; its offset kept, or `origin`
+    (x, y, z mm) when given."""
     h = bytearray(template)
-    nz, ny, nx = vol.shape
+    nz, ny, nx = shape
     h[40:56] = struct.pack("<8h", 3, nx, ny, nz, 1, 1, 1, 1)
     h[70:72] = struct.pack("<h", 2)  # uint8
     h[72:74] = struct.pack("<h", 8)
@@ -63,7 +66,14 @@ def write_nifti(path, vol, spacing, template):
     ratio = spacing / old[1]
     for r, at in enumerate((280, 296, 312)):
         row = list(struct.unpack("<4f", template[at:at + 16]))
-        h[at:at + 16] = struct.pack("<4f", row[0] * ratio, row[1] * ratio, row[2] * ratio, row[3])
+        offset = row[3] if origin is None else origin[r]
+        h[at:at + 16] = struct.pack("<4f", row[0] * ratio, row[1] * ratio, row[2] * ratio, offset)
+    return bytes(h)
+
+
+def write_nifti(path, vol, spacing, template):
+    """uint8 NIfTI-1, gzipped, with the template's header (nifti_header)."""
+    h = nifti_header(template, vol.shape, spacing)
     data = np.clip(np.rint(vol), 0, 255).astype(np.uint8)
     with gzip.open(path, "wb", compresslevel=6) as f:
         f.write(bytes(h) + b"\0\0\0\0" + data.tobytes())
@@ -94,6 +104,15 @@ def bias_field(shape, rng):
     return 1.0 + 0.06 * f
 
 
+def noiseless_head(brain_path, rng):
+    """Steps 1-4 at the brain's 1 mm: (volume z, y, x float32, spacing, NIfTI header template).
+    Draws the bias field from rng."""
+    brain, spacing, template = read_nifti(brain_path)
+    vol = head(brain)
+    vol *= bias_field(vol.shape, rng)
+    return vol, spacing, template
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out")
@@ -101,10 +120,8 @@ def main():
     ap.add_argument("--brain", default=BRAIN)
     ap.add_argument("--sigma", type=float, default=3.0)
     args = ap.parse_args()
-    rng = np.random.default_rng(20261123)
-    brain, spacing, template = read_nifti(args.brain)
-    vol = head(brain)
-    vol *= bias_field(vol.shape, rng)
+    rng = np.random.default_rng(SEED)
+    vol, spacing, template = noiseless_head(args.brain, rng)
     if args.spacing != spacing[0]:
         factor = spacing[0] / args.spacing
         vol = ndimage.zoom(vol, factor, order=1)

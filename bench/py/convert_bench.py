@@ -6,20 +6,29 @@ For every VOL:ISO case, in one run:
   * VTK vtkMarchingCubes + vtkQuadricDecimation to 10 % and 5 % of the MC triangles;
   * VTK flying edges + meshoptimizer meshopt_simplify (libmeshoptimizer-dev 0.18) to the same
     triangle counts (bench/iso_tools_bench meshopt);
+  * VTK flying edges + meshoptimizer 1.2 meshopt_simplifyWithUpdate to 10 % of the MC triangles,
+    positions only, no error limit (the count decides): build/bench-peers/meshopt_update, built
+    by scripts/build_bench_peers.sh (the row is left out, with a note, when it is missing);
+  * VTK flying edges + gltfpack 1.3 -si 0.1 (npm; OBJ in, .glb out);
   * OpenVDB tools::volumeToMesh with adaptivity 0.5 (bench/iso_tools_bench vdb);
-  * `mlfe convert VOL --iso ISO -o X.glb` with its defaults, and with each --simplify S of
-    --tolerances; the whole command timed, peak RSS from /usr/bin/time. The same command is
+  * `mlfe convert VOL --iso ISO -o X.glb` with its defaults, with each --simplify S of
+    --tolerances and with each option set of --variants, at each thread count of
+    --mlfe-threads; the whole command timed, peak RSS from /usr/bin/time. The same command is
     run again with -o X.ply for the distances (same geometry: outputs are deterministic).
 Reported per row: triangles (% of MC), seconds, peak RSS (subprocesses only), symmetric mean
-and Hausdorff distance to the flying-edges surface in voxels (iso_bench.distances), Draco .glb
-bytes (mlfe's writer and tolerance, normals included) and Draco .drc bytes of the positions
-alone; for mlfe rows also the CLI's own .glb. Flying edges + meshoptimizer rows also give an
-end-to-end time (VTK's reader on the volume + flying edges + meshopt_simplify + mlfe's .glb
-writer on the result), comparable with the whole `mlfe convert` command.
+and Hausdorff distance to the flying-edges surface in voxels (iso_bench.distances), edges of
+more than two triangles (non-manifold) and of one (boundary), Draco .glb bytes (mlfe's writer
+and tolerance, normals included) and Draco .drc bytes of the positions alone; for mlfe rows
+also the CLI's own .glb. Flying edges + meshoptimizer rows also give an end-to-end time (VTK's
+reader on the volume + flying edges + the simplification + mlfe's .glb writer on the result),
+comparable with the whole `mlfe convert` command.
 
-usage: bench/py/convert_bench.py [--build DIR] [--work DIR] [--tolerances 0.3,0.6] [--json OUT]
-                              [--no-quadric] [--variants "ARGS;ARGS"] VOL:ISO [...]
-Uses /usr/bin/python3 with python3-vtk9, python3-scipy (scripts/install_bench_deps.sh); threads 2.
+usage: bench/py/convert_bench.py [--build DIR] [--peers DIR] [--work DIR] [--tolerances 0.3,0.6]
+                              [--json OUT] [--no-quadric] [--variants "ARGS;ARGS"]
+                              [--threads N] [--mlfe-threads 1,2] VOL:ISO [...]
+Uses /usr/bin/python3 with python3-vtk9, python3-scipy (scripts/install_bench_deps.sh). --threads
+(default 2) is given to VTK, the bench tools and mlfe; --mlfe-threads repeats every mlfe row at
+each listed count instead.
 """
 import argparse
 import json
@@ -95,6 +104,17 @@ def gltfpack_row(W, fe, n_mc, t_fe):
                 peer="gltfpack")
 
 
+def meshopt_update_row(tool, W, n_mc, t_fe):
+    """Flying edges + meshoptimizer 1.2 meshopt_simplifyWithUpdate to 10 % of the MC triangles."""
+    ply = W("femu10.ply")
+    out, _, rss = timed([tool, W("fe.ply"), str(max(1, n_mc // 10)), ply])
+    j = json.loads(out.strip().splitlines()[-1])
+    return dict(method="flying edges + meshoptimizer 1.2 simplifyWithUpdate 10%", triangles=j["triangles"],
+                seconds=t_fe + j["simplify_seconds"],
+                detail=f"simplifyWithUpdate {j['simplify_seconds']:.2f} (error limit none, reached "
+                       f"{j['absolute_error']:.3g} vox)", peak_mb=rss, ply=ply, peer="femo")
+
+
 def topology(poly):
     """(non-manifold edges, boundary edges) of a surface, vertices welded by position."""
     pts, tris = ib.tri_arrays(poly)
@@ -133,6 +153,10 @@ def vtk_read_seconds(path, reps):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--peers", default=os.path.join(ROOT, "build", "bench-peers"),
+                    help="where scripts/build_bench_peers.sh put meshopt_update")
+    ap.add_argument("--threads", type=int, default=ib.THREADS)
+    ap.add_argument("--mlfe-threads", default="", help="run every mlfe row at each of these thread counts (1,2)")
     ap.add_argument("--work", default="/tmp/mlfe_convert_bench")
     ap.add_argument("--tolerances", default="0.3,0.6", help="extra mlfe runs with --simplify S (voxels)")
     ap.add_argument("--variants", default="",
@@ -143,6 +167,11 @@ def main():
     ap.add_argument("--no-quadric", action="store_true", help="skip MC + quadric decimation (slow on big volumes)")
     ap.add_argument("cases", nargs="+", help="VOL:ISO")
     args = ap.parse_args()
+    ib.THREADS = args.threads
+    mlfe_threads = [int(x) for x in args.mlfe_threads.split(",") if x] or [args.threads]
+    meshopt_update = os.path.join(args.peers, "meshopt_update")
+    if not os.path.exists(meshopt_update):
+        ib.log(f"no {meshopt_update} (scripts/build_bench_peers.sh): no meshoptimizer 1.2 row")
     tools = os.path.join(args.build, "bench", "iso_tools_bench")
     m2g = os.path.join(args.build, "bench", "mesh_to_glb_bench")
     mlfe = mlfe_binary(args.build)
@@ -180,6 +209,8 @@ def main():
             rows.append(dict(method=f"flying edges + meshopt_simplify to {pct}%", triangles=j["triangles"],
                              seconds=t_fe + j["simplify_seconds"], detail=f"meshopt {j['simplify_seconds']:.2f}",
                              peak_mb=rss, ply=ply, peer="femo"))
+        if os.path.exists(meshopt_update):
+            rows.append(meshopt_update_row(meshopt_update, W, n_mc, t_fe))
         if shutil.which("gltfpack") and not args.no_gltfpack:
             rows.append(gltfpack_row(W, fe, n_mc, t_fe))
         # The surface the lattice's finest level gives (Kuhn marching tetrahedra on every voxel
@@ -199,9 +230,14 @@ def main():
                  for x in args.tolerances.split(",") if x]
         runs += [(f"v{i}", f"mlfe convert {v.strip()}", v.split()) for i, v in enumerate(args.variants.split(";"))
                  if v.strip()]
-        for key, label, extra in runs:
+        if len(mlfe_threads) > 1:
+            runs = [(f"{key}_t{n}", f"{label} (threads {n})", extra, n) for key, label, extra in runs
+                    for n in mlfe_threads]
+        else:
+            runs = [(key, label, extra, mlfe_threads[0]) for key, label, extra in runs]
+        for key, label, extra, threads in runs:
             glb, rep = W(f"mlfe_{key}.glb"), W(f"mlfe_{key}.json")
-            cmd = [mlfe, "--threads", str(ib.THREADS), "convert", path, "--iso", f"{iso:g}"] + extra
+            cmd = [mlfe, "--threads", str(threads), "convert", path, "--iso", f"{iso:g}"] + extra
             ib.log("  ", " ".join(cmd))
             _, wall, rss = timed(cmd + ["-o", glb, "--report", rep, "--quiet"])
             report = json.load(open(rep))
@@ -253,6 +289,7 @@ def print_table(name, iso, meta, voxels, rows):
     by = {r["method"]: r for r in rows}
     mcqd = by.get("MC + quadric decimation to 10%")
     femo = by.get("flying edges + meshopt_simplify to 10%")
+    femu = by.get("flying edges + meshoptimizer 1.2 simplifyWithUpdate 10%")
     for r in rows:
         if not r["method"].startswith("mlfe"):
             continue
@@ -266,6 +303,9 @@ def print_table(name, iso, meta, voxels, rows):
             line += f"; time / (FE + meshopt 10%) = {r['seconds'] / femo['seconds']:.2f}"
             if "end_to_end_seconds" in femo:
                 line += f" (end to end, read and .glb write included: {r['seconds'] / femo['end_to_end_seconds']:.2f})"
+        if femu:
+            line += f"; time / (FE + meshopt 1.2 update 10%) = {r['seconds'] / femu['seconds']:.2f} (end to end " \
+                    f"{r['seconds'] / femu['end_to_end_seconds']:.2f})"
         print(line)
     sys.stdout.flush()
 
