@@ -3,6 +3,7 @@
 // refusals (no output written).
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -64,6 +65,57 @@ TEST(BricksCommand, AsCleanAsUnbrickedAndAboutItsSize) {
     EXPECT_GT(ratio, 0.9);
     EXPECT_LT(ratio, 1.1);
   }
+}
+
+// A raw float32 volume (40 x 41 x 39, a ball of radius 13 off centre) with its sidecar; `nan_at`
+// >= 0 puts a NaN at that voxel index.
+std::string write_ball(const std::string& name, long nan_at = -1) {
+  const std::string path = scratch() + "/" + name;
+  std::ofstream out(path, std::ios::binary);
+  long index = 0;
+  for (int k = 0; k < 39; ++k)
+    for (int j = 0; j < 41; ++j)
+      for (int i = 0; i < 40; ++i, ++index) {
+        float v = float(13.0 - std::hypot(i - 19.6, j - 20.2, k - 19.1));
+        if (index == nan_at) v = std::nanf("");
+        out.write(reinterpret_cast<const char*>(&v), sizeof v);
+      }
+  std::ofstream(path + ".json")
+      << R"({"dims": [40, 41, 39], "dtype": "float32", "spacing": [0.5, 0.5, 0.7]})";
+  return path;
+}
+
+// Without an output that needs the whole volume, the raw file is read window by window (the
+// report says so) and the surface is the one the whole volume in memory gives.
+TEST(BricksCommand, ReadsARawVolumeWindowByWindowWithTheSameSurface) {
+  const std::string ball = write_ball("ball.raw");
+  const std::string streamed = scratch() + "/streamed.ply", whole = scratch() + "/whole.ply";
+  test::CliResult r = test::run_mlfe("convert " + ball + " --iso 0 --bricks 8 --quiet -o " + streamed +
+                                     " --report " + streamed + ".json");
+  ASSERT_EQ(r.status, 0) << r.err;
+  std::ifstream in(streamed + ".json");
+  const json report = json::parse(in);
+  EXPECT_TRUE(report["read_in_windows"].get<bool>());
+  EXPECT_GT(report["asset"]["triangles"].get<int>(), 100);
+  r = test::run_mlfe("convert " + ball + " --iso 0 --bricks 8 --quiet -o " + whole + " --hierarchy " +
+                     scratch() + "/whole.mlfeh");
+  ASSERT_EQ(r.status, 0) << r.err;
+  EXPECT_EQ(test::read_bytes(streamed), test::read_bytes(whole));
+}
+
+// What is found only while reading the windows still stops the run with one line and no file.
+TEST(BricksCommand, RefusesWhatTheWindowsShowWithNoOutput) {
+  const std::string out = scratch() + "/late.glb";
+  std::filesystem::remove(out);
+  test::CliResult r = test::run_mlfe("convert " + write_ball("ball_nan.raw", 3 + 40 * (4 + 41 * 5)) +
+                                     " --iso 0 --bricks 8 --quiet -o " + out);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("NaN or infinite (first at index 3,4,5)"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  r = test::run_mlfe("convert " + write_ball("ball.raw") + " --iso 20 --bricks 8 --quiet -o " + out);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.err.find("outside the data's range"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
 }
 
 TEST(BricksCommand, RefusesWhatCannotBeBricked) {

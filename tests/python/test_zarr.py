@@ -2,6 +2,7 @@
 asset of the same volume read from NIfTI, whatever their compressor, chunking, axes and units;
 bad stores give one line and exit 2, and no output. Run by ctest with /usr/bin/python3
 (tests/CMakeLists.txt): MLFE_BINARY is the command line."""
+import json
 import os
 import shutil
 import subprocess
@@ -100,6 +101,25 @@ class ZarrTest(unittest.TestCase):
                 store = os.path.join(self.dir, name + ".zarr")
                 write_store(store, self.data, comp, separator="/" if name == "zlib" else ".")
                 self.assertEqual(self.convert(store, name + ".ply"), ref)
+
+    def test_bricks_read_the_store_box_by_box_with_the_nifti_surface(self):
+        # The store is read window by window (no whole volume, no hierarchy); the NIfTI, read
+        # whole because a hierarchy is written too, gives the same bricked surface.
+        ref_nii = os.path.join(self.dir, "ref.nii.gz")
+        nifti(ref_nii, self.data, (0.75, 1.25, 3.0), (2.5, -5.0, 10.0))
+        whole = os.path.join(self.dir, "whole.ply")
+        r = mlfe("convert", ref_nii, "--iso", "500", "--bricks", "8", "-o", whole, "--hierarchy",
+                 os.path.join(self.dir, "whole.mlfeh"))
+        self.assertEqual(r.returncode, 0, r.stderr)
+        store = os.path.join(self.dir, "bricks.zarr")
+        write_store(store, self.data, numcodecs.Blosc(cname="zstd"))
+        out, report = os.path.join(self.dir, "bricks.ply"), os.path.join(self.dir, "bricks.json")
+        r = mlfe("convert", store, "--iso", "500", "--bricks", "8", "-o", out, "--report", report)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        with open(report) as f:
+            self.assertTrue(json.load(f)["read_in_windows"])
+        with open(out, "rb") as a, open(whole, "rb") as b:
+            self.assertEqual(a.read(), b.read())
 
     def test_units_levels_and_leading_axes(self):
         # Micrometres: the frame is converted to millimetres.
