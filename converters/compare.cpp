@@ -10,6 +10,7 @@
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/volume_reader.h>
+#include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
 
 #include <algorithm>
@@ -568,6 +569,7 @@ std::string CompareResult::summary() const {
 
 CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
                              const CompareOptions& options, const std::string& label) {
+  pipeline::check_options(options);
   CompareResult r;
   r.kind = "mesh";
   // Step 1: counts.
@@ -674,6 +676,7 @@ CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& a
 
 CompareResult compare_files(const std::string& expected, const std::string& actual,
                             const CompareOptions& options) {
+  pipeline::check_options(options);
   const Kind ke = detect_kind(expected), ka = detect_kind(actual);
   const bool both_meshes =
       (ke == Kind::kMesh || ke == Kind::kGltf) && (ka == Kind::kMesh || ka == Kind::kGltf);

@@ -851,6 +851,7 @@ ConvertResult convert(const TetMesh& mesh, const std::string& out, const Convert
 ConvertResult convert(const std::string& input, const std::string& out, const ConvertOptions& options,
                       const VolumeReadOptions& read) {
   check_convert_options(out, options);
+  pipeline::check_options(read);
   if (!options.hierarchy.empty()) check_output_path(options.hierarchy, {".mlfeh"});
   if (!options.report.empty()) check_output_path(options.report, {});
   if (!detect_tet_mesh_format(input).empty()) {

@@ -170,6 +170,7 @@ void check_volume_matches(const std::string& volume, const ScalarGrid& g, const 
 ConvertFileResult convert(const std::string& input, const std::string& output, const ConvertFileOptions& o) {
   check_options(o.build);
   check_options(o.asset);
+  check_options(o.read);
   if (o.labels) return convert_label_map(input, output, o);
   check_convert_outputs(output, o);
   const detail::Reporter report(o.progress);
@@ -240,6 +241,7 @@ ConvertFileResult iso(const std::string& input, const std::string& output, const
   if (!o.report.empty()) check_output_path(o.report, {});
   check_options(o.asset);
   check_options(o.build);
+  check_options(o.read);
   const detail::Reporter report(o.progress);
   report(0, "reading");
   std::optional<ScalarGrid> grid;

@@ -171,6 +171,7 @@ nlohmann::json InfoResult::to_json() const {
 }
 
 InfoResult info(const std::string& file, const InfoOptions& options) {
+  check_options(options.read);
   if (is_hierarchy_file(file)) return hierarchy_info(file, options);
   const auto t0 = std::chrono::steady_clock::now();
   const ScalarGrid g = read_volume(file, options.read);

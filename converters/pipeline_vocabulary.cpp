@@ -5,6 +5,7 @@
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
+#include <mlfe/core/render/transfer_function.h>
 #include <mlfe/pipeline.h>
 
 #include <cctype>
@@ -13,6 +14,7 @@
 #include <cstdlib>
 #include <limits>
 #include <sstream>
+#include <type_traits>
 
 namespace mlfe {
 
@@ -168,13 +170,21 @@ const std::vector<EnumName<RayAccumulator::Rule>>& enum_names<RayAccumulator::Ru
   return t;
 }
 
+namespace {
+
+// `text` is none of the values of the row `name`, which has choices.
+OptionError not_a_choice(const std::string& name, const std::string& text) {
+  return OptionError(
+      fmt::format("{}: expected {}; got '{}'", option_ref(name), option_spec(name).values(), text));
+}
+
+}  // namespace
+
 template <class E>
 E parse_enum(const std::string& text, const std::string& option) {
   for (const auto& e : enum_names<E>())
     if (text == e.name) return e.value;
-  std::string choices;
-  for (const auto& e : enum_names<E>()) choices += (choices.empty() ? "" : ", ") + std::string(e.name);
-  throw OptionError(fmt::format("{}: expected one of {}; got '{}'", option_ref(option), choices, text));
+  throw not_a_choice(option, text);
 }
 
 template <class E>
@@ -196,71 +206,235 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr char kMark = '\x1f';  // around an option's name in a message (option_ref)
 
+OptionSpec choice_option(const char* name, const char* flag, std::vector<std::string> (*choices)(),
+                         const char* keyword = nullptr) {
+  OptionSpec o{name, flag};
+  o.choices = choices;
+  o.keyword = keyword;
+  return o;
+}
+
 template <class E>
 OptionSpec enum_option(const char* name, const char* flag) {
-  OptionSpec o{name, flag};
-  o.choices = &enum_name_list<E>;
-  return o;
+  return choice_option(name, flag, &enum_name_list<E>);
+}
+
+std::vector<std::string> space_names() { return {"ras", "lps"}; }
+std::vector<std::string> endian_names() { return {"little", "big"}; }
+std::vector<std::string> raw_type_names() {
+  std::vector<std::string> names;
+  for (ScalarType t : {ScalarType::U8, ScalarType::I8, ScalarType::U16, ScalarType::I16, ScalarType::U32,
+                       ScalarType::I32, ScalarType::F32, ScalarType::F64})
+    names.emplace_back(scalar_type_name(t));
+  return names;
+}
+
+std::string lower(std::string text) {
+  for (char& c : text) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return text;
+}
+
+// A field of O at member m with the row `spec`; an enum member is reached by its names, which
+// are the row's choices.
+template <class O, class M>
+OptionField<O> field(OptionSpec spec, M O::*m, std::string help, bool show_default = false) {
+  if constexpr (std::is_enum_v<M>) {
+    spec.choices = &enum_name_list<M>;
+    const char* name = spec.name;
+    EnumMember<O> e{[m, name](O& o, const std::string& text) { o.*m = parse_enum<M>(text, name); },
+                    [m](const O& o) { return std::string(enum_name(o.*m)); }};
+    return {spec, std::move(help), show_default, e};
+  } else {
+    return {spec, std::move(help), show_default, m};
+  }
+}
+
+constexpr bool kShowDefault = true;
+
+std::string preset_list() {
+  std::string presets;
+  for (const auto& n : transfer_function_presets()) presets += (presets.empty() ? "" : ", ") + n;
+  return presets;
+}
+
+void check_image_size(const std::string& name, const std::array<int, 2>& size) {
+  for (int s : size)
+    if (s < 1 || s > 16384)
+      throw OptionError(
+          fmt::format("{}: expected WxH (1..16384), got {}x{}", option_ref(name), size[0], size[1]));
 }
 
 }  // namespace
 
-const std::vector<OptionSpec>& option_table() {
-  static const std::vector<OptionSpec> t = {
-      // BuildOptions
-      {"rms", "--rms"},
-      {"threshold", "--threshold", 0, kInf},
-      {"max_vertices", "--max-vertices"},
-      {"max_level", "--max-level", 0, 40},
-      {"start_level", "--start-level", -1, 12},
-      enum_option<Norm>("norm", "--norm"),
-      enum_option<Preconditioner>("preconditioner", "--preconditioner"),
-      {"surface_tolerance", "--surface-tolerance", 0, kInf, true},
-      {"max_sample_error", "--max-error", 0, kInf, false, false, "max_error"},
-      {"max_memory", "--max-memory"},
-      // AssetOptions
-      {"iso", "--iso"},
-      {"tolerance", "--tolerance", 0, kInf},
-      {"lod", "--lod", 0, 8},
-      {"simplify", "--simplify", 0, kInf},
-      {"ratio", "--ratio", 0, 1},
-      enum_option<Simplifier>("simplifier", "--simplifier"),
-      enum_option<VertexPlacement>("placement", "--placement"),
-      {"snap", "--snap", 0, 8},
-      {"min_component", "--min-component"},
-      enum_option<Normals>("normals", "--normals"),
-      {"level", "--level", -1, 40},
-      {"bricks", "--bricks", 0, 1 << 20},
-      enum_option<SurfaceSource>("surface", "--surface"),
-      // LabelOptions
-      {"labels", "--labels"},
-      {"label_table", "--label-table"},
-      {"smoothing_iterations", "--smooth-iterations", 0, 1000, false, false, "smooth_iterations"},
-      {"max_offset", "--max-offset", 0, kInf},
-      // BuildFileOptions, ConvertFileOptions, IsoOptions
-      {"max_error", "--max-error", 0, kInf},
-      {"psnr", "--psnr", 0, kInf},
-      {"quantization_share", "--quantization-share", 0, 1, false, true},
-      {"hierarchy", "--hierarchy"},
-      {"render", "--render"},
-      {"volume", "--volume"},
-      // RenderFileOptions
-      {"tf_unit", "--tf-unit", 0, kInf},
-      enum_option<Projection>("camera", "--camera"),
-      {"elevation", "--elevation", -90, 90},
-      {"position", "--position"},
-      {"target", "--target"},
-      {"up", "--up"},
-      {"size", "--size"},
-      {"reference", "--reference"},
-      enum_option<RayAccumulator::Rule>("integration", "--integration"),
-      {"frames", "--frames", 1, 3600},
-      {"background", "--background"},
-      {"stop_opacity", "--stop-opacity", 0, 1},
-      {"z_opacity", "--z-opacity", 0, 1},
-      // CompareOptions
-      {"count_tolerance", "--count-tolerance"},
+const std::vector<OptionField<RenderFileOptions>>& render_fields() {
+  using R = RenderFileOptions;
+  static const std::vector<OptionField<R>> t = {
+      field({"tf", "--tf"}, &R::tf,
+            "transfer function: a preset (" + preset_list() + ") or a ParaView colour map .json",
+            kShowDefault),
+      field(
+          {"tf_unit", "--tf-unit", 0, kInf}, &R::tf_unit,
+          "length (mm) the opacities refer to (0: one voxel for presets, a mesh's fine edge for presets on a "
+          ".vtu/.msh, 1 for ParaView files)"),
+      field({"camera", "--camera"}, &R::camera, "projection", kShowDefault),
+      field({"azimuth", "--azimuth"}, &R::azimuth, "degrees about +z (0: looking along +y)"),
+      field({"elevation", "--elevation", -90, 90}, &R::elevation, "degrees above the horizontal plane"),
+      field({"position", "--position"}, &R::position,
+            "camera position x,y,z (physical frame; replaces the orbit)"),
+      field({"target", "--target"}, &R::target, "point looked at, x,y,z (default: the volume's centre)"),
+      field({"up", "--up"}, &R::up, "up direction x,y,z (default 0,0,1)"),
+      field({"size", "--size"}, &R::size, "image size WxH", kShowDefault),
+      field({"level", "--level", -1, 40}, &R::level,
+            "render the approximation on this hierarchy level (-1: finest); a .mlfeh file is read only up to "
+            "it"),
+      field({"reference", "--reference"}, &R::reference,
+            "ray-cast the original voxels instead (volume input)"),
+      field(
+          {"integration", "--integration"}, &R::integration,
+          "segment integration: pre-integrated with the tabulated mean transmittance, with the exact one, or "
+          "the trapezoid rule",
+          kShowDefault),
+      field({"shading", "--shading"}, &R::shading, "shade with the per-tetrahedron gradient (headlight)"),
+      field({"skip_empty", "--no-skip"}, &R::skip_empty, "no empty-space skipping"),
+      field({"png", "--png"}, &R::png, "also write an sRGB PNG preview over the background"),
+      field({"frames", "--frames", 1, 3600}, &R::frames,
+            "turntable: this many frames around +z, numbered files"),
+      field({"background", "--background"}, &R::background, "PNG background, linear r,g,b in [0,1]",
+            kShowDefault),
+      field({"stop_opacity", "--stop-opacity", 0, 1}, &R::stop_opacity, "early ray termination",
+            kShowDefault),
+      field({"z_opacity", "--z-opacity", 0, 1}, &R::z_opacity,
+            "Z is where the accumulated opacity reaches this", kShowDefault),
   };
+  return t;
+}
+
+template <class O>
+void set_option_text(const OptionField<O>& f, O& o, const std::string& text) {
+  std::visit(
+      [&](const auto& m) {
+        using M = std::decay_t<decltype(m)>;
+        if constexpr (std::is_same_v<M, EnumMember<O>>) {
+          m.set(o, text);
+        } else if constexpr (std::is_same_v<M, std::string O::*>) {
+          o.*m = text;
+        } else if constexpr (std::is_same_v<M, std::array<int, 2> O::*>) {
+          o.*m = parse_image_size(text, f.spec.name);
+        } else if constexpr (std::is_same_v<M, std::array<double, 3> O::*> ||
+                             std::is_same_v<M, std::optional<std::array<double, 3>> O::*>) {
+          o.*m = parse_vector3(text, f.spec.name);
+        } else {
+          MLFE_CHECK_MSG(false, f.spec.name);
+        }
+      },
+      f.member);
+}
+
+template <class O>
+std::string option_text(const OptionField<O>& f, const O& o) {
+  const auto join = [](const auto& values, const char* separator) {
+    std::string text;
+    for (const auto& v : values) text += (text.empty() ? "" : separator) + fmt::format("{}", v);
+    return text;
+  };
+  return std::visit(
+      [&](const auto& m) -> std::string {
+        using M = std::decay_t<decltype(m)>;
+        if constexpr (std::is_same_v<M, EnumMember<O>>) {
+          return m.get(o);
+        } else if constexpr (std::is_same_v<M, std::array<int, 2> O::*>) {
+          return join(o.*m, "x");
+        } else if constexpr (std::is_same_v<M, std::array<double, 3> O::*>) {
+          return join(o.*m, ",");
+        } else if constexpr (std::is_same_v<M, std::optional<std::array<double, 3>> O::*>) {
+          return o.*m ? join(*(o.*m), ",") : std::string();
+        } else {
+          return fmt::format("{}", o.*m);
+        }
+      },
+      f.member);
+}
+
+template <class O>
+void check_fields(const std::vector<OptionField<O>>& fields, const O& o) {
+  for (const OptionField<O>& f : fields)
+    std::visit(
+        [&](const auto& m) {
+          using M = std::decay_t<decltype(m)>;
+          if constexpr (std::is_same_v<M, int O::*> || std::is_same_v<M, double O::*>)
+            check_option(f.spec.name, o.*m);
+          else if constexpr (std::is_same_v<M, std::array<int, 2> O::*>)
+            check_image_size(f.spec.name, o.*m);
+        },
+        f.member);
+}
+
+template void set_option_text(const OptionField<RenderFileOptions>&, RenderFileOptions&, const std::string&);
+template std::string option_text(const OptionField<RenderFileOptions>&, const RenderFileOptions&);
+template void check_fields(const std::vector<OptionField<RenderFileOptions>>&, const RenderFileOptions&);
+
+const std::vector<OptionSpec>& option_table() {
+  static const std::vector<OptionSpec> t = [] {
+    std::vector<OptionSpec> rows = {
+        // BuildOptions
+        {"rms", "--rms"},
+        {"threshold", "--threshold", 0, kInf},
+        {"max_vertices", "--max-vertices"},
+        {"max_level", "--max-level", 0, 40},
+        {"start_level", "--start-level", -1, 12},
+        enum_option<Norm>("norm", "--norm"),
+        enum_option<Preconditioner>("preconditioner", "--preconditioner"),
+        {"surface_tolerance", "--surface-tolerance", 0, kInf, true},
+        {"max_sample_error", "--max-error", 0, kInf, false, false, "max_error"},
+        {"max_memory", "--max-memory"},
+        // AssetOptions
+        {"iso", "--iso"},
+        {"tolerance", "--tolerance", 0, kInf},
+        {"lod", "--lod", 0, 8},
+        {"simplify", "--simplify", 0, kInf},
+        {"ratio", "--ratio", 0, 1},
+        enum_option<Simplifier>("simplifier", "--simplifier"),
+        enum_option<VertexPlacement>("placement", "--placement"),
+        {"snap", "--snap", 0, 8},
+        {"min_component", "--min-component"},
+        enum_option<Normals>("normals", "--normals"),
+        {"bricks", "--bricks", 0, 1 << 20},
+        enum_option<SurfaceSource>("surface", "--surface"),
+        // LabelOptions
+        {"labels", "--labels"},
+        {"label_table", "--label-table"},
+        {"smoothing_iterations", "--smooth-iterations", 0, 1000, false, false, "smooth_iterations"},
+        {"max_offset", "--max-offset", 0, kInf},
+        // BuildFileOptions, ConvertFileOptions, IsoOptions
+        {"max_error", "--max-error", 0, kInf},
+        {"psnr", "--psnr", 0, kInf},
+        {"quantization_share", "--quantization-share", 0, 1, false, true},
+        {"hierarchy", "--hierarchy"},
+        {"render", "--render"},
+        {"volume", "--volume"},
+        // VolumeReadOptions
+        choice_option("space", "--space", &space_names),
+        choice_option("raw_dtype", "--raw-type", &raw_type_names, "raw_type"),
+        choice_option("raw_endian", "--raw-endian", &endian_names),
+        {"raw_offset", "--raw-offset", 0, kInf},
+        {"zarr_level", "--zarr-level", 0, kInf},
+        {"nan_as", "--nan-as"},
+        // CompareOptions (tolerance is AssetOptions')
+        {"count_tolerance", "--count-tolerance"},
+        {"mean_tolerance", "--mean-tolerance", 0, kInf},
+        {"normal_angle_deg", "--normal-angle", 0, kInf, false, false, "normal_angle"},
+        {"image_max", "--image-max", 0, kInf},
+        {"min_psnr", "--psnr", 0, kInf, false, false, "psnr"},
+        {"value_max", "--value-max", 0, kInf},
+        {"value_rms", "--value-rms", 0, kInf},
+        {"number_tolerance", "--number-tolerance", 0, kInf},
+        // The command line's own (checked there with check_option)
+        {"threads", "--threads", 0, kInf},
+    };
+    // RenderFileOptions (level is AssetOptions' too)
+    for (const auto& f : render_fields()) rows.push_back(f.spec);
+    return rows;
+  }();
   return t;
 }
 
@@ -329,11 +503,22 @@ std::string message(const std::exception& e, Spelling s) {
 
 void check_option(const std::string& name, double value) {
   const OptionSpec& o = option_spec(name);
-  MLFE_CHECK(!o.choices && o.values() != "");
+  MLFE_CHECK(!o.choices);
   const bool low_ok = o.min_excluded ? value > o.min : value >= o.min;
   const bool high_ok = o.max_excluded ? value < o.max : value <= o.max;
-  if (!(std::isfinite(value) && low_ok && high_ok))
-    throw OptionError(fmt::format("{}: expected {}, got {}", option_ref(name), o.values(), value));
+  if (!(std::isfinite(value) && low_ok && high_ok)) {
+    const std::string values = o.values();
+    throw OptionError(fmt::format("{}: expected {}, got {}", option_ref(name),
+                                  values.empty() ? "a finite number" : values, value));
+  }
+}
+
+void check_choice(const std::string& name, const std::string& text, bool ignore_case) {
+  const OptionSpec& o = option_spec(name);
+  MLFE_CHECK(o.choices);
+  for (const std::string& c : o.choices())
+    if ((ignore_case ? lower(text) : text) == c) return;
+  throw not_a_choice(name, text);
 }
 
 void check_options(const BuildOptions& o) {
@@ -369,20 +554,12 @@ void check_options(const LabelOptions& o) {
 }
 
 void check_options(const RenderFileOptions& o) {
-  check_option("tf_unit", o.tf_unit);
-  check_option("elevation", o.elevation);
-  check_option("level", o.level);
-  for (int s : o.size)
-    if (s < 1 || s > 16384)
-      throw OptionError(
-          fmt::format("{}: expected WxH (1..16384), got {}x{}", option_ref("size"), o.size[0], o.size[1]));
-  check_option("frames", o.frames);
-  check_option("stop_opacity", o.stop_opacity);
-  check_option("z_opacity", o.z_opacity);
+  check_fields(render_fields(), o);
   // The orbit camera has its own target and up; silently dropping them would render another view.
   if (!o.position && (o.target || o.up))
     throw OptionError(option_ref(o.up ? "up" : "target") + ": needs " + option_ref("position"));
   check_options(o.build);
+  check_options(o.read);
 }
 
 void check_options(const BuildFileOptions& o) {
@@ -390,6 +567,30 @@ void check_options(const BuildFileOptions& o) {
   check_option("psnr", o.psnr);
   check_option("quantization_share", o.quantization_share);
   check_options(o.build);
+  check_options(o.read);
+}
+
+void check_options(const VolumeReadOptions& o) {
+  if (!o.space.empty()) check_choice("space", o.space, true);
+  // The readers take the raw type's other spellings too (u8, f32, double, ...).
+  if (!o.raw_dtype.empty() && !parse_scalar_type(o.raw_dtype)) throw not_a_choice("raw_dtype", o.raw_dtype);
+  if (!o.raw_endian.empty()) check_choice("raw_endian", o.raw_endian);
+  check_option("raw_offset", static_cast<double>(o.raw_offset));
+  check_option("zarr_level", o.zarr_level);
+  if (o.nan_as) check_option("nan_as", *o.nan_as);
+}
+
+void check_options(const CompareOptions& o) {
+  const std::pair<const char*, const std::optional<double>*> bounds[] = {
+      {"tolerance", &o.tolerance}, {"mean_tolerance", &o.mean_tolerance}, {"image_max", &o.image_max},
+      {"min_psnr", &o.min_psnr},   {"value_max", &o.value_max},           {"value_rms", &o.value_rms}};
+  for (const auto& [name, value] : bounds)
+    if (*value) check_option(name, **value);
+  if (!(o.count_tolerance_percent >= 0 && std::isfinite(o.count_tolerance_percent)))
+    throw OptionError(fmt::format("{}: expected a percentage such as 2% (got {})",
+                                  option_ref("count_tolerance"), o.count_tolerance_percent));
+  check_option("normal_angle_deg", o.normal_angle_deg);
+  check_option("number_tolerance", o.number_tolerance);
 }
 
 #define MLFE_PIPELINE_ENUM(E)                                                   \

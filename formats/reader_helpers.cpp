@@ -26,6 +26,20 @@ std::size_t default_memory_limit() {
   return std::size_t(16) << 30;
 }
 
+std::optional<ScalarType> parse_scalar_type(const std::string& name) {
+  std::string n;
+  for (char c : name) n += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (n == "uint8" || n == "u8" || n == "uchar" || n == "unsigned char") return ScalarType::U8;
+  if (n == "int8" || n == "i8" || n == "char" || n == "signed char") return ScalarType::I8;
+  if (n == "uint16" || n == "u16" || n == "ushort") return ScalarType::U16;
+  if (n == "int16" || n == "i16" || n == "short") return ScalarType::I16;
+  if (n == "uint32" || n == "u32" || n == "uint") return ScalarType::U32;
+  if (n == "int32" || n == "i32" || n == "int") return ScalarType::I32;
+  if (n == "float32" || n == "f32" || n == "float") return ScalarType::F32;
+  if (n == "float64" || n == "f64" || n == "double") return ScalarType::F64;
+  return std::nullopt;
+}
+
 namespace volume_detail {
 
 void fail(const std::string& path, const std::string& problem) {
@@ -51,20 +65,6 @@ void fail(const std::string& path, const std::string& problem) {
   }
   while (!one.empty() && (one.back() == ' ' || one.back() == ';')) one.pop_back();
   throw Error(path + ": " + one);
-}
-
-std::optional<ScalarType> parse_scalar_type(const std::string& name) {
-  std::string n;
-  for (char c : name) n += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (n == "uint8" || n == "u8" || n == "uchar" || n == "unsigned char") return ScalarType::U8;
-  if (n == "int8" || n == "i8" || n == "char" || n == "signed char") return ScalarType::I8;
-  if (n == "uint16" || n == "u16" || n == "ushort") return ScalarType::U16;
-  if (n == "int16" || n == "i16" || n == "short") return ScalarType::I16;
-  if (n == "uint32" || n == "u32" || n == "uint") return ScalarType::U32;
-  if (n == "int32" || n == "i32" || n == "int") return ScalarType::I32;
-  if (n == "float32" || n == "f32" || n == "float") return ScalarType::F32;
-  if (n == "float64" || n == "f64" || n == "double") return ScalarType::F64;
-  return std::nullopt;
 }
 
 bool host_is_little_endian() {

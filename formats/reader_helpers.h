@@ -18,8 +18,6 @@ namespace mlfe::volume_detail {
 /// Throws mlfe::Error("<path>: <problem>"), with line breaks in `problem` turned into "; ".
 [[noreturn]] void fail(const std::string& path, const std::string& problem);
 
-/// "uint8"/"u8"/"uchar", ..., "float64"/"f64"/"double" (any case); nullopt when unknown.
-std::optional<ScalarType> parse_scalar_type(const std::string& name);
 bool host_is_little_endian();
 
 /// nx*ny*nz after checking every dim is in 1..2^31-1 and the product does not overflow a

@@ -22,6 +22,8 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <type_traits>
+#include <variant>
 #include <vector>
 
 namespace py = pybind11;
@@ -76,6 +78,13 @@ class Options {
     py::object o = left_.at(name);
     left_.erase(name);
     return o;
+  }
+  /// A file name or text: a str or an os.PathLike, as os.fspath gives it.
+  std::string path(const char* name) {
+    const py::object o = take(name);
+    if (!is_path(o))
+      throw Error(std::string(name) + ": wrong type (" + std::string(py::str(o.get_type())) + ")");
+    return fspath(o);
   }
   void finish() const {
     if (!left_.empty()) throw Error("unknown option '" + left_.begin()->first + "'");
@@ -242,12 +251,43 @@ std::shared_ptr<ScalarGrid> grid_from(const py::object& volume, const py::object
   return grid_from_array(py::array::ensure(volume), spacing, origin, direction, space);
 }
 
-py::tuple read_volume_py(const py::object& path) {
+// The keywords of a volume file's read, the command line's read options: grid, vec_magnitude,
+// nan_as, space, raw_dims, raw_type, raw_endian, raw_spacing, raw_origin, raw_offset, zarr_level.
+VolumeReadOptions read_options(Options& kw) {
+  VolumeReadOptions o;
+  kw.get("grid", o.grid_name);
+  kw.get("vec_magnitude", o.vec_magnitude);
+  if (kw.has("nan_as")) {
+    double v = 0;
+    kw.get("nan_as", v);
+    o.nan_as = v;
+  }
+  kw.get("space", o.space);
+  if (kw.has("raw_dims")) {
+    std::vector<std::int64_t> d;
+    kw.get("raw_dims", d);
+    if (d.size() < 2 || d.size() > 3) throw Error("raw_dims: expected 2 or 3 numbers");
+    o.raw_dims = std::array<std::int64_t, 3>{d[0], d[1], d.size() > 2 ? d[2] : 1};
+  }
+  kw.get(pipeline::option_spec("raw_dtype").spelled(pipeline::Spelling::kPython), o.raw_dtype);
+  kw.get("raw_endian", o.raw_endian);
+  if (kw.has("raw_spacing")) o.raw_spacing = triple(kw.take("raw_spacing"), "raw_spacing", 1.0);
+  if (kw.has("raw_origin")) o.raw_origin = triple(kw.take("raw_origin"), "raw_origin", 0.0);
+  kw.get("raw_offset", o.raw_offset);
+  kw.get("zarr_level", o.zarr_level);
+  pipeline::check_options(o);
+  return o;
+}
+
+py::tuple read_volume_py(const py::object& path, const py::kwargs& kwargs) {
   const std::string p = fspath(path);
+  Options kw(kwargs);
+  const VolumeReadOptions read = read_options(kw);
+  kw.finish();
   std::shared_ptr<ScalarGrid> g;
   {
     py::gil_scoped_release release;
-    g = std::make_shared<ScalarGrid>(read_volume(p));
+    g = std::make_shared<ScalarGrid>(read_volume(p, read));
   }
   const auto s = py::ssize_t(sizeof(float));
   std::vector<py::ssize_t> shape{g->dims[0], g->dims[1]}, strides{s, s * g->dims[0]};
@@ -472,57 +512,62 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   return to_python(r.asset);
 }
 
-// "x,y,z" or three numbers, through the vocabulary's parser.
-std::array<double, 3> vector3(Options& kw, const char* name) {
-  const py::object o = kw.take(name);
-  if (py::isinstance<py::str>(o)) return pipeline::parse_vector3(o.cast<std::string>(), name);
+// "x,y,z" or three numbers, as text for the vocabulary's parser.
+std::string vector_text(const py::object& o, const std::string& name) {
+  if (py::isinstance<py::str>(o)) return o.cast<std::string>();
   std::vector<double> v;
   try {
     v = o.cast<std::vector<double>>();
   } catch (const py::cast_error&) {
-    throw Error(std::string(name) + ": expected three numbers or 'x,y,z'");
+    throw Error(name + ": expected three numbers or 'x,y,z'");
   }
-  if (v.size() != 3)
-    throw Error(std::string(name) + ": expected three numbers, got " + std::to_string(v.size()));
-  return pipeline::parse_vector3(fmt_vector(v), name);
+  if (v.size() != 3) throw Error(name + ": expected three numbers, got " + std::to_string(v.size()));
+  return fmt_vector(v);
+}
+
+// (width, height) or "WxH", as text for the vocabulary's parser.
+std::string size_text(const py::object& o, const std::string& name) {
+  if (py::isinstance<py::str>(o)) return o.cast<std::string>();
+  std::vector<py::object> wh;
+  try {
+    wh = o.cast<std::vector<py::object>>();
+  } catch (const py::cast_error&) {
+  }
+  if (wh.size() != 2) throw Error(name + ": expected (width, height) or 'WxH'");
+  return std::string(py::str(wh[0])) + "x" + std::string(py::str(wh[1]));
+}
+
+// One keyword of a field table (pipeline::render_fields()), converted by the member's type:
+// bools and numbers cast as they are, text from a str or a path, the rest through the
+// library's parse functions.
+template <class O>
+void get_field(Options& kw, const pipeline::OptionField<O>& f, O& o) {
+  const std::string key = f.spec.spelled(pipeline::Spelling::kPython);
+  if (!kw.has(key.c_str())) return;
+  std::visit(
+      [&](const auto& m) {
+        using M = std::decay_t<decltype(m)>;
+        if constexpr (std::is_same_v<M, bool O::*> || std::is_same_v<M, int O::*> ||
+                      std::is_same_v<M, double O::*>) {
+          kw.get(key.c_str(), o.*m);
+        } else if constexpr (std::is_same_v<M, std::string O::*>) {
+          o.*m = kw.path(key.c_str());
+        } else if constexpr (std::is_same_v<M, pipeline::EnumMember<O>>) {
+          std::string text;
+          kw.get(key.c_str(), text);
+          pipeline::set_option_text(f, o, text);
+        } else if constexpr (std::is_same_v<M, std::array<int, 2> O::*>) {
+          pipeline::set_option_text(f, o, size_text(kw.take(key.c_str()), key));
+        } else {
+          pipeline::set_option_text(f, o, vector_text(kw.take(key.c_str()), key));
+        }
+      },
+      f.member);
 }
 
 pipeline::RenderFileOptions render_options(Options& kw) {
   pipeline::RenderFileOptions o;
-  kw.get("tf", o.tf);
-  kw.get("tf_unit", o.tf_unit);
-  get_enum(kw, "camera", o.camera);
-  kw.get("azimuth", o.azimuth);
-  kw.get("elevation", o.elevation);
-  if (kw.has("position")) o.position = vector3(kw, "position");
-  if (kw.has("target")) o.target = vector3(kw, "target");
-  if (kw.has("up")) o.up = vector3(kw, "up");
-  if (kw.has("size")) {
-    const py::object size = kw.take("size");
-    std::string text;
-    if (py::isinstance<py::str>(size)) {
-      text = size.cast<std::string>();
-    } else {
-      std::vector<py::object> wh;
-      try {
-        wh = size.cast<std::vector<py::object>>();
-      } catch (const py::cast_error&) {
-      }
-      if (wh.size() != 2) throw Error("size: expected (width, height) or 'WxH'");
-      text = std::string(py::str(wh[0])) + "x" + std::string(py::str(wh[1]));
-    }
-    o.size = pipeline::parse_image_size(text, "size");
-  }
-  kw.get("level", o.level);
-  kw.get("reference", o.reference);
-  get_enum(kw, "integration", o.integration);
-  kw.get("shading", o.shading);
-  kw.get("skip_empty", o.skip_empty);
-  if (kw.has("png")) o.png = fspath(kw.take("png"));
-  kw.get("frames", o.frames);
-  if (kw.has("background")) o.background = vector3(kw, "background");
-  kw.get("stop_opacity", o.stop_opacity);
-  kw.get("z_opacity", o.z_opacity);
+  for (const auto& f : pipeline::render_fields()) get_field(kw, f, o);
   return o;
 }
 
@@ -876,6 +921,18 @@ PYBIND11_MODULE(_mlfe, m) {
   py::register_exception<Cancelled>(m, "Cancelled", m.attr("Error"));
 
   m.def("read_volume", &read_volume_py, py::arg("path"));
+  // mlfe.render's keywords and their documentation, from the library's table.
+  m.def("render_fields", [] {
+    py::list fields;
+    for (const auto& f : pipeline::render_fields()) {
+      const std::string values = f.spec.values();
+      const bool clears = std::string(f.spec.flag).rfind("--no-", 0) == 0;
+      fields.append(
+          py::make_tuple(f.spec.spelled(pipeline::Spelling::kPython),
+                         (clears ? "False: " : "") + f.help + (values.empty() ? "" : " (" + values + ")")));
+    }
+    return fields;
+  });
   m.def("load", &load_py, py::arg("path"));
   // mlfe.batch's scans in a folder: the endings of the table of volume formats.
   m.def("scan_extensions", [] { return scan_extensions(); });

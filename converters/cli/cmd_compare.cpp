@@ -57,37 +57,30 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option("EXPECTED", args->expected, "the golden file")->required();
   cmd->add_option("ACTUAL", args->actual, "the file to check")->required();
   cmd->add_option(
-         "--tolerance", args->tolerance,
-         "meshes: largest Hausdorff distance and bounding-box difference, in the files' units "
-         "(glTF: metres; default 1e-4 of the expected bounding-box diagonal); hierarchies: vertex positions")
-      ->check(CLI::NonNegativeNumber);
+      "--tolerance", args->tolerance,
+      "meshes: largest Hausdorff distance and bounding-box difference, in the files' units "
+      "(glTF: metres; default 1e-4 of the expected bounding-box diagonal); hierarchies: vertex positions");
   cmd->add_option("--mean-tolerance", args->mean_tolerance,
-                  "meshes: largest mean distance (default: --tolerance)")
-      ->check(CLI::NonNegativeNumber);
+                  "meshes: largest mean distance (default: --tolerance)");
   cmd->add_option("--count-tolerance", args->count_tolerance,
                   "meshes: allowed vertex/triangle count difference, percent of the expected count (e.g. 2%; "
                   "default exact)");
   cmd->add_option("--normal-angle", args->options.normal_angle_deg,
                   "meshes: largest mean angle between matched normals, degrees")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->capture_default_str();
   cmd->add_option("--samples", args->options.samples, "meshes: area samples per mesh on top of every vertex")
       ->capture_default_str();
   cmd->add_option(
-         "--image-max", args->image_max,
-         "images: largest absolute channel difference (PNG values in [0,1]; default exact unless --psnr)")
-      ->check(CLI::NonNegativeNumber);
+      "--image-max", args->image_max,
+      "images: largest absolute channel difference (PNG values in [0,1]; default exact unless --psnr)");
   cmd->add_option("--psnr", args->psnr, "images: smallest PSNR per channel, dB");
   cmd->add_option(
-         "--value-max", args->value_max,
-         "volumes and hierarchy values: largest absolute difference (default exact unless --value-rms)")
-      ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--value-rms", args->value_rms, "volumes and hierarchy values: largest RMS difference")
-      ->check(CLI::NonNegativeNumber);
+      "--value-max", args->value_max,
+      "volumes and hierarchy values: largest absolute difference (default exact unless --value-rms)");
+  cmd->add_option("--value-rms", args->value_rms, "volumes and hierarchy values: largest RMS difference");
   cmd->add_option("--number-tolerance", args->options.number_tolerance,
                   "relative tolerance for numbers in headers, transforms, materials, extras")
-      ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->capture_default_str();
   cmd->add_option(
       "--ignore", args->options.ignore,
       "JSON pointer not compared (glTF structure, hierarchy metadata), e.g. /asset/generator; repeatable");

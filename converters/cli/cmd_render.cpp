@@ -2,7 +2,6 @@
 // same defaults as mlfe build) or an unstructured tetrahedral mesh (.vtu/.msh, as it is), face
 // to face through the tetrahedra; the work is mlfe::pipeline::render.
 #include <fmt/format.h>
-#include <mlfe/formats/transfer_function_io.h>
 #include <mlfe/pipeline.h>
 
 #include <cstdio>
@@ -13,66 +12,6 @@
 #include "converters/cli/volume_options.h"
 
 namespace mlfe::cli {
-
-void add_render_options(CLI::App* cmd, RenderParams& p) {
-  std::string presets;
-  for (const auto& n : transfer_function_presets()) presets += (presets.empty() ? "" : ", ") + n;
-  cmd->add_option("--tf", p.tf,
-                  "transfer function: a preset (" + presets + ") or a ParaView colour map .json")
-      ->capture_default_str();
-  cmd->add_option("--tf-unit", p.tf_unit,
-                  "length (mm) the opacities refer to (0: one voxel for presets, a mesh's fine edge for "
-                  "presets on a .vtu/.msh, 1 for ParaView files)");
-  cmd->add_option("--camera", p.camera, "projection")->capture_default_str();
-  cmd->add_option("--azimuth", p.azimuth, "degrees about +z (0: looking along +y)");
-  cmd->add_option("--elevation", p.elevation, "degrees above the horizontal plane");
-  cmd->add_option("--position", p.position, "camera position x,y,z (physical frame; replaces the orbit)");
-  cmd->add_option("--target", p.target, "point looked at, x,y,z (default: the volume's centre)");
-  cmd->add_option("--up", p.up, "up direction x,y,z (default 0,0,1)");
-  cmd->add_option("--size", p.size, "image size WxH")->capture_default_str();
-  cmd->add_option(
-      "--level", p.level,
-      "render the approximation on this hierarchy level (-1: finest); a .mlfeh file is read only up to it");
-  cmd->add_flag("--reference", p.reference, "ray-cast the original voxels instead (volume input)");
-  cmd->add_option(
-         "--integration", p.integration,
-         "segment integration: pre-integrated with the tabulated mean transmittance, with the exact one, "
-         "or the trapezoid rule")
-      ->capture_default_str();
-  cmd->add_flag("--shading", p.shading, "shade with the per-tetrahedron gradient (headlight)");
-  cmd->add_flag("--no-skip", p.no_skip, "no empty-space skipping");
-  cmd->add_option("--png", p.png, "also write an sRGB PNG preview over the background");
-  cmd->add_option("--frames", p.frames, "turntable: this many frames around +z, numbered files");
-  cmd->add_option("--background", p.background, "PNG background, linear r,g,b in [0,1]")
-      ->capture_default_str();
-  cmd->add_option("--stop-opacity", p.stop_opacity, "early ray termination")->capture_default_str();
-  cmd->add_option("--z-opacity", p.z_opacity, "Z is where the accumulated opacity reaches this")
-      ->capture_default_str();
-}
-
-pipeline::RenderFileOptions render_options(const RenderParams& p) {
-  pipeline::RenderFileOptions o;
-  o.tf = p.tf;
-  o.tf_unit = p.tf_unit;
-  o.camera = pipeline::parse_enum<pipeline::Projection>(p.camera, "camera");
-  o.azimuth = p.azimuth;
-  o.elevation = p.elevation;
-  if (!p.position.empty()) o.position = pipeline::parse_vector3(p.position, "position");
-  if (!p.target.empty()) o.target = pipeline::parse_vector3(p.target, "target");
-  if (!p.up.empty()) o.up = pipeline::parse_vector3(p.up, "up");
-  o.size = pipeline::parse_image_size(p.size, "size");
-  o.level = p.level;
-  o.reference = p.reference;
-  o.integration = pipeline::parse_enum<RayAccumulator::Rule>(p.integration, "integration");
-  o.shading = p.shading;
-  o.skip_empty = !p.no_skip;
-  o.png = p.png;
-  o.frames = p.frames;
-  o.background = pipeline::parse_vector3(p.background, "background");
-  o.stop_opacity = p.stop_opacity;
-  o.z_opacity = p.z_opacity;
-  return o;
-}
 
 void print_render(const pipeline::RenderResult& r, bool quiet) {
   if (!quiet) {
@@ -96,7 +35,7 @@ namespace {
 
 struct RenderState {
   std::string input, output;
-  RenderParams render;
+  pipeline::RenderFileOptions render;
   BuildParams build;
   VolumeReadOptions read;
 };
@@ -104,7 +43,7 @@ struct RenderState {
 void run_render(const RenderState& s) {
   check_distinct_files({{"input", s.input}, {"--tf", s.render.tf}},
                        {{"--output", s.output}, {"--png", s.render.png}});
-  pipeline::RenderFileOptions o = render_options(s.render);
+  pipeline::RenderFileOptions o = s.render;
   o.build = build_options(s.build);
   o.read = s.read;
   o.progress = progress_display("mlfe render", s.build.quiet);
@@ -124,7 +63,7 @@ void add_render_command(CLI::App& app) {
                   "values (.vtu, .msh; rendered as it is, --grid names the array)")
       ->required();
   cmd->add_option("-o,--output", state->output, "image (.exr; numbered with --frames)")->required();
-  add_render_options(cmd, state->render);
+  add_fields(cmd, pipeline::render_fields(), state->render);
   add_build_options(cmd, state->build);
   add_volume_read_options(cmd, state->read);
   cmd->callback([state] { run_render(*state); });

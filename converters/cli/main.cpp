@@ -54,7 +54,9 @@ void require_finite_numbers(CLI::App& app) {
 // The values an option of the library's table takes, in its help ("INT:0..40"); the library
 // checks them when the command calls it.
 void describe_values(CLI::App& app) {
-  for (CLI::App* cmd : app.get_subcommands([](CLI::App*) { return true; }))
+  std::vector<CLI::App*> apps = app.get_subcommands([](CLI::App*) { return true; });
+  apps.push_back(&app);
+  for (CLI::App* cmd : apps)
     for (CLI::Option* opt : cmd->get_options([](CLI::Option*) { return true; }))
       for (const auto& name : opt->get_lnames())
         if (const auto* spec = mlfe::pipeline::option_by_flag("--" + name); spec && !spec->values().empty())
@@ -128,8 +130,7 @@ int main(int argc, char** argv) {
       "(hierarchies, iso-surfaces, glTF/Draco assets)"};
   app.set_version_flag("--version", std::string("mlfe ") + MLFE_VERSION);
   app.add_option("--threads", mlfe::cli::thread_option(),
-                 "worker threads (0: all cores); output does not depend on it")
-      ->check(CLI::NonNegativeNumber);
+                 "worker threads (0: all cores); output does not depend on it");
   app.require_subcommand(1);
   // Global options (--threads) are accepted after the subcommand too.
   app.fallthrough();
@@ -142,6 +143,7 @@ int main(int argc, char** argv) {
 
   std::unique_ptr<tbb::global_control> threads;
   app.parse_complete_callback([&] {
+    mlfe::pipeline::check_option("threads", mlfe::cli::thread_option());
     if (mlfe::cli::thread_option() > 0)
       threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       mlfe::cli::thread_option());

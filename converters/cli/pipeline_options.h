@@ -7,6 +7,8 @@
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <string>
+#include <type_traits>
+#include <variant>
 #include <vector>
 
 namespace mlfe::cli {
@@ -36,6 +38,36 @@ void add_build_options(CLI::App* cmd, BuildParams& p);
 /// The typed options of `p`, with the refinement table on stderr unless p.quiet; throws
 /// mlfe::UsageError on bad text (--rms, --max-memory).
 BuildOptions build_options(const BuildParams& p);
+
+/// Adds one option per field of `fields` (a table of the library's, e.g.
+/// pipeline::render_fields()) to `cmd`, writing into `o` when parsed: a bool as a flag (one
+/// spelled "--no-..." clears it), numbers and text bound typed, the other types parsed from
+/// their text by the library (pipeline::set_option_text); the help shows the default where the
+/// field asks. `o` and `fields` must outlive parsing.
+template <class O>
+void add_fields(CLI::App* cmd, const std::vector<pipeline::OptionField<O>>& fields, O& o) {
+  for (const pipeline::OptionField<O>& f : fields) {
+    const std::string flag = f.spec.flag;
+    CLI::Option* opt = std::visit(
+        [&](const auto& m) -> CLI::Option* {
+          using M = std::decay_t<decltype(m)>;
+          if constexpr (std::is_same_v<M, bool O::*>) {
+            if (flag.rfind("--no-", 0) == 0)
+              return cmd->add_flag_callback(
+                  flag, [&o, m] { o.*m = false; }, f.help);
+            return cmd->add_flag(flag, o.*m, f.help);
+          } else if constexpr (std::is_same_v<M, int O::*> || std::is_same_v<M, double O::*> ||
+                               std::is_same_v<M, std::string O::*>) {
+            return cmd->add_option(flag, o.*m, f.help);
+          } else {
+            return cmd->add_option_function<std::string>(
+                flag, [&o, &f](const std::string& text) { pipeline::set_option_text(f, o, text); }, f.help);
+          }
+        },
+        f.member);
+    if (f.show_default) opt->default_str(pipeline::option_text(f, O{}));
+  }
+}
 
 using pipeline::parse_memory_budget;
 using pipeline::parse_values;

@@ -16,8 +16,8 @@ void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
   cmd->add_option_function<double>(
       "--nan-as", [o](const double& v) { o->nan_as = v; },
       "replace NaN/Inf voxels by this value (default: NaN/Inf is an error)");
-  cmd->add_option("--space", opts.space, "output coordinate convention: ras or lps (flips x and y as needed)")
-      ->transform(CLI::IsMember({"ras", "lps"}, CLI::ignore_case));
+  cmd->add_option("--space", opts.space,
+                  "output coordinate convention: ras or lps (flips x and y as needed)");
   cmd->add_option_function<std::vector<std::int64_t>>(
          "--raw-dims",
          [o](const std::vector<std::int64_t>& v) {
@@ -26,11 +26,8 @@ void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
          "raw data without sidecar: NX NY [NZ]")
       ->expected(2, 3);
   cmd->add_option("--raw-type", opts.raw_dtype,
-                  "raw data type: uint8 int8 uint16 int16 uint32 int32 float32 float64")
-      ->check(CLI::IsMember({"uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64",
-                             "u8", "i8", "u16", "i16", "u32", "i32", "f32", "f64", "float", "double"}));
-  cmd->add_option("--raw-endian", opts.raw_endian, "raw data byte order: little (default) or big")
-      ->check(CLI::IsMember({"little", "big"}));
+                  "raw data type: uint8 int8 uint16 int16 uint32 int32 float32 float64");
+  cmd->add_option("--raw-endian", opts.raw_endian, "raw data byte order: little (default) or big");
   cmd->add_option_function<std::vector<double>>(
          "--raw-spacing",
          [o](const std::vector<double>& v) {
@@ -45,11 +42,9 @@ void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
          },
          "raw data: physical position of voxel (0,0,0): OX OY [OZ]")
       ->expected(2, 3);
-  cmd->add_option("--raw-offset", opts.raw_offset, "raw data: bytes to skip before the voxels")
-      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--raw-offset", opts.raw_offset, "raw data: bytes to skip before the voxels");
   cmd->add_option("--zarr-level", opts.zarr_level,
-                  "OME-Zarr: the resolution level to read (0: full resolution)")
-      ->check(CLI::NonNegativeNumber);
+                  "OME-Zarr: the resolution level to read (0: full resolution)");
 }
 
 namespace {

@@ -469,8 +469,10 @@ struct OptionSpec {
   std::string values() const;
 };
 
-/// Every option that has a range or choices or that a message names, once. A new ranged option
-/// is a row here and a check_option call where the library takes its value.
+/// Every option that has a range or choices or that a message names, once: the rows of its own
+/// and those of the field tables (render_fields()). A new ranged option is a row here and a
+/// check_option call where the library takes its value; a new render option is one row of
+/// render_fields(), which the library checks and both front ends offer.
 const std::vector<OptionSpec>& option_table();
 /// The row of the library's `name`; a name the table lacks is a bug (CHECK).
 const OptionSpec& option_spec(const std::string& name);
@@ -513,8 +515,51 @@ class OptionInputError : public Error, public OptionMessage {
 /// The message of `e` as `s` spells options: OptionMessage's, else e.what().
 std::string message(const std::exception& e, Spelling s);
 
-/// Throws OptionError naming `name` unless `value` is in its row's range.
+/// Throws OptionError naming `name` unless `value` is finite and in its row's range.
 void check_option(const std::string& name, double value);
+/// Throws OptionError naming `name` unless `text` is one of its row's choices (any case when
+/// `ignore_case`).
+void check_choice(const std::string& name, const std::string& text, bool ignore_case = false);
+
+/// An enum member of the options struct O, by its names (enum_names).
+template <class O>
+struct EnumMember {
+  std::function<void(O&, const std::string& text)> set;  ///< parse_enum, naming the option
+  std::function<std::string(const O&)> get;              ///< enum_name
+};
+
+/// Where a field lives in its options struct O. Its type says how the front ends spell it: a
+/// flag (bool), a number, text, "x,y,z" (three numbers, optional or not), "WxH" (an image size)
+/// or an enum's name.
+template <class O>
+using OptionMember =
+    std::variant<bool O::*, int O::*, double O::*, std::string O::*, std::array<double, 3> O::*,
+                 std::optional<std::array<double, 3>> O::*, std::array<int, 2> O::*, EnumMember<O>>;
+
+/// A row of option_table() that is a field of the options struct O, with what the front ends
+/// need to offer it without code of their own: the command line adds one option per field and
+/// Python reads one keyword per field, both by the member's type; a bool whose flag starts
+/// with "--no-" is the flag that clears it. check_fields checks the values against the row.
+template <class O>
+struct OptionField {
+  OptionSpec spec;
+  std::string help;           ///< the command line's help (and Python's documentation)
+  bool show_default = false;  ///< the help shows the default value
+  OptionMember<O> member;
+};
+
+/// Sets a field that is spelled as text (text, "x,y,z", "WxH", an enum's name) from `text`
+/// through the vocabulary's parse functions; throws OptionError naming it on bad text. Fields
+/// of bool, int and double the front ends set typed (a bug otherwise: CHECK).
+template <class O>
+void set_option_text(const OptionField<O>& f, O& o, const std::string& text);
+/// The field's value as its flag takes it ("0,0,0", "500x500", "ortho"; "" when unset).
+template <class O>
+std::string option_text(const OptionField<O>& f, const O& o);
+/// Throws OptionError naming the first field of `fields` whose value in `o` is out of its
+/// row's range (numbers; image sizes 1..16384).
+template <class O>
+void check_fields(const std::vector<OptionField<O>>& fields, const O& o);
 
 // ---- the option vocabulary: one parse function per option type, for the CLI and Python ----
 // `option` is the option's name in the table; each throws OptionError naming it on bad text.
@@ -692,6 +737,11 @@ struct RenderFileOptions {
   Progress progress;
 };
 
+/// The render options the front ends offer (all but build, read, keep_images and progress), in
+/// the command line's order: each field's row, help and member. A new one is its member above,
+/// its row here (pipeline_vocabulary.cpp) and its use in the renderer.
+const std::vector<OptionField<RenderFileOptions>>& render_fields();
+
 struct RenderFrame {
   std::string exr, png;  ///< written files ("" when not written)
   int width = 0, height = 0;
@@ -810,10 +860,15 @@ ExportResult export_hierarchy(const std::string& input, const std::string& outpu
 void check_options(const BuildOptions& o);
 void check_options(const AssetOptions& o);
 void check_options(const LabelOptions& o);
-/// With o.build (a volume input is built first); `level` against the hierarchy is render's own.
+/// render_fields() and the pairs, with o.build (a volume input is built first) and o.read;
+/// `level` against the hierarchy is render's own.
 void check_options(const RenderFileOptions& o);
-/// With o.build.
+/// With o.build and o.read.
 void check_options(const BuildFileOptions& o);
+/// The raw data's type and byte order, the space's name, offsets and levels, nan_as finite.
+void check_options(const VolumeReadOptions& o);
+/// Every tolerance, angle and figure finite and >= 0 (compare_files and compare_meshes call it).
+void check_options(const CompareOptions& o);
 
 // ---- compare ----
 

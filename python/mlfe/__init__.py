@@ -458,11 +458,14 @@ class Hierarchy:
 
 
 # ---------------------------------------------------------------------------------------------
-def read_volume(path):
+def read_volume(path, **options):
     """Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png) as a
     :class:`Volume` in the file's frame: values float32 indexed ``[i, j, k]`` (a view of the
-    library's buffer, no copy); ``info`` holds format, source_type and notes."""
-    values, spacing, origin, info = _mlfe.read_volume(os.fspath(path))
+    library's buffer, no copy); ``info`` holds format, source_type and notes. Options (the
+    command line's read options): grid, vec_magnitude, nan_as, space ('ras', 'lps'), and for
+    headerless raw data raw_dims, raw_type, raw_endian, raw_spacing, raw_origin, raw_offset;
+    zarr_level."""
+    values, spacing, origin, info = _mlfe.read_volume(os.fspath(path), **options)
     n = values.ndim
     return Volume(values, spacing=spacing[:n], origin=origin, direction=info["direction"], space=info["space"],
                   info={k: info[k] for k in ("format", "source_type", "notes")})
@@ -566,9 +569,9 @@ def read_image(path):
 
 
 # ---------------------------------------------------------------------------------------------
-_RENDER_OPTIONS = ("tf", "tf_unit", "camera", "azimuth", "elevation", "position", "target", "up", "size", "level",
-                   "reference", "integration", "shading", "skip_empty", "png", "frames", "background",
-                   "stop_opacity", "z_opacity")
+# (keyword, documentation) of every render option, from the library's table.
+_RENDER_FIELDS = tuple(_mlfe.render_fields())
+_RENDER_OPTIONS = tuple(keyword for keyword, _ in _RENDER_FIELDS)
 
 
 class RenderResult:
@@ -606,11 +609,9 @@ def render(source, out=None, *, progress=None, **options):
     build options given, or a tetrahedral mesh with point values (``.vtu``, ``.msh``; ``grid=``
     names the array) rendered as it is, no build. Returns a :class:`RenderResult` with the arrays; with ``out`` (.exr)
     also writes the EXR (half RGBA, float Z, camera and transfer function in the header) and
-    with ``png=`` an sRGB preview. Options (the command line's): tf (a preset or a ParaView
-    .json), tf_unit, camera ('ortho', 'perspective'), azimuth, elevation, position, target, up,
-    size ((w, h) or 'WxH'), level, reference (the voxels themselves; volume input), integration
-    ('preintegrated', 'exact', 'trapezoid'), shading, skip_empty, png, frames, background,
-    stop_opacity, z_opacity."""
+    with ``png=`` an sRGB preview. Options (the command line's; position, target, up and
+    background take three numbers or 'x,y,z', size (w, h) or 'WxH'):
+    """
     render_opts = {k: options.pop(k) for k in list(options) if k in _RENDER_OPTIONS}
     if isinstance(source, Hierarchy):
         if options:
@@ -633,6 +634,9 @@ def render(source, out=None, *, progress=None, **options):
         else:
             h = build(source, progress=progress, **options)
     return RenderResult(_mlfe.render(h._h, None if out is None else os.fspath(out), progress, **render_opts))
+
+
+render.__doc__ += "".join("\n    - ``%s``: %s" % field for field in _RENDER_FIELDS) + "\n"
 
 
 def export(hierarchy, out, *, level=-1, progress=None):

@@ -6,6 +6,7 @@
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/pipeline.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -126,6 +127,95 @@ TEST(PipelineCalls, OptionMessagesInEachFrontEndsSpelling) {
   }
   EXPECT_EQ(pipeline::option_spec("quantization_share").values(), "a value in [0, 1)");
   EXPECT_EQ(pipeline::option_spec("norm").values(), "one of l2, h1");
+}
+
+// The message of the usage error f() throws, as `s` spells options ("no error" when none).
+template <class F>
+std::string usage_message(F&& f, pipeline::Spelling s) {
+  try {
+    f();
+  } catch (const UsageError& e) {
+    return pipeline::message(e, s);
+  }
+  return "no error";
+}
+
+// compare's and the reads' ranges are the library's, as the other options' are: each front end
+// gets the one message in its spelling.
+TEST(PipelineCalls, CompareAndReadOptionsAreCheckedByTheLibrary) {
+  using pipeline::Spelling;
+  CompareOptions c;
+  c.normal_angle_deg = -1;
+  const auto files = [&c] { compare_files(kSkull, kSkull, c); };
+  EXPECT_EQ(usage_message(files, Spelling::kCommandLine),
+            "--normal-angle: expected a finite value >= 0, got -1");
+  EXPECT_EQ(usage_message(files, Spelling::kPython), "normal_angle: expected a finite value >= 0, got -1");
+  c = {};
+  c.min_psnr = -3;
+  EXPECT_EQ(usage_message(files, Spelling::kCommandLine), "--psnr: expected a finite value >= 0, got -3");
+  c = {};
+  c.count_tolerance_percent = -2;
+  EXPECT_EQ(usage_message([&c] { compare_meshes(TriangleMesh{}, TriangleMesh{}, c); }, Spelling::kLibrary),
+            "count_tolerance: expected a percentage such as 2% (got -2)");
+
+  pipeline::InfoOptions info;
+  info.read.raw_dtype = "int3";
+  const auto read = [&info] { pipeline::info(kSkull, info); };
+  const std::string types = "one of uint8, int8, uint16, int16, uint32, int32, float32, float64";
+  EXPECT_EQ(usage_message(read, Spelling::kCommandLine), "--raw-type: expected " + types + "; got 'int3'");
+  EXPECT_EQ(usage_message(read, Spelling::kPython), "raw_type: expected " + types + "; got 'int3'");
+  info.read.raw_dtype = "F32";  // the readers' other spellings, in any case
+  info.read.space = "LPS";
+  EXPECT_EQ(pipeline::info(kSkull, info).space, "LPS");
+  VolumeReadOptions r;
+  r.raw_endian = "middle";
+  EXPECT_EQ(usage_message([&r] { pipeline::check_options(r); }, Spelling::kLibrary),
+            "raw_endian: expected one of little, big; got 'middle'");
+  r = {};
+  r.zarr_level = -1;
+  EXPECT_EQ(usage_message([&r] { pipeline::check_options(r); }, Spelling::kCommandLine),
+            "--zarr-level: expected a finite value >= 0, got -1");
+}
+
+const pipeline::OptionField<pipeline::RenderFileOptions>& render_field(const std::string& name) {
+  for (const auto& f : pipeline::render_fields())
+    if (name == f.spec.name) return f;
+  ADD_FAILURE() << name;
+  return pipeline::render_fields().front();
+}
+
+// Render's options are one table: each field a row of option_table(), set from the text its
+// flag takes and shown as that text, its range checked by the library.
+TEST(PipelineCalls, RenderFieldsAreTableRowsThatTheLibraryChecks) {
+  for (const auto& f : pipeline::render_fields()) {
+    EXPECT_STREQ(pipeline::option_spec(f.spec.name).flag, f.spec.flag);
+    EXPECT_FALSE(f.help.empty()) << f.spec.name;
+  }
+  const pipeline::RenderFileOptions defaults;
+  EXPECT_EQ(pipeline::option_text(render_field("background"), defaults), "0,0,0");
+  EXPECT_EQ(pipeline::option_text(render_field("size"), defaults), "500x500");
+  EXPECT_EQ(pipeline::option_text(render_field("stop_opacity"), defaults), "0.99");
+  EXPECT_EQ(pipeline::option_text(render_field("target"), defaults), "");
+  EXPECT_EQ(pipeline::option_text(render_field("integration"), defaults), "preintegrated");
+  pipeline::RenderFileOptions o;
+  for (const auto& [name, text] : std::vector<std::pair<std::string, std::string>>{
+           {"size", "64x48"}, {"camera", "perspective"}, {"up", "0,1,0.5"}, {"tf", "bone"}}) {
+    pipeline::set_option_text(render_field(name), o, text);
+    EXPECT_EQ(pipeline::option_text(render_field(name), o), text);
+  }
+  EXPECT_EQ(o.size, (std::array<int, 2>{64, 48}));
+  EXPECT_EQ(o.camera, pipeline::Projection::kPerspective);
+  EXPECT_EQ(usage_message([&o] { pipeline::set_option_text(render_field("size"), o, "0x3"); },
+                          pipeline::Spelling::kCommandLine),
+            "--size: expected WxH (1..16384), got '0x3'");
+  o = {};
+  o.azimuth = std::nan("");
+  EXPECT_EQ(usage_message([&o] { pipeline::check_options(o); }, pipeline::Spelling::kLibrary),
+            "azimuth: expected a finite number, got nan");
+  o = {};
+  o.frames = 0;
+  EXPECT_EQ(usage_message([&o] { pipeline::check_options(o); }, pipeline::Spelling::kCommandLine),
+            "--frames: expected 1..3600, got 0");
 }
 
 TEST(PipelineCalls, ConvertReportsOrderedFractionsAndGivesTheCommandLinesBytes) {

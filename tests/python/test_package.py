@@ -325,6 +325,40 @@ class PipelineCallsTest(unittest.TestCase):
                 self.assertTrue(str(caught.exception).startswith(message), str(caught.exception))
                 self.assertNotIn("--", str(caught.exception))
 
+    def test_bad_compare_read_and_render_options_give_the_librarys_message(self):
+        """Ranges are checked once, by the library: a bad option gives one message, naming the
+        flag on the command line (exit 2 for compare, 1 otherwise) and the keyword in Python
+        (mlfe.Error, a ValueError)."""
+        h = self.hierarchy()
+        raw = self.path("v.raw")
+        with open(raw, "wb") as f:
+            f.write(bytes(8 * 8 * 8))
+        read = ["info", raw, "--raw-dims", "8", "8", "8"]
+        cases = [  # the command line's arguments, its exit status, the same call in Python
+            (["compare", SKULL, SKULL, "--tolerance", "-1"], 2, lambda: mlfe.compare(SKULL, SKULL, tolerance=-1)),
+            (["compare", SKULL, SKULL, "--normal-angle", "-2"], 2,
+             lambda: mlfe.compare(SKULL, SKULL, normal_angle=-2)),
+            (["compare", SKULL, SKULL, "--psnr", "-3"], 2, lambda: mlfe.compare(SKULL, SKULL, psnr=-3)),
+            (read + ["--raw-type", "int3"], 1, lambda: mlfe.read_volume(raw, raw_dims=(8, 8, 8), raw_type="int3")),
+            (read + ["--raw-type", "u8", "--raw-endian", "middle"], 1,
+             lambda: mlfe.read_volume(raw, raw_dims=(8, 8, 8), raw_type="u8", raw_endian="middle")),
+            (read + ["--raw-type", "u8", "--raw-offset", "-4"], 1,
+             lambda: mlfe.read_volume(raw, raw_dims=(8, 8, 8), raw_type="u8", raw_offset=-4)),
+            (["render", h, "-o", self.path("x.exr"), "--frames", "0"], 1, lambda: mlfe.render(h, frames=0)),
+        ]
+        for args, status, call in cases:
+            with self.subTest(args=args):
+                r = cli(*args)
+                self.assertEqual(r.returncode, status, r.stderr)
+                message = r.stderr.strip()
+                self.assertTrue(message.startswith("mlfe: --"), message)
+                message = message[len("mlfe: "):]
+                flag = message.split(":")[0]
+                with self.assertRaises(ValueError) as caught:
+                    call()
+                self.assertEqual(str(caught.exception), message.replace(flag, flag[2:].replace("-", "_"), 1))
+        self.assertEqual(mlfe.read_volume(raw, raw_dims=(8, 8, 8), raw_type="U8").shape, (8, 8, 8))
+
 
 class StubTest(unittest.TestCase):
     def test_stubs_cover_the_public_api(self):

@@ -1,7 +1,10 @@
-// What every volume reader takes: the options of a read and the memory limit they default to.
+// What every volume reader takes: the options of a read, the memory limit they default to and
+// the raw data's type names.
 // The readers (formats/*_reader.cpp) include this rather than volume_reader.h, the dispatcher
 // that picks one of them, so that no include runs from a reader back up to it.
 #pragma once
+#include <mlfe/core/field/scalar_grid.h>
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -29,6 +32,10 @@ struct VolumeReadOptions {
   /// Upper bound in bytes for what reading may allocate; 0: MemAvailable from /proc/meminfo.
   std::size_t max_bytes = 0;
 };
+
+/// The type raw_dtype names: "uint8"/"u8"/"uchar", ..., "float64"/"f64"/"double" (any case);
+/// nullopt when unknown.
+std::optional<ScalarType> parse_scalar_type(const std::string& name);
 
 /// The default memory limit in bytes: MemAvailable from /proc/meminfo (16 GiB if unknown).
 std::size_t default_memory_limit();

@@ -82,14 +82,17 @@ struct CompareResult {
 
 /// Compares EXPECTED with ACTUAL by content, as described above; the kind comes from the
 /// files' magic bytes and extensions. Two files of different kinds give one difference.
-/// Throws mlfe::Error ("<path>: <problem>") when a file cannot be read or decoded.
+/// Throws mlfe::Error ("<path>: <problem>") when a file cannot be read or decoded, and
+/// pipeline::OptionError (a usage error, <mlfe/pipeline.h>) for a negative or non-finite
+/// tolerance, angle or figure, before reading.
 CompareResult compare_files(const std::string& expected, const std::string& actual,
                             const CompareOptions& options = {});
 
 /// The mesh comparison of compare_files for meshes already in memory; `label` prefixes the
 /// difference items ("" for none). Meshes without triangles are compared by counts only.
 /// Normals: the meshes' own when both have one per vertex, else area-weighted ones for both.
-/// Triangle indices must be in range (CHECK: the readers guarantee it for files).
+/// Triangle indices must be in range (CHECK: the readers guarantee it for files). Options are
+/// checked as compare_files checks them.
 CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
                              const CompareOptions& options = {}, const std::string& label = "");
 
