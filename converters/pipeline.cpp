@@ -8,6 +8,7 @@
 #include <mlfe/core/surface/iso_surface.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/atomic_file.h>
+#include <mlfe/formats/brick_parts.h>
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
@@ -474,8 +475,10 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
   Surfaces out;
   std::vector<GltfSurface>& surfaces = out.surfaces;
   std::vector<double>& isos = out.iso_values;
-  // Surfaces extracted and simplified brick by brick (bricked_iso_surface).
+  // Surfaces extracted and simplified brick by brick (bricked_iso_surfaces), all at once.
   bool bricked = false;
+  std::vector<TriangleMesh> bricked_meshes;
+  std::vector<BrickStats> brick_stats;
   out.placement = resolved_placement(p);
   const SimplifierOptions so = simplifier_options(p, smallest_spacing(b.transform, b.dim()));
   const int dim = b.dim();
@@ -536,13 +539,15 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       IsoOptions o = options(level);
       o.dropped = &dropped;
       if (bricked) {
-        BrickedIsoOptions bo;
-        bo.iso = isos[i];
-        bo.normals_toward_higher = p.normals_toward_higher;
-        bo.simplifier = so;
-        BrickStats stats;
-        s.mesh = bricked_iso_surface(grid_windows(*grid), grid->dims, p.bricks, bo, &stats);
-        dropped.kept_parts = stats.parts;
+        if (i == 0) {
+          BrickedIsoOptions bo;
+          bo.normals_toward_higher = p.normals_toward_higher;
+          bo.simplifier = so;
+          bricked_meshes =
+              bricked_iso_surfaces(grid_windows(*grid), grid->dims, p.bricks, isos, bo, &brick_stats);
+        }
+        s.mesh = std::move(bricked_meshes[i]);
+        dropped.kept_parts = brick_stats[i].parts;
       } else {
         // On the samples the surface is the data's own: nothing to snap or clip.
         s.mesh = from_samples ? lattice_iso_surface(*grid, isos[i], o) : x->extract(isos[i], b.transform, o);
@@ -672,7 +677,17 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   return summary;
 }
 
-Surfaces extract(const VolumeWindows& v, const AssetOptions& p) {
+namespace {
+
+// What extract(const VolumeWindows&, ...) and the distributed pieces share: the checks, the
+// simplifier's options and the surfaces' styles, before any brick.
+struct BrickedSurfaces {
+  Surfaces out;
+  BrickedIsoOptions options;
+  BrickLayout layout;
+};
+
+BrickedSurfaces start_bricked_surfaces(const VolumeWindows& v, const AssetOptions& p) {
   pipeline::check_options(p);
   const ScalarGrid& frame = v.frame();
   if (frame.dim != 3)
@@ -684,43 +699,115 @@ Surfaces extract(const VolumeWindows& v, const AssetOptions& p) {
         ": a volume read in bricks gives simplified surfaces of its samples at the finest "
         "level, with no LODs and no part-size floor");
   require_iso(p.iso);
-  const auto t0 = std::chrono::steady_clock::now();
-  Surfaces out;
-  out.iso_values = p.iso;
-  std::sort(out.iso_values.begin(), out.iso_values.end());
-  out.source = SurfaceSource::kSamples;
-  out.placement = resolved_placement(p);
-  RangedWindows windows{v};
-  const WindowReader read = windows.reader();
-  BrickedIsoOptions bo;
-  bo.normals_toward_higher = p.normals_toward_higher;
-  bo.simplifier = simplifier_options(p, smallest_spacing(frame.transform, 3));
-  std::mutex progress_mutex;
-  const std::size_t n = out.iso_values.size();
+  BrickedSurfaces b;
+  b.out.iso_values = p.iso;
+  std::sort(b.out.iso_values.begin(), b.out.iso_values.end());
+  b.out.source = SurfaceSource::kSamples;
+  b.out.placement = resolved_placement(p);
+  b.options.normals_toward_higher = p.normals_toward_higher;
+  b.options.simplifier = simplifier_options(p, smallest_spacing(frame.transform, 3));
+  b.layout = brick_layout(frame.dims, p.bricks);
+  return b;
+}
+
+// The surfaces joined from the bricks' meshes (one per iso-value), once the data's range is
+// known: an iso-value outside it is refused as the unbricked path refuses it, before anything
+// is written.
+void finish_bricked_surfaces(BrickedSurfaces& b, std::vector<TriangleMesh> meshes,
+                             const std::vector<BrickStats>& stats, float lo, float hi, const VolumeWindows& v,
+                             const AssetOptions& p) {
+  check_iso_in_range(p.iso, lo, hi, v.frame().source);
+  const std::size_t n = b.out.iso_values.size();
   for (std::size_t i = 0; i < n; ++i) {
     GltfSurface s;
-    style_iso_surface(s, out.iso_values[i], i, n, p.normals_toward_higher);
-    bo.iso = out.iso_values[i];
-    BrickStats stats;
-    s.mesh =
-        bricked_iso_surface(read, frame.dims, p.bricks, bo, &stats, [&](std::size_t done, std::size_t total) {
-          const std::lock_guard<std::mutex> lock(progress_mutex);
-          if (p.progress && !p.progress((double(i) + double(done) / double(total)) / double(n), "extracting"))
-            throw Cancelled();
-          return true;
-        });
+    style_iso_surface(s, b.out.iso_values[i], i, n, p.normals_toward_higher);
+    s.mesh = std::move(meshes[i]);
     Dropped kept;
-    kept.kept_parts = stats.parts;
-    out.dropped.push_back(kept);
-    out.surfaces.push_back(std::move(s));
-    // The data's range is known once every brick was read: an iso-value outside it is refused
-    // as the unbricked path refuses it, before anything is written.
-    check_iso_in_range(p.iso, windows.lo, windows.hi, frame.source);
+    kept.kept_parts = stats[i].parts;
+    b.out.dropped.push_back(kept);
+    b.out.surfaces.push_back(std::move(s));
   }
-  out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  finish_surfaces(out, p);
-  out.simplify_seconds = 0;  // inside the bricks, with the extraction
-  return out;
+  finish_surfaces(b.out, p);
+}
+
+}  // namespace
+
+Surfaces extract(const VolumeWindows& v, const AssetOptions& p) {
+  BrickedSurfaces b = start_bricked_surfaces(v, p);
+  const auto t0 = std::chrono::steady_clock::now();
+  RangedWindows windows{v};
+  std::mutex progress_mutex;
+  std::vector<BrickStats> stats;
+  std::vector<TriangleMesh> meshes =
+      bricked_iso_surfaces(windows.reader(), v.frame().dims, p.bricks, b.out.iso_values, b.options, &stats,
+                           [&](std::size_t done, std::size_t total) {
+                             const std::lock_guard<std::mutex> lock(progress_mutex);
+                             if (p.progress && !p.progress(double(done) / double(total), "extracting"))
+                               throw Cancelled();
+                             return true;
+                           });
+  finish_bricked_surfaces(b, std::move(meshes), stats, windows.lo, windows.hi, v, p);
+  b.out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return std::move(b.out);
+}
+
+nlohmann::json bricks_provenance(const std::string& input, const AssetOptions& o) {
+  return {{"input", fs::path(input).filename().string()},
+          {"tool", std::string("mlfe ") + MLFE_VERSION},
+          {"refinement", "none: the samples' surfaces, read and simplified in bricks"},
+          {"bricks", o.bricks}};
+}
+
+std::size_t brick_count(const VolumeWindows& v, const AssetOptions& o) {
+  return start_bricked_surfaces(v, o).layout.bricks();
+}
+
+std::string brick_parts(const VolumeWindows& v, const AssetOptions& o, std::size_t brick) {
+  const BrickedSurfaces b = start_bricked_surfaces(v, o);
+  if (brick >= b.layout.bricks())
+    throw Error(
+        fmt::format("{}: brick {} is not one of its {} bricks", v.frame().source, brick, b.layout.bricks()));
+  std::array<std::int64_t, 3> lo, hi;
+  b.layout.window(brick, lo, hi);
+  const ScalarGrid window = v.read(lo, hi);
+  BrickParts parts;
+  parts.brick = brick;
+  const auto [mn, mx] = std::minmax_element(window.values.begin(), window.values.end());
+  parts.lo = *mn;
+  parts.hi = *mx;
+  for (double iso : b.out.iso_values)
+    parts.surfaces.push_back(brick_pass(window, b.layout, brick, iso, b.options));
+  return encode_brick_parts(parts);
+}
+
+nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
+                            const std::vector<std::string>& parts, const nlohmann::json& provenance) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check_output_path(out, kAssetExtensions);
+  BrickedSurfaces b = start_bricked_surfaces(v, o);
+  if (parts.size() != b.layout.bricks())
+    throw Error(
+        fmt::format("{}: {} bricks' parts for {} bricks", v.frame().source, parts.size(), b.layout.bricks()));
+  const std::size_t n = b.out.iso_values.size();
+  std::vector<std::vector<BrickPart>> surfaces(n, std::vector<BrickPart>(parts.size()));
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    BrickParts d = decode_brick_parts(parts[k]);
+    if (d.brick != k || d.surfaces.size() != n)
+      throw Error(fmt::format("brick parts: brick {}'s bytes hold brick {} with {} surfaces", k, d.brick,
+                              d.surfaces.size()));
+    lo = std::min(lo, d.lo);
+    hi = std::max(hi, d.hi);
+    for (std::size_t i = 0; i < n; ++i) surfaces[i][k] = std::move(d.surfaces[i]);
+  }
+  std::vector<TriangleMesh> meshes;
+  std::vector<BrickStats> stats(n);
+  for (std::size_t i = 0; i < n; ++i)
+    meshes.push_back(join_bricks(std::move(surfaces[i]), b.options, &stats[i]));
+  finish_bricked_surfaces(b, std::move(meshes), stats, lo, hi, v, o);
+  b.out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return write_surfaces(out, b.out, o, provenance, 3, smallest_spacing(v.frame().transform, 3),
+                        v.frame().space, t0);
 }
 
 bool reads_in_bricks(const BuildOptions& b, const AssetOptions& a, bool whole_volume_outputs) {

@@ -100,10 +100,7 @@ ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& i
                                     const std::string& output, const ConvertFileOptions& o,
                                     const detail::Reporter& report) {
   ConvertFileResult r;
-  nlohmann::json prov = {{"input", std::filesystem::path(input).filename().string()},
-                         {"tool", std::string("mlfe ") + MLFE_VERSION},
-                         {"refinement", "none: the samples' surfaces, read and simplified in bricks"},
-                         {"bricks", o.asset.bricks}};
+  nlohmann::json prov = bricks_provenance(input, o.asset);
   if (o.provenance.is_object()) prov.merge_patch(o.provenance);
   AssetOptions asset = o.asset;
   if (report) asset.progress = report.share(0.02, 1).as_progress();

@@ -1,8 +1,10 @@
 // libFuzzer entry point for mlfe's own decoders: the hierarchy file reader (read_hierarchy),
 // the glTF reader (read_gltf, .glb) and the EXR/PNG reader (read_image, .exr), each through a
-// temporary file, and the Draco payload decoder (decode_draco). mlfe::Error is the expected
+// temporary file, the Draco payload decoder (decode_draco) and the bricks' parts a distributed
+// worker returns (decode_brick_parts, which must encode back to the same bytes). mlfe::Error is the expected
 // outcome for bad input; anything else is a finding.
 #include <mlfe/core/base/error.h>
+#include <mlfe/formats/brick_parts.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/hierarchy_io.h>
@@ -19,6 +21,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     if (kind == "draco") {
       mlfe::decode_draco(reinterpret_cast<const char*>(data), size, "fuzz input");
+    } else if (kind == "brick_parts") {
+      const std::string bytes(reinterpret_cast<const char*>(data), size);
+      if (mlfe::encode_brick_parts(mlfe::decode_brick_parts(bytes)) != bytes) std::abort();
     } else {
       const std::string ext = kind == "gltf" ? ".glb" : kind == "exr" ? ".exr" : ".mlfeh";
       static const std::string path = "/tmp/mlfe_fuzz_" + kind + "_" + std::to_string(::getpid()) + ext;

@@ -20,7 +20,7 @@ TARGETS=("$@")
 # attribute list first, but OpenEXR's typed attributes (chlist) can run past their declared
 # size, so a corrupt file can still make it ask. Outside ASan that is an allocation that fails
 # or a read that fails, reported as bad input (exit 2).
-if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh zarr hierarchy gltf label_table); fi
+if [ "${#TARGETS[@]}" -eq 0 ]; then TARGETS=(nrrd nifti vdb raw metaimage image vtu msh zarr hierarchy gltf label_table brick_parts); fi
 
 command -v clang++ >/dev/null || { echo "run_fuzzers: clang++ not found (apt-get install clang libclang-rt-14-dev)" >&2; exit 1; }
 
@@ -49,6 +49,7 @@ seed_patterns() {
     gltf) echo "*.glb" ;;
     exr) echo "*.exr" ;;
     label_table) echo "*.txt *.ctbl *.json *.lut" ;;
+    brick_parts) echo "*.mlfebrk" ;;
   esac
 }
 

@@ -357,7 +357,7 @@ BrickLayout brick_layout(const std::array<std::int64_t, 3>& dims, std::int64_t e
   return l;
 }
 
-BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b,
+BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b, double iso,
                      const BrickedIsoOptions& o) {
   if (o.simplifier.kind == Simplifier::kMeshopt)
     throw Error(
@@ -379,7 +379,7 @@ BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::s
   io.normals_toward_higher = o.normals_toward_higher;
   const TriangleMesh extracted =
       lattice_iso_surface(window, wlo, {lo[0] - wlo[0], lo[1] - wlo[1], lo[2] - wlo[2]},
-                          {hi[0] - wlo[0], hi[1] - wlo[1], hi[2] - wlo[2]}, o.iso, io, &places);
+                          {hi[0] - wlo[0], hi[1] - wlo[1], hi[2] - wlo[2]}, iso, io, &places);
   part.extracted_triangles = extracted.triangles.size();
   if (extracted.triangles.empty()) return part;
   // 2. Lock the face vertices and simplify.
@@ -442,11 +442,14 @@ WindowReader grid_windows(const ScalarGrid& grid) {
   };
 }
 
-TriangleMesh bricked_iso_surface(const WindowReader& read, const std::array<std::int64_t, 3>& dims,
-                                 std::int64_t edge, const BrickedIsoOptions& o, BrickStats* stats,
-                                 const BrickProgress& progress) {
+std::vector<TriangleMesh> bricked_iso_surfaces(const WindowReader& read,
+                                               const std::array<std::int64_t, 3>& dims, std::int64_t edge,
+                                               const std::vector<double>& isos, const BrickedIsoOptions& o,
+                                               std::vector<BrickStats>* stats,
+                                               const BrickProgress& progress) {
   const BrickLayout layout = brick_layout(dims, edge);
-  std::vector<BrickPart> parts(layout.bricks());
+  // parts[b][i]: brick b's part of surface i.
+  std::vector<std::vector<BrickPart>> parts(layout.bricks());
   std::atomic<std::size_t> done{0};
   std::atomic<bool> stop{false};
   tbb::parallel_for(std::size_t(0), parts.size(), std::size_t(1), [&](std::size_t b) {
@@ -456,13 +459,21 @@ TriangleMesh bricked_iso_surface(const WindowReader& read, const std::array<std:
     tbb::this_task_arena::isolate([&] {
       std::array<std::int64_t, 3> lo, hi;
       layout.window(b, lo, hi);
-      parts[b] = brick_pass(read(lo, hi), layout, b, o);
+      const ScalarGrid window = read(lo, hi);
+      for (double iso : isos) parts[b].push_back(brick_pass(window, layout, b, iso, o));
     });
     const std::size_t n = ++done;
     if (progress && !progress(n, parts.size())) stop = true;
   });
   if (stop) throw Error("bricks: cancelled");
-  return join_bricks(std::move(parts), o, stats);
+  std::vector<TriangleMesh> out;
+  if (stats) stats->assign(isos.size(), BrickStats{});
+  for (std::size_t i = 0; i < isos.size(); ++i) {
+    std::vector<BrickPart> surface(parts.size());
+    for (std::size_t b = 0; b < parts.size(); ++b) surface[b] = std::move(parts[b][i]);
+    out.push_back(join_bricks(std::move(surface), o, stats ? &(*stats)[i] : nullptr));
+  }
+  return out;
 }
 
 }  // namespace mlfe

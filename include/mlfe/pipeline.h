@@ -330,6 +330,22 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
 /// bricks ("extracting"); returning false throws Cancelled.
 Surfaces extract(const VolumeWindows& v, const AssetOptions& o);
 
+/// The pieces of a conversion read in bricks that can run apart (mlfe.distributed): the bricks'
+/// passes on workers, the join and the writing on the client. extract(v, o) runs the same
+/// pieces in one process, so write_bricks writes write_assets(out, v, o, provenance)'s bytes.
+/// Each throws as extract(v, o) does for options it refuses.
+/// The asset extras convert gives a volume `input` read in bricks (file name, tool, bricks).
+nlohmann::json bricks_provenance(const std::string& input, const AssetOptions& o);
+/// How many bricks `v` has for `o` (o.bricks samples per brick edge).
+std::size_t brick_count(const VolumeWindows& v, const AssetOptions& o);
+/// Brick `brick`'s passes, one per iso-value of `o`, read from `v` and encoded
+/// (<mlfe/formats/brick_parts.h>). Throws mlfe::Error for a brick that is not one of `v`'s.
+std::string brick_parts(const VolumeWindows& v, const AssetOptions& o, std::size_t brick);
+/// The asset joined from every brick's brick_parts (in brick order) written to `out`, with
+/// write_assets' summary. Throws mlfe::Error for parts that are not those of `v`'s bricks.
+nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
+                            const std::vector<std::string>& parts, const nlohmann::json& provenance);
+
 /// True when convert() with these options reads the volume brick by brick (extract(const
 /// VolumeWindows&, ...)): a.bricks set, the surfaces the samples' (AssetOptions::surface), simplified,
 /// at the finest level, no LODs or part-size floor, and no output that holds the hierarchy or

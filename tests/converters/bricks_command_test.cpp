@@ -2,12 +2,19 @@
 // count, a surface as clean as the unbricked one and of about its size, and the option's
 // refusals (no output written).
 #include <gtest/gtest.h>
+#include <mlfe/core/base/error.h>
+#include <mlfe/formats/brick_parts.h>
+#include <mlfe/formats/volume_reader.h>
+#include <mlfe/pipeline.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "tests/test_meshes.h"
 #include "tests/test_paths.h"
@@ -116,6 +123,38 @@ TEST(BricksCommand, RefusesWhatTheWindowsShowWithNoOutput) {
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.err.find("outside the data's range"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// The pieces a distributed run sends apart (brick_parts on workers, write_bricks on the client)
+// give the bytes of the one-process run; parts that are not the volume's bricks are refused.
+TEST(BricksCommand, PiecesRunApartWriteTheSameAsset) {
+  const VolumeWindows v(write_ball("pieces.raw"), {});
+  AssetOptions o;
+  o.iso = {0.0, 2.0};
+  o.bricks = 8;
+  const nlohmann::json prov = bricks_provenance("pieces.raw", o);
+  const std::string whole = scratch() + "/pieces_whole.glb", apart = scratch() + "/pieces_apart.glb";
+  write_assets(whole, v, o, prov);
+  const std::size_t n = brick_count(v, o);
+  EXPECT_EQ(n, 5u * 5u * 5u);  // 39 x 40 x 38 cubes
+  std::vector<std::string> parts(n);
+  for (std::size_t b = n; b-- > 0;) parts[b] = brick_parts(v, o, b);  // any order
+  EXPECT_EQ(encode_brick_parts(decode_brick_parts(parts[7])), parts[7]);
+  if (const char* seed = std::getenv("MLFE_WRITE_BRICK_SEED"))
+    std::ofstream(seed, std::ios::binary) << parts[62];
+  write_bricks(apart, v, o, parts, prov);
+  EXPECT_EQ(test::read_bytes(apart), test::read_bytes(whole));
+
+  const std::string refused = scratch() + "/pieces_refused.glb";
+  std::swap(parts[3], parts[4]);
+  EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
+  std::swap(parts[3], parts[4]);
+  parts[3].pop_back();
+  EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
+  parts.pop_back();
+  EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
+  EXPECT_THROW(brick_parts(v, o, n), Error);
+  EXPECT_FALSE(std::filesystem::exists(refused));
 }
 
 TEST(BricksCommand, RefusesWhatCannotBeBricked) {

@@ -80,9 +80,12 @@ SimplifierOptions options(Placement placement) {
 TriangleMesh in_bricks(const Extraction& e, const SimplifierOptions& o, std::int64_t brick,
                        BrickStats* stats = nullptr) {
   BrickedIsoOptions bo;
-  bo.iso = 0.0;
   bo.simplifier = o;
-  return bricked_iso_surface(grid_windows(e.grid), e.grid.dims, brick, bo, stats);
+  std::vector<BrickStats> st;
+  std::vector<TriangleMesh> out =
+      bricked_iso_surfaces(grid_windows(e.grid), e.grid.dims, brick, {0.0}, bo, &st);
+  if (stats) *stats = st[0];
+  return std::move(out[0]);
 }
 
 // The bricked result against the whole surface's: the same topology, closed, welded (no crack,
@@ -227,12 +230,12 @@ TEST(BrickedIsoSurface, JoinRefusesPartsThatDoNotFit) {
   for (std::size_t b = 0; b < layout.bricks(); ++b) {
     std::array<std::int64_t, 3> lo, hi;
     layout.window(b, lo, hi);
-    parts[b] = brick_pass(grid_windows(b == 0 ? other.grid : e.grid)(lo, hi), layout, b, bo);
+    parts[b] = brick_pass(grid_windows(b == 0 ? other.grid : e.grid)(lo, hi), layout, b, 0.0, bo);
   }
   EXPECT_THROW(join_bricks(parts, bo), Error);
   std::array<std::int64_t, 3> lo, hi;
   layout.window(1, lo, hi);
-  EXPECT_THROW(brick_pass(grid_windows(e.grid)(lo, hi), layout, 0, bo), Error);  // the wrong window
+  EXPECT_THROW(brick_pass(grid_windows(e.grid)(lo, hi), layout, 0, 0.0, bo), Error);  // the wrong window
 }
 
 TEST(BrickedIsoSurface, RejectsWhatCannotBeBricked) {

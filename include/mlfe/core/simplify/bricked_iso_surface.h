@@ -102,16 +102,15 @@ struct BrickPart {
 
 /// What a bricked extraction does besides the simplifier's options.
 struct BrickedIsoOptions {
-  double iso = 0;
   bool normals_toward_higher = false;
   SimplifierOptions simplifier;  ///< kAuto, kFast or kBounded (kMeshopt cannot lock vertices)
 };
 
-/// The brick pass of brick `b` of `layout`: `window` holds the samples layout.window(b) (with the
-/// whole grid's transform), the brick's part of lattice_iso_surface is extracted from it and
-/// simplified as the header says. Deterministic; parallel inside. Throws mlfe::Error for a
-/// window of the wrong size and as simplify_within does.
-BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b,
+/// The brick pass of brick `b` of `layout` for the iso-value `iso`: `window` holds the samples
+/// layout.window(b) (with the whole grid's transform), the brick's part of lattice_iso_surface
+/// is extracted from it and simplified as the header says. Deterministic; parallel inside.
+/// Throws mlfe::Error for a window of the wrong size and as simplify_within does.
+BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b, double iso,
                      const BrickedIsoOptions& o);
 
 /// The weld and the seam pass over the bricks' parts, in brick order (empty parts allowed):
@@ -132,13 +131,17 @@ WindowReader grid_windows(const ScalarGrid& grid);
 /// (the caller's Cancelled is thrown from it or mlfe::Error "cancelled").
 using BrickProgress = std::function<bool(std::size_t done, std::size_t total)>;
 
-/// The iso-surface o.iso of a grid of `dims` samples, read brick by brick through `read`,
-/// simplified in bricks of `edge` cubes: brick_pass over every brick (threads over bricks, at
-/// most as many windows in memory as threads run), then join_bricks. Vertex and triangle order
-/// are a function of the samples, `edge` and the options, not of the thread count. Throws
-/// mlfe::Error as brick_layout, brick_pass and join_bricks do, and what `read` throws.
-TriangleMesh bricked_iso_surface(const WindowReader& read, const std::array<std::int64_t, 3>& dims,
-                                 std::int64_t edge, const BrickedIsoOptions& o, BrickStats* stats = nullptr,
-                                 const BrickProgress& progress = {});
+/// The iso-surfaces `isos` of a grid of `dims` samples, read brick by brick through `read` (one
+/// window per brick for every iso-value), simplified in bricks of `edge` cubes: brick_pass over
+/// every brick (threads over bricks, at most as many windows in memory as threads run), then
+/// join_bricks per iso-value; `stats` (may be null) receives one BrickStats per iso-value.
+/// Vertex and triangle order are a function of the samples, `edge` and the options, not of the
+/// thread count. Throws mlfe::Error as brick_layout, brick_pass and join_bricks do, and what
+/// `read` or `progress` throws.
+std::vector<TriangleMesh> bricked_iso_surfaces(const WindowReader& read,
+                                               const std::array<std::int64_t, 3>& dims, std::int64_t edge,
+                                               const std::vector<double>& isos, const BrickedIsoOptions& o,
+                                               std::vector<BrickStats>* stats = nullptr,
+                                               const BrickProgress& progress = {});
 
 }  // namespace mlfe
