@@ -186,11 +186,13 @@ struct PlaceHash {
   }
 };
 
-Welded weld(const std::vector<BrickPart>& parts) {
+// Each part is released once appended, so the parts and the welded surface are not both held.
+Welded weld(std::vector<BrickPart> parts) {
   Welded w;
   std::unordered_map<PlaceKey, Id32, PlaceHash> joined;
   std::vector<Id32> uses;  // per welded face vertex, how many parts have it
-  for (const BrickPart& b : parts) {
+  for (BrickPart& part : parts) {
+    const BrickPart b = std::move(part);
     if (b.face_place.size() != b.mesh.positions.size())
       throw Error("bricks: a brick's face places are not one per vertex");
     if (b.mesh.positions.empty()) continue;
@@ -280,23 +282,33 @@ TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, Brick
     w.mesh.positions[seam_vertex[i]] = seams.positions[i];
     if (!w.mesh.normals.empty()) w.mesh.normals[seam_vertex[i]] = seams.normals[i];
   }
+  // Compacted in place (a vertex only moves down), so the surface is not held twice.
   std::vector<std::array<Id32, 3>> tris;
   tris.reserve(outside.size() + seams.triangles.size());
   for (Id32 t : outside) tris.push_back(w.mesh.triangles[t]);
   for (const auto& t : seams.triangles)
     tris.push_back({seam_vertex[t[0]], seam_vertex[t[1]], seam_vertex[t[2]]});
-  TriangleMesh out;
+  TriangleMesh out = std::move(w.mesh);
+  std::vector<std::array<Id32, 3>>().swap(out.triangles);
   std::fill(map.begin(), map.end(), kNone);
   for (const auto& t : tris)
     for (Id32 v : t) map[v] = 0;
+  Id32 kept = 0;
   for (Id32 v = 0; v < Id32(map.size()); ++v)
     if (map[v] != kNone) {
-      map[v] = Id32(out.positions.size());
-      out.positions.push_back(w.mesh.positions[v]);
-      if (!w.mesh.normals.empty()) out.normals.push_back(w.mesh.normals[v]);
+      map[v] = kept;
+      out.positions[kept] = out.positions[v];
+      if (!out.normals.empty()) out.normals[kept] = out.normals[v];
+      ++kept;
     }
-  out.triangles.reserve(tris.size());
-  for (const auto& t : tris) out.triangles.push_back({map[t[0]], map[t[1]], map[t[2]]});
+  out.positions.resize(kept);
+  out.positions.shrink_to_fit();
+  if (!out.normals.empty()) {
+    out.normals.resize(kept);
+    out.normals.shrink_to_fit();
+  }
+  for (auto& t : tris) t = {map[t[0]], map[t[1]], map[t[2]]};
+  out.triangles = std::move(tris);
   return out;
 }
 
@@ -414,8 +426,7 @@ TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickedIsoOptions& 
     st.bricks += !p.mesh.triangles.empty();
     st.extracted_triangles += p.extracted_triangles;
   }
-  Welded w = weld(parts);
-  parts.clear();
+  Welded w = weld(std::move(parts));
   for (std::uint8_t f : w.face) st.face_vertices += f;
   st.welded_triangles = w.mesh.triangles.size();
   const std::vector<SimplifyOptions> stages = brick_stages(o.simplifier, st.extracted_triangles);
