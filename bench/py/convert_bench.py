@@ -243,11 +243,13 @@ def main():
             report = json.load(open(rep))
             subprocess.run(cmd + ["-o", W(f"mlfe_{key}_mm.ply"), "--quiet"], check=True, stdout=subprocess.DEVNULL)
             physical_to_index(W(f"mlfe_{key}_mm.ply"), W(f"mlfe_{key}.ply"), meta)
-            rows.append(dict(method=label, triangles=report["asset"]["triangles"], seconds=wall,
-                             detail=f"build {report['seconds']:.2f}, asset {report['asset']['seconds']:.2f}; "
-                                    f"{report['vertices']} vertices, {report['elements']} leaves",
+            # A volume read in bricks builds no hierarchy (its report has no build figures).
+            detail = (f"read in bricks, asset {report['asset']['seconds']:.2f}" if "read_in_windows" in report else
+                      f"build {report['seconds']:.2f}, asset {report['asset']['seconds']:.2f}; "
+                      f"{report['vertices']} vertices, {report['elements']} leaves")
+            rows.append(dict(method=label, triangles=report["asset"]["triangles"], seconds=wall, detail=detail,
                              peak_mb=rss, ply=W(f"mlfe_{key}.ply"), cli_glb=os.path.getsize(glb),
-                             leaves=report["elements"], report=report))
+                             leaves=report.get("elements", 0), report=report))
         ref = ib.Surface(fe, rng, args.samples)
         for r in rows:
             if r["ply"] is None:
