@@ -158,6 +158,7 @@ AssetOptions asset_options(Options& kw) {
   get_enum(kw, "surface", o.surface);
   kw.get("z_scale", o.z_scale);
   kw.get("level", o.level);
+  kw.get("bricks", o.bricks);
   return o;
 }
 

@@ -120,6 +120,12 @@ class ZarrTest(unittest.TestCase):
             self.assertTrue(json.load(f)["read_in_windows"])
         with open(out, "rb") as a, open(whole, "rb") as b:
             self.assertEqual(a.read(), b.read())
+        # Python's bricks= reads the store the same way.
+        import mlfe as package
+        py = os.path.join(self.dir, "bricks_py.ply")
+        package.convert(store, py, iso=500, bricks=8)
+        with open(py, "rb") as a, open(whole, "rb") as b:
+            self.assertEqual(a.read(), b.read())
 
     def test_units_levels_and_leading_axes(self):
         # Micrometres: the frame is converted to millimetres.
