@@ -492,15 +492,15 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
     out.source = surfaces_from_samples(p, have_samples, b.surface_driven) ? SurfaceSource::kSamples
                                                                           : SurfaceSource::kHierarchy;
     const bool from_samples = out.source == SurfaceSource::kSamples;
-    if (p.bricks != 0 && !from_samples)
+    if (p.bricks > 0 && !from_samples)
       throw pipeline::OptionError(
           pipeline::option_ref("bricks") +
           ": the bricks are the samples' lattice; surfaces from the hierarchy have none");
-    if (p.bricks != 0 && p.min_component > 0)
+    if (p.bricks > 0 && p.min_component > 0)
       throw pipeline::OptionError(pipeline::option_ref("bricks") + ": " +
                                   pipeline::option_ref("min_component") +
                                   " needs the whole surface (a part may span bricks); use one or the other");
-    bricked = p.bricks != 0 && p.simplify > 0;
+    bricked = p.bricks > 0 && p.simplify > 0;
     const Approximation<3>& a3 = b.get<3>();
     // Surface-driven builds refined until the data's interpolant on the mesh has the data's
     // surfaces (within the tolerance, small parts included); u, the L2 approximation, smooths
@@ -692,7 +692,7 @@ BrickedSurfaces start_bricked_surfaces(const VolumeWindows& v, const AssetOption
   const ScalarGrid& frame = v.frame();
   if (frame.dim != 3)
     throw pipeline::OptionError(pipeline::option_ref("bricks") + ": a 2D height field has no bricks");
-  if (p.bricks == 0 || p.simplify <= 0 || p.lod > 0 || p.level >= 0 ||
+  if (p.bricks <= 0 || p.simplify <= 0 || p.lod > 0 || p.level >= 0 ||
       p.surface == SurfaceSource::kHierarchy || p.min_component > 0)
     throw pipeline::OptionError(
         pipeline::option_ref("bricks") +
@@ -810,9 +810,14 @@ nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, cons
                         v.frame().space, t0);
 }
 
+std::int64_t auto_bricks(const std::array<std::int64_t, 3>& dims) {
+  constexpr std::int64_t kFrom = std::int64_t(1) << 27, kEdge = 128;
+  return dims[0] * dims[1] * dims[2] > kFrom ? kEdge : 0;
+}
+
 bool reads_in_bricks(const BuildOptions& b, const AssetOptions& a, bool whole_volume_outputs) {
   const bool surface_driven = without_global_target(b, a.iso) && b.max_sample_error < 0;
-  return a.bricks != 0 && !whole_volume_outputs && a.simplify > 0 && a.lod == 0 && a.min_component == 0 &&
+  return a.bricks > 0 && !whole_volume_outputs && a.simplify > 0 && a.lod == 0 && a.min_component == 0 &&
          surfaces_from_samples(a, true, surface_driven);
 }
 

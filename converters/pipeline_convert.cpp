@@ -125,6 +125,33 @@ ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& i
   return r;
 }
 
+// The volume opened for reading in bricks when `o` reads it so (reads_in_bricks), with auto's
+// brick edge resolved in `o`: a raw or OME-Zarr file is opened (its header only) to weigh it;
+// any other input takes 0.
+std::optional<VolumeWindows> bricks_for(const std::string& input, ConvertFileOptions& o) {
+  const bool whole_volume_outputs = !o.render.empty() || !o.hierarchy.empty();
+  std::optional<VolumeWindows> v;
+  if (!detect_tet_mesh_format(input).empty()) {
+    o.asset.bricks = std::max<std::int64_t>(o.asset.bricks, 0);
+    return v;
+  }
+  if (o.asset.bricks < 0) {
+    o.asset.bricks = 0;
+    const std::string format = detect_volume_format(input);
+    const bool streams = format == "zarr" || format == "raw" ||
+                         (format.empty() && (o.read.raw_dims || !o.read.raw_dtype.empty()));
+    AssetOptions probe = o.asset;
+    probe.bricks = 2;  // any edge: would the other options read in bricks?
+    if (streams && reads_in_bricks(o.build, probe, whole_volume_outputs)) {
+      v.emplace(input, budgeted(o.read, o.build));
+      o.asset.bricks = auto_bricks(v->frame().dims);
+    }
+  }
+  if (!reads_in_bricks(o.build, o.asset, whole_volume_outputs)) return std::nullopt;
+  if (!v) v.emplace(input, budgeted(o.read, o.build));
+  return v;
+}
+
 // The written files of a conversion, in the order the command line lists them.
 void list_written(const std::string& output, const ConvertOptions& c, ConvertFileResult& r) {
   r.written.push_back(output);
@@ -172,18 +199,15 @@ ConvertFileResult convert(const std::string& input, const std::string& output, c
   check_convert_outputs(output, o);
   const detail::Reporter report(o.progress);
   report(0, "reading");
-  if (detect_tet_mesh_format(input).empty() &&
-      reads_in_bricks(o.build, o.asset, !o.render.empty() || !o.hierarchy.empty())) {
-    const VolumeWindows v(input, budgeted(o.read, o.build));
-    if (v.frame().dim == 3) {
-      ConvertFileResult r = convert_in_bricks(v, input, output, o, report);
-      report.finish("writing");
-      return r;
-    }
+  ConvertFileOptions resolved = o;
+  if (std::optional<VolumeWindows> v = bricks_for(input, resolved); v && v->frame().dim == 3) {
+    ConvertFileResult r = convert_in_bricks(*v, input, output, resolved, report);
+    report.finish("writing");
+    return r;
   }
   ConvertOptions c;
   c.build = o.build;
-  c.asset = o.asset;
+  c.asset = resolved.asset;
   c.hierarchy = o.hierarchy;
   c.report = o.report;
   c.provenance = o.provenance;

@@ -398,7 +398,7 @@ const std::vector<OptionSpec>& option_table() {
         {"snap", "--snap", 0, 8},
         {"min_component", "--min-component"},
         enum_option<Normals>("normals", "--normals"),
-        {"bricks", "--bricks", 0, 1 << 20},
+        {"bricks", "--bricks", -1, 1 << 20},
         enum_option<SurfaceSource>("surface", "--surface"),
         // LabelOptions
         {"labels", "--labels"},
@@ -541,8 +541,8 @@ void check_options(const AssetOptions& o) {
   check_option("snap", o.snap);
   check_option("level", o.level);
   check_option("bricks", o.bricks);
-  if (o.bricks == 1 || (o.bricks & (o.bricks - 1)) != 0)
-    throw OptionError(fmt::format("{}: expected 0 or a power of two of at least 2, got {}",
+  if (o.bricks == 1 || (o.bricks > 0 && (o.bricks & (o.bricks - 1)) != 0))
+    throw OptionError(fmt::format("{}: expected -1 (auto), 0 or a power of two of at least 2, got {}",
                                   option_ref("bricks"), o.bricks));
 }
 

@@ -106,7 +106,7 @@ struct AssetParams {
   std::string placement = "auto";  ///< "auto", "input", "optimal"
   double z_scale = 1.0;
   int level = -1;
-  std::int64_t bricks = 0;
+  std::int64_t bricks = -1;
   std::string surface = "auto";  ///< "auto", "samples", "hierarchy"
 };
 

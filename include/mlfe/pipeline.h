@@ -286,8 +286,9 @@ struct AssetOptions {
   /// Extract and simplify 3D surfaces from the samples in bricks of this many samples per edge
   /// (a power of two; core/simplify/bricked_iso_surface.h): threads over bricks, the same output
   /// for any thread count. When no output needs the whole volume (see reads_in_bricks), convert
-  /// reads it window by window and builds no hierarchy. 0: the whole surface at once.
-  std::int64_t bricks = 0;
+  /// reads it window by window and builds no hierarchy. 0: the whole surface at once. -1 (auto):
+  /// convert() takes auto_bricks() for a raw or OME-Zarr file; anything else takes 0.
+  std::int64_t bricks = -1;
   /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
   /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.
   Progress progress;
@@ -345,6 +346,10 @@ std::string brick_parts(const VolumeWindows& v, const AssetOptions& o, std::size
 /// write_assets' summary. Throws mlfe::Error for parts that are not those of `v`'s bricks.
 nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
                             const std::vector<std::string>& parts, const nlohmann::json& provenance);
+
+/// auto's brick edge for a volume of `dims` samples read window by window: 128 above 2^27 samples
+/// (where the whole volume's surface and hierarchy would take gigabytes), else 0.
+std::int64_t auto_bricks(const std::array<std::int64_t, 3>& dims);
 
 /// True when convert() with these options reads the volume brick by brick (extract(const
 /// VolumeWindows&, ...)): a.bricks set, the surfaces the samples' (AssetOptions::surface), simplified,

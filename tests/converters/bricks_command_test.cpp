@@ -110,6 +110,19 @@ TEST(BricksCommand, ReadsARawVolumeWindowByWindowWithTheSameSurface) {
   EXPECT_EQ(test::read_bytes(streamed), test::read_bytes(whole));
 }
 
+// auto (the default) bricks a raw or OME-Zarr volume only above 2^27 samples: smaller ones keep
+// the whole surface's bytes.
+TEST(BricksCommand, AutoBricksOnlyBigVolumes) {
+  EXPECT_EQ(auto_bricks({512, 512, 512}), 0);
+  EXPECT_EQ(auto_bricks({512, 512, 513}), 128);
+  EXPECT_EQ(auto_bricks({2048, 1024, 1024}), 128);
+  const std::string ball = write_ball("auto.raw");
+  const std::string by_default = scratch() + "/auto_default.ply", whole = scratch() + "/auto_whole.ply";
+  ASSERT_EQ(test::run_mlfe("convert " + ball + " --iso 0 --quiet -o " + by_default).status, 0);
+  ASSERT_EQ(test::run_mlfe("convert " + ball + " --iso 0 --bricks 0 --quiet -o " + whole).status, 0);
+  EXPECT_EQ(test::read_bytes(by_default), test::read_bytes(whole));
+}
+
 // What is found only while reading the windows still stops the run with one line and no file.
 TEST(BricksCommand, RefusesWhatTheWindowsShowWithNoOutput) {
   const std::string out = scratch() + "/late.glb";
