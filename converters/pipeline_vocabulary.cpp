@@ -30,14 +30,12 @@ std::vector<double> parse_values(const std::string& text, const std::string& opt
   std::stringstream ss(text);
   std::string item;
   while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      const double v = std::stod(item, &used);
-      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
-      out.push_back(v);
-    } catch (const std::exception&) {
+    // strtod, not stod: stod refuses a value below the normal doubles (1e-320), a finite number.
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    if (item.empty() || end != item.c_str() + item.size() || !std::isfinite(v))
       throw OptionError(fmt::format("{}: not a finite number: '{}'", option_ref(option), item));
-    }
+    out.push_back(v);
   }
   return out;
 }
@@ -255,7 +253,7 @@ const std::vector<OptionSpec>& option_table() {
       {"reference", "--reference"},
       enum_option<RayAccumulator::Rule>("integration", "--integration"),
       {"frames", "--frames", 1, 3600},
-      {"background", "--background"},
+      {"background", "--background", 0, 1},
       {"stop_opacity", "--stop-opacity", 0, 1},
       {"z_opacity", "--z-opacity", 0, 1},
       // CompareOptions
@@ -379,6 +377,7 @@ void check_options(const RenderFileOptions& o) {
   check_option("frames", o.frames);
   check_option("stop_opacity", o.stop_opacity);
   check_option("z_opacity", o.z_opacity);
+  for (double c : o.background) check_option("background", c);
   // The orbit camera has its own target and up; silently dropping them would render another view.
   if (!o.position && (o.target || o.up))
     throw OptionError(option_ref(o.up ? "up" : "target") + ": needs " + option_ref("position"));
