@@ -86,6 +86,25 @@ LabelTable label_table_for(const LabelOptions& o, const ScalarGrid& grid,
   return table;
 }
 
+// None of the labels asked for is in the volume: which ones, and a few that are.
+std::string absent_labels_message(const std::vector<std::uint16_t>& missing,
+                                  const std::map<std::uint16_t, std::size_t>& present,
+                                  const std::string& source) {
+  std::vector<std::uint16_t> labels;
+  for (const auto& [l, n] : present)
+    if (l != 0) labels.push_back(l);
+  constexpr std::size_t kShown = 8;
+  std::string shown = labels.empty() ? "none but the background 0" : "";
+  for (std::size_t i = 0; i < std::min(labels.size(), kShown); ++i)
+    shown += (i ? ", " : "") + std::to_string(labels[i]);
+  if (labels.size() > kShown) shown += fmt::format(" and {} more", labels.size() - kShown);
+  std::string asked;
+  for (std::size_t i = 0; i < missing.size(); ++i) asked += (i ? ", " : "") + std::to_string(missing[i]);
+  return fmt::format("{}: {} {} {} not in the volume (its labels: {})", source,
+                     missing.size() == 1 ? "label" : "labels", asked, missing.size() == 1 ? "is" : "are",
+                     shown);
+}
+
 // The labels to write: the picked ones present (absent ones warned about), else every label
 // but the background; the table's labels absent from the volume are warned about too.
 std::vector<std::uint16_t> pick_labels(const LabelOptions& o,
@@ -98,16 +117,15 @@ std::vector<std::uint16_t> pick_labels(const LabelOptions& o,
   if (!absent.empty())
     warn(fmt::format("{}: {} labels of the table are absent from {} (e.g. {})", table.source, absent.size(),
                      source, absent.front()));
-  std::vector<std::uint16_t> picked;
+  std::vector<std::uint16_t> picked, missing;
   for (auto l : o.labels) {
     if (l == 0)
       throw pipeline::OptionInputError(pipeline::option_ref("labels") +
                                        ": 0 is the background and has no surface");
-    if (!present.count(l))
-      warn(fmt::format("label {} is absent from {}", l, source));
-    else
-      picked.push_back(l);
+    (present.count(l) ? picked : missing).push_back(l);
   }
+  if (!o.labels.empty() && picked.empty()) throw Error(absent_labels_message(missing, present, source));
+  for (auto l : missing) warn(fmt::format("label {} is absent from {}", l, source));
   if (o.labels.empty())
     for (const auto& [l, n] : present)
       if (l != 0) picked.push_back(l);

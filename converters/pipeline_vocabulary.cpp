@@ -32,14 +32,12 @@ std::vector<double> parse_values(const std::string& text, const std::string& opt
   std::stringstream ss(text);
   std::string item;
   while (std::getline(ss, item, ',')) {
-    try {
-      std::size_t used = 0;
-      const double v = std::stod(item, &used);
-      if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument("bad");
-      out.push_back(v);
-    } catch (const std::exception&) {
+    // strtod, not stod: stod refuses a value below the normal doubles (1e-320), a finite number.
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    if (item.empty() || end != item.c_str() + item.size() || !std::isfinite(v))
       throw OptionError(fmt::format("{}: not a finite number: '{}'", option_ref(option), item));
-    }
+    out.push_back(v);
   }
   return out;
 }
@@ -299,7 +297,7 @@ const std::vector<OptionField<RenderFileOptions>>& render_fields() {
       field({"png", "--png"}, &R::png, "also write an sRGB PNG preview over the background"),
       field({"frames", "--frames", 1, 3600}, &R::frames,
             "turntable: this many frames around +z, numbered files"),
-      field({"background", "--background"}, &R::background, "PNG background, linear r,g,b in [0,1]",
+      field({"background", "--background", 0, 1}, &R::background, "PNG background, linear r,g,b in [0,1]",
             kShowDefault),
       field({"stop_opacity", "--stop-opacity", 0, 1}, &R::stop_opacity, "early ray termination",
             kShowDefault),
@@ -365,6 +363,8 @@ void check_fields(const std::vector<OptionField<O>>& fields, const O& o) {
             check_option(f.spec.name, o.*m);
           else if constexpr (std::is_same_v<M, std::array<int, 2> O::*>)
             check_image_size(f.spec.name, o.*m);
+          else if constexpr (std::is_same_v<M, std::array<double, 3> O::*>)
+            for (double c : o.*m) check_option(f.spec.name, c);  // each component in the row's range
         },
         f.member);
 }

@@ -135,8 +135,20 @@ std::uint64_t written_file_size(const std::string& path) {
 
 std::string temporary_path_for(const std::string& path) {
   fs::path p(path);
-  std::string name = kPrefix + std::to_string(::getpid()) + "-" + p.filename().string();
-  return (p.parent_path() / name).string();
+  const std::string file = p.filename().string();
+  const std::string start = kPrefix + std::to_string(::getpid()) + "-";
+  // A name may have 255 bytes (NAME_MAX): a valid output name of 250 could not be written under
+  // the prefix. A long name is replaced by its hash and as much of its end (the extension the
+  // libraries look at) as fits.
+  constexpr std::size_t kNameMax = 255, kHashDigits = 16;
+  if (start.size() + file.size() <= kNameMax) return (p.parent_path() / (start + file)).string();
+  std::uint64_t hash = 14695981039346656037ull;  // FNV-1a
+  for (const char c : file) hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+  std::size_t from = file.size() - (kNameMax - start.size() - kHashDigits - 1);
+  while (from < file.size() && (static_cast<unsigned char>(file[from]) & 0xC0) == 0x80) ++from;  // UTF-8
+  char digits[kHashDigits + 1];
+  std::snprintf(digits, sizeof digits, "%016llx", static_cast<unsigned long long>(hash));
+  return (p.parent_path() / (start + digits + "-" + file.substr(from))).string();
 }
 
 void write_path_atomically(const std::string& path, const std::function<bool(const std::string&)>& write) {

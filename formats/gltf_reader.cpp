@@ -178,10 +178,15 @@ std::vector<std::string> load_buffers(const std::string& path, const std::string
   const std::string dir = path.find('/') == std::string::npos ? "." : path.substr(0, path.rfind('/'));
   for (const auto& b : j.at("buffers")) {
     const auto length = b.at("byteLength").get<std::uint64_t>();
+    const std::string which = fmt::format("buffer {}", buffers.size());
     std::string data;
     if (!b.contains("uri")) {
       if (!buffers.empty() || !is_glb(bytes))
         fail(path, "a buffer without uri that is not the GLB BIN chunk");
+      // The BIN chunk is padded to 4 bytes (glTF 2.0, 4.4.3.3), so it may be up to 3 bytes longer.
+      if (bin.size() < length || bin.size() - length > 3)
+        fail(path, fmt::format("{} says {} bytes (byteLength), the GLB BIN chunk has {}", which, length,
+                               bin.size()));
       data = bin;
     } else {
       const auto uri = b.at("uri").get<std::string>();
@@ -193,10 +198,17 @@ std::vector<std::string> load_buffers(const std::string& path, const std::string
         if (uri.find("..") != std::string::npos || uri.find(':') != std::string::npos || uri.empty() ||
             uri[0] == '/')
           fail(path, "buffer URI '" + uri + "' is not a file next to the asset");
-        data = read_regular_file(dir + "/" + uri, UINT64_MAX, "the buffer");
+        // Weighed before it is read: a byteLength that is not the file's size is a damaged asset.
+        RegularFile file(dir + "/" + uri);
+        if (file.size() != length)
+          fail(path, fmt::format("{} says {} bytes (byteLength), its file {} has {}", which, length, uri,
+                                 file.size()));
+        data.resize(static_cast<std::size_t>(length));
+        data.resize(file.read(data.data(), data.size()));
       }
+      if (data.size() != length)
+        fail(path, fmt::format("{} says {} bytes (byteLength), its data has {}", which, length, data.size()));
     }
-    if (data.size() < length) fail(path, "a buffer is shorter than its byteLength");
     buffers.push_back(std::move(data));
   }
   return buffers;

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -288,7 +289,17 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;
   if (slope != 0.0 && std::isfinite(slope) && std::isfinite(inter) && !(slope == 1.0 && inter == 0.0)) {
-    for (float& v : grid.values) v = static_cast<float>(v * slope + inter);
+    for (float& v : grid.values) {
+      const double scaled = v * slope + inter;
+      // Beyond float's range the value would become infinite and be reported as bad data.
+      if (std::isfinite(v) && !(std::abs(scaled) <= std::numeric_limits<float>::max()))
+        fail(path,
+             fmt::format(
+                 "scl_slope {:.7g} and scl_inter {:.7g} take the value {:g} to {:.7g}, which overflows a "
+                 "float (+-{:.4g})",
+                 slope, inter, v, scaled, std::numeric_limits<float>::max()));
+      v = static_cast<float>(scaled);
+    }
     add_note(grid, fmt::format("scl_slope {} and scl_inter {} applied", slope, inter));
   }
 

@@ -9,6 +9,8 @@
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/safe_read.h>
 
+#include <OpenMesh/Core/IO/reader/OFFReader.hh>
+#include <OpenMesh/Core/IO/reader/PLYReader.hh>
 #include <OpenMesh/Tools/Decimater/DecimaterT.hh>
 #include <OpenMesh/Tools/Decimater/ModNormalFlippingT.hh>
 #include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
@@ -18,7 +20,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -147,12 +152,21 @@ std::uint64_t header_count(const std::string& path, const std::string& what, con
   return v;
 }
 
+// What a mesh file's header says it holds, to be compared with what OpenMesh hands over.
+struct Declared {
+  std::optional<std::uint64_t> vertices, faces;
+  /// PLY or ASCII OFF: read on a stream whose state shows a read past the end of the file
+  /// (OpenMesh's readers read on past the end of a short one without failing).
+  bool on_stream = false;
+};
+
 // OpenMesh loops over (and reserves for) the counts an OFF or PLY header declares before it
 // finds the data short: 30 bytes declaring a million vertices took minutes. Each count is
 // weighed against the file size with the fewest bytes an item can take (a value as text is a
 // digit and a separator; in binary at least a byte).
-void check_declared_counts(const std::string& path, const std::string& ext, const std::string& head,
-                           std::uint64_t size) {
+Declared check_declared_counts(const std::string& path, const std::string& ext, const std::string& head,
+                               std::uint64_t size) {
+  Declared declared;
   std::istringstream in(head);
   if (ext == ".off") {
     std::vector<std::string> words;
@@ -160,21 +174,25 @@ void check_declared_counts(const std::string& path, const std::string& ext, cons
       std::istringstream w(line.substr(0, line.find('#')));
       for (std::string word; w >> word;) words.push_back(word);
     }
-    if (words.size() > 1 && words[1] == "BINARY") return;  // binary counts: OpenMesh checks them
+    if (words.size() > 1 && words[1] == "BINARY") return declared;  // binary counts: OpenMesh checks them
     if (words.size() < 3) throw Error(path + ": truncated OFF header (no vertex and face counts)");
-    check_declared_count(path, "the OFF header's vertex count",
-                         header_count(path, "the OFF vertex count", words[1]), 6, size);
-    check_declared_count(path, "the OFF header's face count",
-                         header_count(path, "the OFF face count", words[2]), 8, size);
-    return;
+    declared.vertices = header_count(path, "the OFF vertex count", words[1]);
+    declared.faces = header_count(path, "the OFF face count", words[2]);
+    declared.on_stream = true;
+    check_declared_count(path, "the OFF header's vertex count", *declared.vertices, 6, size);
+    check_declared_count(path, "the OFF header's face count", *declared.faces, 8, size);
+    return declared;
   }
+  declared.on_stream = true;
   bool ascii = false;
   std::string element;
   std::uint64_t count = 0, properties = 0;
   const auto weigh = [&] {
-    if (!element.empty())
-      check_declared_count(path, "the PLY element '" + element.substr(0, 40) + "'", count,
-                           (ascii ? 2 : 1) * std::max<std::uint64_t>(properties, 1), size);
+    if (element.empty()) return;
+    check_declared_count(path, "the PLY element '" + element.substr(0, 40) + "'", count,
+                         (ascii ? 2 : 1) * std::max<std::uint64_t>(properties, 1), size);
+    if (element == "vertex") declared.vertices = count;
+    if (element == "face") declared.faces = count;
   };
   for (std::string line; std::getline(in, line);) {
     std::istringstream w(line);
@@ -184,18 +202,46 @@ void check_declared_counts(const std::string& path, const std::string& ext, cons
     if (key == "property") ++properties;
     if (key == "element" || key == "end_header") {
       weigh();
-      if (key == "end_header") return;
+      if (key == "end_header") return declared;
       element = a;
       count = header_count(path, "the PLY element '" + a.substr(0, 40) + "' count", b);
       properties = 0;
     }
   }
+  return declared;
+}
+
+// OpenMesh's ASCII STL reader skips the lines it does not know, so text that is not STL became
+// an empty mesh: every line must start with one of the format's keywords, three vertices to a
+// facet. Returns the number of facets.
+std::uint64_t ascii_stl_facets(const std::string& path) {
+  static const char* const kKeywords[] = {"solid",   "facet",    "outer",   "vertex",
+                                          "endloop", "endfacet", "endsolid"};
+  std::ifstream in(path, std::ios::binary);
+  std::uint64_t facets = 0, vertices = 0, line_number = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++line_number;
+    std::istringstream words(line);
+    std::string word;
+    if (!(words >> word)) continue;
+    std::transform(word.begin(), word.end(), word.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    if (std::find(std::begin(kKeywords), std::end(kKeywords), word) == std::end(kKeywords))
+      throw Error(path + ": line " + std::to_string(line_number) + ": '" + word.substr(0, 40) +
+                  "' is not an STL keyword");
+    facets += word == "facet";
+    vertices += word == "vertex";
+  }
+  if (vertices != 3 * facets)
+    throw Error(path + ": " + std::to_string(facets) + " facets with " + std::to_string(vertices) +
+                " vertices (three to a facet)");
+  return facets;
 }
 
 // OpenMesh reads what it can and skips the rest, so random bytes named .stl or .obj became an
 // empty mesh (and two such files compared equal). What each format must start with is checked
 // here; a binary STL must also be exactly as long as its triangle count says.
-void check_mesh_file_header(const std::string& path) {
+Declared check_mesh_file_header(const std::string& path) {
   RegularFile file(path);
   const std::uint64_t size = file.size();
   std::string head(static_cast<std::size_t>(std::min<std::uint64_t>(4096, size)), '\0');
@@ -214,8 +260,9 @@ void check_mesh_file_header(const std::string& path) {
     const std::string word = first == std::string::npos ? "" : head.substr(first, 6);
     if (word.find("OFF") == std::string::npos) throw Error(path + ": not an OFF file");
   }
-  if (ext == ".off" || ext == ".ply") check_declared_counts(path, ext, head, size);
+  if (ext == ".off" || ext == ".ply") return check_declared_counts(path, ext, head, size);
   if (ext == ".obj" && !text()) throw Error(path + ": not an OBJ file (binary bytes in a text format)");
+  Declared declared;
   if (ext == ".stl") {
     std::uint32_t count = 0;
     if (head.size() >= 84) std::memcpy(&count, head.data() + 80, 4);
@@ -223,7 +270,55 @@ void check_mesh_file_header(const std::string& path) {
     if (!binary && !(starts("solid") && text()))
       throw Error(path + ": not an STL file (binary: " + std::to_string(size) +
                   " bytes do not match its triangle count; ASCII: does not start with 'solid')");
+    declared.faces = binary ? count : ascii_stl_facets(path);
   }
+  return declared;
+}
+
+// OpenMesh's importer, counting what the readers hand it: they pass on a face whose vertex
+// index is out of range (OBJ 'f 1 2 99', a PLY index past its vertices) and the importer drops
+// it without failing the read, so a damaged file read as a smaller mesh.
+class CountingImporter : public OpenMesh::IO::ImporterT<OpenMeshTriMesh> {
+ public:
+  explicit CountingImporter(OpenMeshTriMesh& mesh) : ImporterT(mesh), mesh_(mesh) {}
+
+  OpenMesh::FaceHandle add_face(const VHandles& indices) override {
+    ++faces;
+    if (problem.empty() && indices.size() < 3)
+      problem = "face " + std::to_string(faces) + " has fewer than 3 vertices";
+    for (const auto vh : indices)
+      if (problem.empty() && !mesh_.is_valid_handle(vh))
+        problem = "face " + std::to_string(faces) + " refers to vertex " + std::to_string(vh.idx()) +
+                  " (counted from 0) of " + std::to_string(mesh_.n_vertices());
+    // A face that would make the mesh non-manifold is added on copies of its vertices.
+    const std::size_t before = mesh_.n_vertices();
+    const auto fh = ImporterT::add_face(indices);
+    copies += mesh_.n_vertices() - before;
+    return fh;
+  }
+
+  std::uint64_t faces = 0;   ///< faces handed over
+  std::uint64_t copies = 0;  ///< vertices the importer added for non-manifold faces
+  std::string problem;       ///< the first face that could not be added as it was written
+
+ private:
+  OpenMeshTriMesh& mesh_;
+};
+
+// The mesh OpenMesh read must be the one the file declares: every face added, the counts of the
+// header met, and no read past the end of the file (OpenMesh's OFF and PLY readers read on past
+// the end of a short one, taking uninitialised or repeated indices).
+void check_as_declared(const std::string& path, const Declared& declared, const CountingImporter& importer,
+                       const OpenMeshTriMesh& om, bool read_past_end) {
+  if (read_past_end) throw Error(path + ": the file ends before the vertices and faces its header declares");
+  if (!importer.problem.empty()) throw Error(path + ": " + importer.problem);
+  const std::uint64_t vertices = om.n_vertices() - importer.copies;
+  if (declared.vertices && *declared.vertices != vertices)
+    throw Error(path + ": declares " + std::to_string(*declared.vertices) + " vertices, " +
+                std::to_string(vertices) + " read");
+  if (declared.faces && *declared.faces != importer.faces)
+    throw Error(path + ": declares " + std::to_string(*declared.faces) + " faces, " +
+                std::to_string(importer.faces) + " read");
 }
 
 }  // namespace
@@ -254,12 +349,33 @@ void write_mesh_file(const std::string& path, const TriangleMesh& mesh) {
 }
 
 TriangleMesh read_mesh_file(const std::string& path) {
-  check_mesh_file_header(path);
+  const Declared declared = check_mesh_file_header(path);
   OpenMeshTriMesh om;
-  om.request_vertex_normals();
-  OpenMesh::IO::Options opt = OpenMesh::IO::Options::VertexNormal;
+  OpenMesh::IO::Options opt;
+  // STL has facet normals only, yet OpenMesh's STL reader reports the vertex normals asked for
+  // as read, uninitialised: `compare X.stl X.stl` found them different.
+  if (lower_extension(path) != ".stl") {
+    om.request_vertex_normals();
+    opt += OpenMesh::IO::Options::VertexNormal;
+  }
   const QuietOpenMesh quiet;
-  if (!OpenMesh::IO::read_mesh(om, path, opt)) throw Error(path + ": cannot read mesh");
+  CountingImporter importer(om);
+  bool ok = false, read_past_end = false;
+  if (declared.on_stream) {
+    // On a stream of our own, whose state shows whether the reader wanted more than there was.
+    // can_u_read parses the header into the reader's record of what the file holds (normals,
+    // colours), as a read by name does first.
+    OpenMesh::IO::BaseReader& reader = lower_extension(path) == ".off"
+                                           ? static_cast<OpenMesh::IO::BaseReader&>(OpenMesh::IO::OFFReader())
+                                           : OpenMesh::IO::PLYReader();
+    std::ifstream in(path, std::ios::binary);
+    ok = reader.can_u_read(path) && reader.read(in, importer, opt);
+    read_past_end = in.fail();
+  } else {
+    ok = OpenMesh::IO::IOManager().read(path, importer, opt);
+  }
+  if (!ok && !read_past_end) throw Error(path + ": cannot read mesh");
+  check_as_declared(path, declared, importer, om, read_past_end);
   if (!opt.vertex_has_normal()) om.release_vertex_normals();
   return from_openmesh(om);
 }

@@ -2,6 +2,7 @@
 // Exit status: 0 success, 1 usage error, 2 bad input (one line on stderr naming the file), 130
 // interrupted (Ctrl-C; no output written).
 // `compare` follows diff(1) instead: 0 equal, 1 different, 2 bad input or usage error.
+#include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/formats/atomic_file.h>
@@ -122,6 +123,41 @@ void suggest(CLI::App& app, int argc, char** argv) {
   }
 }
 
+// An error is one line of about 200 characters on stderr: a file name with a newline split it
+// over two lines, and a 10 kB number from a label table was echoed whole. Control characters
+// are written as escapes (\n, \t, \xHH); a long message keeps its start, which names the file,
+// and its end, which most often says what is wrong with it.
+std::string escaped(const std::string& text) {
+  std::string out;
+  for (const char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (c == '\n')
+      out += "\\n";
+    else if (c == '\r')
+      out += "\\r";
+    else if (c == '\t')
+      out += "\\t";
+    else if (u < 0x20 || u == 0x7f)
+      out += fmt::format("\\x{:02x}", u);
+    else
+      out += c;
+  }
+  return out;
+}
+
+std::string error_line(const std::string& message) {
+  constexpr std::size_t kHead = 150, kTail = 50;
+  if (message.size() <= kHead + kTail) return "mlfe: " + escaped(message);
+  // The cuts fall between UTF-8 characters, not inside one.
+  const auto continuation = [&](std::size_t i) {
+    return (static_cast<unsigned char>(message[i]) & 0xC0) == 0x80;
+  };
+  std::size_t head = kHead, tail = message.size() - kTail;
+  while (head > 0 && continuation(head)) --head;
+  while (tail < message.size() && continuation(tail)) ++tail;
+  return "mlfe: " + escaped(message.substr(0, head)) + " [...] " + escaped(message.substr(tail));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -166,16 +202,16 @@ int main(int argc, char** argv) {
     mlfe::cli::status_line("mlfe: interrupted");
     return 130;
   } catch (const mlfe::UsageError& e) {
-    mlfe::cli::status_line("mlfe: " + mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine));
+    mlfe::cli::status_line(error_line(mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine)));
     return app.got_subcommand("compare") ? 2 : 1;
   } catch (const mlfe::Error& e) {
-    mlfe::cli::status_line("mlfe: " + mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine));
+    mlfe::cli::status_line(error_line(mlfe::pipeline::message(e, mlfe::pipeline::Spelling::kCommandLine)));
     return 2;
   } catch (const std::bad_alloc&) {
     mlfe::cli::status_line("mlfe: out of memory");
     return 2;
   } catch (const std::exception& e) {
-    mlfe::cli::status_line(std::string("mlfe: ") + e.what());
+    mlfe::cli::status_line(error_line(e.what()));
     return 2;
   }
   return mlfe::cli::command_exit_status();

@@ -29,7 +29,8 @@ void write_file_atomically(const std::string& path, const std::function<void(std
 void write_path_atomically(const std::string& path, const std::function<bool(const std::string&)>& write);
 
 /// The temporary name used for `path` (same folder, so rename is atomic). The extension is kept
-/// at the end so that libraries which pick a format by extension still see it.
+/// at the end so that libraries which pick a format by extension still see it. A name that would
+/// pass 255 bytes becomes ".tmp-mlfe-<pid>-<hash of the name>-<end of the name>", 255 bytes.
 std::string temporary_path_for(const std::string& path);
 
 /// The file a write to `path` replaces: `path` with symbolic links followed. Throws mlfe::Error
