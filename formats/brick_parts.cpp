@@ -23,7 +23,7 @@ struct Writer {
   }
   template <class T>
   void put_all(const std::vector<T>& v) {
-    out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
   }
 };
 
@@ -45,7 +45,7 @@ struct Reader {
   void get_all(std::vector<T>& v, std::size_t n) {
     if (n > (in.size() - at) / sizeof(T)) throw Error("brick parts: truncated");
     v.resize(n);
-    std::memcpy(v.data(), in.data() + at, n * sizeof(T));
+    if (n > 0) std::memcpy(v.data(), in.data() + at, n * sizeof(T));  // an empty vector's data() may be null
     at += n * sizeof(T);
   }
 };
@@ -92,7 +92,8 @@ BrickParts decode_brick_parts(const std::string& bytes) {
     const std::uint32_t nv = r.get<std::uint32_t>(), nt = r.get<std::uint32_t>();
     const std::uint8_t normals = r.get<std::uint8_t>();
     const std::uint32_t np = r.get<std::uint32_t>();
-    if (normals > 1) throw Error("brick parts: bad normals flag");
+    // Only a surface with vertices has normals: the encoding is canonical (one per set of parts).
+    if (normals > 1 || (normals == 1 && nv == 0)) throw Error("brick parts: bad normals flag");
     r.get_all(s.mesh.positions, nv);
     if (normals) r.get_all(s.mesh.normals, nv);
     r.get_all(s.mesh.triangles, nt);
