@@ -531,6 +531,14 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       }
       return o;
     };
+    if (bricked) {
+      // Every iso-value from one window per brick.
+      BrickedIsoOptions bo;
+      bo.normals_toward_higher = p.normals_toward_higher;
+      bo.simplifier = so;
+      bricked_meshes =
+          bricked_iso_surfaces(grid_windows(*grid), grid->dims, p.bricks, isos, bo, &brick_stats);
+    }
     for (std::size_t i = 0; i < isos.size(); ++i) {
       if (p.progress && !p.progress(0.5 * double(i) / double(isos.size()), "extracting")) throw Cancelled();
       GltfSurface s;
@@ -539,13 +547,6 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
       IsoOptions o = options(level);
       o.dropped = &dropped;
       if (bricked) {
-        if (i == 0) {
-          BrickedIsoOptions bo;
-          bo.normals_toward_higher = p.normals_toward_higher;
-          bo.simplifier = so;
-          bricked_meshes =
-              bricked_iso_surfaces(grid_windows(*grid), grid->dims, p.bricks, isos, bo, &brick_stats);
-        }
         s.mesh = std::move(bricked_meshes[i]);
         dropped.kept_parts = brick_stats[i].parts;
       } else {

@@ -137,12 +137,9 @@ std::optional<VolumeWindows> bricks_for(const std::string& input, ConvertFileOpt
   }
   if (o.asset.bricks < 0) {
     o.asset.bricks = 0;
-    const std::string format = detect_volume_format(input);
-    const bool streams = format == "zarr" || format == "raw" ||
-                         (format.empty() && (o.read.raw_dims || !o.read.raw_dtype.empty()));
     AssetOptions probe = o.asset;
     probe.bricks = 2;  // any edge: would the other options read in bricks?
-    if (streams && reads_in_bricks(o.build, probe, whole_volume_outputs)) {
+    if (reads_in_windows(input, o.read) && reads_in_bricks(o.build, probe, whole_volume_outputs)) {
       v.emplace(input, budgeted(o.read, o.build));
       o.asset.bricks = auto_bricks(v->frame().dims);
     }

@@ -105,6 +105,21 @@ void check_transform(const ScalarGrid& grid) {
   check_frame(grid.source, t.direction);
 }
 
+// Runs a reader's work on `path`: mlfe::Error passes, anything else a library or the allocator
+// throws becomes one naming the file.
+template <class Read>
+void as_read_of(const std::string& path, Read&& read) {
+  try {
+    read();
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    fail(path, "out of memory while reading");
+  } catch (const std::exception& e) {
+    fail(path, e.what());
+  }
+}
+
 }  // namespace
 
 std::string detect_volume_format(const std::string& path) {
@@ -133,17 +148,11 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts) {
                            hex.empty() ? "none: empty file" : hex));
   }
   ScalarGrid grid;
-  try {
+  as_read_of(path, [&] {
     const VolumeFormatRow* row = volume_format(format);
     if (!row) fail(path, "unsupported format " + format);
     grid = row->read(path, opts);
-  } catch (const Error&) {
-    throw;
-  } catch (const std::bad_alloc&) {
-    fail(path, "out of memory while reading");
-  } catch (const std::exception& e) {
-    fail(path, e.what());
-  }
+  });
   grid.format = format;
   grid.source = path;
   if (grid.dims[2] == 1) grid.dim = 2;
@@ -168,31 +177,26 @@ VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& o
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.opts = opts;
-  const std::string format = detect_volume_format(path);
-  try {
-    if (format == "zarr") {
+  if (!reads_in_windows(path, opts)) {
+    m.whole = read_volume(path, opts);
+    // The frame without the values: they are held once, in `whole`.
+    std::vector<float> values = std::move(m.whole.values);
+    m.frame = m.whole;
+    m.whole.values = std::move(values);
+    return;
+  }
+  as_read_of(path, [&] {
+    if (is_zarr_store(path)) {
       m.zarr.emplace(path, opts.zarr_level);
       m.frame.dims = m.zarr->dims();
       m.frame.transform = m.zarr->transform();
       m.frame.source_type = m.zarr->type();
       m.frame.notes = m.zarr->notes();
-    } else if (format == "raw" || (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty()))) {
+    } else {
       m.raw = raw_layout(path, opts);
       m.frame = m.raw->frame;
     }
-  } catch (const Error&) {
-    throw;
-  } catch (const std::bad_alloc&) {
-    fail(path, "out of memory while reading");
-  } catch (const std::exception& e) {
-    fail(path, e.what());
-  }
-  if (!m.zarr && !m.raw) {
-    m.whole = read_volume(path, opts);
-    m.frame = m.whole;
-    m.frame.values = {};
-    return;
-  }
+  });
   m.frame.format = m.zarr ? "zarr" : "raw";
   m.frame.source = path;
   if (m.frame.dims[2] == 1) m.frame.dim = 2;
@@ -206,7 +210,13 @@ VolumeWindows& VolumeWindows::operator=(VolumeWindows&&) noexcept = default;
 
 const ScalarGrid& VolumeWindows::frame() const { return impl_->frame; }
 
-bool VolumeWindows::streamed() const { return impl_->whole.values.empty(); }
+bool VolumeWindows::streamed() const { return impl_->zarr || impl_->raw; }
+
+bool reads_in_windows(const std::string& path, const VolumeReadOptions& opts) {
+  const std::string format = detect_volume_format(path);
+  return format == "zarr" || format == "raw" ||
+         (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty()));
+}
 
 ScalarGrid VolumeWindows::read(const std::array<std::int64_t, 3>& lo,
                                const std::array<std::int64_t, 3>& hi) const {
@@ -214,29 +224,20 @@ ScalarGrid VolumeWindows::read(const std::array<std::int64_t, 3>& lo,
   for (int a = 0; a < 3; ++a) MLFE_CHECK(0 <= lo[a] && lo[a] < hi[a] && hi[a] <= m.frame.dims[a]);
   ScalarGrid w;
   if (m.zarr) {
-    VolumeReadOptions o = m.opts;
-    w = m.zarr->read_box(lo, hi, o);
-  } else {
+    w = m.zarr->read_box(lo, hi, m.opts);
+  } else if (m.raw) {
     w.dims = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
     w.values.resize(std::size_t(w.voxel_count()));
-    const ScalarGrid& from = m.whole;
-    if (m.raw) {
-      read_raw_box(m.frame.source, *m.raw, lo, hi, w.values.data());
-    } else {
-      float* to = w.values.data();
-      for (std::int64_t k = lo[2]; k < hi[2]; ++k)
-        for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
-          const float* row = &m.whole.values[std::size_t(lo[0] + from.dims[0] * (j + from.dims[1] * k))];
-          to = std::copy(row, row + w.dims[0], to);
-        }
-    }
+    read_raw_box(m.frame.source, *m.raw, lo, hi, w.values.data());
+  } else {
+    w = window_of(m.whole, lo, hi);
   }
   w.dim = 3;
   w.transform = m.frame.transform;
   w.space = m.frame.space;
   w.source = m.frame.source;
   w.source_type = m.frame.source_type;
-  if (m.whole.values.empty()) check_finite_values(w, m.opts, lo);
+  if (streamed()) check_finite_values(w, m.opts, lo);  // read_volume checked `whole`
   return w;
 }
 

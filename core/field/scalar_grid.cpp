@@ -77,4 +77,21 @@ std::array<double, 3> ScalarGrid::local_extent() const {
   return e;
 }
 
+ScalarGrid window_of(const ScalarGrid& grid, const std::array<std::int64_t, 3>& lo,
+                     const std::array<std::int64_t, 3>& hi) {
+  MLFE_CHECK(grid.dim == 3);
+  for (int a = 0; a < 3; ++a) MLFE_CHECK(0 <= lo[a] && lo[a] < hi[a] && hi[a] <= grid.dims[a]);
+  ScalarGrid w;
+  w.dims = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+  w.transform = grid.transform;
+  w.values.resize(std::size_t(w.voxel_count()));
+  float* to = w.values.data();
+  for (std::int64_t k = lo[2]; k < hi[2]; ++k)
+    for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
+      const float* row = &grid.values[std::size_t(lo[0] + grid.dims[0] * (j + grid.dims[1] * k))];
+      to = std::copy(row, row + w.dims[0], to);
+    }
+  return w;
+}
+
 }  // namespace mlfe

@@ -32,6 +32,10 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts = 
 /// Returns "" when neither identifies a format. Throws mlfe::Error when `path` cannot be read.
 std::string detect_volume_format(const std::string& path);
 
+/// True when VolumeWindows reads `path` box by box from the file (a raw volume or an OME-Zarr
+/// store), false when it would read it whole. Reads at most the file's first bytes.
+bool reads_in_windows(const std::string& path, const VolumeReadOptions& opts);
+
 /// A volume opened for reading box by box (`mlfe convert --bricks`): its frame at once, its
 /// samples window by window. Raw volumes and OME-Zarr stores are read box by box from the file
 /// (only a window's voxels in memory); the other formats are read whole once and their windows

@@ -58,4 +58,9 @@ struct ScalarGrid {
   std::array<double, 3> local_extent() const;
 };
 
+/// The samples [lo, hi) of the 3D grid `grid` (inside its dims; CHECK) as a grid with its
+/// transform (the window keeps the whole grid's lattice frame, not one moved to lo).
+ScalarGrid window_of(const ScalarGrid& grid, const std::array<std::int64_t, 3>& lo,
+                     const std::array<std::int64_t, 3>& hi);
+
 }  // namespace mlfe
