@@ -183,6 +183,37 @@ std::string png_chunk(const std::string& type, const std::string& data) {
   return c;
 }
 
+/// An ASCII PLY of the triangle (0,0,0) (1,0,0) (0,1,0) with the face line `face`.
+std::string ply_triangle(const std::string& face) {
+  return "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+         "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n" +
+         face + "\n";
+}
+
+/// A .gltf of one triangle whose buffer is the file `uri` (36 bytes of positions), declared
+/// `byte_length` bytes long.
+std::string gltf_triangle(std::size_t byte_length, const std::string& uri = "b.bin") {
+  return R"({"asset":{"version":"2.0"},"buffers":[{"uri":")" + uri + R"(","byteLength":)" +
+         std::to_string(byte_length) +
+         R"(}],"bufferViews":[{"buffer":0,"byteLength":36}],"accessors":[{"bufferView":0,)"
+         R"("componentType":5126,"count":3,"type":"VEC3"}],"meshes":[{"primitives":[{"attributes":)"
+         R"({"POSITION":0}}]}],"nodes":[{"mesh":0}]})";
+}
+
+/// The 36 bytes of gltf_triangle's positions.
+std::string triangle_positions() {
+  std::string b(36, '\0');
+  put<float>(b, 12, 1.0f);
+  put<float>(b, 28, 1.0f);
+  return b;
+}
+
+/// A 4x4x4 NRRD of labels: half 1, half 2.
+std::string two_label_nrrd() {
+  return "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\n" + std::string(32, '\1') +
+         std::string(32, '\2');
+}
+
 /// A fresh FIFO at `path` (no writer ever opens it: reading it would wait forever).
 void make_fifo(const std::string& path) { ASSERT_EQ(mkfifo(path.c_str(), 0644), 0) << path; }
 
@@ -797,6 +828,207 @@ std::vector<Case> battery() {
        "a\\.ply: the PLY element 'vertex' declares 100000000",
        {}},
 
+      // compare reads strictly (issue 43): a mesh OpenMesh would read only in part is bad input,
+      // on either side and against itself, never "equal" or "different".
+      {"compare_ply_face_index_out_of_range",
+       [](const std::string& d) { write_bytes(d + "/a.ply", ply_triangle("3 0 1 7")); },
+       "compare a.ply a.ply",
+       2,
+       "^mlfe: a\\.ply: face 1 refers to vertex 7 \\(counted from 0\\) of 3\n$",
+       {}},
+      {"compare_obj_face_index_99",
+       [](const std::string& d) {
+         write_bytes(d + "/good.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+         write_bytes(d + "/a.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n");
+       },
+       "compare good.obj a.obj",
+       2,
+       "^mlfe: a\\.obj: face 1 refers to vertex 98 \\(counted from 0\\) of 3\n$",
+       {}},
+      {"compare_obj_face_index_99_with_itself",
+       [](const std::string& d) { write_bytes(d + "/a.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n"); },
+       "compare a.obj a.obj",
+       2,
+       "a\\.obj: face 1 refers to vertex 98",
+       {}},
+      {"compare_ascii_stl_garbage",
+       [](const std::string& d) { write_bytes(d + "/a.stl", "solid x\nthis is no facet\nendsolid x\n"); },
+       "compare a.stl a.stl",
+       2,
+       "^mlfe: a\\.stl: line 2: 'this' is not an STL keyword\n$",
+       {}},
+      {"compare_ascii_stl_facet_without_vertices",
+       [](const std::string& d) {
+         write_bytes(d + "/a.stl",
+                     "solid x\nfacet normal 0 0 1\nouter loop\nendloop\nendfacet\nendsolid x\n");
+       },
+       "compare a.stl a.stl",
+       2,
+       "^mlfe: a\\.stl: 1 facets with 0 vertices",
+       {}},
+      {"compare_off_3_vertices_2_given",
+       [](const std::string& d) { write_bytes(d + "/a.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n3 0 1 2\n"); },
+       "compare a.off a.off",
+       2,
+       "^mlfe: a\\.off: the file ends before the vertices and faces its header declares\n$",
+       {}},
+      {"compare_off_face_index_out_of_range",
+       [](const std::string& d) { write_bytes(d + "/a.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"); },
+       "compare a.off a.off",
+       2,
+       "^mlfe: a\\.off: face 1 refers to vertex 3 ",
+       {}},
+      {"compare_ply_fewer_faces_than_declared",
+       [](const std::string& d) {
+         std::string ply = ply_triangle("3 0 1 2");
+         ply.replace(ply.find("element face 1"), 14, "element face 2");
+         write_bytes(d + "/a.ply", ply);
+       },
+       "compare a.ply a.ply",
+       2,
+       "^mlfe: a\\.ply: the file ends before the vertices and faces its header declares\n$",
+       {}},
+      {"compare_binary_ply_short",
+       [](const std::string& d) {
+         write_bytes(d + "/a.ply",
+                     "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty "
+                     "float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                     "end_header\n" +
+                         std::string(30, '\0'));
+       },
+       "compare a.ply a.ply",
+       2,
+       "^mlfe: a\\.ply: the file ends before the vertices and faces its header declares\n$",
+       {}},
+      {"compare_valid_text_meshes",
+       [](const std::string& d) {
+         write_bytes(d + "/a.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+         write_bytes(d + "/b.ply", ply_triangle("3 0 1 2"));
+       },
+       "compare a.off b.ply",
+       0,
+       "^$",
+       {}},
+      {"compare_valid_obj_and_ascii_stl",
+       [](const std::string& d) {
+         write_bytes(d + "/a.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+         write_bytes(d + "/b.stl",
+                     "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\n"
+                     "endloop\nendfacet\nendsolid t\n");
+       },
+       "compare a.obj b.stl",
+       0,
+       "^$",
+       {}},
+      {"gltf_buffer_longer_than_its_byte_length",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf", gltf_triangle(24));
+         write_bytes(d + "/b.bin", triangle_positions());
+       },
+       "compare a.gltf a.gltf",
+       2,
+       "^mlfe: a\\.gltf: buffer 0 says 24 bytes \\(byteLength\\), its file b\\.bin has 36\n$",
+       {}},
+      {"gltf_buffer_shorter_than_its_byte_length",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf", gltf_triangle(4000000000));
+         write_bytes(d + "/b.bin", triangle_positions());
+       },
+       "compare a.gltf a.gltf",
+       2,
+       "a\\.gltf: buffer 0 says 4000000000 bytes \\(byteLength\\), its file b\\.bin has 36",
+       {},
+       100},
+      {"gltf_valid_external_buffer",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf", gltf_triangle(36));
+         write_bytes(d + "/b.bin", triangle_positions());
+       },
+       "compare a.gltf a.gltf",
+       0,
+       "^$",
+       {}},
+
+      // Messages (issue 43): one line of about 200 characters, unprintable characters escaped,
+      // and saying what is wrong.
+      {"message_file_name_with_a_newline",
+       [](const std::string& d) {
+         write_bytes(d + "/a.gltf", gltf_triangle(36, "a\\nb.bin"));
+         make_fifo(d + "/a\nb.bin");
+       },
+       "compare a.gltf a.gltf",
+       2,
+       R"(^mlfe: a\.gltf: \./a\\nb\.bin: not a regular file\n$)",
+       {}},
+      {"message_of_10_kb_cut",
+       none,
+       "convert ct.nrrd -o o.glb --iso " + std::string(10000, '7') + "x",
+       1,
+       "^mlfe: --iso: not a finite number: '7{100,150} \\[\\.\\.\\.\\] 7{40,60}x'\n$",
+       {"o.glb"}},
+      {"message_label_table_10_kb_number",
+       [](const std::string& d) {
+         write_bytes(d + "/lab.nrrd", two_label_nrrd());
+         write_bytes(d + "/t.txt", "1 a 255 0 0\n" + std::string(10000, '9') + " b 0 255 0\n");
+       },
+       "convert lab.nrrd --labels --label-table t.txt -o o.glb",
+       2,
+       "^mlfe: t\\.txt: line 2: label value '9{40}' is not an integer\n$",
+       {"o.glb"}},
+      {"iso_denormal_is_a_number",
+       none,
+       "convert ct.nrrd --iso 1e-320 -o o.glb",
+       2,
+       "^mlfe: ct\\.nrrd: --iso 1e-320 is outside the data's range",
+       {"o.glb"}},
+      {"labels_asked_for_are_absent",
+       [](const std::string& d) { write_bytes(d + "/lab.nrrd", two_label_nrrd()); },
+       "convert lab.nrrd --labels 9 -o o.glb",
+       2,
+       "^mlfe: lab\\.nrrd: label 9 is not in the volume \\(its labels: 1, 2\\)\n$",
+       {"o.glb"}},
+      {"nifti_scl_slope_overflows_float",
+       [](const std::string& d) {
+         std::string n = nifti_file(352, 1);
+         put<float>(n, 112, 1e38f);  // scl_slope; the voxels are 0..63
+         write_bytes(d + "/v.nii", n);
+       },
+       "info v.nii",
+       2,
+       "^mlfe: v\\.nii: scl_slope 1e\\+38 and scl_inter 0 take the value 4 to 4e\\+38, which overflows a "
+       "float",
+       {}},
+      {"raw_sidecar_of_1_5_mb",
+       [](const std::string& d) {
+         write_bytes(d + "/r.raw", std::string(64, '\1'));
+         write_bytes(d + "/r.raw.json",
+                     R"({"dims":[4,4,4],"dtype":"uint8","pad":")" + std::string(1500000, ' ') + "\"}");
+       },
+       "info r.raw",
+       2,
+       "^mlfe: r\\.raw\\.json: a raw sidecar has 1500041 bytes, more than the 1048576 allowed\n$",
+       {}},
+
+      // An output name of 250 bytes is valid (NAME_MAX 255): its temporary must be too.
+      {"output_name_of_250_bytes",
+       none,
+       "convert ct.nrrd --iso 2.5 --quiet -o " + std::string(246, 'n') + ".ply",
+       0,
+       "^$",
+       {}},
+      {"render_background_out_of_range",
+       none,
+       "render h.mlfeh -o x.exr --size 16x16 --background 2,2,2",
+       1,
+       "^mlfe: --background: expected 0\\.\\.1, got 2\n$",
+       {"x.exr"}},
+      {"render_background_in_range",
+       none,
+       "render h.mlfeh -o x.exr --size 16x16 --png x.png --background 1,0.5,0 --quiet",
+       0,
+       "^$",
+       {}},
+
       // Frames: a singular direction matrix is refused by every reader (it gave flat assets).
       {"nifti_sform_two_equal_columns",
        [](const std::string& d) {
@@ -1003,6 +1235,19 @@ TEST(CompareEncoding, DracoGlbEqualsItsNoDracoTwin) {
   // the copies agree within sqrt(3) times that (the README's rule): 0.68 mm.
   const ChildRun r = run_in(d, "compare plain.glb draco.glb --tolerance 7e-4");
   EXPECT_EQ(r.status, 0) << r.out << r.err;
+}
+
+// STL has facet normals only; the vertex normals OpenMesh reported as read were uninitialised,
+// so a surface compared with itself was "different".
+TEST(CompareStrict, StlEqualsItselfAndItsOff) {
+  const std::string d = scratch_dir("battery/stl_twins");
+  standard_inputs(d);
+  ASSERT_EQ(run_in(d, "convert ct.nrrd --iso 2.5 -o a.stl --quiet").status, 0);
+  ASSERT_EQ(run_in(d, "convert ct.nrrd --iso 2.5 -o a.off --quiet").status, 0);
+  const ChildRun self = run_in(d, "compare a.stl a.stl");
+  EXPECT_EQ(self.status, 0) << self.out << self.err;
+  const ChildRun twin = run_in(d, "compare a.off a.stl");
+  EXPECT_EQ(twin.status, 0) << twin.out << twin.err;
 }
 
 TEST(NiftiNan, NanAsReplacesThemAsForOtherReaders) {
