@@ -63,6 +63,8 @@ struct Level {
   std::string mesh_name;
   int lod = 0;
   const TriangleMesh* source = nullptr;
+  /// `source` when the caller gave the surfaces up: released once converted for writing.
+  TriangleMesh* owned = nullptr;
 };
 
 // `in` converted to glTF metres with cleaned triangles and unit normals.
@@ -282,18 +284,21 @@ void add_extension(tinygltf::Model& model, const std::string& name, bool require
   if (required) model.extensionsRequired.push_back(name);
 }
 
-// Every surface and its coarser levels, named.
-std::vector<std::vector<Level>> name_levels(const std::vector<GltfSurface>& surfaces) {
+// Every surface and its coarser levels, named; `owned`: the same surfaces when the caller gave
+// them up (Level::owned).
+std::vector<std::vector<Level>> name_levels(const std::vector<GltfSurface>& surfaces,
+                                            std::vector<GltfSurface>* owned) {
   std::vector<std::vector<Level>> levels(surfaces.size());
   for (std::size_t s = 0; s < surfaces.size(); ++s) {
     const GltfSurface& surface = surfaces[s];
     const std::string node_name =
         surface.node_name.empty() ? fmt::format("iso {}", surface.iso_value) : surface.node_name;
     const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
-    levels[s].push_back({node_name, mesh_name, 0, &surface.mesh});
+    levels[s].push_back({node_name, mesh_name, 0, &surface.mesh, owned ? &(*owned)[s].mesh : nullptr});
     for (std::size_t k = 0; k < surface.lods.size(); ++k)
       levels[s].push_back({fmt::format("{} lod {}", node_name, k + 1),
-                           fmt::format("{} lod {}", mesh_name, k + 1), int(k + 1), &surface.lods[k]});
+                           fmt::format("{} lod {}", mesh_name, k + 1), int(k + 1), &surface.lods[k],
+                           owned ? &(*owned)[s].lods[k] : nullptr});
   }
   return levels;
 }
@@ -360,6 +365,7 @@ int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<L
       extras["iso_value"] = tinygltf::Value(surface.iso_value);
     extras["lod"] = tinygltf::Value(level.lod);
     TriangleMesh mesh = convert(*level.source, m, w.path);
+    if (level.owned) *level.owned = TriangleMesh{};
     extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(mesh.triangles.size(), INT32_MAX)));
     node.extras = tinygltf::Value(std::move(extras));
     if (!mesh.triangles.empty()) node.mesh = w.add_mesh(level, std::move(mesh), material);
@@ -392,8 +398,11 @@ std::array<double, 9> physical_to_gltf_matrix(const std::string& space) {
   throw Error("glTF export: unknown anatomical space '" + space + "' (expected RAS, LPS or empty)");
 }
 
-void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
-                const GltfOptions& options) {
+namespace {
+
+// write_gltf's body; `owned`: the same surfaces when the caller gave them up.
+void write_gltf_of(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                   std::vector<GltfSurface>* owned, const GltfOptions& options) {
   const std::string ext = lower_extension(path);
   if (ext != ".glb" && ext != ".gltf") throw Error(path + ": glTF output needs a .glb or .gltf extension");
   const bool binary = ext == ".glb";
@@ -409,7 +418,7 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
     throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
 
-  const std::vector<std::vector<Level>> levels = name_levels(surfaces);
+  const std::vector<std::vector<Level>> levels = name_levels(surfaces, owned);
 
   Writer w{path, options, encoding, {}, {}};
   fit_shared_box(w, levels, m);
@@ -481,6 +490,17 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
     if (!gltf.WriteGltfSceneToStream(&model, out, /*prettyPrint=*/!binary, /*writeBinary=*/binary))
       throw Error(path + ": glTF serialization failed");
   });
+}
+
+}  // namespace
+
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                const GltfOptions& options) {
+  write_gltf_of(path, surfaces, nullptr, options);
+}
+
+void write_gltf(const std::string& path, std::vector<GltfSurface>&& surfaces, const GltfOptions& options) {
+  write_gltf_of(path, surfaces, &surfaces, options);
 }
 
 }  // namespace mlfe
