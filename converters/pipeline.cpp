@@ -585,8 +585,9 @@ Surfaces extract(const Built& b, const AssetOptions& p, const ScalarGrid* grid) 
 namespace {
 
 // The extracted surfaces of a volume of `dim` dimensions (voxel: its smallest spacing) written
-// to `out`, and write_assets' summary; `t0`: when the call began.
-nlohmann::json write_surfaces(const std::string& out, const Surfaces& extracted, const AssetOptions& p,
+// to `out`, and write_assets' summary; `t0`: when the call began. The surfaces are given up to
+// the writer, which releases each mesh as it writes it.
+nlohmann::json write_surfaces(const std::string& out, Surfaces extracted, const AssetOptions& p,
                               const nlohmann::json& provenance, int dim, double voxel,
                               const std::string& space, std::chrono::steady_clock::time_point t0) {
   const double tol = p.tolerance > 0 ? p.tolerance : voxel / 10.0;
@@ -628,7 +629,7 @@ nlohmann::json write_surfaces(const std::string& out, const Surfaces& extracted,
     extras["placement"] = to_string(extracted.placement);
   extras["normals"] = to_string(extracted.normals);
   if (dim == 3) extras["surface"] = to_string(extracted.source);
-  write_asset(surfaces, out, {p.draco, p.quantize, tol, space, extras});
+  write_asset(std::move(extracted.surfaces), out, {p.draco, p.quantize, tol, space, extras});
   summary["output"] = out;
   if (dim == 3) summary["surface"] = to_string(extracted.source);
   summary["surfaces"] = per;
@@ -670,9 +671,9 @@ nlohmann::json write_assets(const std::string& out, const Built& b, const AssetO
   const pipeline::detail::Reporter report(p.progress);
   AssetOptions extract_options = p;
   extract_options.progress = report.share(0, 0.8).as_progress();
-  const Surfaces extracted = extract(b, extract_options, grid);
+  Surfaces extracted = extract(b, extract_options, grid);
   report(0.8, "writing");
-  nlohmann::json summary = write_surfaces(out, extracted, p, provenance, b.dim(),
+  nlohmann::json summary = write_surfaces(out, std::move(extracted), p, provenance, b.dim(),
                                           smallest_spacing(b.transform, b.dim()), b.space, t0);
   report.finish("writing");
   return summary;
@@ -807,7 +808,7 @@ nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, cons
     meshes.push_back(join_bricks(std::move(surfaces[i]), b.options, &stats[i]));
   finish_bricked_surfaces(b, std::move(meshes), stats, lo, hi, v, o);
   b.out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  return write_surfaces(out, b.out, o, provenance, 3, smallest_spacing(v.frame().transform, 3),
+  return write_surfaces(out, std::move(b.out), o, provenance, 3, smallest_spacing(v.frame().transform, 3),
                         v.frame().space, t0);
 }
 
@@ -829,9 +830,9 @@ nlohmann::json write_assets(const std::string& out, const VolumeWindows& v, cons
   const pipeline::detail::Reporter report(p.progress);
   AssetOptions extract_options = p;
   extract_options.progress = report.share(0, 0.9).as_progress();
-  const Surfaces extracted = extract(v, extract_options);
+  Surfaces extracted = extract(v, extract_options);
   report(0.9, "writing");
-  nlohmann::json summary = write_surfaces(out, extracted, p, provenance, 3,
+  nlohmann::json summary = write_surfaces(out, std::move(extracted), p, provenance, 3,
                                           smallest_spacing(v.frame().transform, 3), v.frame().space, t0);
   report.finish("writing");
   return summary;

@@ -6,6 +6,7 @@
 #include <mlfe/formats/openmesh_io.h>
 
 #include <algorithm>
+#include <utility>
 
 namespace mlfe {
 
@@ -18,8 +19,11 @@ TriangleMesh merged_mesh(const std::vector<GltfSurface>& surfaces) {
   return merge_meshes(parts);
 }
 
-void write_asset(const std::vector<GltfSurface>& surfaces, const std::string& path,
-                 const AssetWriteOptions& options) {
+namespace {
+
+// write_asset's body; `owned`: the same surfaces when the caller gave them up.
+void write_asset_of(const std::vector<GltfSurface>& surfaces, std::vector<GltfSurface>* owned,
+                    const std::string& path, const AssetWriteOptions& options) {
   const std::string ext = lower_extension(path);
   if (std::find(kAssetExtensions.begin(), kAssetExtensions.end(), ext) == kAssetExtensions.end())
     throw Error(path + ": not an asset type (expected .glb, .gltf, .drc, .ply, .obj, .stl or .off)");
@@ -31,14 +35,33 @@ void write_asset(const std::vector<GltfSurface>& surfaces, const std::string& pa
     o.space = options.space;
     o.extras = options.extras;
     o.extras["tolerance_mm"] = options.tolerance_mm;
-    write_gltf(path, surfaces, o);
-  } else if (ext == ".drc") {
+    if (owned)
+      write_gltf(path, std::move(*owned), o);
+    else
+      write_gltf(path, surfaces, o);
+    return;
+  }
+  TriangleMesh merged = merged_mesh(surfaces);
+  if (owned) std::vector<GltfSurface>().swap(*owned);
+  if (ext == ".drc") {
     DracoOptions o;
     o.tolerance = options.tolerance_mm;
-    write_draco_file(path, merged_mesh(surfaces), o);
+    write_draco_file(path, std::move(merged), o);
   } else {
-    write_mesh_file(path, merged_mesh(surfaces));
+    write_mesh_file(path, merged);
   }
+}
+
+}  // namespace
+
+void write_asset(const std::vector<GltfSurface>& surfaces, const std::string& path,
+                 const AssetWriteOptions& options) {
+  write_asset_of(surfaces, nullptr, path, options);
+}
+
+void write_asset(std::vector<GltfSurface>&& surfaces, const std::string& path,
+                 const AssetWriteOptions& options) {
+  write_asset_of(surfaces, &surfaces, path, options);
 }
 
 }  // namespace mlfe

@@ -10,7 +10,7 @@ namespace mlfe {
 
 namespace {
 
-constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'B', 'R', 'K', '1'};
+constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'B', 'R', 'K', '2'};
 
 // The arrays are copied with memcpy, as hierarchy_io.cpp's are; a big-endian host would swap.
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "brick_parts assumes a little-endian host");
@@ -65,9 +65,11 @@ std::string encode_brick_parts(const BrickParts& p) {
     w.put(std::uint32_t(s.mesh.triangles.size()));
     w.put(std::uint8_t(!s.mesh.normals.empty()));
     w.put(std::uint32_t(s.points.size()));
+    w.put(std::uint32_t(s.face_vertex.size()));
     w.put_all(s.mesh.positions);
     w.put_all(s.mesh.normals);
     w.put_all(s.mesh.triangles);
+    w.put_all(s.face_vertex);
     w.put_all(s.face_place);
     w.put_all(s.points);
     w.put_all(s.point_face);
@@ -91,13 +93,14 @@ BrickParts decode_brick_parts(const std::string& bytes) {
     s.extracted_triangles = std::size_t(r.get<std::uint64_t>());
     const std::uint32_t nv = r.get<std::uint32_t>(), nt = r.get<std::uint32_t>();
     const std::uint8_t normals = r.get<std::uint8_t>();
-    const std::uint32_t np = r.get<std::uint32_t>();
+    const std::uint32_t np = r.get<std::uint32_t>(), nf = r.get<std::uint32_t>();
     // Only a surface with vertices has normals: the encoding is canonical (one per set of parts).
     if (normals > 1 || (normals == 1 && nv == 0)) throw Error("brick parts: bad normals flag");
     r.get_all(s.mesh.positions, nv);
     if (normals) r.get_all(s.mesh.normals, nv);
     r.get_all(s.mesh.triangles, nt);
-    r.get_all(s.face_place, nv);
+    r.get_all(s.face_vertex, nf);
+    r.get_all(s.face_place, nf);
     r.get_all(s.points, np);
     r.get_all(s.point_face, np);
     for (const auto& t : s.mesh.triangles)
@@ -105,6 +108,9 @@ BrickParts decode_brick_parts(const std::string& bytes) {
         if (v >= nv) throw Error("brick parts: a triangle index is out of range");
     for (std::uint32_t f : s.point_face)
       if (f >= nt) throw Error("brick parts: a point's face is out of range");
+    for (std::uint32_t k = 0; k < nf; ++k)
+      if (s.face_vertex[k] >= nv || (k > 0 && s.face_vertex[k] <= s.face_vertex[k - 1]))
+        throw Error("brick parts: the face vertices are not ascending vertices");
     p.surfaces.push_back(std::move(s));
   }
   if (r.at != bytes.size()) throw Error("brick parts: trailing bytes");

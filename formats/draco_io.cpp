@@ -14,6 +14,7 @@
 #include <memory>
 #include <new>
 #include <unordered_map>
+#include <utility>
 
 namespace mlfe {
 namespace {
@@ -34,8 +35,8 @@ void check_options(const DracoOptions& o) {
     throw Error(std::string(kEncodeWhat) + ": quantization box is not finite");
 }
 
-// Validates the input and drops degenerate triangles (see the header for why).
-TriangleMesh cleaned_copy(const TriangleMesh& mesh) {
+// Validates the input and drops its degenerate triangles in place (see the header for why).
+void clean(TriangleMesh& mesh) {
   const std::size_t n = mesh.positions.size();
   if (!mesh.normals.empty() && mesh.normals.size() != n)
     throw Error(std::string(kEncodeWhat) + ": " + std::to_string(mesh.normals.size()) + " normals for " +
@@ -46,10 +47,7 @@ TriangleMesh cleaned_copy(const TriangleMesh& mesh) {
     if (!finite3(v)) throw Error(std::string(kEncodeWhat) + ": non-finite vertex normal");
   if (n > std::numeric_limits<std::int32_t>::max())
     throw Error(std::string(kEncodeWhat) + ": too many vertices");
-  TriangleMesh out;
-  out.positions = mesh.positions;
-  out.normals = mesh.normals;
-  out.triangles.reserve(mesh.triangles.size());
+  std::size_t kept = 0;
   for (const auto& t : mesh.triangles) {
     if (t[0] >= n || t[1] >= n || t[2] >= n)
       throw Error(std::string(kEncodeWhat) + ": triangle index out of range");
@@ -57,9 +55,9 @@ TriangleMesh cleaned_copy(const TriangleMesh& mesh) {
     const auto& b = mesh.positions[t[1]];
     const auto& c = mesh.positions[t[2]];
     if (a == b || b == c || a == c) continue;
-    out.triangles.push_back(t);
+    mesh.triangles[kept++] = t;
   }
-  return out;
+  mesh.triangles.resize(kept);
 }
 
 // Positions within `tol` per coordinate (Chebyshev distance), the metric of quantization error.
@@ -170,18 +168,63 @@ int quantization_bits_for(double tolerance, double box_range) {
   return 30;
 }
 
-DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions& options) {
+namespace {
+
+// A Draco mesh holding `mesh`'s arrays, each released from `mesh` once copied (the encoder's
+// own tables are several times the mesh: the mesh is not held beside them). Returns the
+// attribute ids of the positions and normals (-1 without normals).
+std::pair<int, int> move_into(TriangleMesh& mesh, draco::Mesh& dm) {
+  const std::size_t n = mesh.positions.size();
+  dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
+  auto add = [&](draco::GeometryAttribute::Type type, std::vector<std::array<float, 3>>& values) {
+    draco::GeometryAttribute att;
+    att.Init(type, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3, 0);
+    const int id = dm.AddAttribute(att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
+    for (std::size_t i = 0; i < n; ++i)
+      dm.attribute(id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)), values[i].data());
+    std::vector<std::array<float, 3>>().swap(values);
+    return id;
+  };
+  const int pos_id = add(draco::GeometryAttribute::POSITION, mesh.positions);
+  const int nrm_id = mesh.normals.empty() ? -1 : add(draco::GeometryAttribute::NORMAL, mesh.normals);
+  dm.SetNumFaces(mesh.triangles.size());
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const auto& t = mesh.triangles[f];
+    dm.SetFace(draco::FaceIndex(std::uint32_t(f)),
+               {draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
+  }
+  std::vector<std::array<std::uint32_t, 3>>().swap(mesh.triangles);
+  return {pos_id, nrm_id};
+}
+
+// The positions and triangles that move_into took (what verify_decoded compares with).
+TriangleMesh taken_back(const draco::Mesh& dm, int pos_id) {
+  TriangleMesh m;
+  const draco::PointAttribute& pos = *dm.attribute(pos_id);
+  m.positions.resize(dm.num_points());
+  for (std::uint32_t i = 0; i < m.positions.size(); ++i)
+    pos.GetValue(draco::AttributeValueIndex(i), m.positions[i].data());
+  m.triangles.resize(dm.num_faces());
+  for (std::uint32_t f = 0; f < dm.num_faces(); ++f) {
+    const auto& face = dm.face(draco::FaceIndex(f));
+    m.triangles[f] = {face[0].value(), face[1].value(), face[2].value()};
+  }
+  return m;
+}
+
+}  // namespace
+
+DracoEncoding encode_draco_verified(TriangleMesh&& mesh, const DracoOptions& options) {
   check_options(options);
-  const TriangleMesh input = cleaned_copy(mesh);
-  const std::size_t n = input.positions.size();
-  if (input.triangles.empty())
+  clean(mesh);
+  if (mesh.triangles.empty())
     throw Error(std::string(kEncodeWhat) + ": the mesh has no (non-degenerate) triangles");
 
   // Quantization box: the caller's shared box, or this mesh's own bounding cube.
   std::array<float, 3> origin = options.box_min;
   float range = options.box_range;
   if (range > 0) {
-    for (const auto& p : input.positions)
+    for (const auto& p : mesh.positions)
       for (int k = 0; k < 3; ++k) {
         // The same float subtraction Draco performs, so "inside" here means inside there.
         const float offset = p[k] - origin[k];
@@ -189,9 +232,9 @@ DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions
           throw Error(std::string(kEncodeWhat) + ": vertex position outside the quantization box");
       }
   } else {
-    std::array<float, 3> hi = input.positions[0];
-    origin = input.positions[0];
-    for (const auto& p : input.positions)
+    std::array<float, 3> hi = mesh.positions[0];
+    origin = mesh.positions[0];
+    for (const auto& p : mesh.positions)
       for (int k = 0; k < 3; ++k) {
         origin[k] = std::min(origin[k], p[k]);
         hi[k] = std::max(hi[k], p[k]);
@@ -202,40 +245,25 @@ DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions
   }
   const int bits = quantization_bits_for(options.tolerance, range);
 
-  draco::Mesh dm;
-  dm.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
-  draco::GeometryAttribute pos_att;
-  pos_att.Init(draco::GeometryAttribute::POSITION, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3,
-               0);
-  const int pos_id = dm.AddAttribute(pos_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
-  for (std::size_t i = 0; i < n; ++i)
-    dm.attribute(pos_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)),
-                                            input.positions[i].data());
-  int nrm_id = -1;
-  if (!input.normals.empty()) {
-    draco::GeometryAttribute nrm_att;
-    nrm_att.Init(draco::GeometryAttribute::NORMAL, nullptr, 3, draco::DT_FLOAT32, false, sizeof(float) * 3,
-                 0);
-    nrm_id = dm.AddAttribute(nrm_att, true, static_cast<draco::AttributeValueIndex::ValueType>(n));
-    for (std::size_t i = 0; i < n; ++i)
-      dm.attribute(nrm_id)->SetAttributeValue(draco::AttributeValueIndex(std::uint32_t(i)),
-                                              input.normals[i].data());
-  }
-  for (const auto& t : input.triangles)
-    dm.AddFace({draco::PointIndex(t[0]), draco::PointIndex(t[1]), draco::PointIndex(t[2])});
-
-  draco::ExpertEncoder encoder(dm);
-  encoder.SetAttributeExplicitQuantization(pos_id, bits, 3, origin.data(), range);
-  if (nrm_id >= 0) encoder.SetAttributeQuantization(nrm_id, options.normal_bits);
-  encoder.SetSpeedOptions(options.speed, options.speed);
-  draco::EncoderBuffer buffer;
-  const draco::Status status = encoder.EncodeToBuffer(&buffer);
-  if (!status.ok()) throw Error(std::string(kEncodeWhat) + ": " + status.error_msg_string());
-
   DracoEncoding result;
-  result.bytes.assign(buffer.data(), buffer.data() + buffer.size());
-  result.position_unique_id = int(dm.attribute(pos_id)->unique_id());
-  result.normal_unique_id = nrm_id >= 0 ? int(dm.attribute(nrm_id)->unique_id()) : -1;
+  TriangleMesh input;
+  {
+    draco::Mesh dm;
+    const auto [pos_id, nrm_id] = move_into(mesh, dm);
+    {
+      draco::ExpertEncoder encoder(dm);
+      encoder.SetAttributeExplicitQuantization(pos_id, bits, 3, origin.data(), range);
+      if (nrm_id >= 0) encoder.SetAttributeQuantization(nrm_id, options.normal_bits);
+      encoder.SetSpeedOptions(options.speed, options.speed);
+      draco::EncoderBuffer buffer;
+      const draco::Status status = encoder.EncodeToBuffer(&buffer);
+      if (!status.ok()) throw Error(std::string(kEncodeWhat) + ": " + status.error_msg_string());
+      result.bytes.assign(buffer.data(), buffer.data() + buffer.size());
+    }
+    result.position_unique_id = int(dm.attribute(pos_id)->unique_id());
+    result.normal_unique_id = nrm_id >= 0 ? int(dm.attribute(nrm_id)->unique_id()) : -1;
+    input = taken_back(dm, pos_id);
+  }
   result.quantization_bits = bits;
   result.decoded = decode_draco(result.bytes.data(), result.bytes.size(), kEncodeWhat);
 
@@ -245,6 +273,10 @@ DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions
       (double(range) + std::max({std::fabs(origin[0]), std::fabs(origin[1]), std::fabs(origin[2])}));
   verify_decoded(input, result.decoded, options.tolerance + ulp_slack);
   return result;
+}
+
+DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions& options) {
+  return encode_draco_verified(TriangleMesh(mesh), options);
 }
 
 std::vector<char> encode_draco(const TriangleMesh& mesh, const DracoOptions& options) {
@@ -322,10 +354,10 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
   return mesh;
 }
 
-void write_draco_file(const std::string& path, const TriangleMesh& mesh, const DracoOptions& options) {
+void write_draco_file(const std::string& path, TriangleMesh mesh, const DracoOptions& options) {
   std::vector<char> bytes;
   try {
-    bytes = encode_draco(mesh, options);
+    bytes = encode_draco_verified(std::move(mesh), options).bytes;
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }

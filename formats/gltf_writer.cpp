@@ -56,22 +56,25 @@ tinygltf::Value to_value(const nlohmann::json& j) {
   }
 }
 
-// A surface level converted to glTF metres with cleaned triangles and unit normals.
+// A surface level: its names and the mesh it is converted from (converted when it is written,
+// so that only one level is held in glTF's frame at a time).
 struct Level {
   std::string node_name;
   std::string mesh_name;
   int lod = 0;
-  TriangleMesh mesh;
+  const TriangleMesh* source = nullptr;
+  /// `source` when the caller gave the surfaces up: released once converted for writing.
+  TriangleMesh* owned = nullptr;
 };
 
-Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std::string& path) {
+// `in` converted to glTF metres with cleaned triangles and unit normals.
+TriangleMesh convert(const TriangleMesh& in, const std::array<double, 9>& m, const std::string& path) {
   const std::size_t n = in.positions.size();
   if (!in.normals.empty() && in.normals.size() != n)
     throw Error(path + ": mesh has " + std::to_string(in.normals.size()) + " normals for " +
                 std::to_string(n) + " positions");
   if (n > std::numeric_limits<std::uint32_t>::max()) throw Error(path + ": mesh too large");
-  Level level;
-  TriangleMesh& out = level.mesh;
+  TriangleMesh out;
   out.positions.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     const auto& p = in.positions[i];
@@ -115,7 +118,7 @@ Level convert(const TriangleMesh& in, const std::array<double, 9>& m, const std:
     }
     out.normals[i] = geometric->normals[i];
   }
-  return level;
+  return out;
 }
 
 // Appends bytes to buffer 0 at a 4-byte aligned offset and returns a new bufferView index.
@@ -196,11 +199,11 @@ struct Writer {
   SceneBox box;
   tinygltf::Model model;
 
-  int add_mesh(const Level& level, int material) {
+  // `mesh`: `level` in glTF's frame (consumed by the Draco encoder).
+  int add_mesh(const Level& level, TriangleMesh&& mesh, int material) {
     tinygltf::Primitive prim;
     prim.material = material;
     prim.mode = TINYGLTF_MODE_TRIANGLES;
-    const TriangleMesh& mesh = level.mesh;
     if (encoding == Encoding::kDraco) {
       DracoOptions d;
       d.tolerance = options.tolerance_mm * 1e-3;
@@ -208,7 +211,7 @@ struct Writer {
       d.box_range = box.range;
       DracoEncoding enc;
       try {
-        enc = encode_draco_verified(mesh, d);
+        enc = encode_draco_verified(std::move(mesh), d);
       } catch (const Error& e) {
         throw Error(path + ": " + level.mesh_name + ": " + e.what());
       }
@@ -281,44 +284,44 @@ void add_extension(tinygltf::Model& model, const std::string& name, bool require
   if (required) model.extensionsRequired.push_back(name);
 }
 
-// Every surface and its coarser levels in glTF's frame, named. All of them are converted before
-// writing: the shared quantization box needs all of them.
-std::vector<std::vector<Level>> convert_levels(const std::vector<GltfSurface>& surfaces,
-                                               const std::array<double, 9>& m, const std::string& path) {
+// Every surface and its coarser levels, named; `owned`: the same surfaces when the caller gave
+// them up (Level::owned).
+std::vector<std::vector<Level>> name_levels(const std::vector<GltfSurface>& surfaces,
+                                            std::vector<GltfSurface>* owned) {
   std::vector<std::vector<Level>> levels(surfaces.size());
   for (std::size_t s = 0; s < surfaces.size(); ++s) {
     const GltfSurface& surface = surfaces[s];
     const std::string node_name =
         surface.node_name.empty() ? fmt::format("iso {}", surface.iso_value) : surface.node_name;
     const std::string mesh_name = surface.name.empty() ? node_name : surface.name;
-    levels[s].push_back(convert(surface.mesh, m, path));
-    levels[s].back().node_name = node_name;
-    levels[s].back().mesh_name = mesh_name;
-    for (std::size_t k = 0; k < surface.lods.size(); ++k) {
-      levels[s].push_back(convert(surface.lods[k], m, path));
-      levels[s].back().lod = int(k + 1);
-      levels[s].back().node_name = fmt::format("{} lod {}", node_name, k + 1);
-      levels[s].back().mesh_name = fmt::format("{} lod {}", mesh_name, k + 1);
-    }
+    levels[s].push_back({node_name, mesh_name, 0, &surface.mesh, owned ? &(*owned)[s].mesh : nullptr});
+    for (std::size_t k = 0; k < surface.lods.size(); ++k)
+      levels[s].push_back({fmt::format("{} lod {}", node_name, k + 1),
+                           fmt::format("{} lod {}", mesh_name, k + 1), int(k + 1), &surface.lods[k],
+                           owned ? &(*owned)[s].lods[k] : nullptr});
   }
   return levels;
 }
 
-// The box of every vertex of every level, which quantized positions share.
-void fit_shared_box(Writer& w, const std::vector<std::vector<Level>>& levels) {
+// The box of every vertex of every level in glTF's frame, which quantized positions share. Each
+// level is converted and dropped in turn, which also checks every level before anything else.
+void fit_shared_box(Writer& w, const std::vector<std::vector<Level>>& levels,
+                    const std::array<double, 9>& m) {
   std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
   bool any = false;
   for (const auto& ls : levels)
-    for (const auto& l : ls)
-      for (const auto& t : l.mesh.triangles)
+    for (const auto& l : ls) {
+      const TriangleMesh mesh = convert(*l.source, m, w.path);
+      for (const auto& t : mesh.triangles)
         for (auto v : t) {
-          const auto& p = l.mesh.positions[v];
+          const auto& p = mesh.positions[v];
           for (int k = 0; k < 3; ++k) {
             lo[k] = any ? std::min(lo[k], p[k]) : p[k];
             hi[k] = any ? std::max(hi[k], p[k]) : p[k];
           }
           any = true;
         }
+    }
   float range = 0;
   for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - lo[k]);
   w.box.min = lo;
@@ -347,8 +350,8 @@ tinygltf::Material surface_material(const GltfSurface& surface, const std::strin
 
 // One node per level of a surface (extras: iso value or the surface's own, lod, triangles); the
 // coarser ones referenced from the full one through MSFT_lod. Returns the full level's node.
-int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<Level>& levels, int material,
-                      bool& any_lod) {
+int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<Level>& levels,
+                      const std::array<double, 9>& m, int material, bool& any_lod) {
   tinygltf::Model& model = w.model;
   std::vector<int> lod_nodes;
   int main_node = -1;
@@ -361,9 +364,11 @@ int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<L
     else
       extras["iso_value"] = tinygltf::Value(surface.iso_value);
     extras["lod"] = tinygltf::Value(level.lod);
-    extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(level.mesh.triangles.size(), INT32_MAX)));
+    TriangleMesh mesh = convert(*level.source, m, w.path);
+    if (level.owned) *level.owned = TriangleMesh{};
+    extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(mesh.triangles.size(), INT32_MAX)));
     node.extras = tinygltf::Value(std::move(extras));
-    if (!level.mesh.triangles.empty()) node.mesh = w.add_mesh(level, material);
+    if (!mesh.triangles.empty()) node.mesh = w.add_mesh(level, std::move(mesh), material);
     model.nodes.push_back(node);
     const int id = int(model.nodes.size() - 1);
     if (level.lod == 0)
@@ -393,8 +398,11 @@ std::array<double, 9> physical_to_gltf_matrix(const std::string& space) {
   throw Error("glTF export: unknown anatomical space '" + space + "' (expected RAS, LPS or empty)");
 }
 
-void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
-                const GltfOptions& options) {
+namespace {
+
+// write_gltf's body; `owned`: the same surfaces when the caller gave them up.
+void write_gltf_of(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                   std::vector<GltfSurface>* owned, const GltfOptions& options) {
   const std::string ext = lower_extension(path);
   if (ext != ".glb" && ext != ".gltf") throw Error(path + ": glTF output needs a .glb or .gltf extension");
   const bool binary = ext == ".glb";
@@ -410,10 +418,10 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
   if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
     throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
 
-  const std::vector<std::vector<Level>> levels = convert_levels(surfaces, m, path);
+  const std::vector<std::vector<Level>> levels = name_levels(surfaces, owned);
 
   Writer w{path, options, encoding, {}, {}};
-  fit_shared_box(w, levels);
+  fit_shared_box(w, levels, m);
   if (encoding == Encoding::kQuantized) {
     const double max_error = 0.5 * double(w.box.range) / 65534.0;
     if (max_error > options.tolerance_mm * 1e-3)
@@ -461,7 +469,7 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
     model.materials.push_back(mat);
     const int material = int(model.materials.size() - 1);
 
-    const int main_node = add_surface_nodes(w, surfaces[s], levels[s], material, any_lod);
+    const int main_node = add_surface_nodes(w, surfaces[s], levels[s], m, material, any_lod);
     if (parent >= 0)
       model.nodes[parent].children.push_back(main_node);
     else
@@ -482,6 +490,17 @@ void write_gltf(const std::string& path, const std::vector<GltfSurface>& surface
     if (!gltf.WriteGltfSceneToStream(&model, out, /*prettyPrint=*/!binary, /*writeBinary=*/binary))
       throw Error(path + ": glTF serialization failed");
   });
+}
+
+}  // namespace
+
+void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
+                const GltfOptions& options) {
+  write_gltf_of(path, surfaces, nullptr, options);
+}
+
+void write_gltf(const std::string& path, std::vector<GltfSurface>&& surfaces, const GltfOptions& options) {
+  write_gltf_of(path, surfaces, &surfaces, options);
 }
 
 }  // namespace mlfe

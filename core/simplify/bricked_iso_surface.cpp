@@ -186,26 +186,45 @@ struct PlaceHash {
   }
 };
 
-// Each part is released once appended, so the parts and the welded surface are not both held.
+// Each part is released once appended, and the welded arrays are reserved at their final size
+// (at most), so the parts and the welded surface are not both held, nor grown by doubling.
 Welded weld(std::vector<BrickPart> parts) {
   Welded w;
+  std::size_t vertices = 0, triangles = 0, points = 0;
+  for (const BrickPart& b : parts) {
+    vertices += b.mesh.positions.size();
+    triangles += b.mesh.triangles.size();
+    points += b.points.size();
+  }
+  w.mesh.positions.reserve(vertices);
+  w.mesh.triangles.reserve(triangles);
+  w.face.reserve(vertices);
+  w.points.reserve(points);
+  w.point_face.reserve(points);
   std::unordered_map<PlaceKey, Id32, PlaceHash> joined;
   std::vector<Id32> uses;  // per welded face vertex, how many parts have it
+  uses.reserve(vertices);
   for (BrickPart& part : parts) {
     const BrickPart b = std::move(part);
-    if (b.face_place.size() != b.mesh.positions.size())
-      throw Error("bricks: a brick's face places are not one per vertex");
+    if (b.face_place.size() != b.face_vertex.size())
+      throw Error("bricks: a brick's face places are not one per face vertex");
+    for (std::size_t k = 0; k < b.face_vertex.size(); ++k)
+      if (b.face_vertex[k] >= b.mesh.positions.size() || (k > 0 && b.face_vertex[k] <= b.face_vertex[k - 1]))
+        throw Error("bricks: a brick's face vertices are not ascending vertices");
     if (b.mesh.positions.empty()) continue;
     const bool normals = !b.mesh.normals.empty();
     if (normals != !w.mesh.normals.empty() && !w.mesh.positions.empty())
       throw Error("bricks: the bricks' parts disagree on normals");
     if (normals && b.mesh.normals.size() != b.mesh.positions.size())
       throw Error("bricks: a brick's normals are not one per vertex");
+    if (normals && w.mesh.normals.capacity() == 0) w.mesh.normals.reserve(vertices);
     const Id32 base = Id32(w.mesh.triangles.size());
     std::vector<Id32> id(b.mesh.positions.size());
+    std::size_t next_face = 0;  // into b.face_vertex
     for (std::size_t i = 0; i < id.size(); ++i) {
-      const LatticePlace& p = b.face_place[i];
-      if (p.axis >= 0) {
+      const bool on_face = next_face < b.face_vertex.size() && b.face_vertex[next_face] == i;
+      if (on_face) {
+        const LatticePlace& p = b.face_place[next_face++];
         const auto [it, fresh] =
             joined.try_emplace(PlaceKey{{p.at[0], p.at[1], p.at[2]}, p.axis}, Id32(w.mesh.positions.size()));
         id[i] = it->second;
@@ -221,7 +240,7 @@ Welded weld(std::vector<BrickPart> parts) {
       }
       w.mesh.positions.push_back(b.mesh.positions[i]);
       if (normals) w.mesh.normals.push_back(b.mesh.normals[i]);
-      w.face.push_back(p.axis >= 0);
+      w.face.push_back(on_face);
       uses.push_back(1);
     }
     for (const auto& t : b.mesh.triangles) {
@@ -247,7 +266,7 @@ Welded weld(std::vector<BrickPart> parts) {
 // The seam pass: the strips simplified with their rim locked and the points attached to them,
 // under `opts` (the brick pass's last run) down to `budget` triangles of the whole surface.
 TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, BrickStats& stats) {
-  const std::vector<std::uint8_t> strip = strip_triangles(w.mesh, w.face);
+  std::vector<std::uint8_t> strip = strip_triangles(w.mesh, w.face);
   std::vector<Id32> inside, outside;
   for (Id32 t = 0; t < Id32(strip.size()); ++t) (strip[t] ? inside : outside).push_back(t);
   std::vector<Id32> map(w.mesh.positions.size(), kNone);
@@ -268,11 +287,20 @@ TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, Brick
         carry.point_face.push_back(strip_index[w.point_face[p]]);
       }
   }
-  opts.min_triangles = budget > outside.size() ? budget - outside.size() : 0;
+  // What the strips' simplification does not need is released before it runs.
+  std::vector<std::uint8_t>().swap(rim);
+  std::vector<std::uint8_t>().swap(w.face);
+  std::vector<std::array<float, 3>>().swap(w.points);
+  std::vector<Id32>().swap(w.point_face);
+  std::vector<Id32>().swap(map);
+  std::vector<std::uint8_t>().swap(strip);
   stats.seam_triangles = inside.size();
+  std::vector<Id32>().swap(inside);
+  opts.min_triangles = budget > outside.size() ? budget - outside.size() : 0;
   const TriangleMesh seams =
-      inside.empty() ? TriangleMesh{} : simplify_within(part.mesh, opts, nullptr, &carry);
+      stats.seam_triangles == 0 ? TriangleMesh{} : simplify_within(part.mesh, opts, nullptr, &carry);
   stats.seam_output = seams.triangles.size();
+  part.mesh = TriangleMesh{};
 
   // The strips' vertices take their simplified places (a moving survivor); the surface is the
   // triangles outside, then the strips', with the vertices in use in welded order.
@@ -290,7 +318,7 @@ TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, Brick
     tris.push_back({seam_vertex[t[0]], seam_vertex[t[1]], seam_vertex[t[2]]});
   TriangleMesh out = std::move(w.mesh);
   std::vector<std::array<Id32, 3>>().swap(out.triangles);
-  std::fill(map.begin(), map.end(), kNone);
+  map.assign(out.positions.size(), kNone);
   for (const auto& t : tris)
     for (Id32 v : t) map[v] = 0;
   Id32 kept = 0;
@@ -404,19 +432,24 @@ BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::s
   const std::vector<std::uint8_t> strip = strip_triangles(s.mesh, out_face);
   if (o.simplifier.placement == Placement::kOptimal)
     refit_outside_strips(s.mesh, strip, extracted, o.simplifier.tolerance);
-  // 4. Keep what the join needs: the face vertices' places, the points on the strips.
-  part.face_place.resize(s.vertex.size());
-  for (std::size_t i = 0; i < s.vertex.size(); ++i)
-    if (out_face[i])
-      part.face_place[i] = places[s.vertex[i]];
-    else
-      part.face_place[i].axis = -1;
+  // 4. Keep what the join needs, at its size (every brick's part is held until the join): the
+  // face vertices' places, the points on the strips.
+  for (Id32 i = 0; i < Id32(s.vertex.size()); ++i)
+    if (out_face[i]) {
+      part.face_vertex.push_back(i);
+      part.face_place.push_back(places[s.vertex[i]]);
+    }
   for (std::size_t p = 0; p < s.point_face.size(); ++p)
     if (s.point_face[p] != kNone && strip[s.point_face[p]]) {
       part.points.push_back(s.points[p]);
       part.point_face.push_back(s.point_face[p]);
     }
   part.mesh = std::move(s.mesh);
+  for (auto* v : {&part.mesh.positions, &part.mesh.normals, &part.points}) v->shrink_to_fit();
+  part.mesh.triangles.shrink_to_fit();
+  part.face_vertex.shrink_to_fit();
+  part.face_place.shrink_to_fit();
+  part.point_face.shrink_to_fit();
   return part;
 }
 

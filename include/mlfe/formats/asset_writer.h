@@ -38,4 +38,9 @@ TriangleMesh merged_mesh(const std::vector<GltfSurface>& surfaces);
 void write_asset(const std::vector<GltfSurface>& surfaces, const std::string& path,
                  const AssetWriteOptions& options);
 
+/// The same, giving the surfaces up: their meshes are released as they are written (the same
+/// bytes; `surfaces` is left unspecified).
+void write_asset(std::vector<GltfSurface>&& surfaces, const std::string& path,
+                 const AssetWriteOptions& options);
+
 }  // namespace mlfe

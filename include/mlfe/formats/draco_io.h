@@ -55,6 +55,10 @@ struct DracoEncoding {
 /// box, a mesh without non-degenerate triangles, an encoder failure or a failed verification.
 DracoEncoding encode_draco_verified(const TriangleMesh& mesh, const DracoOptions& options);
 
+/// The same, consuming `mesh` (left empty): its arrays are released as the encoder takes them,
+/// so a big mesh is not held beside the encoder's tables (several times its size).
+DracoEncoding encode_draco_verified(TriangleMesh&& mesh, const DracoOptions& options);
+
 /// encode_draco_verified(mesh, options).bytes.
 std::vector<char> encode_draco(const TriangleMesh& mesh, const DracoOptions& options);
 
@@ -65,7 +69,8 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
 
 /// Writes encode_draco(mesh, options) to `path` atomically (no file is left on failure).
 /// Errors are mlfe::Error prefixed with `path`.
-void write_draco_file(const std::string& path, const TriangleMesh& mesh, const DracoOptions& options);
+/// `mesh` is taken by value: a temporary is consumed rather than copied (as the && overload).
+void write_draco_file(const std::string& path, TriangleMesh mesh, const DracoOptions& options);
 
 /// Reads a .drc file written by write_draco_file or draco_encoder. Throws mlfe::Error on
 /// unreadable or corrupt files.

@@ -54,6 +54,10 @@ struct GltfOptions {
 void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
                 const GltfOptions& options);
 
+/// The same, giving the surfaces up: each mesh is released once converted for writing, so a big
+/// surface is not held beside its encoding (the same bytes; `surfaces` is left unspecified).
+void write_gltf(const std::string& path, std::vector<GltfSurface>&& surfaces, const GltfOptions& options);
+
 /// Row-major 3x3 matrix M with gltf_metres = M * physical_mm for input space "RAS" (also "")
 /// or "LPS": RAS -> 0.001*(-x, z, y), LPS -> 0.001*(x, z, -y). 1000*M is a proper rotation
 /// (det +1), so triangle winding and normals stay valid. Throws mlfe::Error for other spaces.

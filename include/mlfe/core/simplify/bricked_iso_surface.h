@@ -92,8 +92,10 @@ BrickLayout brick_layout(const std::array<std::int64_t, 3>& dims, std::int64_t e
 struct BrickPart {
   std::size_t extracted_triangles = 0;  ///< the brick's extraction before simplification
   TriangleMesh mesh;                    ///< simplified, its face vertices where extracted
-  /// Per vertex of `mesh`: its lattice place if it lies on a sample plane the brick shares with
-  /// a neighbour (the weld joins by it), else axis -1.
+  /// The vertices of `mesh` on a sample plane the brick shares with a neighbour, ascending, and
+  /// their lattice places (the weld joins by them); only these carry a place, so the parts of a
+  /// big volume held for the join stay small.
+  std::vector<std::uint32_t> face_vertex;
   std::vector<LatticePlace> face_place;
   /// The bound's points attached to the triangles the seam pass takes again (verified bound).
   std::vector<std::array<float, 3>> points;
