@@ -126,8 +126,8 @@ ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& i
 }
 
 // The volume opened for reading in bricks when `o` reads it so (reads_in_bricks), with auto's
-// brick edge resolved in `o`: a raw or OME-Zarr file is opened (its header only) to weigh it;
-// any other input takes 0.
+// brick edge resolved in `o`: a file read box by box (reads_in_windows) is opened (its header
+// only; compressed data is decoded by the first window read) to weigh it; any other input takes 0.
 std::optional<VolumeWindows> bricks_for(const std::string& input, ConvertFileOptions& o) {
   const bool whole_volume_outputs = !o.render.empty() || !o.hierarchy.empty();
   std::optional<VolumeWindows> v;

@@ -128,7 +128,7 @@ void read_transform(const std::string& path, const Header& get, int ndims, GridT
 
 }  // namespace
 
-ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
+RawLayout metaimage_layout(const std::string& path, const VolumeReadOptions&) {
   regular_file_size(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open");
@@ -167,7 +167,8 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     fail(path, "ASCII MetaImage data (BinaryData = False) is not supported");
   const bool compressed = get("CompressedData") && truthy(*get("CompressedData"));
 
-  ScalarGrid grid;
+  RawLayout layout;
+  ScalarGrid& grid = layout.frame;
   GridTransform& t = grid.transform;
   read_transform(path, get, ndims, t);
   grid.space = "LPS";
@@ -201,36 +202,51 @@ ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts
     }
   }
   const std::uint64_t avail = dsize > offset ? dsize - offset : 0;
-  std::uint64_t need = checked_bytes(path, voxels, 4);
   grid.dims = dims;
   grid.source_type = *type;
+  layout.data_file = data_file;
+  layout.swap = msb == host_is_little_endian();
   if (!compressed) {
     if (avail < bytes)
       fail(data_file, fmt::format("truncated: {} x {} x {} {} voxels need {} bytes of data, the file has {}",
                                   dims[0], dims[1], dims[2], *et, bytes, avail));
-    check_memory(path, need, opts, "the float32 grid");
-    allocate_values(grid);
-    RegularFile din(data_file);
-    din.seek(offset);
-    read_raw_values(data_file, din, *type, msb == host_is_little_endian(), grid.values.data(),
-                    grid.values.size());
-    return grid;
+    layout.offset = offset;
+    return layout;
   }
   // Compressed: a zlib stream that must inflate to exactly `bytes`.
+  layout.packing = Compression::kZlib;
+  layout.packed_at = offset;
+  layout.packed_exactly = true;
+  add_note(grid, "zlib-compressed MetaImage");
+  return layout;
+}
+
+ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts) {
+  RawLayout layout = metaimage_layout(path, opts);
+  ScalarGrid& grid = layout.frame;
+  const std::uint64_t bytes = stored_bytes(path, layout);
+  std::uint64_t need = checked_bytes(path, grid.voxel_count(), 4);
+  if (!layout.packing) {
+    check_memory(path, need, opts, "the float32 grid");
+    allocate_values(grid);
+    RegularFile din(layout.data_file);
+    din.seek(layout.offset);
+    read_raw_values(layout.data_file, din, grid.source_type, layout.swap, grid.values.data(),
+                    grid.values.size());
+    return std::move(grid);
+  }
+  RegularFile din(layout.data_file);
+  const std::uint64_t avail = din.size() > layout.packed_at ? din.size() - layout.packed_at : 0;
   if (__builtin_add_overflow(need, bytes, &need) || __builtin_add_overflow(need, avail, &need))
     need = UINT64_MAX;
   check_memory(path, need, opts, "the compressed data, the voxels and the float32 grid");
   std::string packed(static_cast<std::size_t>(avail), '\0');
-  {
-    RegularFile din(data_file);
-    din.seek(offset);
-    if (din.read(packed.data(), packed.size()) != avail) fail(data_file, "read error");
-  }
+  din.seek(layout.packed_at);
+  if (din.read(packed.data(), packed.size()) != avail) fail(layout.data_file, "read error");
   const std::vector<unsigned char> raw = inflate_exactly(path, packed.data(), packed.size(), bytes);
   allocate_values(grid);
-  convert_to_float(raw.data(), *type, msb == host_is_little_endian(), grid.values.data(), grid.values.size());
-  add_note(grid, "zlib-compressed MetaImage");
-  return grid;
+  convert_to_float(raw.data(), grid.source_type, layout.swap, grid.values.data(), grid.values.size());
+  return std::move(grid);
 }
 
 }  // namespace mlfe

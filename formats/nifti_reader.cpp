@@ -1,6 +1,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/vec.h>
 #include <mlfe/formats/nifti_reader.h>
+#include <mlfe/formats/raw_reader.h>
 #include <nifti2_io.h>
 #include <sys/stat.h>
 #include <zlib.h>
@@ -9,7 +10,6 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
-#include <limits>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -172,21 +172,15 @@ double checked_vox_offset(const std::string& path) {
 // The voxels are read here, not by libnifti's loader, which silently turns NaN and Inf into 0:
 // the shared rule (an error unless --nan-as) must see them. The first 3D volume is the first
 // `bytes` bytes of the data.
-void read_voxels(const std::string& path, const nifti_image* nim, double vox_offset, std::uint64_t bytes,
-                 ScalarType type, ScalarGrid& grid) {
-  if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
-  if (static_cast<double>(nim->iname_offset) != vox_offset)
-    fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
-                           vox_offset, nim->iname_offset));
-  regular_file_size(nim->iname);
-  znzFile fp = znzopen(nim->iname, "rb", ends_with_ci(nim->iname, ".gz") ? 1 : 0);
-  if (znz_isnull(fp)) fail(nim->iname, "cannot open the NIfTI voxel data");
+void read_voxels(const std::string& path, const RawLayout& layout, std::uint64_t bytes, ScalarGrid& grid) {
+  znzFile fp = znzopen(layout.data_file.c_str(), "rb", layout.packing ? 1 : 0);
+  if (znz_isnull(fp)) fail(layout.data_file, "cannot open the NIfTI voxel data");
   struct Closer {
     znzFile& fp;
     ~Closer() { znzclose(fp); }
   } closer{fp};
   // fseek returns 0, gzseek the new offset; both -1 on failure.
-  if (znzseek(fp, static_cast<znz_off_t>(nim->iname_offset), SEEK_SET) < 0)
+  if (znzseek(fp, static_cast<znz_off_t>(layout.offset), SEEK_SET) < 0)
     fail(path, "unreadable NIfTI voxel data (cannot seek to vox_offset)");
   // Read as it decodes: a few bytes of gzip claiming a huge grid end early without the claim
   // ever being allocated.
@@ -194,8 +188,8 @@ void read_voxels(const std::string& path, const nifti_image* nim, double vox_off
       path, [fp](unsigned char* dst, std::size_t n) { return znzread(dst, 1, n, fp); }, bytes,
       "or unreadable NIfTI voxel data");
   allocate_values(grid);
-  convert_to_float(data.data(), type, nim->byteorder != nifti_short_order(), grid.values.data(),
-                   grid.values.size());
+  convert_to_float(data.data(), grid.source_type, layout.swap, grid.values.data(), grid.values.size());
+  scale_values(path, layout, grid.values.data(), grid.values.size());
 }
 
 // The transform: the sform, else the qform (RAS), else pixdim spacing alone.
@@ -235,7 +229,7 @@ void read_transform(const std::string& path, const nifti_image* nim, ScalarGrid&
 
 }  // namespace
 
-ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
+RawLayout nifti_layout(const std::string& path, const VolumeReadOptions&) {
   const double vox_offset = checked_vox_offset(path);
   check_image_files(path);
 
@@ -277,35 +271,38 @@ ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
                        volumes > 1 ? fmt::format(" x {} volumes", volumes) : "", nim->iname_offset, end,
                        isize));
   }
-  std::uint64_t need = 0;
-  if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
-  check_memory(path, need, opts, "the NIfTI data and the float32 grid");
+  if (!nim->iname || nim->iname_offset < 0) fail(path, "NIfTI header names no voxel data");
+  if (static_cast<double>(nim->iname_offset) != vox_offset)
+    fail(path, fmt::format("invalid NIfTI vox_offset {} (libnifti would read the voxels at offset {})",
+                           vox_offset, nim->iname_offset));
+  regular_file_size(nim->iname);
 
-  ScalarGrid grid;
+  RawLayout layout;
+  ScalarGrid& grid = layout.frame;
   grid.dims = dims;
   grid.source_type = *type;
-  read_voxels(path, nim.get(), vox_offset, bytes, *type, grid);
+  layout.data_file = nim->iname;
+  layout.offset = static_cast<std::uint64_t>(nim->iname_offset);
+  layout.swap = nim->byteorder != nifti_short_order();
+  if (ends_with_ci(nim->iname, ".gz")) layout.packing = Compression::kGzip;
   if (volumes > 1) add_note(grid, fmt::format("NIfTI has {} volumes; read the first", volumes));
 
   const double slope = nim->scl_slope, inter = nim->scl_inter;
   if (slope != 0.0 && std::isfinite(slope) && std::isfinite(inter) && !(slope == 1.0 && inter == 0.0)) {
-    for (float& v : grid.values) {
-      const double scaled = v * slope + inter;
-      // Beyond float's range the value would become infinite and be reported as bad data.
-      if (std::isfinite(v) && !(std::abs(scaled) <= std::numeric_limits<float>::max()))
-        fail(path,
-             fmt::format(
-                 "scl_slope {:.7g} and scl_inter {:.7g} take the value {:g} to {:.7g}, which overflows a "
-                 "float (+-{:.4g})",
-                 slope, inter, v, scaled, std::numeric_limits<float>::max()));
-      v = static_cast<float>(scaled);
-    }
+    layout.scaling = std::array<double, 2>{slope, inter};
     add_note(grid, fmt::format("scl_slope {} and scl_inter {} applied", slope, inter));
   }
 
   read_transform(path, nim.get(), grid);
   if (nim->nifti_type == NIFTI_FTYPE_ANALYZE) add_note(grid, "Analyze 7.5 header (no NIfTI magic)");
-  return grid;
+  return layout;
+}
+
+ScalarGrid read_nifti(const std::string& path, const VolumeReadOptions& opts) {
+  RawLayout layout = nifti_layout(path, opts);
+  check_memory_for_copy(path, layout, opts, "the NIfTI data and the float32 grid");
+  read_voxels(path, layout, stored_bytes(path, layout), layout.frame);
+  return std::move(layout.frame);
 }
 
 }  // namespace mlfe

@@ -1,6 +1,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/vec.h>
 #include <mlfe/formats/nrrd_reader.h>
+#include <mlfe/formats/raw_reader.h>
 #include <teem/nrrd.h>
 
 #include <algorithm>
@@ -272,9 +273,41 @@ void read_transform(const std::string& path, const Nrrd* nrrd, unsigned dim, Sca
   }
 }
 
-}  // namespace
+// The header read without the data: the frame, the Teem type and axes, and where the voxels lie
+// when read_raw_box can read them (in_boxes): raw or gzip data in one file, no skipped lines.
+struct NrrdHeader {
+  RawLayout layout;
+  int teem_type = nrrdTypeUnknown;
+  unsigned dim = 0;
+  bool in_boxes = false;
+};
 
-ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
+void place_data(const std::string& path, const NrrdIoState& nio, NrrdHeader& h) {
+  const bool attached = nio.dataFNArr->len == 0 && !nio.dataFNFormat;
+  const bool gzip = nio.encoding == nrrdEncodingGzip;
+  if ((!attached && (nio.dataFNArr->len != 1 || nio.dataFNFormat)) || nio.lineSkip != 0 ||
+      (nio.encoding != nrrdEncodingRaw && !gzip) || nio.byteSkip < 0 || (gzip && nio.byteSkip != 0))
+    return;
+  RawLayout& l = h.layout;
+  l.data_file = attached ? path : sibling_path(path, nio.dataFN[0]);
+  std::uint64_t start = 0;
+  if (attached) {
+    const auto end = attached_header_length(path);
+    // Teem also ends a line at a lone '\r': the header's end is certain only without any.
+    if (!end || read_file_prefix(path, *end).find('\r') != std::string::npos) return;
+    start = *end;
+  }
+  if (gzip) {
+    l.packing = Compression::kGzip;
+    l.packed_at = start;
+  } else {
+    l.offset = start + static_cast<std::uint64_t>(nio.byteSkip);
+  }
+  l.swap = scalar_type_size(l.frame.source_type) > 1 && nio.endian != airMyEndian();
+  h.in_boxes = true;
+}
+
+NrrdHeader read_header(const std::string& path) {
   std::string magic = read_file_prefix(path, 8);
   if (magic.rfind("NRRD000", 0) != 0) fail(path, "not a NRRD file (no NRRD000x magic)");
   if (magic.size() < 8 || magic[7] < '1' || magic[7] > '5')
@@ -303,30 +336,46 @@ ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
   const std::int64_t voxels = checked_voxel_count(path, dims);
   const int esize = scalar_type_size(*type);
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));
-
-  const std::string encoding = nio->encoding ? nio->encoding->name : "";
   check_data_size(path, *nio, bytes, dims, *type);
-  std::uint64_t need = 0;
-  if (__builtin_add_overflow(bytes, checked_bytes(path, voxels, 4), &need)) need = UINT64_MAX;
-  check_memory(path, need, opts, "the NRRD data and the float32 grid");
 
-  std::unique_ptr<Nrrd, NrrdDeleter> nrrd(nrrdNew());
-  if (nrrdLoad(nrrd.get(), path.c_str(), nullptr)) fail(path, biff_message());
-  if (nrrd->dim != dim || nrrd->type != header->type || !nrrd->data)
-    fail(path, "NRRD header changed between reads");
-  for (unsigned a = 0; a < dim; ++a)
-    if (static_cast<std::int64_t>(nrrd->axis[a].size) != dims[a])
-      fail(path, "NRRD header changed between reads");
-
-  ScalarGrid grid;
+  NrrdHeader h;
+  h.teem_type = header->type;
+  h.dim = dim;
+  ScalarGrid& grid = h.layout.frame;
   grid.dims = dims;
   grid.source_type = *type;
-  allocate_values(grid);
-  convert_to_float(nrrd->data, *type, false, grid.values.data(), grid.values.size());
-
-  read_transform(path, nrrd.get(), dim, grid);
+  read_transform(path, header.get(), dim, grid);
+  const std::string encoding = nio->encoding ? nio->encoding->name : "";
   if (encoding != "raw") add_note(grid, "NRRD encoding " + encoding);
-  return grid;
+  place_data(path, *nio, h);
+  return h;
+}
+
+}  // namespace
+
+std::optional<RawLayout> nrrd_layout(const std::string& path, const VolumeReadOptions&) {
+  NrrdHeader h = read_header(path);
+  if (!h.in_boxes) return std::nullopt;
+  return std::move(h.layout);
+}
+
+ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts) {
+  NrrdHeader h = read_header(path);
+  ScalarGrid& grid = h.layout.frame;
+  check_memory_for_copy(path, h.layout, opts, "the NRRD data and the float32 grid");
+
+  std::lock_guard<std::mutex> lock(teem_mutex());
+  std::unique_ptr<Nrrd, NrrdDeleter> nrrd(nrrdNew());
+  if (nrrdLoad(nrrd.get(), path.c_str(), nullptr)) fail(path, biff_message());
+  if (nrrd->dim != h.dim || nrrd->type != h.teem_type || !nrrd->data)
+    fail(path, "NRRD header changed between reads");
+  for (unsigned a = 0; a < h.dim; ++a)
+    if (static_cast<std::int64_t>(nrrd->axis[a].size) != grid.dims[a])
+      fail(path, "NRRD header changed between reads");
+
+  allocate_values(grid);
+  convert_to_float(nrrd->data, grid.source_type, false, grid.values.data(), grid.values.size());
+  return std::move(grid);
 }
 
 }  // namespace mlfe

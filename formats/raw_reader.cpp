@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <vector>
 
@@ -180,6 +181,7 @@ RawLayout raw_layout(const std::string& path, const VolumeReadOptions& opts) {
   grid.dims = dims;
   grid.source_type = *type;
   if (!sidecar.empty()) add_note(grid, "geometry from sidecar " + sidecar);
+  layout.data_file = path;
   layout.offset = static_cast<std::uint64_t>(offset);
   layout.swap = (endian == "big") == host_is_little_endian();
   return layout;
@@ -196,22 +198,74 @@ ScalarGrid read_raw(const std::string& path, const VolumeReadOptions& opts) {
   return std::move(layout.frame);
 }
 
-void read_raw_box(const std::string& path, const RawLayout& layout, const std::array<std::int64_t, 3>& lo,
+void read_raw_box(const RegularFile& data, const RawLayout& layout, const std::array<std::int64_t, 3>& lo,
                   const std::array<std::int64_t, 3>& hi, float* dst) {
   const auto& d = layout.frame.dims;
   for (int a = 0; a < 3; ++a) MLFE_CHECK(0 <= lo[a] && lo[a] < hi[a] && hi[a] <= d[a]);
   const std::uint64_t esize = std::uint64_t(scalar_type_size(layout.frame.source_type));
   const std::size_t row = std::size_t(hi[0] - lo[0]);
   std::vector<char> buf(row * esize);
-  RegularFile in(path);
+  float* const first = dst;
   for (std::int64_t k = lo[2]; k < hi[2]; ++k)
     for (std::int64_t j = lo[1]; j < hi[1]; ++j) {
-      in.seek(layout.offset + esize * std::uint64_t(lo[0] + d[0] * (j + d[1] * k)));
-      if (in.read(buf.data(), buf.size()) != buf.size())
-        fail(path, "truncated: the voxel data ended while reading a box (the file shrank?)");
+      const std::uint64_t at = layout.offset + esize * std::uint64_t(lo[0] + d[0] * (j + d[1] * k));
+      if (data.read_at(at, buf.data(), buf.size()) != buf.size())
+        fail(data.path(), "truncated: the voxel data ended while reading a box (the file shrank?)");
       convert_to_float(buf.data(), layout.frame.source_type, layout.swap, dst, row);
       dst += row;
     }
+  scale_values(data.path(), layout, first, std::size_t(dst - first));
+}
+
+std::uint64_t stored_bytes(const std::string& path, const RawLayout& layout) {
+  return checked_bytes(path, layout.frame.voxel_count(),
+                       std::uint64_t(scalar_type_size(layout.frame.source_type)));
+}
+
+void check_memory_for_copy(const std::string& path, const RawLayout& layout, const VolumeReadOptions& opts,
+                           const std::string& what) {
+  std::uint64_t need = 0;
+  if (__builtin_add_overflow(stored_bytes(path, layout), checked_bytes(path, layout.frame.voxel_count(), 4),
+                             &need))
+    need = UINT64_MAX;
+  check_memory(path, need, opts, what);
+}
+
+std::unique_ptr<RegularFile> unpack_raw(const std::string& path, const RawLayout& layout) {
+  MLFE_CHECK(layout.packing.has_value());
+  const std::uint64_t bytes = stored_bytes(path, layout);
+  std::uint64_t total = 0;
+  if (__builtin_add_overflow(bytes, layout.offset, &total)) fail(path, "the voxel data's size overflows");
+  RegularFile in(layout.data_file);
+  in.seek(layout.packed_at);
+  const ByteSource decoded = decoded_source(path, *layout.packing, file_source(in));
+  std::unique_ptr<RegularFile> out = RegularFile::scratch(path);
+  std::vector<unsigned char> buf(std::size_t(1) << 20);
+  for (std::uint64_t done = 0; done < total;) {
+    const std::size_t got =
+        decoded(buf.data(), std::size_t(std::min<std::uint64_t>(buf.size(), total - done)));
+    if (got == 0) fail(path, fmt::format("truncated compressed data ({} of {} bytes)", done, total));
+    out->append(buf.data(), got);
+    done += got;
+  }
+  unsigned char extra = 0;
+  if (layout.packed_exactly && decoded(&extra, 1) != 0)
+    fail(path, fmt::format("compressed data does not inflate to the {} bytes of the dimensions", bytes));
+  return out;
+}
+
+void scale_values(const std::string& path, const RawLayout& layout, float* v, std::size_t n) {
+  if (!layout.scaling) return;
+  const auto [slope, inter] = *layout.scaling;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double scaled = v[i] * slope + inter;
+    // Beyond float's range the value would become infinite and be reported as bad data.
+    if (std::isfinite(v[i]) && !(std::abs(scaled) <= std::numeric_limits<float>::max()))
+      fail(path, fmt::format("scl_slope {:.7g} and scl_inter {:.7g} take the value {:g} to {:.7g}, which "
+                             "overflows a float (+-{:.4g})",
+                             slope, inter, v[i], scaled, std::numeric_limits<float>::max()));
+    v[i] = static_cast<float>(scaled);
+  }
 }
 
 }  // namespace mlfe

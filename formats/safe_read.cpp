@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <climits>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <new>
 
@@ -62,6 +63,45 @@ std::size_t RegularFile::read(void* dst, std::size_t n) {
   return done;
 }
 
+std::size_t RegularFile::read_at(std::uint64_t offset, void* dst, std::size_t n) const {
+  auto* p = static_cast<unsigned char*>(dst);
+  std::size_t done = 0;
+  while (done < n) {
+    if (offset + done > static_cast<std::uint64_t>(INT64_MAX)) break;
+    const ssize_t got = ::pread(fd_, p + done, std::min<std::size_t>(n - done, std::size_t(1) << 30),
+                                static_cast<off_t>(offset + done));
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) fail(path_, fmt::format("read error ({})", std::strerror(errno)));
+    if (got == 0) break;
+    done += static_cast<std::size_t>(got);
+  }
+  return done;
+}
+
+RegularFile::RegularFile(std::string name, int fd) : path_(std::move(name)), fd_(fd) {}
+
+std::unique_ptr<RegularFile> RegularFile::scratch(const std::string& name) {
+  const char* dir = std::getenv("TMPDIR");
+  std::string pattern = std::string(dir && *dir ? dir : "/tmp") + "/.mlfe-scratch-XXXXXX";
+  const int fd = ::mkostemp(pattern.data(), O_CLOEXEC);
+  if (fd < 0)
+    fail(name, fmt::format("cannot create its temporary copy in {} ({})", pattern, std::strerror(errno)));
+  // Unlinked at once: the space is freed when the descriptor closes, even after kill -9.
+  ::unlink(pattern.c_str());
+  return std::unique_ptr<RegularFile>(new RegularFile(name, fd));
+}
+
+void RegularFile::append(const void* src, std::size_t n) {
+  const auto* p = static_cast<const unsigned char*>(src);
+  for (std::size_t done = 0; done < n;) {
+    const ssize_t put = ::write(fd_, p + done, std::min<std::size_t>(n - done, std::size_t(1) << 30));
+    if (put < 0 && errno == EINTR) continue;
+    if (put <= 0) fail(path_, fmt::format("cannot write its temporary copy ({})", std::strerror(errno)));
+    done += static_cast<std::size_t>(put);
+    size_ += static_cast<std::uint64_t>(put);
+  }
+}
+
 std::uint64_t regular_file_size(const std::string& path) { return RegularFile(path).size(); }
 
 std::string read_file_prefix(const std::string& path, std::size_t n) {
@@ -102,12 +142,14 @@ class Decoder {
  public:
   Decoder(std::string path, Compression c, ByteSource in)
       : path_(std::move(path)), c_(c), in_(std::move(in)), buf_(kChunk) {
-    const bool ok =
-        c_ == Compression::kZlib ? inflateInit(&z_) == Z_OK : BZ2_bzDecompressInit(&b_, 0, 0) == BZ_OK;
+    constexpr int kGzipWindow = 16 + MAX_WBITS;  // zlib's code for a gzip header and trailer
+    const bool ok = c_ == Compression::kZlib   ? inflateInit(&z_) == Z_OK
+                    : c_ == Compression::kGzip ? inflateInit2(&z_, kGzipWindow) == Z_OK
+                                               : BZ2_bzDecompressInit(&b_, 0, 0) == BZ_OK;
     if (!ok) throw std::bad_alloc();  // the one way the init fails with the library it was built with
   }
   ~Decoder() {
-    if (c_ == Compression::kZlib)
+    if (c_ != Compression::kBzip2)
       inflateEnd(&z_);
     else
       BZ2_bzDecompressEnd(&b_);
@@ -118,11 +160,7 @@ class Decoder {
   std::size_t read(unsigned char* dst, std::size_t n) {
     std::size_t made = 0;
     while (made < n && !ended_) {
-      if (avail_ == 0 && !input_done_) {
-        avail_ = in_(buf_.data(), buf_.size());
-        next_ = buf_.data();
-        input_done_ = avail_ == 0;
-      }
+      if (avail_ == 0 && !input_done_) refill();
       const std::size_t out = std::min<std::size_t>(n - made, UINT_MAX);
       std::size_t used = 0, produced = 0;
       step(dst + made, out, used, produced);
@@ -130,15 +168,33 @@ class Decoder {
       avail_ -= used;
       made += produced;
       if (used == 0 && produced == 0 && (input_done_ || avail_ > 0)) break;  // no progress possible
+      if (member_ended_) next_member();
     }
     return made;
   }
 
  private:
+  // Keeps the unused input at the front of the buffer and reads more after it.
+  void refill() {
+    if (avail_ > 0) std::memmove(buf_.data(), next_, avail_);
+    next_ = buf_.data();
+    const std::size_t got = in_(buf_.data() + avail_, buf_.size() - avail_);
+    input_done_ = got == 0;
+    avail_ += got;
+  }
+
+  // After a gzip member: the next one starts where gzip's magic bytes follow, else the data ends.
+  void next_member() {
+    member_ended_ = false;
+    if (avail_ < 2 && !input_done_) refill();
+    if (avail_ >= 2 && next_[0] == 0x1f && next_[1] == 0x8b && inflateReset(&z_) == Z_OK) return;
+    ended_ = true;
+  }
+
   void step(unsigned char* dst, std::size_t out, std::size_t& used, std::size_t& produced) {
     const auto in = static_cast<unsigned>(std::min<std::size_t>(avail_, UINT_MAX));
     const auto room = static_cast<unsigned>(out);
-    if (c_ == Compression::kZlib) {
+    if (c_ != Compression::kBzip2) {
       z_.next_in = next_;
       z_.avail_in = in;
       z_.next_out = dst;
@@ -146,7 +202,7 @@ class Decoder {
       const int rc = inflate(&z_, Z_NO_FLUSH);
       used = in - z_.avail_in;
       produced = room - z_.avail_out;
-      if (rc == Z_STREAM_END) ended_ = true;
+      if (rc == Z_STREAM_END) (c_ == Compression::kGzip ? member_ended_ : ended_) = true;
       if (rc != Z_OK && rc != Z_STREAM_END && rc != Z_BUF_ERROR)
         fail(path_, std::string("corrupt compressed data") + (z_.msg ? fmt::format(" ({})", z_.msg) : ""));
       return;
@@ -169,7 +225,7 @@ class Decoder {
   std::vector<unsigned char> buf_;
   unsigned char* next_ = nullptr;
   std::size_t avail_ = 0;
-  bool input_done_ = false, ended_ = false;
+  bool input_done_ = false, ended_ = false, member_ended_ = false;
   z_stream z_{};
   bz_stream b_{};
 };

@@ -67,27 +67,49 @@ bool metaimage_magic(const std::string& head) {
   return false;
 }
 
+// The rows' layouts, for the readers whose every file has one.
+template <RawLayout (*Layout)(const std::string&, const VolumeReadOptions&)>
+std::optional<RawLayout> always(const std::string& path, const VolumeReadOptions& opts) {
+  return Layout(path, opts);
+}
+
 }  // namespace
 
 const std::vector<VolumeFormatRow>& volume_formats() {
   static const std::vector<VolumeFormatRow> rows = {
-      // name, read extensions, scan endings, write extensions, magic, reader, writer
-      {"nrrd", {".nrrd", ".nhdr"}, {".nrrd", ".nhdr"}, {".nrrd"}, nrrd_magic, read_nrrd, write_nrrd},
-      {"vdb", {".vdb"}, {".vdb"}, {".vdb"}, vdb_magic, read_vdb, write_vdb},
-      {"png", {".png"}, {}, {}, png_magic, read_png, nullptr},
-      {"pgm", {".pgm"}, {}, {}, pgm_magic, read_pgm, nullptr},
+      // name, read extensions, scan endings, write extensions, magic, reader, layout, writer
+      {"nrrd",
+       {".nrrd", ".nhdr"},
+       {".nrrd", ".nhdr"},
+       {".nrrd"},
+       nrrd_magic,
+       read_nrrd,
+       nrrd_layout,
+       write_nrrd},
+      {"vdb", {".vdb"}, {".vdb"}, {".vdb"}, vdb_magic, read_vdb, nullptr, write_vdb},
+      {"png", {".png"}, {}, {}, png_magic, read_png, nullptr, nullptr},
+      {"pgm", {".pgm"}, {}, {}, pgm_magic, read_pgm, nullptr, nullptr},
       {"nifti",
        {".nii", ".hdr", ".img"},
        {".nii.gz", ".nii"},
        {".nii.gz", ".nii"},
        nifti_magic,
        read_nifti,
+       always<nifti_layout>,
        write_nifti},
-      {"metaimage", {".mha", ".mhd"}, {".mha", ".mhd"}, {}, metaimage_magic, read_metaimage, nullptr},
+      {"metaimage",
+       {".mha", ".mhd"},
+       {".mha", ".mhd"},
+       {},
+       metaimage_magic,
+       read_metaimage,
+       always<metaimage_layout>,
+       nullptr},
       // Headerless: by extension, a "<file>.json" sidecar, or --raw-dims/--raw-type.
-      {"raw", {".raw", ".bin", ".dat"}, {}, {".raw"}, nullptr, read_raw, write_raw},
-      // A folder: recognised by its metadata files (is_zarr_store), not by magic bytes.
-      {"zarr", {".zarr"}, {}, {}, nullptr, read_zarr, nullptr},
+      {"raw", {".raw", ".bin", ".dat"}, {}, {".raw"}, nullptr, read_raw, always<raw_layout>, write_raw},
+      // A folder: recognised by its metadata files (is_zarr_store), not by magic bytes; read in
+      // boxes by chunks (ZarrVolume), not by a layout.
+      {"zarr", {".zarr"}, {}, {}, nullptr, read_zarr, nullptr, nullptr},
   };
   return rows;
 }

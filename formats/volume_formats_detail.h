@@ -6,8 +6,10 @@
 // in formats/volume_formats.cpp. Not part of the public API.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/volume_read_options.h>
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +28,10 @@ struct VolumeFormatRow {
   /// Whether a file's first bytes (up to 512) are this format's; nullptr: no magic (raw).
   bool (*magic)(const std::string& head);
   ScalarGrid (*read)(const std::string& path, const VolumeReadOptions& options);
+  /// Where the voxels of the file at `path` lie, when VolumeWindows can read boxes of them with
+  /// read_raw_box (nullopt: only `read` reads it); the frame is the one `read` gives. nullptr: no
+  /// file of this format is read so.
+  std::optional<RawLayout> (*layout)(const std::string& path, const VolumeReadOptions& options);
   void (*write)(const std::string& path, const ScalarGrid& grid);  ///< nullptr: not written
 };
 

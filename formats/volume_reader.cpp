@@ -13,6 +13,8 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <exception>
+#include <mutex>
 #include <new>
 #include <optional>
 
@@ -171,7 +173,44 @@ struct VolumeWindows::Impl {
   std::optional<ZarrVolume> zarr;
   std::optional<RawLayout> raw;
   ScalarGrid whole;  // the formats without box reads
+
+  // The file read_raw_box reads: the data file, or a packed layout's decoded copy, made by the
+  // first read that needs it (opening a volume only to weigh it decodes nothing). A failure is
+  // kept and thrown again to every later read.
+  mutable std::mutex data_mutex;
+  mutable std::unique_ptr<RegularFile> data;
+  mutable std::exception_ptr data_failure;
+
+  const RegularFile& data_file() const {
+    const std::lock_guard<std::mutex> lock(data_mutex);
+    if (data_failure) std::rethrow_exception(data_failure);
+    if (!data) {
+      try {
+        as_read_of(frame.source, [&] {
+          data =
+              raw->packing ? unpack_raw(frame.source, *raw) : std::make_unique<RegularFile>(raw->data_file);
+        });
+      } catch (...) {
+        data_failure = std::current_exception();
+        throw;
+      }
+    }
+    return *data;
+  }
 };
+
+namespace {
+
+// The row of the format whose layout VolumeWindows reads `path` by, or nullptr (a zarr store,
+// or a file only its reader reads whole).
+const VolumeFormatRow* layout_row(const std::string& path, const VolumeReadOptions& opts) {
+  std::string format = detect_volume_format(path);
+  if (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty())) format = "raw";
+  const VolumeFormatRow* row = volume_format(format);
+  return row && row->layout ? row : nullptr;
+}
+
+}  // namespace
 
 VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& opts)
     : impl_(std::make_unique<Impl>()) {
@@ -192,12 +231,15 @@ VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& o
       m.frame.transform = m.zarr->transform();
       m.frame.source_type = m.zarr->type();
       m.frame.notes = m.zarr->notes();
+      m.frame.format = "zarr";
     } else {
-      m.raw = raw_layout(path, opts);
+      const VolumeFormatRow* row = layout_row(path, opts);
+      m.raw = row->layout(path, opts);
+      MLFE_CHECK(m.raw.has_value());
       m.frame = m.raw->frame;
+      m.frame.format = row->name;
     }
   });
-  m.frame.format = m.zarr ? "zarr" : "raw";
   m.frame.source = path;
   if (m.frame.dims[2] == 1) m.frame.dim = 2;
   check_transform(m.frame);
@@ -213,9 +255,11 @@ const ScalarGrid& VolumeWindows::frame() const { return impl_->frame; }
 bool VolumeWindows::streamed() const { return impl_->zarr || impl_->raw; }
 
 bool reads_in_windows(const std::string& path, const VolumeReadOptions& opts) {
-  const std::string format = detect_volume_format(path);
-  return format == "zarr" || format == "raw" ||
-         (format.empty() && (opts.raw_dims || !opts.raw_dtype.empty()));
+  if (is_zarr_store(path)) return true;
+  const VolumeFormatRow* row = layout_row(path, opts);
+  bool in_boxes = false;
+  if (row) as_read_of(path, [&] { in_boxes = row->layout(path, opts).has_value(); });
+  return in_boxes;
 }
 
 ScalarGrid VolumeWindows::read(const std::array<std::int64_t, 3>& lo,
@@ -228,7 +272,7 @@ ScalarGrid VolumeWindows::read(const std::array<std::int64_t, 3>& lo,
   } else if (m.raw) {
     w.dims = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
     w.values.resize(std::size_t(w.voxel_count()));
-    read_raw_box(m.frame.source, *m.raw, lo, hi, w.values.data());
+    read_raw_box(m.data_file(), *m.raw, lo, hi, w.values.data());
   } else {
     w = window_of(m.whole, lo, hi);
   }

@@ -120,9 +120,9 @@ void add_asset_options(CLI::App* cmd, AssetParams& p) {
   cmd->add_option(
          "--bricks", p.bricks,
          "extract and simplify surfaces from the samples in bricks of this many samples per edge, a power "
-         "of two (e.g. 64): threads work on bricks, the seams are simplified after; raw and OME-Zarr "
-         "volumes are then read brick by brick. 0: the whole surface at once; -1 (auto): 128 for a raw or "
-         "OME-Zarr volume of more than 2^27 samples, else 0")
+         "of two (e.g. 64): threads work on bricks, the seams are simplified after; raw, NIfTI, NRRD (raw, "
+         "gzip), MetaImage and OME-Zarr volumes are then read brick by brick. 0: the whole surface at once; "
+         "-1 (auto): 128 for such a volume of more than 2^27 samples, else 0")
       ->capture_default_str();
 }
 

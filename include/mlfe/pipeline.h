@@ -287,7 +287,8 @@ struct AssetOptions {
   /// (a power of two; core/simplify/bricked_iso_surface.h): threads over bricks, the same output
   /// for any thread count. When no output needs the whole volume (see reads_in_bricks), convert
   /// reads it window by window and builds no hierarchy. 0: the whole surface at once. -1 (auto):
-  /// convert() takes auto_bricks() for a raw or OME-Zarr file; anything else takes 0.
+  /// convert() takes auto_bricks() for a file read_volume's windows read box by box
+  /// (reads_in_windows: raw, NIfTI, NRRD raw or gzip, MetaImage, OME-Zarr); anything else takes 0.
   std::int64_t bricks = -1;
   /// extract(): stages "extracting" and "simplifying"; write_assets(): the same in its first
   /// 0.8, then "writing". Returning false throws Cancelled (nothing written). May be empty.

@@ -5,13 +5,16 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/brick_parts.h>
 #include <mlfe/formats/volume_reader.h>
+#include <mlfe/formats/volume_writer.h>
 #include <mlfe/pipeline.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -136,6 +139,97 @@ TEST(BricksCommand, RefusesWhatTheWindowsShowWithNoOutput) {
   EXPECT_EQ(r.status, 2);
   EXPECT_NE(r.err.find("outside the data's range"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// The ball as float32 with dyadic spacing (exact in a NIfTI's float sform), in RAS: a raw file
+// with its sidecar and the same volume written as .nii.gz.
+std::pair<std::string, std::string> write_ball_raw_and_nifti(const std::string& name) {
+  const std::string raw = write_ball(name + ".raw");
+  std::ofstream(raw + ".json")
+      << R"({"dims": [40, 41, 39], "dtype": "float32", "spacing": [0.5, 0.5, 0.75], "space": "RAS"})";
+  write_volume(scratch() + "/" + name + ".nii.gz", read_volume(raw));
+  return {raw, scratch() + "/" + name + ".nii.gz"};
+}
+
+// A .nii.gz read in bricks (inflated once into a temporary file) gives the bytes the same volume
+// as raw gives, and says it was read in windows.
+TEST(BricksCommand, GzippedNiftiInBricksGivesTheRawVolumesBytes) {
+  const auto [raw, nii] = write_ball_raw_and_nifti("same");
+  pipeline::ConvertFileOptions o;
+  o.asset.iso = {0.0, 2.0};
+  o.asset.bricks = 8;
+  o.provenance = {{"input", "ball"}};
+  const std::string from_raw = scratch() + "/same_raw.glb", from_nii = scratch() + "/same_nii.glb";
+  pipeline::convert(raw, from_raw, o);
+  o.report = from_nii + ".json";
+  pipeline::convert(nii, from_nii, o);
+  std::ifstream in(o.report);
+  EXPECT_TRUE(json::parse(in)["read_in_windows"].get<bool>());
+  EXPECT_EQ(test::read_bytes(from_nii), test::read_bytes(from_raw));
+  EXPECT_GT(test::read_bytes(from_raw).size(), 1000u);
+}
+
+// auto bricks a NIfTI as it bricks raw: only above 2^27 samples, so a small one keeps the whole
+// surface's bytes. A truncated .nii.gz, found out only while its bricks are read, still stops the
+// run with one line, exit 2 and no output.
+TEST(BricksCommand, SmallNiftiKeepsItsBytesAndATruncatedOneLeavesNoOutput) {
+  const std::string nii = write_ball_raw_and_nifti("auto_nii").second;
+  const std::string by_default = scratch() + "/nii_default.ply", whole = scratch() + "/nii_whole.ply";
+  ASSERT_EQ(test::run_mlfe("convert " + nii + " --iso 0 --quiet -o " + by_default).status, 0);
+  ASSERT_EQ(test::run_mlfe("convert " + nii + " --iso 0 --bricks 0 --quiet -o " + whole).status, 0);
+  EXPECT_EQ(test::read_bytes(by_default), test::read_bytes(whole));
+
+  const std::string gz = test::read_bytes(nii), cut = scratch() + "/cut.nii.gz";
+  std::ofstream(cut, std::ios::binary) << gz.substr(0, gz.size() / 2);
+  const std::string out = scratch() + "/cut.glb";
+  const test::CliResult r = test::run_mlfe("convert " + cut + " --iso 0 --bricks 8 --quiet -o " + out);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(r.err.rfind("mlfe: " + cut + ": truncated compressed data", 0), 0u) << r.err;
+  EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// Progress counts bricks: one report a brick in "extracting", in order; cancelling while the
+// bricks are read throws Cancelled and leaves neither the asset nor the report.
+TEST(BricksCommand, ProgressCountsBricksAndCancelLeavesNoOutput) {
+  const std::string ball = write_ball("progress.raw");
+  pipeline::ConvertFileOptions o;
+  o.asset.iso = {0.0};
+  o.asset.bricks = 8;
+  std::vector<double> extracting;
+  o.progress = [&](double f, const std::string& stage) {
+    if (stage == "extracting") extracting.push_back(f);
+    return true;
+  };
+  pipeline::convert(ball, scratch() + "/progress.glb", o);
+  const std::size_t bricks = 5 * 5 * 5;
+  EXPECT_GE(extracting.size(), bricks);
+  EXPECT_TRUE(std::is_sorted(extracting.begin(), extracting.end()));
+  const std::string out = scratch() + "/cancelled.glb";
+  std::size_t seen = 0;
+  o.report = out + ".json";
+  o.progress = [&](double, const std::string& stage) { return stage != "extracting" || ++seen < bricks / 2; };
+  EXPECT_THROW(pipeline::convert(ball, out, o), pipeline::Cancelled);
+  // Bricks already in flight on other threads may still report.
+  EXPECT_GE(seen, bricks / 2);
+  EXPECT_LT(seen, bricks);
+  EXPECT_FALSE(std::filesystem::exists(out));
+  EXPECT_FALSE(std::filesystem::exists(o.report));
+}
+
+// The command line's bar (on a terminal) moves with the bricks while it reads them.
+TEST(BricksCommand, TheBarMovesWithTheBricks) {
+  const std::string ball = write_ball("bar.raw"), log = scratch() + "/bar.log";
+  const std::string cmd = std::string(MLFE_BINARY) + " convert " + ball +
+                          " --iso 0 --bricks 8 --threads 1 -o " + scratch() + "/bar.glb";
+  // script(1) gives the command a terminal, so the bar is drawn.
+  ASSERT_EQ(std::system(("script -qec '" + cmd + "' /dev/null > " + log + " 2>&1").c_str()), 0);
+  const std::string text = test::read_bytes(log);
+  std::set<int> percents;
+  for (std::size_t at = text.find("% extracting"); at != std::string::npos;
+       at = text.find("% extracting", at + 1))
+    percents.insert(std::stoi(text.substr(at - 3, 3)));
+  EXPECT_GE(percents.size(), 20u) << text;
 }
 
 // The pieces a distributed run sends apart (brick_parts on workers, write_bricks on the client)

@@ -1,6 +1,7 @@
 // MetaImage (.mha with the data in the same file, .mhd with a separate data file).
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/volume_read_options.h>
 
 #include <string>
@@ -16,5 +17,10 @@ namespace mlfe {
 /// Throws mlfe::Error for a bad header, unsupported types or channels, size mismatches,
 /// truncated data and corrupt compressed data.
 ScalarGrid read_metaimage(const std::string& path, const VolumeReadOptions& opts);
+
+/// read_metaimage's header checks (all but the memory limit) without reading the voxels: where
+/// they lie (zlib-packed with CompressedData, to be inflated to exactly the voxels' bytes),
+/// their byte order and the frame read_metaimage gives.
+RawLayout metaimage_layout(const std::string& path, const VolumeReadOptions& opts);
 
 }  // namespace mlfe

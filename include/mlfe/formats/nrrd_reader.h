@@ -1,8 +1,10 @@
 // NRRD volumes and height fields (.nrrd with attached data, .nhdr with detached data) via Teem.
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
+#include <mlfe/formats/raw_reader.h>
 #include <mlfe/formats/volume_read_options.h>
 
+#include <optional>
 #include <string>
 
 namespace mlfe {
@@ -14,5 +16,11 @@ namespace mlfe {
 /// first without data, so dims, type and sizes are checked against the file size and the memory
 /// limit before Teem allocates. Teem's messages (biff) become the mlfe::Error text.
 ScalarGrid read_nrrd(const std::string& path, const VolumeReadOptions& opts);
+
+/// read_nrrd's header checks (all but the memory limit) without reading the voxels, and where
+/// they lie when read_raw_box can read them: raw or gzip data in the file itself or in one data
+/// file, no "line skip" (nor a "byte skip" for gzip), a header whose lines end with '\n' only.
+/// nullopt for the rest (bzip2, ascii, hex, several data files), which read_nrrd reads whole.
+std::optional<RawLayout> nrrd_layout(const std::string& path, const VolumeReadOptions& opts);
 
 }  // namespace mlfe

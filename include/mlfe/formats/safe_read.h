@@ -34,8 +34,21 @@ class RegularFile {
   /// Reads up to `n` bytes at the read position: fewer only at the end of the file. Throws
   /// Error("<path>: read error (<reason>)").
   std::size_t read(void* dst, std::size_t n);
+  /// Reads up to `n` bytes at byte `offset` without using the read position (pread), so several
+  /// threads may read one file at once: fewer only at the end of the file. Throws as read().
+  std::size_t read_at(std::uint64_t offset, void* dst, std::size_t n) const;
+
+  /// An empty file that no folder lists (made in the temporary folder, TMPDIR or /tmp, and
+  /// unlinked at once), open for append() and reading: its disk space returns when it is
+  /// destroyed or the process ends, however it ends. `name` stands for it in messages.
+  static std::unique_ptr<RegularFile> scratch(const std::string& name);
+  /// Appends `n` bytes to a scratch file. Throws Error("<name>: cannot write its temporary copy
+  /// (<reason>)"), e.g. when the disk is full.
+  void append(const void* src, std::size_t n);
 
  private:
+  RegularFile(std::string name, int fd);
+
   std::string path_;
   int fd_ = -1;
   std::uint64_t size_ = 0;
@@ -60,7 +73,9 @@ ByteSource file_source(RegularFile& file);
 /// The `n` bytes at `data` (which must outlive the source).
 ByteSource memory_source(const void* data, std::size_t n);
 
-enum class Compression { kZlib, kBzip2 };
+/// kGzip reads the members of a gzip file one after the other, as gzread does, and ends where
+/// the bytes after a member are not another member.
+enum class Compression { kZlib, kGzip, kBzip2 };
 
 /// The decoded bytes of the compressed stream that `in` delivers, as a source that ends where
 /// the stream ends or where `in` runs out inside it. Corrupt data throws

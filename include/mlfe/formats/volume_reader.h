@@ -32,14 +32,19 @@ ScalarGrid read_volume(const std::string& path, const VolumeReadOptions& opts = 
 /// Returns "" when neither identifies a format. Throws mlfe::Error when `path` cannot be read.
 std::string detect_volume_format(const std::string& path);
 
-/// True when VolumeWindows reads `path` box by box from the file (a raw volume or an OME-Zarr
-/// store), false when it would read it whole. Reads at most the file's first bytes.
+/// True when VolumeWindows reads `path` box by box from the file, false when it would read it
+/// whole: true for OME-Zarr stores, raw volumes, NIfTI, MetaImage, and NRRD with raw or gzip data
+/// (nrrd_layout). Reads the header only; throws as read_volume does for a bad one.
 bool reads_in_windows(const std::string& path, const VolumeReadOptions& opts);
 
 /// A volume opened for reading box by box (`mlfe convert --bricks`): its frame at once, its
-/// samples window by window. Raw volumes and OME-Zarr stores are read box by box from the file
-/// (only a window's voxels in memory); the other formats are read whole once and their windows
-/// copied from memory. A window holds the values read_volume would give there.
+/// samples window by window. What reads_in_windows accepts is read box by box from the file
+/// (only a window's voxels in memory): OME-Zarr by chunks; raw, NIfTI, NRRD and MetaImage data
+/// by file offsets (read_raw_box on the header's RawLayout), their compressed data (.nii.gz,
+/// NRRD gzip, MetaImage CompressedData) decoded once, by the first read, into an unlinked
+/// temporary file (unpack_raw: disk, not memory) that the boxes are read from. The other
+/// formats are read whole once and their windows copied from memory. A window holds the values
+/// read_volume would give there.
 class VolumeWindows {
  public:
   /// Opens `path` as read_volume reads it (the same checks of header and frame, `opts.space`
@@ -56,7 +61,9 @@ class VolumeWindows {
   bool streamed() const;
   /// The samples [lo, hi) (inside frame().dims) as a grid with frame()'s transform. NaN/Inf
   /// voxels are replaced by opts.nan_as or throw "<path>: ... NaN or infinite (first at index
-  /// i,j,k) ..." with the volume's index. Thread-safe.
+  /// i,j,k) ..." with the volume's index. Data found bad only now (truncated or corrupt
+  /// compressed data, a file that shrank) throws read_volume's one line; a bad compressed stream
+  /// throws again at every later read. Thread-safe.
   ScalarGrid read(const std::array<std::int64_t, 3>& lo, const std::array<std::int64_t, 3>& hi) const;
 
   struct Impl;  ///< formats/volume_reader.cpp
