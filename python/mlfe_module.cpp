@@ -570,12 +570,20 @@ void bind_bricks(py::module_& m) {
              for (const std::string& p : parts) out.append(py::bytes(p));
              return out;
            })
-      .def("write", [](const PyBricks& b, const py::object& output, const std::vector<std::string>& parts) {
+      // Takes the parts out of `parts` (its items become None) so that they are held once, not
+      // twice, while the seams are simplified.
+      .def("write", [](const PyBricks& b, const py::object& output, py::list parts) {
         const std::string path = fspath(output);
+        std::vector<std::string> taken;
+        taken.reserve(parts.size());
+        for (std::size_t k = 0; k < parts.size(); ++k) {
+          taken.push_back(parts[k].cast<std::string>());
+          parts[k] = py::none();
+        }
         nlohmann::json summary;
         {
           py::gil_scoped_release release;
-          summary = write_bricks(path, *b.volume, b.options.asset, parts,
+          summary = write_bricks(path, *b.volume, b.options.asset, taken,
                                  bricks_provenance(b.input, b.options.asset));
         }
         return to_python(summary);

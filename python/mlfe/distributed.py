@@ -112,6 +112,6 @@ def convert(input, output, client=None, *, iso=None, progress=None, n_workers=No
         for c in close:
             c.close()
     _report(progress, 0.9, "writing")
-    summary = job.write(output, parts)
+    summary = job.write(output, parts)  # empties `parts`: the meshes are held once while joined
     _report(progress, 1.0, "writing", final=True)
     return summary
