@@ -125,30 +125,6 @@ ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& i
   return r;
 }
 
-// The volume opened for reading in bricks when `o` reads it so (reads_in_bricks), with auto's
-// brick edge resolved in `o`: a file read box by box (reads_in_windows) is opened (its header
-// only; compressed data is decoded by the first window read) to weigh it; any other input takes 0.
-std::optional<VolumeWindows> bricks_for(const std::string& input, ConvertFileOptions& o) {
-  const bool whole_volume_outputs = !o.render.empty() || !o.hierarchy.empty();
-  std::optional<VolumeWindows> v;
-  if (!detect_tet_mesh_format(input).empty()) {
-    o.asset.bricks = std::max<std::int64_t>(o.asset.bricks, 0);
-    return v;
-  }
-  if (o.asset.bricks < 0) {
-    o.asset.bricks = 0;
-    AssetOptions probe = o.asset;
-    probe.bricks = 2;  // any edge: would the other options read in bricks?
-    if (reads_in_windows(input, o.read) && reads_in_bricks(o.build, probe, whole_volume_outputs)) {
-      v.emplace(input, budgeted(o.read, o.build));
-      o.asset.bricks = auto_bricks(v->frame().dims);
-    }
-  }
-  if (!reads_in_bricks(o.build, o.asset, whole_volume_outputs)) return std::nullopt;
-  if (!v) v.emplace(input, budgeted(o.read, o.build));
-  return v;
-}
-
 // The written files of a conversion, in the order the command line lists them.
 void list_written(const std::string& output, const ConvertOptions& c, ConvertFileResult& r) {
   r.written.push_back(output);
@@ -188,6 +164,27 @@ void check_volume_matches(const std::string& volume, const ScalarGrid& g, const 
 
 }  // namespace
 
+std::optional<VolumeWindows> open_in_bricks(const std::string& input, ConvertFileOptions& o) {
+  const bool whole_volume_outputs = !o.render.empty() || !o.hierarchy.empty();
+  std::optional<VolumeWindows> v;
+  if (!detect_tet_mesh_format(input).empty()) {
+    o.asset.bricks = std::max<std::int64_t>(o.asset.bricks, 0);
+    return v;
+  }
+  if (o.asset.bricks < 0) {
+    o.asset.bricks = 0;
+    AssetOptions probe = o.asset;
+    probe.bricks = 2;  // any edge: would the other options read in bricks?
+    if (reads_in_windows(input, o.read) && reads_in_bricks(o.build, probe, whole_volume_outputs)) {
+      v.emplace(input, budgeted(o.read, o.build));
+      o.asset.bricks = auto_bricks(v->frame().dims);
+    }
+  }
+  if (!reads_in_bricks(o.build, o.asset, whole_volume_outputs)) return std::nullopt;
+  if (!v) v.emplace(input, budgeted(o.read, o.build));
+  return v;
+}
+
 ConvertFileResult convert(const std::string& input, const std::string& output, const ConvertFileOptions& o) {
   check_options(o.build);
   check_options(o.asset);
@@ -197,7 +194,7 @@ ConvertFileResult convert(const std::string& input, const std::string& output, c
   const detail::Reporter report(o.progress);
   report(0, "reading");
   ConvertFileOptions resolved = o;
-  if (std::optional<VolumeWindows> v = bricks_for(input, resolved); v && v->frame().dim == 3) {
+  if (std::optional<VolumeWindows> v = open_in_bricks(input, resolved); v && v->frame().dim == 3) {
     ConvertFileResult r = convert_in_bricks(*v, input, output, resolved, report);
     report.finish("writing");
     return r;

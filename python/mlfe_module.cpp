@@ -21,6 +21,7 @@
 #include <cstring>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <type_traits>
 #include <variant>
@@ -513,6 +514,83 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   return to_python(r.asset);
 }
 
+// A conversion of a volume file read in bricks, split for mlfe.distributed: convert()'s options
+// resolved as convert() resolves them (open_in_bricks: auto's brick edge), the volume opened.
+// Workers each open one to compute their bricks' parts; the client opens one to write the asset.
+struct PyBricks {
+  std::string input;
+  pipeline::ConvertFileOptions options;
+  std::shared_ptr<const VolumeWindows> volume;
+  std::size_t count = 0;
+};
+
+// mlfe.convert's keywords, read options and iso for `input`; with `output`, that path is checked
+// first, as convert() checks it. Throws for any option convert would refuse, and for options
+// with which convert reads the volume whole (nothing to distribute).
+PyBricks open_bricks_py(const py::object& input, const py::object& output, const py::object& iso,
+                        const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  PyBricks b;
+  b.options.build = build_options(kw);
+  b.options.asset = asset_options(kw);
+  b.options.read = read_options(kw);
+  kw.finish();
+  if (!iso.is_none()) b.options.asset.iso = iso.cast<std::vector<double>>();
+  pipeline::check_options(b.options.build);
+  pipeline::check_options(b.options.asset);
+  b.input = fspath(input);
+  if (!output.is_none()) check_output_path(fspath(output), kAssetExtensions);
+  py::gil_scoped_release release;
+  std::optional<VolumeWindows> v = pipeline::open_in_bricks(b.input, b.options);
+  if (!v)
+    throw pipeline::OptionError(
+        pipeline::option_ref("bricks") + ": " + b.input +
+        " would be converted whole, not in bricks (auto bricks raw and OME-Zarr volumes over 2^27 "
+        "samples; give bricks=N, without lod, level, min_component, simplify=0 or a global target)");
+  b.count = brick_count(*v, b.options.asset);
+  b.volume = std::make_shared<const VolumeWindows>(std::move(*v));
+  return b;
+}
+
+// mlfe._mlfe.Bricks: the pieces of mlfe.distributed.convert.
+void bind_bricks(py::module_& m) {
+  py::class_<PyBricks>(m, "Bricks")
+      .def_property_readonly("count", [](const PyBricks& b) { return b.count; })
+      .def_property_readonly("edge", [](const PyBricks& b) { return b.options.asset.bricks; })
+      .def_property_readonly("streamed", [](const PyBricks& b) { return b.volume->streamed(); })
+      .def("parts",
+           [](const PyBricks& b, std::size_t first, std::size_t last) {
+             std::vector<std::string> parts;
+             {
+               py::gil_scoped_release release;
+               for (std::size_t k = first; k < last; ++k)
+                 parts.push_back(brick_parts(*b.volume, b.options.asset, k));
+             }
+             py::list out;
+             for (const std::string& p : parts) out.append(py::bytes(p));
+             return out;
+           })
+      // Takes the parts out of `parts` (its items become None) so that they are held once, not
+      // twice, while the seams are simplified.
+      .def("write", [](const PyBricks& b, const py::object& output, py::list parts) {
+        const std::string path = fspath(output);
+        std::vector<std::string> taken;
+        taken.reserve(parts.size());
+        for (std::size_t k = 0; k < parts.size(); ++k) {
+          taken.push_back(parts[k].cast<std::string>());
+          parts[k] = py::none();
+        }
+        nlohmann::json summary;
+        {
+          py::gil_scoped_release release;
+          summary = write_bricks(path, *b.volume, b.options.asset, taken,
+                                 bricks_provenance(b.input, b.options.asset));
+        }
+        return to_python(summary);
+      });
+  m.def("open_bricks", &open_bricks_py, py::arg("input"), py::arg("output"), py::arg("iso"));
+}
+
 // "x,y,z" or three numbers, as text for the vocabulary's parser.
 std::string vector_text(const py::object& o, const std::string& name) {
   if (py::isinstance<py::str>(o)) return o.cast<std::string>();
@@ -941,4 +1019,5 @@ PYBIND11_MODULE(_mlfe, m) {
   bind_mesh(m);
   bind_hierarchy(m);
   bind_calls(m);
+  bind_bricks(m);
 }

@@ -840,6 +840,13 @@ struct ConvertFileResult {
 ConvertFileResult convert(const std::string& input, const std::string& output,
                           const ConvertFileOptions& options);
 
+/// The volume `input` opened (VolumeWindows, its header only where the format allows) when
+/// convert(input, out, o) reads it in bricks (reads_in_bricks), else nullopt; auto's brick edge
+/// (o.asset.bricks < 0) is resolved in `o` first, as convert resolves it: auto_bricks for a file
+/// read box by box (reads_in_windows), 0 for anything else. mlfe.distributed splits that same conversion over
+/// workers (brick_parts, write_bricks). Throws as VolumeWindows does for an unreadable input.
+std::optional<VolumeWindows> open_in_bricks(const std::string& input, ConvertFileOptions& o);
+
 struct IsoOptions {
   AssetOptions asset;
   BuildOptions build;      ///< a volume input is built first (as convert)

@@ -366,8 +366,9 @@ class StubTest(unittest.TestCase):
         public callables have docstrings."""
         import ast
         import mlfe.batch
+        import mlfe.distributed
 
-        for module in (mlfe, mlfe.batch):
+        for module in (mlfe, mlfe.batch, mlfe.distributed):
             stub = os.path.splitext(module.__file__)[0] + ".pyi"
             with open(stub) as f:
                 tree = ast.parse(f.read())
