@@ -1,13 +1,14 @@
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/mesh_distance.h>
 #include <mlfe/core/surface/triangle_mesh.h>
+#include <mlfe/formats/asset_reader.h>
+#include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/atomic_file.h>
-#include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/image_reader.h>
-#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/safe_read.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
@@ -69,12 +70,6 @@ Kind detect_kind(const std::string& path) {
   return Kind::kVolume;
 }
 
-TriangleMesh read_any_mesh(const std::string& path) {
-  const std::string head = read_file_prefix(path, 5);
-  if (head == "DRACO" || lower_extension(path) == ".drc") return read_draco_file(path);
-  return read_mesh_file(path);
-}
-
 /// Reads `path` as a file of kind `k`, for the reader's error on what is not one.
 void read_as(const std::string& path, Kind k) {
   switch (k) {
@@ -82,7 +77,7 @@ void read_as(const std::string& path, Kind k) {
       read_gltf(path);
       return;
     case Kind::kMesh:
-      read_any_mesh(path);
+      read_asset(path);
       return;
     case Kind::kImage:
       read_image(path);
@@ -218,15 +213,65 @@ void diff_json(const nlohmann::json& e, const nlohmann::json& a, const std::stri
 
 void add_json_differences(const nlohmann::json& e, const nlohmann::json& a, const std::string& what,
                           const CompareOptions& options, CompareResult& r) {
-  std::vector<std::pair<std::string, std::string>> diffs;
-  diff_json(e, a, "", options, diffs);
+  std::vector<std::pair<std::string, std::string>> all, diffs;
+  diff_json(e, a, "", options, all);
+  std::vector<std::string> provenance;
+  for (auto& d : all) {
+    if (!options.strict && is_provenance(d.first))
+      provenance.push_back(d.first);
+    else
+      diffs.push_back(std::move(d));
+  }
   for (std::size_t i = 0; i < diffs.size() && i < kMaxStructureDifferences; ++i)
     r.differences.push_back({what + " " + (diffs[i].first.empty() ? "/" : diffs[i].first), diffs[i].second});
   if (diffs.size() > kMaxStructureDifferences)
     r.differences.push_back(
         {what, fmt::format("{} more differences not listed", diffs.size() - kMaxStructureDifferences)});
   r.report[what + "_differences"] = diffs.size();
+  if (!provenance.empty()) {
+    r.report[what + "_provenance_not_compared"] = provenance;
+    r.notes.push_back(fmt::format("{}: provenance not compared ({}; --strict compares it)", what,
+                                  fmt::join(provenance, ", ")));
+  }
 }
+
+/// Index pairs (expected, actual) matched by key when every key is non-empty and distinct on
+/// both sides and both hold the same keys, or `by_name_anyway` (the structures of label maps may
+/// come in another order or be missing on one side; unmatched keys are differences). Returns
+/// false, with no pairs, when the keys cannot match that way.
+bool pair_by_name(const std::vector<std::string>& ek, const std::vector<std::string>& ak, bool by_name_anyway,
+                  const std::string& what, std::vector<std::pair<std::size_t, std::size_t>>& pairs,
+                  CompareResult& r) {
+  auto sorted = [](std::vector<std::string> k) {
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  auto distinct = [&](const std::vector<std::string>& k) {
+    const std::vector<std::string> s = sorted(k);
+    return std::adjacent_find(s.begin(), s.end()) == s.end() && (s.empty() || !s.front().empty());
+  };
+  if (!distinct(ek) || !distinct(ak) || !(sorted(ek) == sorted(ak) || by_name_anyway)) return false;
+  std::map<std::string, std::size_t> in_actual;
+  for (std::size_t i = 0; i < ak.size(); ++i) in_actual[ak[i]] = i;
+  for (std::size_t i = 0; i < ek.size(); ++i) {
+    const auto it = in_actual.find(ek[i]);
+    if (it == in_actual.end()) {
+      r.differences.push_back({what, "node " + ek[i] + " of EXPECTED is not in ACTUAL"});
+      continue;
+    }
+    pairs.emplace_back(i, it->second);
+    in_actual.erase(it);
+  }
+  for (const auto& [k, i] : in_actual)
+    r.differences.push_back({what, "node " + k + " of ACTUAL is not in EXPECTED"});
+  return true;
+}
+
+/// compare_meshes with each side's Draco quantization step (0: none), which widens the
+/// distance tolerances (see compare_files).
+CompareResult compare_quantized_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
+                                       const CompareOptions& options, const std::string& label, double step_e,
+                                       double step_a);
 
 // ---------------------------------------------------------------- kinds
 
@@ -235,8 +280,9 @@ CompareResult compare_gltf(const std::string& expected, const std::string& actua
   const GltfAsset e = read_gltf(expected), a = read_gltf(actual);
   CompareResult r;
   r.kind = "gltf";
-  // Step 1: the scene graph, names, materials, extensions and extras.
+  // Step 1: the scene graph, names, materials, extensions and extras; strict: the encoding.
   add_json_differences(e.structure, a.structure, "structure", options, r);
+  if (options.strict) add_json_differences(e.encoding, a.encoding, "encoding", options, r);
   // Step 2: the geometry of each primitive, matched by node name (and primitive index) when
   // every node with a mesh has a distinct name in both files (structures of a label map may
   // come in another order or be missing), else in node order.
@@ -254,11 +300,6 @@ CompareResult compare_gltf(const std::string& expected, const std::string& actua
     return k;
   };
   const std::vector<std::string> ek = keys(e), ak = keys(a);
-  auto distinct = [](std::vector<std::string> k) {
-    std::sort(k.begin(), k.end());
-    return std::adjacent_find(k.begin(), k.end()) == k.end() && (k.empty() || !k.front().empty());
-  };
-  std::vector<std::pair<std::size_t, std::size_t>> pairs;
   // Label maps (nodes with a "label" extra) are matched by name even when a structure is
   // missing on one side; other assets only when both hold the same names.
   auto label_map = [](const GltfAsset& g) {
@@ -268,38 +309,21 @@ CompareResult compare_gltf(const std::string& expected, const std::string& actua
     }
     return !g.primitives.empty();
   };
-  auto sorted = [](std::vector<std::string> k) {
-    std::sort(k.begin(), k.end());
-    return k;
-  };
-  const bool by_name =
-      distinct(ek) && distinct(ak) && (sorted(ek) == sorted(ak) || (label_map(e) && label_map(a)));
-  if (by_name) {
-    std::map<std::string, std::size_t> in_actual;
-    for (std::size_t i = 0; i < ak.size(); ++i) in_actual[ak[i]] = i;
-    for (std::size_t i = 0; i < ek.size(); ++i) {
-      const auto it = in_actual.find(ek[i]);
-      if (it == in_actual.end()) {
-        r.differences.push_back({"primitives", "node " + ek[i] + " of EXPECTED is not in ACTUAL"});
-        continue;
-      }
-      pairs.emplace_back(i, it->second);
-      in_actual.erase(it);
-    }
-    for (const auto& [k, i] : in_actual)
-      r.differences.push_back({"primitives", "node " + k + " of ACTUAL is not in EXPECTED"});
-  } else {
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  const bool by_name = pair_by_name(ek, ak, label_map(e) && label_map(a), "primitives", pairs, r);
+  if (!by_name)
     for (std::size_t i = 0; i < std::min(e.primitives.size(), a.primitives.size()); ++i)
       pairs.emplace_back(i, i);
-  }
   r.report["primitives_matched_by"] = by_name ? "node name" : "node order";
   nlohmann::json prims = nlohmann::json::array();
   for (const auto& [i, j] : pairs) {
-    CompareResult m =
-        compare_meshes(e.primitives[i].mesh_data, a.primitives[j].mesh_data, options, e.primitives[i].label);
-    m.report["label"] = e.primitives[i].label;
+    const GltfPrimitive &pe = e.primitives[i], &pa = a.primitives[j];
+    CompareResult m = compare_quantized_meshes(pe.mesh_data, pa.mesh_data, options, pe.label,
+                                               pe.quantization_step, pa.quantization_step);
+    m.report["label"] = pe.label;
     prims.push_back(m.report);
     for (auto& d : m.differences) r.differences.push_back(std::move(d));
+    for (auto& n : m.notes) r.notes.push_back(std::move(n));
   }
   r.report["primitives"] = prims;
   return r;
@@ -567,8 +591,11 @@ std::string CompareResult::summary() const {
   return s;
 }
 
-CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
-                             const CompareOptions& options, const std::string& label) {
+namespace {
+
+CompareResult compare_quantized_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
+                                       const CompareOptions& options, const std::string& label, double step_e,
+                                       double step_a) {
   pipeline::check_options(options);
   CompareResult r;
   r.kind = "mesh";
@@ -594,9 +621,20 @@ CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& a
   // Step 2: bounding box and scale.
   const Box be = bounding_box(expected), ba = bounding_box(actual);
   const double diag_e = diagonal(be), diag_a = diagonal(ba);
-  const double tol = options.tolerance.value_or(1e-4 * diag_e);
-  const double mean_tol = options.mean_tolerance.value_or(tol);
+  // A Draco side moved every coordinate by up to half its grid step, a point by up to
+  // sqrt(3)/2 steps: the sum of both sides' steps bounds what quantization alone can do.
+  const double asked = options.tolerance.value_or(1e-4 * diag_e);
+  const double step = step_e + step_a;
+  const double tol = std::max(asked, step);
+  const double mean_tol = std::max(options.mean_tolerance.value_or(asked), step);
   r.report["tolerance"] = tol;
+  if (step > 0) r.report["quantization_step"] = {step_e, step_a};
+  if (step > asked)
+    r.notes.push_back(fmt::format("{}tolerance {} widened to {}: the Draco quantization step of {}",
+                                  label.empty() ? "" : label + ": ", fmt_g(asked), fmt_g(step),
+                                  step_e > 0 && step_a > 0 ? "both sides"
+                                  : step_e > 0             ? "EXPECTED"
+                                                           : "ACTUAL"));
   r.report["bounding_box"] = {be, ba};
   double corner = 0;
   for (int c = 0; c < 2; ++c)
@@ -674,6 +712,91 @@ CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& a
   return r;
 }
 
+}  // namespace
+
+bool is_provenance(const std::string& pointer) {
+  for (const char* p : {"/asset/generator", "/asset/extras/tool", "/asset/extras/input",
+                        "/asset/extras/tolerance_mm", "/input", "/tool"})
+    if (pointer == p) return true;
+  // Timings, wherever a record keeps them.
+  std::size_t at = 0;
+  while (at < pointer.size()) {
+    const std::size_t next = std::min(pointer.find('/', at + 1), pointer.size());
+    const std::string key = pointer.substr(at + 1, next - at - 1);
+    if (key == "seconds" || key == "timings" ||
+        (key.size() > 8 && key.compare(key.size() - 8, 8, "_seconds") == 0))
+      return true;
+    at = next;
+  }
+  return false;
+}
+
+CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
+                             const CompareOptions& options, const std::string& label) {
+  return compare_quantized_meshes(expected, actual, options, label, 0.0, 0.0);
+}
+
+CompareResult compare_assets(AssetFile expected, AssetFile actual, const CompareOptions& options) {
+  pipeline::check_options(options);
+  if (expected.gltf_frame != actual.gltf_frame) {
+    to_scan_frame(expected);
+    to_scan_frame(actual);
+  }
+  CompareResult r;
+  r.kind = "mesh";
+  r.report["frame"] = expected.gltf_frame ? "glTF metres" : "scan millimetres";
+  r.report["format"] = {expected.format, actual.format};
+  if (options.strict && expected.format != actual.format)
+    r.differences.push_back({"format", expected.format + " in EXPECTED, " + actual.format + " in ACTUAL"});
+  auto keys = [](const AssetFile& f) {
+    std::vector<std::string> k;
+    for (const GltfSurface& s : f.surfaces) {
+      const std::string& name = s.node_name.empty() ? s.name : s.node_name;
+      k.push_back(name.empty() ? std::string() : "'" + name + "'");
+    }
+    return k;
+  };
+  auto label_map = [](const AssetFile& f) {
+    return !f.surfaces.empty() && std::all_of(f.surfaces.begin(), f.surfaces.end(), [](const GltfSurface& s) {
+      return s.node_extras.is_object() && s.node_extras.contains("label");
+    });
+  };
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  CompareResult matched;
+  const bool per_surface = (expected.surfaces.size() > 1 || actual.surfaces.size() > 1) &&
+                           pair_by_name(keys(expected), keys(actual),
+                                        label_map(expected) && label_map(actual), "surfaces", pairs, matched);
+  r.report["surfaces_matched_by"] = per_surface ? "name" : "all merged";
+  auto step = [](const AssetFile& f) {
+    return f.quantization_steps.empty()
+               ? 0.0
+               : *std::max_element(f.quantization_steps.begin(), f.quantization_steps.end());
+  };
+  if (!per_surface) {
+    pairs.clear();
+    CompareResult m = compare_quantized_meshes(merged_mesh(expected.surfaces), merged_mesh(actual.surfaces),
+                                               options, "", step(expected), step(actual));
+    r.report.update(m.report);
+    for (auto& d : m.differences) r.differences.push_back(std::move(d));
+    for (auto& n : m.notes) r.notes.push_back(std::move(n));
+    return r;
+  }
+  for (auto& d : matched.differences) r.differences.push_back(std::move(d));
+  nlohmann::json surfaces = nlohmann::json::array();
+  for (const auto& [i, j] : pairs) {
+    const std::string label = "surface " + keys(expected)[i];
+    CompareResult m =
+        compare_quantized_meshes(expected.surfaces[i].mesh, actual.surfaces[j].mesh, options, label,
+                                 expected.quantization_steps[i], actual.quantization_steps[j]);
+    m.report["label"] = label;
+    surfaces.push_back(m.report);
+    for (auto& d : m.differences) r.differences.push_back(std::move(d));
+    for (auto& n : m.notes) r.notes.push_back(std::move(n));
+  }
+  r.report["surfaces"] = surfaces;
+  return r;
+}
+
 CompareResult compare_files(const std::string& expected, const std::string& actual,
                             const CompareOptions& options) {
   pipeline::check_options(options);
@@ -704,18 +827,9 @@ CompareResult compare_files(const std::string& expected, const std::string& actu
     case Kind::kHierarchy:
       r = compare_hierarchies(expected, actual, options);
       break;
-    case Kind::kMesh: {
-      // A glTF against a plain mesh file: all primitives of the glTF merged into one mesh.
-      auto load = [](const std::string& path, Kind k) {
-        if (k != Kind::kGltf) return read_any_mesh(path);
-        const GltfAsset asset = read_gltf(path);
-        std::vector<const TriangleMesh*> parts;
-        for (const auto& p : asset.primitives) parts.push_back(&p.mesh_data);
-        return merge_meshes(parts);
-      };
-      r = compare_meshes(load(expected, ke), load(actual, ka), options, "");
+    case Kind::kMesh:
+      r = compare_assets(read_asset(expected), read_asset(actual), options);
       break;
-    }
   }
   r.report["kind"] = r.kind;
   return r;
@@ -731,6 +845,7 @@ void write_compare_report(const std::string& path, const std::string& expected, 
   j["differences"] = nlohmann::json::array();
   for (const auto& d : result.differences)
     j["differences"].push_back({{"item", d.item}, {"reason", d.reason}});
+  j["notes"] = result.notes;
   j["figures"] = result.report;
   write_file_atomically(path, [&](std::ostream& os) { os << j.dump(2) << "\n"; });
 }

@@ -1,3 +1,4 @@
+#include <draco/attributes/attribute_quantization_transform.h>
 #include <draco/compression/decode.h>
 #include <draco/compression/encode.h>
 #include <draco/compression/expert_encode.h>
@@ -283,7 +284,12 @@ std::vector<char> encode_draco(const TriangleMesh& mesh, const DracoOptions& opt
   return encode_draco_verified(mesh, options).bytes;
 }
 
-TriangleMesh decode_draco(const char* data, std::size_t size, const std::string& what) {
+double DracoQuantization::step() const {
+  return bits > 0 ? double(range) / double((std::uint64_t(1) << bits) - 1) : 0.0;
+}
+
+TriangleMesh decode_draco(const char* data, std::size_t size, const std::string& what,
+                          DracoQuantization* quantization) {
   if (data == nullptr || size == 0) throw Error(what + ": empty Draco data");
   draco::DecoderBuffer buffer;
   buffer.Init(data, size);
@@ -291,6 +297,9 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
   if (!type.ok()) throw Error(what + ": not Draco data (" + type.status().error_msg_string() + ")");
   if (type.value() != draco::TRIANGULAR_MESH) throw Error(what + ": Draco data is not a triangle mesh");
   draco::Decoder decoder;
+  // Quantized positions come back as the encoder's integers with their grid, which a plain decode
+  // forgets; Draco's own inverse transform below then gives the floats a plain decode gives.
+  decoder.SetSkipAttributeTransform(draco::GeometryAttribute::POSITION);
   // Draco sizes its buffers from counts in the data: a corrupt count can ask for gigabytes
   // (found by fuzzing), which surfaces here as bad_alloc.
   auto decode = [&] {
@@ -305,14 +314,17 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
   const draco::Mesh& dm = *decoded.value();
 
   const std::size_t n = dm.num_points();
-  // Reads one attribute per point, refusing maps that point outside the value array (corrupt
-  // input must not make us read out of bounds).
-  auto read_vec3 = [&](const draco::PointAttribute* att, const char* name) {
+  // Reads one attribute per point (values from `values`, indexed through `att`'s point map),
+  // refusing maps that point outside the value array (corrupt input must not make us read out
+  // of bounds).
+  auto read_vec3 = [&](const draco::PointAttribute* att, const draco::PointAttribute* values,
+                       const char* name) {
     std::vector<std::array<float, 3>> out(n);
-    if (att->num_components() != 3) throw Error(what + ": Draco " + name + " attribute is not 3-component");
+    if (values->num_components() != 3)
+      throw Error(what + ": Draco " + name + " attribute is not 3-component");
     // Only numeric types: Draco's converter reads DT_BOOL bytes as C++ bool, which is undefined
     // for bytes other than 0/1 (found by fuzzing).
-    switch (att->data_type()) {
+    switch (values->data_type()) {
       case draco::DT_INT8:
       case draco::DT_UINT8:
       case draco::DT_INT16:
@@ -329,7 +341,7 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
       throw Error(what + ": corrupt Draco data (" + name + " map too short)");
     for (std::size_t i = 0; i < n; ++i) {
       const draco::AttributeValueIndex avi = att->mapped_index(draco::PointIndex(std::uint32_t(i)));
-      if (avi.value() >= att->size() || !att->ConvertValue<float>(avi, 3, out[i].data()))
+      if (avi.value() >= values->size() || !values->ConvertValue<float>(avi, 3, out[i].data()))
         throw Error(what + ": corrupt Draco data (" + name + " index out of range)");
       if (!finite3(out[i])) throw Error(what + ": corrupt Draco data (non-finite " + name + ")");
     }
@@ -338,10 +350,26 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
 
   const draco::PointAttribute* pos = dm.GetNamedAttribute(draco::GeometryAttribute::POSITION);
   if (pos == nullptr) throw Error(what + ": Draco mesh has no positions");
+  draco::AttributeQuantizationTransform grid;
+  draco::PointAttribute dequantized;
+  const draco::PointAttribute* position_values = pos;
+  if (pos->GetAttributeTransformData() != nullptr) {
+    // The inverse transform reads size() x 3 packed 32-bit integers: checked before it runs.
+    const bool packed = pos->num_components() == 3 && pos->byte_offset() == 0 && pos->byte_stride() == 12 &&
+                        (pos->data_type() == draco::DT_INT32 || pos->data_type() == draco::DT_UINT32) &&
+                        pos->buffer() != nullptr && pos->buffer()->data_size() / 12 >= pos->size();
+    if (!packed || !grid.InitFromAttribute(*pos) || grid.quantization_bits() < 1 ||
+        grid.quantization_bits() > 30)
+      throw Error(what + ": corrupt Draco data (bad POSITION quantization)");
+    dequantized.Init(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32, false, pos->size());
+    if (!grid.InverseTransformAttribute(*pos, &dequantized))
+      throw Error(what + ": corrupt Draco data (bad POSITION quantization)");
+    position_values = &dequantized;
+  }
   TriangleMesh mesh;
-  mesh.positions = read_vec3(pos, "POSITION");
+  mesh.positions = read_vec3(pos, position_values, "POSITION");
   if (const draco::PointAttribute* nrm = dm.GetNamedAttribute(draco::GeometryAttribute::NORMAL)) {
-    if (nrm->num_components() == 3) mesh.normals = read_vec3(nrm, "NORMAL");
+    if (nrm->num_components() == 3) mesh.normals = read_vec3(nrm, nrm, "NORMAL");
   }
   mesh.triangles.resize(dm.num_faces());
   for (std::uint32_t f = 0; f < dm.num_faces(); ++f) {
@@ -349,6 +377,14 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
     for (int k = 0; k < 3; ++k) {
       if (face[k].value() >= n) throw Error(what + ": corrupt Draco data (face index out of range)");
       mesh.triangles[f][k] = face[k].value();
+    }
+  }
+  if (quantization != nullptr) {
+    *quantization = {};
+    if (position_values != pos) {
+      quantization->bits = grid.quantization_bits();
+      quantization->min = {grid.min_value(0), grid.min_value(1), grid.min_value(2)};
+      quantization->range = grid.range();
     }
   }
   return mesh;
@@ -365,9 +401,9 @@ void write_draco_file(const std::string& path, TriangleMesh mesh, const DracoOpt
                         [&](std::ostream& out) { out.write(bytes.data(), std::streamsize(bytes.size())); });
 }
 
-TriangleMesh read_draco_file(const std::string& path) {
+TriangleMesh read_draco_file(const std::string& path, DracoQuantization* quantization) {
   const std::string bytes = read_regular_file(path, UINT64_MAX, "the file");
-  return decode_draco(bytes.data(), bytes.size(), path);
+  return decode_draco(bytes.data(), bytes.size(), path, quantization);
 }
 
 }  // namespace mlfe

@@ -109,6 +109,19 @@ nlohmann::json strip_encoding(nlohmann::json j) {
   return j;
 }
 
+nlohmann::json encoding_of(const nlohmann::json& j) {
+  nlohmann::json out = {{"extensions", nlohmann::json::array()}};
+  if (j.contains("extensionsUsed") && j["extensionsUsed"].is_array())
+    for (const auto& e : j["extensionsUsed"])
+      if (e.is_string() && is_encoding_extension(e.get<std::string>())) out["extensions"].push_back(e);
+  std::sort(out["extensions"].begin(), out["extensions"].end());
+  const nlohmann::json::json_pointer record("/asset/extras/mlfe");
+  if (j.contains(record) && j[record].is_object())
+    for (const char* key : {"encoding", "tolerance_mm"})
+      if (j[record].contains(key)) out["mlfe"][key] = j[record][key];
+  return out;
+}
+
 Eigen::Matrix4d local_matrix(const nlohmann::json& n) {
   Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
   if (n.contains("matrix")) {
@@ -313,14 +326,16 @@ class AccessorView {
   std::size_t count_ = 0, stride_ = 0;
 };
 
-/// The primitive's geometry in the mesh's own frame.
+/// The primitive's geometry in the mesh's own frame; `draco` receives the grid of Draco's
+/// positions (bits 0 for other encodings).
 TriangleMesh primitive_mesh(const std::string& path, const nlohmann::json& j,
                             const std::vector<std::string>& buffers, const nlohmann::json& prim,
-                            const std::string& label) {
+                            const std::string& label, DracoQuantization& draco) {
+  draco = {};
   if (prim.contains("extensions") && prim.at("extensions").contains("KHR_draco_mesh_compression")) {
     const auto& ext = prim.at("extensions").at("KHR_draco_mesh_compression");
     const ViewBytes view = view_bytes(path, j, buffers, ext.at("bufferView").get<std::int64_t>(), label);
-    return decode_draco(reinterpret_cast<const char*>(view.data), view.length, path + ": " + label);
+    return decode_draco(reinterpret_cast<const char*>(view.data), view.length, path + ": " + label, &draco);
   }
   TriangleMesh m;
   const auto& attributes = prim.at("attributes");
@@ -360,11 +375,16 @@ TriangleMesh primitive_mesh(const std::string& path, const nlohmann::json& j,
   return m;
 }
 
-void transform_mesh(TriangleMesh& m, const Eigen::Matrix4d& world) {
-  const Eigen::Matrix3d linear = world.topLeftCorner<3, 3>();
+}  // namespace
+
+void transform_mesh(TriangleMesh& m, const std::array<double, 9>& linear_rows,
+                    const std::array<double, 3>& translation) {
+  const Eigen::Matrix3d linear =
+      Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(linear_rows.data());
   const Eigen::Matrix3d normal_matrix = linear.inverse().transpose();
+  const Eigen::Vector3d shift(translation[0], translation[1], translation[2]);
   for (auto& p : m.positions) {
-    const Eigen::Vector3d q = linear * Eigen::Vector3d(p[0], p[1], p[2]) + world.topRightCorner<3, 1>();
+    const Eigen::Vector3d q = linear * Eigen::Vector3d(p[0], p[1], p[2]) + shift;
     p = {float(q[0]), float(q[1]), float(q[2])};
   }
   for (auto& n : m.normals) {
@@ -378,14 +398,13 @@ void transform_mesh(TriangleMesh& m, const Eigen::Matrix4d& world) {
     for (auto& t : m.triangles) std::swap(t[1], t[2]);
 }
 
-}  // namespace
-
 GltfAsset read_gltf(const std::string& path) {
   const std::string bytes = read_regular_file(path, UINT64_MAX, "the file");
   GltfAsset asset;
   try {
     const nlohmann::json j = parse_json(path, bytes);
     asset.structure = strip_encoding(j);
+    asset.encoding = encoding_of(j);
     // Step 1: buffers (BIN chunk, data: URIs, files next to the asset). The JSON is read here
     // directly: every index and range is checked, so a damaged file cannot make us read
     // outside its buffers.
@@ -404,6 +423,18 @@ GltfAsset read_gltf(const std::string& path) {
             fail(path, "node graph is not a forest");
           parent[std::size_t(c)] = std::int64_t(i);
         }
+    // An MSFT_lod level stands in for the node that lists it, under that node's parent (the
+    // quantized encoding's dequantizing root, for one).
+    for (std::size_t i = 0; i < nn; ++i) {
+      const nlohmann::json& node = nodes.at(i);
+      if (!node.contains("extensions") || !node.at("extensions").contains("MSFT_lod")) continue;
+      for (const auto& id : node.at("extensions").at("MSFT_lod").value("ids", nlohmann::json::array())) {
+        const auto level = id.get<std::int64_t>();
+        if (level < 0 || std::size_t(level) >= nn || std::size_t(level) == i)
+          fail(path, fmt::format("node {}: MSFT_lod id out of range", i));
+        if (parent[std::size_t(level)] == -1) parent[std::size_t(level)] = parent[i];
+      }
+    }
     std::vector<Eigen::Matrix4d> world(nn);
     for (std::size_t i = 0; i < nn; ++i) {
       Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
@@ -432,8 +463,14 @@ GltfAsset read_gltf(const std::string& path) {
         prim.primitive = int(p);
         prim.label = fmt::format("node {} '{}' mesh '{}' primitive {}", i, node.value("name", std::string()),
                                  mesh.value("name", std::string()), p);
-        prim.mesh_data = primitive_mesh(path, j, buffers, primitives.at(p), prim.label);
-        transform_mesh(prim.mesh_data, world[i]);
+        DracoQuantization draco;
+        prim.mesh_data = primitive_mesh(path, j, buffers, primitives.at(p), prim.label, draco);
+        std::array<double, 9> rows;
+        for (int k = 0; k < 9; ++k) rows[std::size_t(k)] = world[i](k / 3, k % 3);
+        transform_mesh(prim.mesh_data, rows, {world[i](0, 3), world[i](1, 3), world[i](2, 3)});
+        // A grid step is a displacement: the largest stretch of the node's linear part bounds it.
+        const Eigen::Matrix3d linear = world[i].topLeftCorner<3, 3>();
+        prim.quantization_step = draco.step() * Eigen::JacobiSVD<Eigen::Matrix3d>(linear).singularValues()(0);
         asset.primitives.push_back(std::move(prim));
       }
     }

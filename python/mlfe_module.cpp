@@ -5,7 +5,9 @@
 // (volumes read, surfaces extracted, hierarchy values) are views of the C++ buffers, kept alive by their
 // owner; a volume passed in is copied once into the grid the library samples. The GIL is released while the
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
+#include <fmt/format.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
 #include <mlfe/formats/volume_formats.h>
@@ -326,21 +328,142 @@ struct PyBuilt {
   nlohmann::json file_info;
 };
 
-// Extracted surfaces (one per iso-value, or the height field) with what writing them needs.
+// ---- Meshes in and out (issue 42): extracted, read from any asset file, or made from arrays ----
+
+// Surfaces with what writing and comparing them needs: the asset (its frame, space, provenance
+// and Draco grid), all surfaces merged (the arrays Python sees) and the tolerance writing uses
+// by default.
 struct PyMesh {
-  std::vector<GltfSurface> surfaces;
-  TriangleMesh merged;  // merged_mesh(surfaces): what the single-mesh formats store
-  std::string space;
-  double default_tolerance = 0;  // a tenth of the smallest voxel spacing
-  nlohmann::json extras;         // provenance for glTF
+  AssetFile asset;
+  TriangleMesh merged;           // merged_mesh(asset.surfaces): what the single-mesh formats store
+  double default_tolerance = 0;  // millimetres
 };
 
-// Writes extracted surfaces as write_assets does (write_asset), with the extraction's default tolerance.
+std::shared_ptr<PyMesh> make_mesh(AssetFile asset, double default_tolerance) {
+  auto m = std::make_shared<PyMesh>();
+  asset.quantization_steps.resize(asset.surfaces.size(), 0.0);
+  m->merged = merged_mesh(asset.surfaces);
+  m->asset = std::move(asset);
+  m->default_tolerance = default_tolerance;
+  return m;
+}
+
+// A file's surfaces; writing them again uses the tolerance they were written with: the one a
+// glTF records, half a Draco file's grid step, else write_asset's default.
+std::shared_ptr<PyMesh> read_mesh_py(const std::string& path) {
+  AssetFile a;
+  {
+    py::gil_scoped_release release;
+    a = read_asset(path);
+  }
+  double tolerance = a.tolerance_mm;
+  if (a.format == "drc") tolerance = a.quantization_steps[0] / 2;
+  return make_mesh(std::move(a), tolerance > 0 ? tolerance : AssetWriteOptions{}.tolerance_mm);
+}
+
+// An (n, 3) array of `T` copied from `h` (any numeric array), named `what` in errors.
+template <class T>
+std::vector<std::array<T, 3>> rows3(const py::handle& h, const char* what) {
+  const auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(h);
+  if (!a || a.ndim() != 2 || a.shape(1) != 3)
+    throw Error(std::string(what) + ": expected an (n, 3) array of numbers");
+  std::vector<std::array<T, 3>> out(std::size_t(a.shape(0)));
+  if (!out.empty()) std::memcpy(out.data(), a.data(), out.size() * sizeof(out[0]));
+  return out;
+}
+
+// Mesh(positions, triangles, normals, name, label, color, iso): one surface in the scan's
+// millimetres, checked as write_asset will need it.
+std::shared_ptr<PyMesh> mesh_from_arrays(const py::object& positions, const py::object& triangles,
+                                         const py::object& normals, const std::string& name,
+                                         const py::object& label, const std::vector<float>& color,
+                                         double iso) {
+  GltfSurface s;
+  s.name = s.node_name = name;
+  s.iso_value = iso;
+  s.mesh.positions = rows3<float>(positions, "positions");
+  for (const auto& p : s.mesh.positions)
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+      throw Error("positions: NaN or infinite coordinates");
+  const py::array t = py::array::ensure(triangles);
+  if (!t || !(t.dtype().kind() == 'i' || t.dtype().kind() == 'u' || t.size() == 0))
+    throw Error("triangles: expected an (m, 3) array of integer vertex indices");
+  for (const auto& tri : rows3<std::int64_t>(t, "triangles")) {
+    for (std::int64_t v : tri)
+      if (v < 0 || std::uint64_t(v) >= s.mesh.positions.size())
+        throw Error(fmt::format("triangles: vertex index {} outside 0..{}", v, s.mesh.positions.size() - 1));
+    s.mesh.triangles.push_back({std::uint32_t(tri[0]), std::uint32_t(tri[1]), std::uint32_t(tri[2])});
+  }
+  if (!normals.is_none()) {
+    s.mesh.normals = rows3<float>(normals, "normals");
+    if (s.mesh.normals.size() != s.mesh.positions.size())
+      throw Error(
+          fmt::format("normals: {} rows for {} positions", s.mesh.normals.size(), s.mesh.positions.size()));
+  }
+  if (color.size() != 3 && color.size() != 4)
+    throw Error("color: expected 3 or 4 numbers (RGB[A] in [0, 1])");
+  for (std::size_t k = 0; k < color.size(); ++k) {
+    if (!(color[k] >= 0.0f && color[k] <= 1.0f)) throw Error("color: expected numbers in [0, 1]");
+    s.color[k] = color[k];
+  }
+  if (!label.is_none()) {
+    if (!py::isinstance<py::int_>(label) || py::isinstance<py::bool_>(label))
+      throw Error("label: expected an integer, got " + std::string(py::str(label.get_type())));
+    s.node_extras = {{"label", label.cast<std::int64_t>()}};
+  }
+  AssetFile a;
+  a.surfaces.push_back(std::move(s));
+  return make_mesh(std::move(a), AssetWriteOptions{}.tolerance_mm);
+}
+
+// The surfaces of several meshes in one (all in the same frame), in order.
+std::shared_ptr<PyMesh> join_meshes(const std::vector<std::shared_ptr<PyMesh>>& parts) {
+  if (parts.empty()) throw Error("meshes: expected at least one Mesh");
+  AssetFile a = parts[0]->asset;
+  a.surfaces.clear();
+  a.quantization_steps.clear();
+  double tolerance = 0;
+  for (const auto& p : parts) {
+    if (p->asset.gltf_frame != a.gltf_frame)
+      throw Error("meshes: some are in glTF's frame and some in the scan's (use to_scan_frame() first)");
+    a.surfaces.insert(a.surfaces.end(), p->asset.surfaces.begin(), p->asset.surfaces.end());
+    a.quantization_steps.insert(a.quantization_steps.end(), p->asset.quantization_steps.begin(),
+                                p->asset.quantization_steps.end());
+    tolerance = std::max(tolerance, p->default_tolerance);
+  }
+  return make_mesh(std::move(a), tolerance);
+}
+
+// Surface `i` alone, with the asset's frame, space and provenance.
+std::shared_ptr<PyMesh> surface_of(const PyMesh& m, std::size_t i) {
+  if (i >= m.asset.surfaces.size()) throw py::index_error("surface index out of range");
+  AssetFile a = m.asset;
+  a.surfaces = {m.asset.surfaces[i]};
+  a.quantization_steps = {m.asset.quantization_steps[i]};
+  return make_mesh(std::move(a), m.default_tolerance);
+}
+
+std::shared_ptr<PyMesh> in_scan_frame(const PyMesh& m) {
+  AssetFile a = m.asset;
+  to_scan_frame(a);
+  return make_mesh(std::move(a), m.default_tolerance);
+}
+
+// Writes the surfaces as write_assets does (write_asset), from the scan's millimetres, with the
+// mesh's default tolerance unless one is given.
 void write_mesh(const PyMesh& m, const std::string& path, bool draco, bool quantize, double tolerance) {
   check_output_path(path, kAssetExtensions);
   if (!(tolerance >= 0)) throw Error("tolerance: expected a value >= 0");
   const double tol = tolerance > 0 ? tolerance : m.default_tolerance;
-  write_asset(m.surfaces, path, {draco, quantize, tol, m.space, m.extras});
+  AssetFile a = m.asset;
+  to_scan_frame(a);
+  write_asset(a.surfaces, path, {draco, quantize, tol, a.space, a.extras});
+}
+
+// A side of mlfe.compare that is not a file pair: a Mesh, or a mesh file read as one.
+AssetFile compared_asset(const py::handle& side) {
+  if (is_path(side)) return read_asset(fspath(side));
+  return side.cast<const PyMesh&>().asset;
 }
 
 // Leaf simplices of `b` as an (m, dim + 1) array of vertex indices.
@@ -717,6 +840,7 @@ CompareOptions compare_options(const py::kwargs& kwargs) {
   kw.get("samples", o.samples);
   kw.get("number_tolerance", o.number_tolerance);
   kw.get("ignore", o.ignore);
+  kw.get("strict", o.strict);
   kw.finish();
   return o;
 }
@@ -724,52 +848,74 @@ CompareOptions compare_options(const py::kwargs& kwargs) {
 py::tuple compare_result(const CompareResult& r) {
   py::list differences;
   for (const auto& d : r.differences) differences.append(py::make_tuple(d.item, d.reason));
-  return py::make_tuple(r.kind, differences, to_python(r.report), r.summary());
+  return py::make_tuple(r.kind, differences, to_python(r.report), r.summary(), r.notes);
 }
 
-// mlfe._mlfe.Mesh: extracted surfaces and their writer.
+// A read-only (n, 3) view of one of the merged mesh's arrays.
+template <class T>
+py::array_t<T> rows_view(const std::shared_ptr<PyMesh>& s, const std::vector<std::array<T, 3>>& rows) {
+  auto a = view<T>(s, rows.empty() ? nullptr : rows[0].data(), {py::ssize_t(rows.size()), 3},
+                   {py::ssize_t(3 * sizeof(T)), py::ssize_t(sizeof(T))});
+  py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+  return a;
+}
+
+// mlfe._mlfe.Mesh: surfaces extracted, read or made from arrays, and their writer.
 void bind_mesh(py::module_& m) {
   py::class_<PyMesh, std::shared_ptr<PyMesh>>(m, "Mesh")
       .def_property_readonly("vertices",
-                             [](std::shared_ptr<PyMesh> s) {
-                               const auto& p = s->merged.positions;
-                               return view<float>(
-                                   s, p.empty() ? nullptr : p[0].data(), {py::ssize_t(p.size()), 3},
-                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
-                             })
+                             [](std::shared_ptr<PyMesh> s) { return rows_view(s, s->merged.positions); })
       .def_property_readonly("normals",
-                             [](std::shared_ptr<PyMesh> s) {
-                               const auto& n = s->merged.normals;
-                               return view<float>(
-                                   s, n.empty() ? nullptr : n[0].data(), {py::ssize_t(n.size()), 3},
-                                   {py::ssize_t(3 * sizeof(float)), py::ssize_t(sizeof(float))});
-                             })
-      .def_property_readonly(
-          "triangles",
-          [](std::shared_ptr<PyMesh> s) {
-            const auto& t = s->merged.triangles;
-            return view<std::uint32_t>(
-                s, t.empty() ? nullptr : t[0].data(), {py::ssize_t(t.size()), 3},
-                {py::ssize_t(3 * sizeof(std::uint32_t)), py::ssize_t(sizeof(std::uint32_t))});
-          })
+                             [](std::shared_ptr<PyMesh> s) { return rows_view(s, s->merged.normals); })
+      .def_property_readonly("triangles",
+                             [](std::shared_ptr<PyMesh> s) { return rows_view(s, s->merged.triangles); })
       .def_property_readonly("iso",
                              [](const PyMesh& s) {
                                std::vector<double> v;
-                               for (const auto& x : s.surfaces) v.push_back(x.iso_value);
+                               for (const auto& x : s.asset.surfaces) v.push_back(x.iso_value);
                                return v;
                              })
       .def_property_readonly("surface_triangles",
                              [](const PyMesh& s) {
                                std::vector<std::size_t> v;
-                               for (const auto& x : s.surfaces) v.push_back(x.mesh.triangles.size());
+                               for (const auto& x : s.asset.surfaces) v.push_back(x.mesh.triangles.size());
                                return v;
                              })
-      .def_property_readonly("space", [](const PyMesh& s) { return s.space; })
+      .def_property_readonly("names",
+                             [](const PyMesh& s) {
+                               std::vector<std::string> v;
+                               for (const auto& x : s.asset.surfaces)
+                                 v.push_back(x.node_name.empty() ? x.name : x.node_name);
+                               return v;
+                             })
+      .def_property_readonly("colors",
+                             [](const PyMesh& s) {
+                               std::vector<std::array<float, 4>> v;
+                               for (const auto& x : s.asset.surfaces) v.push_back(x.color);
+                               return v;
+                             })
+      .def_property_readonly("node_extras",
+                             [](const PyMesh& s) {
+                               nlohmann::json v = nlohmann::json::array();
+                               for (const auto& x : s.asset.surfaces) v.push_back(x.node_extras);
+                               return to_python(v);
+                             })
+      .def_property_readonly("quantization_steps", [](const PyMesh& s) { return s.asset.quantization_steps; })
+      .def_property_readonly("gltf_frame", [](const PyMesh& s) { return s.asset.gltf_frame; })
+      .def_property_readonly("format", [](const PyMesh& s) { return s.asset.format; })
+      .def_property_readonly("extras", [](const PyMesh& s) { return to_python(s.asset.extras); })
+      .def_property_readonly("space", [](const PyMesh& s) { return s.asset.space; })
+      .def_property_readonly("size", [](const PyMesh& s) { return s.asset.surfaces.size(); })
+      .def("surface", &surface_of)
+      .def("to_scan_frame", &in_scan_frame)
       .def("write",
            [](const PyMesh& s, const std::string& path, bool draco, bool quantize, double tolerance) {
              py::gil_scoped_release release;
              write_mesh(s, path, draco, quantize, tolerance);
            });
+  m.def("read_mesh", &read_mesh_py, py::arg("path"));
+  m.def("make_mesh", &mesh_from_arrays);
+  m.def("join_meshes", &join_meshes);
 }
 
 // mlfe._mlfe.Hierarchy: a built or loaded approximation.
@@ -827,22 +973,21 @@ void bind_hierarchy(py::module_& m) {
              AssetOptions o = asset_options(kw);
              kw.finish();
              o.iso = iso;
-             auto mesh = std::make_shared<PyMesh>();
              Surfaces s = with_progress(progress, [&](const Progress& p) {
                o.progress = p;
                return extract(*b.built, o, b.grid.get());
              });
-             mesh->extras = {{"input", b.source},
-                             {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
-                             {"iso_values", s.iso_values},
-                             {"normals", pipeline::enum_name(s.normals)}};
-             mesh->surfaces = std::move(s.surfaces);
-             mesh->merged = merged_mesh(mesh->surfaces);
-             mesh->space = b.built->space;
+             AssetFile a;
+             a.extras = {{"input", b.source},
+                         {"tool", std::string("mlfe ") + MLFE_VERSION + " (python)"},
+                         {"iso_values", s.iso_values},
+                         {"normals", pipeline::enum_name(s.normals)}};
+             a.surfaces = std::move(s.surfaces);
+             a.space = b.built->space;
              const auto& sp = b.built->transform.spacing;
-             mesh->default_tolerance =
-                 (b.built->dim() == 2 ? std::min(sp[0], sp[1]) : std::min({sp[0], sp[1], sp[2]})) / 10.0;
-             return mesh;
+             return make_mesh(
+                 std::move(a),
+                 (b.built->dim() == 2 ? std::min(sp[0], sp[1]) : std::min({sp[0], sp[1], sp[2]})) / 10.0);
            })
       .def("write",
            [](const PyBuilt& b, const std::string& path, const std::vector<double>& iso,
@@ -941,12 +1086,14 @@ void bind_calls(py::module_& m) {
     }
     return compare_result(r);
   });
-  m.def("compare_meshes", [](const PyMesh& expected, const PyMesh& actual, const py::kwargs& kw) {
+  // A Mesh against a Mesh or a mesh file (compare_assets).
+  m.def("compare_meshes", [](const py::object& expected, const py::object& actual, const py::kwargs& kw) {
     const CompareOptions o = compare_options(kw);
+    AssetFile e = compared_asset(expected), a = compared_asset(actual);
     CompareResult r;
     {
       py::gil_scoped_release release;
-      r = compare_meshes(expected.merged, actual.merged, o);
+      r = compare_assets(std::move(e), std::move(a), o);
     }
     return compare_result(r);
   });

@@ -37,15 +37,15 @@ void run_compare(CompareArgs& a) {
     o.count_tolerance_percent = pipeline::parse_percent(a.count_tolerance, "count_tolerance");
   check_distinct_files({{"EXPECTED", a.expected}, {"ACTUAL", a.actual}}, {{"--report", a.report}});
   const CompareResult r = pipeline::compare(a.expected, a.actual, o, a.report);
-  if (r.equal()) {
-    if (!a.quiet) fmt::print("equal ({})\n", r.kind);
-    return;
-  }
   if (!a.quiet) {
-    fmt::print("different ({}): {} vs {}\n", r.kind, a.expected, a.actual);
+    if (r.equal())
+      fmt::print("equal ({})\n", r.kind);
+    else
+      fmt::print("different ({}): {} vs {}\n", r.kind, a.expected, a.actual);
     for (const Difference& d : r.differences) fmt::print("  {}: {}\n", d.item, d.reason);
+    for (const std::string& n : r.notes) fmt::print("  note: {}\n", n);
   }
-  command_exit_status() = 1;
+  if (!r.equal()) command_exit_status() = 1;
 }
 
 void add_compare_command(CLI::App& app) {
@@ -84,6 +84,9 @@ void add_compare_command(CLI::App& app) {
   cmd->add_option(
       "--ignore", args->options.ignore,
       "JSON pointer not compared (glTF structure, hierarchy metadata), e.g. /asset/generator; repeatable");
+  cmd->add_flag("--strict", args->options.strict,
+                "also compare provenance (input, generator, tool, timings) and the encoding (Draco or not, "
+                "quantization, file format); by default only the content is compared");
   cmd->add_option("--report", args->report, "write every figure and difference as JSON");
   cmd->add_flag("--quiet", args->quiet, "print nothing; the exit status says it");
   cmd->callback([args] { run_compare(*args); });

@@ -61,6 +61,8 @@ __all__ = [
     "info",
     "load",
     "read_image",
+    "read_mesh",
+    "read_meshes",
     "read_volume",
     "render",
     "__version__",
@@ -271,27 +273,60 @@ def _volume_args(volume, spacing, origin, direction, affine, space):
 
 # ---------------------------------------------------------------------------------------------
 class Mesh:
-    """Extracted iso-surfaces in physical millimetres: ``vertices`` float32 (n, 3), ``normals``
-    float32 (n, 3) (or (0, 3)), ``triangles`` uint32 (m, 3) counter-clockwise seen from the
-    normals' side; all surfaces merged, ``iso`` and ``surface_triangles`` per surface. The
-    arrays are read-only views of the library's buffers."""
+    """Triangle surfaces: extracted (:meth:`Hierarchy.extract`), read from an asset file
+    (:func:`read_mesh`) or made from arrays, ``Mesh(positions, triangles, normals=None,
+    name="", label=None, color=None, iso=0.0)``.
+
+    ``positions`` float32 (n, 3), ``normals`` float32 (n, 3) (or (0, 3) without normals) and
+    ``triangles`` uint32 (m, 3), counter-clockwise seen from the normals' side: every surface
+    merged, as read-only views of the library's buffers (``vertices`` is ``positions``).
+    Per surface, in order: ``names``, ``labels`` (a label map's label values, else None),
+    ``colors`` (linear RGBA in [0, 1]), ``iso`` (0.0 where none is recorded),
+    ``surface_triangles``, ``quantization_steps``
+    (Draco's position grid step read from the file, 0 without Draco); :attr:`surfaces` gives them
+    as one-surface meshes and ``name``/``label``/``color`` are those of a one-surface mesh.
+
+    Units and axes (``frame``): ``"scan"`` is the scan's physical millimetres in its anatomical
+    ``space`` (extracted meshes, arrays, and .drc/.ply/.obj/.stl/.off files); ``"gltf"`` is
+    glTF's metres and axes as a .glb/.gltf stores them (+Y superior, +Z anterior, -X the
+    patient's right). :meth:`to_scan_frame` undoes the glTF writer's map (the matrix mlfe records
+    in the file; RAS's for other glTF files).
+    """
 
     __slots__ = ("_m",)
 
-    def __init__(self, core):
-        self._m = core
+    def __init__(self, positions, triangles, normals=None, *, name="", label=None, color=(0.8, 0.8, 0.8, 1.0),
+                 iso=0.0):
+        self._m = _mlfe.make_mesh(positions, triangles, normals, str(name), label,
+                                  _numbers("color", color, (3, 4)), float(iso))
 
-    @property
-    def vertices(self):
-        return self._m.vertices
+    @classmethod
+    def _wrap(cls, core):
+        mesh = cls.__new__(cls)
+        mesh._m = core
+        return mesh
 
-    @property
-    def normals(self):
-        return self._m.normals
+    @classmethod
+    def join(cls, meshes):
+        """One mesh holding the surfaces of ``meshes`` in order (all in the same frame): what a
+        multi-node .glb is written from."""
+        meshes = list(meshes)
+        for m in meshes:
+            if not isinstance(m, Mesh):
+                raise Error("meshes: expected Mesh objects, got %s" % type(m).__name__)
+        return cls._wrap(_mlfe.join_meshes([m._m for m in meshes]))
 
-    @property
-    def triangles(self):
-        return self._m.triangles
+    positions = property(lambda self: self._m.vertices, doc="float32 (n, 3), every surface merged")
+    vertices = positions
+    normals = property(lambda self: self._m.normals, doc="float32 (n, 3), or (0, 3) without normals")
+    triangles = property(lambda self: self._m.triangles, doc="uint32 (m, 3) indices into positions")
+    frame = property(lambda self: "gltf" if self._m.gltf_frame else "scan",
+                     doc="'gltf' (metres, glTF's axes) or 'scan' (millimetres in space)")
+    units = property(lambda self: "m" if self._m.gltf_frame else "mm")
+    space = property(lambda self: self._m.space, doc="'RAS', 'LPS' or '' of the scan frame")
+    format = property(lambda self: self._m.format,
+                      doc="the file's encoding ('glb', 'gltf', 'drc', 'ply', 'obj', 'stl', 'off'), '' if not read")
+    extras = property(lambda self: self._m.extras, doc="the provenance a glTF records (asset.extras), else {}")
 
     @property
     def iso(self):
@@ -302,21 +337,81 @@ class Mesh:
         return list(self._m.surface_triangles)
 
     @property
-    def space(self):
-        return self._m.space
+    def names(self):
+        return list(self._m.names)
+
+    @property
+    def labels(self):
+        return [e.get("label") if isinstance(e, dict) else None for e in self._m.node_extras]
+
+    @property
+    def colors(self):
+        # float32 in the library: their shortest spelling, 0.93 rather than 0.9300000071525574
+        return [tuple(float(str(np.float32(x))) for x in c) for c in self._m.colors]
+
+    @property
+    def quantization_steps(self):
+        return list(self._m.quantization_steps)
+
+    @property
+    def surfaces(self):
+        """The surfaces as one-surface meshes (glTF: one per node), in order."""
+        return [Mesh._wrap(self._m.surface(i)) for i in range(self._m.size)]
+
+    def _single(self, values):
+        return values[0] if len(values) == 1 else None
+
+    name = property(lambda self: self._single(self.names), doc="the only surface's name (None for several)")
+    label = property(lambda self: self._single(self.labels), doc="the only surface's label, or None")
+    color = property(lambda self: self._single(self.colors), doc="the only surface's RGBA, or None")
+
+    def to_scan_frame(self):
+        """The same surfaces in the scan's millimetres (a copy; ``self`` when already there)."""
+        return Mesh._wrap(self._m.to_scan_frame()) if self._m.gltf_frame else self
 
     def write(self, path, *, draco=True, quantize=False, tolerance=0.0):
-        """Writes the surfaces by extension: .glb/.gltf (one node per surface; Draco unless
-        ``draco=False``, ``quantize`` for KHR_mesh_quantization), .drc, .ply, .obj, .stl, .off
-        (one merged mesh). ``tolerance``: millimetres for Draco/quantization (0: a tenth of the
-        smallest voxel spacing). Atomic: nothing is left behind on error."""
+        """Writes the surfaces by extension, as ``mlfe convert`` writes them: .glb/.gltf (one node
+        per surface with its name, colour and label; Draco unless ``draco=False``, ``quantize``
+        for KHR_mesh_quantization), .drc, .ply, .obj, .stl, .off (one merged mesh). A glTF-frame
+        mesh goes back to the scan frame first, so every format gets what the command line
+        writes. ``tolerance``: millimetres for Draco/quantization (0: the mesh's own: a tenth of
+        the smallest voxel spacing for extracted surfaces, the tolerance a read glTF records or
+        half a read .drc's grid step, else 0.01). Atomic: nothing is left behind on error."""
         self._m.write(os.fspath(path), bool(draco), bool(quantize), float(tolerance))
 
     def __len__(self):
         return len(self._m.triangles)
 
     def __repr__(self):
-        return "mlfe.Mesh(vertices=%d, triangles=%d, iso=%s)" % (len(self.vertices), len(self.triangles), self.iso)
+        # Names that say more than the writer's default "iso <value>".
+        names = self.names
+        if all(not n or n == "iso %g" % v for n, v in zip(names, self.iso)):
+            names = []
+        return "mlfe.Mesh(vertices=%d, triangles=%d, iso=%s%s%s)" % (
+            len(self.positions), len(self.triangles), self.iso, ", names=%s" % names if names else "",
+            ", frame='gltf' (metres)" if self._m.gltf_frame else "")
+
+
+def read_mesh(path):
+    """Reads every asset format mlfe writes (.glb/.gltf with or without Draco, .drc, .ply, .obj,
+    .stl, .off; the kind from the file's contents) as one :class:`Mesh` holding all its surfaces
+    (glTF: one per node, with names, colours and labels; MSFT_lod levels are kept for
+    :meth:`Mesh.write`, not in the arrays). glTF stays in
+    glTF's metres and axes (``frame == 'gltf'``, see :meth:`Mesh.to_scan_frame`); the other formats
+    are the scan's millimetres. :func:`read_meshes` gives the surfaces by name."""
+    return Mesh._wrap(_mlfe.read_mesh(os.fspath(path)))
+
+
+def read_meshes(path):
+    """The surfaces of :func:`read_mesh` as a dict name → one-surface :class:`Mesh`, in file
+    order; an empty or repeated name is made unique as ``'<name> #<position>'`` (from 1)."""
+    out = {}
+    for i, mesh in enumerate(read_mesh(path).surfaces, 1):
+        key = mesh.name
+        if not key or key in out:
+            key = "%s #%d" % (key, i) if key else "#%d" % i
+        out[key] = mesh
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -415,7 +510,7 @@ class Hierarchy:
         isos = _iso_values(iso)
         if isos is None and self.dim == 3:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
-        return Mesh(self._h.extract(isos or [], progress, **options))
+        return Mesh._wrap(self._h.extract(isos or [], progress, **options))
 
     def write(self, path, *, iso=None, progress=None, **options):
         """Extracts and writes the surfaces to ``path`` by extension, as ``mlfe iso``; returns
@@ -512,14 +607,17 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
 class CompareResult:
     """What :func:`compare` found: ``equal`` (also the truth value), ``kind`` ("mesh", "gltf",
     "image", "volume", "hierarchy" or "mismatch"), ``differences`` as (item, reason) pairs
-    (empty when equal within the tolerances) and ``report``, every measured figure."""
+    (empty when equal within the tolerances), ``notes`` (how the comparison was adjusted: a
+    tolerance widened to Draco's quantization step, provenance not compared) and ``report``,
+    every measured figure."""
 
-    __slots__ = ("kind", "differences", "report", "_summary")
+    __slots__ = ("kind", "differences", "report", "notes", "_summary")
 
-    def __init__(self, kind, differences, report, summary):
+    def __init__(self, kind, differences, report, summary, notes=()):
         self.kind = kind
         self.differences = [tuple(d) for d in differences]
         self.report = report
+        self.notes = list(notes)
         self._summary = summary
 
     @property
@@ -541,22 +639,28 @@ class CompareResult:
 
 def compare(expected, actual, **options):
     """Compares two outputs by content, as ``mlfe compare EXPECTED ACTUAL``: files (meshes,
-    glTF, EXR/PNG images, volumes, hierarchies; the kind from their contents) or two
-    :class:`Mesh` objects. Returns a :class:`CompareResult`. Options (the command line's):
-    tolerance (meshes: Hausdorff distance in the files' units, glTF metres), mean_tolerance,
-    count_tolerance ('2%' or a number of percent), normal_angle (degrees), samples, image_max,
-    psnr, value_max, value_rms, number_tolerance, ignore (JSON pointers, e.g.
-    ['/asset/extras/tool'])."""
+    glTF, EXR/PNG images, volumes, hierarchies; the kind from their contents) or meshes, any mix
+    of mesh files and :class:`Mesh` objects. Returns a :class:`CompareResult`.
+
+    Geometry, not provenance: the input's name, the generator and tool, timings and the encoding
+    (Draco or not, quantization, file format) are not compared unless ``strict=True``; a Draco
+    side widens the tolerances to its quantization step (read from the file; ``notes`` says so).
+    Meshes in different frames (a .glb against a :class:`Mesh` in millimetres or a .ply) are
+    compared in the scan's millimetres, so the tolerance is then in millimetres.
+
+    Options (the command line's): tolerance (meshes: Hausdorff distance in the meshes' units,
+    glTF metres), mean_tolerance, count_tolerance ('2%' or a number of percent), normal_angle
+    (degrees), samples, image_max, psnr, value_max, value_rms, number_tolerance, ignore (JSON
+    pointers, e.g. ['/asset/extras/note']), strict."""
     if "ignore" in options:
         ignore = options["ignore"]
         options["ignore"] = [ignore] if isinstance(ignore, str) else list(ignore)
-    if isinstance(expected, Mesh) or isinstance(actual, Mesh):
-        if not (isinstance(expected, Mesh) and isinstance(actual, Mesh)):
-            raise Error("compare: a Mesh is compared with a Mesh (write it to compare with a file)")
-        return CompareResult(*_mlfe.compare_meshes(expected._m, actual._m, **options))
     for name, value in (("expected", expected), ("actual", actual)):
-        if _fspath(value) is None:
+        if not isinstance(value, Mesh) and _fspath(value) is None:
             raise Error("%s: expected a file path or a Mesh, got %s" % (name, type(value).__name__))
+    if isinstance(expected, Mesh) or isinstance(actual, Mesh):
+        sides = [m._m if isinstance(m, Mesh) else os.fspath(m) for m in (expected, actual)]
+        return CompareResult(*_mlfe.compare_meshes(*sides, **options))
     return CompareResult(*_mlfe.compare_files(os.fspath(expected), os.fspath(actual), **options))
 
 

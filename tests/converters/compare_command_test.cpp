@@ -92,5 +92,29 @@ TEST(GoldenCompare, SkullGlbMatchesCheckedInGlb) {
   EXPECT_EQ(diff.status, 1) << diff.out;
 }
 
+// Issue 42: the golden .glb (Draco) against a --no-draco conversion of the same input, with no
+// --ignore: equal, the tolerance widened to the golden file's quantization step (a note says
+// so); --strict compares the encoding and the provenance and finds them different.
+TEST(GoldenCompare, DracoGoldenEqualsItsNoDracoTwinUnlessStrict) {
+  const std::string plain = test::scratch_dir() + "/skull_plain.glb";
+  const std::string golden = kGolden + "/ct_skull_iso2.5_3000.glb";
+  const CliRun conv = mlfe_run("convert " + kSkull +
+                               " --iso 2.5 --max-vertices 3000 --simplify 0 --no-draco --quiet -o " + plain);
+  ASSERT_EQ(conv.status, 0) << conv.err;
+  const CliRun cmp = mlfe_run("compare " + golden + " " + plain);
+  EXPECT_EQ(cmp.status, 0) << cmp.out << cmp.err;
+  EXPECT_NE(cmp.out.find("note: node 0 'iso 2.5' mesh 'iso 2.5' primitive 0: tolerance"), std::string::npos)
+      << cmp.out;
+  EXPECT_NE(cmp.out.find("widened to"), std::string::npos) << cmp.out;
+  const CliRun strict = mlfe_run("compare --strict " + golden + " " + plain);
+  EXPECT_EQ(strict.status, 1) << strict.out << strict.err;
+  EXPECT_NE(strict.out.find("encoding /mlfe/encoding: \"draco\" in EXPECTED, \"float\" in ACTUAL"),
+            std::string::npos)
+      << strict.out;
+  // A .ply of the conversion is the same geometry in the scan's millimetres.
+  const CliRun ply = mlfe_run("compare " + golden + " " + kGolden + "/ct_skull_iso2.5_3000.ply");
+  EXPECT_EQ(ply.status, 0) << ply.out << ply.err;
+}
+
 }  // namespace
 }  // namespace mlfe

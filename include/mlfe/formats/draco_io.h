@@ -62,18 +62,31 @@ DracoEncoding encode_draco_verified(TriangleMesh&& mesh, const DracoOptions& opt
 /// encode_draco_verified(mesh, options).bytes.
 std::vector<char> encode_draco(const TriangleMesh& mesh, const DracoOptions& options);
 
+/// The grid a Draco payload quantized its positions on, as the payload states it: 2^bits - 1
+/// steps of range / (2^bits - 1) per axis from `min`.
+struct DracoQuantization {
+  int bits = 0;  ///< 0: positions stored as they are (not quantized)
+  std::array<float, 3> min{0.0f, 0.0f, 0.0f};
+  float range = 0.0f;
+  /// The grid step in the positions' units, 0 when not quantized. A decoded coordinate lies
+  /// within step() / 2 of the encoder's input.
+  double step() const;
+};
+
 /// Decodes a Draco mesh. Normals are returned when the payload has a 3-component NORMAL
-/// attribute. Throws mlfe::Error("<what_for_errors>: ...") for truncated or corrupt data, point
-/// clouds, missing positions or indices out of range; never reads outside [data, data+size).
-TriangleMesh decode_draco(const char* data, std::size_t size, const std::string& what_for_errors);
+/// attribute. `quantization` (optional) receives the positions' grid. Throws
+/// mlfe::Error("<what_for_errors>: ...") for truncated or corrupt data, point clouds, missing
+/// positions or indices out of range; never reads outside [data, data+size).
+TriangleMesh decode_draco(const char* data, std::size_t size, const std::string& what_for_errors,
+                          DracoQuantization* quantization = nullptr);
 
 /// Writes encode_draco(mesh, options) to `path` atomically (no file is left on failure).
 /// Errors are mlfe::Error prefixed with `path`.
 /// `mesh` is taken by value: a temporary is consumed rather than copied (as the && overload).
 void write_draco_file(const std::string& path, TriangleMesh mesh, const DracoOptions& options);
 
-/// Reads a .drc file written by write_draco_file or draco_encoder. Throws mlfe::Error on
-/// unreadable or corrupt files.
-TriangleMesh read_draco_file(const std::string& path);
+/// Reads a .drc file written by write_draco_file or draco_encoder; `quantization` as in
+/// decode_draco. Throws mlfe::Error on unreadable or corrupt files.
+TriangleMesh read_draco_file(const std::string& path, DracoQuantization* quantization = nullptr);
 
 }  // namespace mlfe

@@ -5,6 +5,7 @@
 #pragma once
 #include <mlfe/core/surface/triangle_mesh.h>
 
+#include <array>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -16,6 +17,9 @@ struct GltfPrimitive {
   std::string label;  ///< "node <i> '<node name>' mesh '<mesh name>' primitive <p>"
   int node = -1, mesh = -1, primitive = -1;
   TriangleMesh mesh_data;  ///< positions and normals transformed by the node's world matrix
+  /// The grid step of Draco-quantized positions (DracoQuantization::step) in world units (times
+  /// the node's largest scale); 0 when the primitive is not Draco-compressed.
+  double quantization_step = 0.0;
 };
 
 struct GltfAsset {
@@ -28,6 +32,10 @@ struct GltfAsset {
   /// EXT_meshopt_compression (in extensionsUsed/Required too). What remains is the scene graph,
   /// names, materials, other extensions and extras.
   nlohmann::json structure;
+  /// How the geometry is stored, the part of the JSON that `structure` leaves out but which is
+  /// not data: {"extensions": the compression extensions used, sorted; "mlfe": asset.extras.mlfe's
+  /// encoding and tolerance_mm when present}.
+  nlohmann::json encoding;
 };
 
 /// Reads a .glb or .gltf file (by magic bytes: "glTF" is binary, anything else JSON).
@@ -37,5 +45,12 @@ struct GltfAsset {
 /// JSON, buffers or accessors outside their data, indices out of range, sparse accessors,
 /// buffer URIs that leave the asset's folder and Draco payloads that do not decode.
 GltfAsset read_gltf(const std::string& path);
+
+/// Moves `mesh` by x -> linear * x + translation (`linear` row-major, invertible): positions
+/// mapped, normals through the inverse transpose and renormalized, and the winding flipped when
+/// the map mirrors (det < 0), so triangles stay counter-clockwise seen from their normals' side.
+/// How read_gltf applies node transforms, and read_asset's to_scan_frame.
+void transform_mesh(TriangleMesh& mesh, const std::array<double, 9>& linear,
+                    const std::array<double, 3>& translation = {0.0, 0.0, 0.0});
 
 }  // namespace mlfe

@@ -20,9 +20,15 @@
 //   const mlfe::CompareResult r = mlfe::compare_files("golden/skull.glb", "out/skull.glb", opt);
 //   EXPECT_TRUE(r.equal()) << r.summary();
 //
+// By default the comparison judges content, not provenance: the input's name, the generator and
+// tool, timings and the encoding (Draco or not, quantization, the tolerance written) are not
+// compared; CompareOptions::strict compares them too. A Draco-compressed side widens the
+// distance tolerances by its quantization step, read from the file, and says so in `notes`.
+//
 // Results depend only on the files and the options (never on the thread count).
 #pragma once
 #include <mlfe/core/surface/triangle_mesh.h>
+#include <mlfe/formats/asset_reader.h>
 
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -63,7 +69,17 @@ struct CompareOptions {
   /// JSON pointers (glTF structure, hierarchy metadata; e.g. "/asset/generator",
   /// "/asset/extras/mlfe/version") whose subtrees are not compared.
   std::vector<std::string> ignore;
+  /// Compare provenance too (see is_provenance) and the glTF encoding (compression extensions,
+  /// asset.extras.mlfe's encoding and tolerance_mm) and, for other meshes, the file format.
+  bool strict = false;
 };
+
+/// Whether the JSON pointer names provenance, which only strict comparisons compare: the glTF
+/// generator and tool (/asset/generator, /asset/extras/tool), the input (/asset/extras/input;
+/// /input and /tool of hierarchy metadata), the tolerance write_asset records
+/// (/asset/extras/tolerance_mm) and timings anywhere (a key "seconds", "timings" or ending in
+/// "_seconds").
+bool is_provenance(const std::string& pointer);
 
 struct Difference {
   std::string item;    ///< what differs: "triangle count", "node 0 'iso 80' ... : Hausdorff", ...
@@ -74,6 +90,9 @@ struct CompareResult {
   std::string kind;                     ///< "mesh", "gltf", "image", "volume", "hierarchy" or "mismatch"
   std::vector<Difference> differences;  ///< empty when equal within the tolerances
   nlohmann::json report;                ///< every measured figure, also for equal files
+  /// How the comparison was adjusted, one line each for people (a tolerance widened by Draco's
+  /// quantization, provenance differences not compared); empty when nothing was.
+  std::vector<std::string> notes;
 
   bool equal() const { return differences.empty(); }
   /// "equal" or one line per difference, "item: reason".
@@ -81,7 +100,11 @@ struct CompareResult {
 };
 
 /// Compares EXPECTED with ACTUAL by content, as described above; the kind comes from the
-/// files' magic bytes and extensions. Two files of different kinds give one difference.
+/// files' magic bytes and extensions. Two files of different kinds give one difference; two
+/// meshes of which not both are glTF are compared by compare_assets. Mesh tolerances
+/// (Hausdorff, bounding box and mean) widen to at least the sum of the two sides' Draco
+/// quantization steps (a decoded coordinate lies within half a step of the encoder's input,
+/// a point within sqrt(3)/2 steps), per glTF primitive or file, and the notes say so.
 /// Throws mlfe::Error ("<path>: <problem>") when a file cannot be read or decoded, and
 /// pipeline::OptionError (a usage error, <mlfe/pipeline.h>) for a negative or non-finite
 /// tolerance, angle or figure, before reading.
@@ -95,6 +118,15 @@ CompareResult compare_files(const std::string& expected, const std::string& actu
 /// checked as compare_files checks them.
 CompareResult compare_meshes(const TriangleMesh& expected, const TriangleMesh& actual,
                              const CompareOptions& options = {}, const std::string& label = "");
+
+/// The mesh comparison of two assets, files read with read_asset or meshes made in memory (the
+/// Python module's Mesh): surface by surface when both hold several, with distinct names, and
+/// the same names (label maps: names on either side), else all surfaces merged. Both in glTF's
+/// frame when both are, else both in the scan's millimetres (to_scan_frame), so a .glb and a
+/// .ply of one conversion compare equal. Each side's Draco quantization step widens the
+/// tolerances (see compare_files). In strict mode, a different `format` is a difference. Checks
+/// the options as compare_files does.
+CompareResult compare_assets(AssetFile expected, AssetFile actual, const CompareOptions& options = {});
 
 /// Writes result.report plus the differences as JSON (atomically). Throws mlfe::Error on I/O
 /// failure.
