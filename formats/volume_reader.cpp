@@ -216,14 +216,8 @@ VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& o
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.opts = opts;
-  if (!reads_in_windows(path, opts)) {
-    m.whole = read_volume(path, opts);
-    // The frame without the values: they are held once, in `whole`.
-    std::vector<float> values = std::move(m.whole.values);
-    m.frame = m.whole;
-    m.whole.values = std::move(values);
-    return;
-  }
+  // The header is read once: the layout found here is both the test (reads_in_windows) and
+  // the one used.
   as_read_of(path, [&] {
     if (is_zarr_store(path)) {
       m.zarr.emplace(path, opts.zarr_level);
@@ -232,14 +226,22 @@ VolumeWindows::VolumeWindows(const std::string& path, const VolumeReadOptions& o
       m.frame.source_type = m.zarr->type();
       m.frame.notes = m.zarr->notes();
       m.frame.format = "zarr";
-    } else {
-      const VolumeFormatRow* row = layout_row(path, opts);
+    } else if (const VolumeFormatRow* row = layout_row(path, opts)) {
       m.raw = row->layout(path, opts);
-      MLFE_CHECK(m.raw.has_value());
-      m.frame = m.raw->frame;
-      m.frame.format = row->name;
+      if (m.raw) {
+        m.frame = m.raw->frame;
+        m.frame.format = row->name;
+      }
     }
   });
+  if (!m.zarr && !m.raw) {
+    m.whole = read_volume(path, opts);
+    // The frame without the values: they are held once, in `whole`.
+    std::vector<float> values = std::move(m.whole.values);
+    m.frame = m.whole;
+    m.whole.values = std::move(values);
+    return;
+  }
   m.frame.source = path;
   if (m.frame.dims[2] == 1) m.frame.dim = 2;
   check_transform(m.frame);
