@@ -593,8 +593,8 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     simplify, ratio, simplifier, snap, min_component, normals_toward_higher, normals, placement,
     z_scale, level, surface ('auto', 'samples': marching cubes on the volume's samples,
     'hierarchy': marching tetrahedra on the hierarchy), bricks (extract and simplify in bricks of
-    this many samples, a power of two; a raw or OME-Zarr file with no hierarchy= is then read
-    brick by brick). ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
+    this many samples, a power of two; a raw, NIfTI, NRRD, MetaImage or OME-Zarr file
+    with no hierarchy= is then read brick by brick). ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
     ``labels=True`` (or a list, or '3,7-9'): the volume is a label map; one closed, named
     surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)

@@ -6,7 +6,7 @@ simplified on the workers, the seams and the writing on the client, the command 
     client = distributed.Client("tcp://scheduler:8786")           # or any running scheduler
     mlfe.distributed.convert("/shared/big.zarr", "big.glb", client=client, iso=80)
 
-- What runs where: the client opens the volume (a raw volume's or OME-Zarr store's header only),
+- What runs where: the client opens the volume (its header only, for the formats read box by box),
   resolves and checks the options as ``mlfe convert`` does (a bad keyword raises here, before
   any task) and sends groups of bricks to the workers; each task opens the volume itself, reads
   and simplifies its bricks and returns their meshes as bytes; the client joins them in brick
@@ -15,11 +15,12 @@ simplified on the workers, the seams and the writing on the client, the command 
   file system); only the client writes, so the output folder need only exist there. Workers
   need this package (the same version) importable.
 - Bricks: ``bricks=N`` (a power of two), or by default the command line's auto rule: 128-sample
-  bricks for a raw or OME-Zarr volume over 2^27 samples. With options under which ``mlfe
+  bricks for a volume read box by box over 2^27 samples. With options under which ``mlfe
   convert`` reads the volume whole (a smaller volume with auto bricks, LODs, ``level``,
   ``min_component``, a global target) there is nothing to distribute: it raises (use
-  :func:`mlfe.convert`). Raw volumes and OME-Zarr stores are read brick by brick; any other
-  format is read whole by each task, so it gets one task per worker thread.
+  :func:`mlfe.convert`). Raw, NIfTI, NRRD, MetaImage files and OME-Zarr stores are read
+  brick by brick (NRRD's bzip2, ascii and hex encodings excepted); any other volume is read whole
+  by each task, so it gets one task per worker thread.
 - Errors: a worker's error raises on the client as the same :class:`mlfe.Error` with the same
   message as the local call; no output is written.
 - Progress: ``progress(fraction, stage)`` as in :func:`mlfe.convert`, the fraction counting the
