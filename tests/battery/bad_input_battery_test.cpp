@@ -433,6 +433,16 @@ std::vector<Case> battery() {
        1,
        "t\\.txt is also an input \\(--label-table\\)",
        {"o.glb"}},
+      {"labels_report_is_the_mricron_colours",
+       [](const std::string& d) {
+         write_bytes(d + "/lab.nrrd", two_label_nrrd());
+         write_bytes(d + "/t.txt", "1 one\n2 two\n");
+         write_bytes(d + "/t.lut", std::string(768, '\7'));
+       },
+       "convert lab.nrrd --labels --label-table t.txt -o o.glb --report t.lut",
+       1,
+       "t\\.lut is also an input \\(--label-table t\\.txt reads it\\)",
+       {"o.glb"}},
       {"labels_report_is_the_table_beside_the_volume",
        [](const std::string& d) {
          write_bytes(d + "/lab.nrrd", two_label_nrrd());

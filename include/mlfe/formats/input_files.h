@@ -9,10 +9,10 @@ namespace mlfe {
 /// Every file a read of `path` opens: `path` first, then the files beside it that its reader
 /// reads too, as the reader finds them: a raw volume's .json sidecar, a detached NRRD's data
 /// files, the other half of a NIfTI/Analyze .hdr/.img pair, a MetaImage's ElementDataFile, the
-/// buffer files of a .gltf/.glb. Only `path` when nothing exists there yet (the read will say
-/// so). The outputs of a call are checked against these before any work, so that no output
-/// replaces a file the call reads. Throws mlfe::Error as the reader would for a header it
-/// cannot read (a FIFO, a bad data file name).
+/// buffer files of a .gltf/.glb, the .lut beside an MRIcron .txt label table. Only `path` when nothing exists
+/// there yet (the read will say so). The outputs of a call are checked against these before any work, so that
+/// no output replaces a file the call reads. Throws mlfe::Error as the reader would for a header it cannot
+/// read (a FIFO, a bad data file name).
 std::vector<std::string> input_files(const std::string& path);
 
 }  // namespace mlfe
