@@ -10,6 +10,7 @@
 #include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/label_table.h>
 #include <mlfe/formats/volume_formats.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
@@ -592,7 +593,9 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   kw.get("max_offset", o.max_offset);
   kw.finish();
   const std::string out_path = fspath(out);
-  check_files(volume, o.table, {{"output", out_path}, {"report", report.is_none() ? "" : fspath(report)}});
+  // The table read is the one named, else the one beside a volume file (find_label_table).
+  const std::string table = o.table.empty() && is_path(volume) ? find_label_table(fspath(volume)) : o.table;
+  check_files(volume, table, {{"output", out_path}, {"report", report.is_none() ? "" : fspath(report)}});
   check_output_path(out_path, kAssetExtensions);
   auto grid = grid_from(volume, spacing, origin, direction, space);
   // Warnings (absent labels) are collected without the GIL and raised as Python warnings.
