@@ -12,8 +12,8 @@
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
-#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/input_files.h>
+#include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/version.h>

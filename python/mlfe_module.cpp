@@ -675,7 +675,10 @@ PyBricks open_bricks_py(const py::object& input, const py::object& output, const
   pipeline::check_options(b.options.build);
   pipeline::check_options(b.options.asset);
   b.input = fspath(input);
-  if (!output.is_none()) check_output_path(fspath(output), kAssetExtensions);
+  if (!output.is_none()) {
+    pipeline::check_distinct_files({{"input", b.input}}, {{"output", fspath(output)}});
+    check_output_path(fspath(output), kAssetExtensions);
+  }
   py::gil_scoped_release release;
   std::optional<VolumeWindows> v = pipeline::open_in_bricks(b.input, b.options);
   if (!v)

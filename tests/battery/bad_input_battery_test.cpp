@@ -1298,9 +1298,10 @@ TEST_P(Battery, ExitStatusMessageNoOutputBoundedMemory) {
   for (const auto& e : fs::directory_iterator(d))
     EXPECT_EQ(e.path().filename().string().rfind(".tmp-", 0), std::string::npos) << e.path() << " was left";
   // A refused run changes no file: no input (a sidecar, a detached data file, a table) is lost.
-  if (c.status != 0)
+  if (c.status != 0) {
     for (const auto& [name, bytes] : before)
       EXPECT_EQ(read_bytes(d + "/" + name), bytes) << name << " was changed by mlfe " << c.args;
+  }
   EXPECT_LE(r.peak_mb, c.max_peak_mb) << "peak resident memory of mlfe " << c.args;
 }
 
