@@ -91,6 +91,10 @@ template std::vector<std::uint16_t> leaf_labels<2>(const Hierarchy<2>&, const st
 template std::vector<std::uint16_t> leaf_labels<3>(const Hierarchy<3>&, const std::vector<ElemId>&,
                                                    const std::vector<double>&);
 
+std::string label_table_file(const std::string& named, const std::string& volume) {
+  return named.empty() ? find_label_table(volume) : named;
+}
+
 LabelTable named_or_beside_table(const std::string& named, const std::string& volume,
                                  std::vector<std::string>& warnings) {
   if (!named.empty()) return read_label_table(named);

@@ -29,6 +29,10 @@ constexpr double kLabelSampleBound = 0.25;
 nlohmann::json stored_label_table(const LabelTable& table,
                                   const std::map<std::uint16_t, std::size_t>& counts);
 
+/// The label table file a labelled call reads: `named`, else the one beside `volume`
+/// (find_label_table), else "".
+std::string label_table_file(const std::string& named, const std::string& volume);
+
 /// The label table of a label map: the one named (`named`, which must parse), else the file
 /// beside the volume with its stem (find_label_table) when it parses as a table (a report.json
 /// of an earlier run, say, is not one: a warning is appended to `warnings`), else none.

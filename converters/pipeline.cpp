@@ -12,6 +12,7 @@
 #include <mlfe/formats/file_names.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <mlfe/formats/hierarchy_levels.h>
+#include <mlfe/formats/input_files.h>
 #include <mlfe/formats/openmesh_io.h>
 #include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
@@ -45,6 +46,45 @@ void check_output_path(const std::string& path, const std::vector<std::string>& 
   if (!parent.empty() && !fs::is_directory(parent))
     throw Error(fmt::format("{}: cannot create file: folder {} does not exist", path, parent.string()));
 }
+
+namespace pipeline {
+namespace {
+
+bool same_file(const std::string& a, const std::string& b) {
+  // weakly_canonical keeps a relative path relative when nothing of it exists yet.
+  std::error_code ea, eb;
+  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea);
+  const fs::path cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
+  if (!ea && !eb && ca == cb) return true;
+  std::error_code ec;
+  return fs::equivalent(a, b, ec) && !ec;
+}
+
+}  // namespace
+
+void check_distinct_files(const NamedFiles& inputs, const NamedFiles& outputs) {
+  std::vector<std::pair<std::string, std::string>> read;  // what reads it, file
+  for (const auto& [name, path] : inputs)
+    if (!path.empty())
+      for (const std::string& f : input_files(path))
+        read.emplace_back(f == path ? name : name + " " + path + " reads it", f);
+  std::vector<std::pair<std::string, std::string>> written;  // option, target
+  for (const auto& [name, path] : outputs) {
+    if (path.empty()) continue;
+    const std::string target = output_target(path);
+    for (const auto& [reader, in_path] : read)
+      if (same_file(target, in_path))
+        throw OptionError(option_ref(name) + ": " + path + " is also an input (" + reader +
+                          "); it would be overwritten");
+    for (const auto& [other, other_target] : written)
+      if (same_file(target, other_target))
+        throw OptionError(option_ref(name) + ": " + path + " is also the output " + option_ref(other) +
+                          " (two outputs on one path)");
+    written.emplace_back(name, target);
+  }
+}
+
+}  // namespace pipeline
 
 double peak_rss_mb() {
   rusage ru{};

@@ -259,7 +259,12 @@ BuildFileResult build_mesh(const std::string& input, const std::string& output, 
   return r;
 }
 
-void check_build_file_options(const BuildFileOptions& s, const std::string& output) {
+void check_build_file_options(const std::string& input, const BuildFileOptions& s,
+                              const std::string& output) {
+  NamedFiles inputs = {{"input", input}};
+  if (s.labels)
+    inputs.emplace_back(option_ref("label_table"), detail::label_table_file(s.label_table, input));
+  check_distinct_files(inputs, {{"output", output}, {"report", s.report}});
   check_output_path(output, {".mlfeh"});
   if (!s.report.empty()) check_output_path(s.report, {});
   check_options(s);
@@ -277,7 +282,7 @@ void check_build_file_options(const BuildFileOptions& s, const std::string& outp
 }  // namespace
 
 BuildFileResult build(const std::string& input, const std::string& output, const BuildFileOptions& options) {
-  check_build_file_options(options, output);
+  check_build_file_options(input, options, output);
   const detail::Reporter report(options.progress);
   report(0, "reading");
   BuildFileOptions s = options;

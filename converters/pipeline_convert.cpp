@@ -31,6 +31,15 @@ void check_convert_outputs(const std::string& output, const ConvertFileOptions& 
   if (!o.render.empty()) check_output_path(o.render, {".exr"});
 }
 
+// Every file convert reads and writes, checked before any work.
+void check_convert_files(const std::string& input, const std::string& output, const ConvertFileOptions& o) {
+  NamedFiles inputs = {{"input", input}};
+  if (o.labels)
+    inputs.emplace_back(option_ref("label_table"), detail::label_table_file(o.labels->table, input));
+  check_distinct_files(
+      inputs, {{"output", output}, {"hierarchy", o.hierarchy}, {"report", o.report}, {"render", o.render}});
+}
+
 // convert with labels: a label map in, one surface per structure out.
 ConvertFileResult convert_label_map(const std::string& input, const std::string& output,
                                     const ConvertFileOptions& o) {
@@ -186,6 +195,7 @@ std::optional<VolumeWindows> open_in_bricks(const std::string& input, ConvertFil
 }
 
 ConvertFileResult convert(const std::string& input, const std::string& output, const ConvertFileOptions& o) {
+  check_convert_files(input, output, o);
   check_options(o.build);
   check_options(o.asset);
   check_options(o.read);
@@ -250,6 +260,8 @@ ConvertFileResult iso(const std::string& input, const std::string& output, const
     c.progress = o.progress;
     return convert(input, output, c);
   }
+  check_distinct_files({{"input", input}, {option_ref("volume"), o.volume}},
+                       {{"output", output}, {"report", o.report}});
   const nlohmann::json prov = {{"input", std::filesystem::path(input).filename().string()},
                                {"tool", std::string("mlfe ") + MLFE_VERSION}};
   check_output_path(output, kAssetExtensions);
@@ -286,6 +298,7 @@ ConvertFileResult iso(const std::string& input, const std::string& output, const
 
 CompareResult compare(const std::string& expected, const std::string& actual, const CompareOptions& options,
                       const std::string& report) {
+  check_distinct_files({{"expected", expected}, {"actual", actual}}, {{"report", report}});
   CompareResult r = compare_files(expected, actual, options);
   if (!report.empty()) write_compare_report(report, expected, actual, r);
   return r;

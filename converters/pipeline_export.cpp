@@ -113,6 +113,9 @@ void export_file(const std::string& input, const std::string& output, const Hier
 ExportResult export_hierarchy(const std::string& input, const std::string& output,
                               const ExportOptions& options) {
   const std::string ext = lower_extension(output);
+  // A .raw volume is written with its sidecar.
+  check_distinct_files({{"input", input}},
+                       {{"output", output}, {"output", ext == ".raw" ? output + ".json" : ""}});
   if (!is_mesh_output(ext) && !is_volume_output(output))
     throw Error(output + ": unknown output type '" + ext + "' (use .nii.gz .nii .nrrd .raw .vdb .vtu .msh)");
   check_output_path(output, {});

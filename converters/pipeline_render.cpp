@@ -126,6 +126,22 @@ void check_render_options(const RenderFileOptions& p, const Built& b, const Scal
                                   option_ref("level"), max_level, p.level));
 }
 
+// Refuses images the memory budget cannot hold, before any work: each frame's RGBA and Z floats
+// (every frame's when they are kept), and while a frame is written the EXR's half channels and
+// the PNG's pixels and encoding. A 16384x16384 image takes 9 GB written.
+void check_image_budget(const RenderFileOptions& p, bool written) {
+  const std::size_t budget = p.build.max_memory.bytes();
+  if (budget == 0) return;
+  const double pixels = double(p.size[0]) * double(p.size[1]);
+  const double per_pixel =
+      20.0 * (p.keep_images ? p.frames : 1) + (written ? 8.0 : 0.0) + (written && !p.png.empty() ? 6.0 : 0.0);
+  if (pixels * per_pixel > double(budget))
+    throw OptionInputError(
+        fmt::format("{}: {}x{} images take about {:.0f} MB ({} bytes a pixel), more than {} {}",
+                    option_ref("size"), p.size[0], p.size[1], pixels * per_pixel / 1048576.0, per_pixel,
+                    option_ref("max_memory"), p.build.max_memory.text()));
+}
+
 RenderOptions ray_options(const RenderFileOptions& p) {
   RenderOptions opt;
   opt.rule = p.integration;
@@ -189,6 +205,7 @@ RenderResult render_frames(const Built& b, const std::string& output, const Rend
                            const ScalarGrid* grid, const std::string& source,
                            RayEntry entry = RayEntry::kHierarchy) {
   check_render_options(p, b, grid, source, entry);
+  check_image_budget(p, !output.empty());
   const TransferFunction tf = choose_transfer_function(p, b, entry);
   const detail::Reporter report(p.progress);
   report(0, "rendering");
@@ -337,9 +354,12 @@ RenderResult render(const Built& b, const std::string& output, const RenderFileO
 }
 
 RenderResult render(const std::string& input, const std::string& output, const RenderFileOptions& options) {
+  check_distinct_files({{"input", input}, {option_ref("tf"), options.tf}},
+                       {{"output", output}, {"png", options.png}});
   check_output_path(output, {".exr"});
   if (!options.png.empty()) check_output_path(options.png, {".png"});
   check_options(options);
+  check_image_budget(options, true);
   const detail::Reporter report(options.progress);
   report(0, "reading");
   RenderFileOptions o = options;

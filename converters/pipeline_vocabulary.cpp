@@ -409,6 +409,8 @@ const std::vector<OptionSpec>& option_table() {
         {"max_error", "--max-error", 0, kInf},
         {"psnr", "--psnr", 0, kInf},
         {"quantization_share", "--quantization-share", 0, 1, false, true},
+        {"output", "--output", -kInf, kInf, false, false, "out"},
+        {"report", "--report"},
         {"hierarchy", "--hierarchy"},
         {"render", "--render"},
         {"volume", "--volume"},

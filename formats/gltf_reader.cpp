@@ -170,6 +170,15 @@ std::string base64_decode(const std::string& in, const std::string& path) {
   return out;
 }
 
+/// The file a buffer URI (not a data: URI) names: only a file next to the asset is read.
+std::string buffer_file(const std::string& path, const std::string& uri) {
+  if (uri.find("..") != std::string::npos || uri.find(':') != std::string::npos || uri.empty() ||
+      uri[0] == '/')
+    fail(path, "buffer URI '" + uri + "' is not a file next to the asset");
+  const std::string dir = path.find('/') == std::string::npos ? "." : path.substr(0, path.rfind('/'));
+  return dir + "/" + uri;
+}
+
 /// The bytes of every buffer: the GLB's BIN chunk, a data: URI or a file next to `path`.
 std::vector<std::string> load_buffers(const std::string& path, const std::string& bytes,
                                       const nlohmann::json& j) {
@@ -188,7 +197,6 @@ std::vector<std::string> load_buffers(const std::string& path, const std::string
       bin = bytes.substr(at + 8, length);
     }
   }
-  const std::string dir = path.find('/') == std::string::npos ? "." : path.substr(0, path.rfind('/'));
   for (const auto& b : j.at("buffers")) {
     const auto length = b.at("byteLength").get<std::uint64_t>();
     const std::string which = fmt::format("buffer {}", buffers.size());
@@ -208,11 +216,8 @@ std::vector<std::string> load_buffers(const std::string& path, const std::string
         if (comma == std::string::npos) fail(path, "buffer data URI is not base64");
         data = base64_decode(uri.substr(comma + 8), path);
       } else {
-        if (uri.find("..") != std::string::npos || uri.find(':') != std::string::npos || uri.empty() ||
-            uri[0] == '/')
-          fail(path, "buffer URI '" + uri + "' is not a file next to the asset");
         // Weighed before it is read: a byteLength that is not the file's size is a damaged asset.
-        RegularFile file(dir + "/" + uri);
+        RegularFile file(buffer_file(path, uri));
         if (file.size() != length)
           fail(path, fmt::format("{} says {} bytes (byteLength), its file {} has {}", which, length, uri,
                                  file.size()));
@@ -396,6 +401,18 @@ void transform_mesh(TriangleMesh& m, const std::array<double, 9>& linear_rows,
   // the winding keeps "counter-clockwise from outside" true in world coordinates.
   if (linear.determinant() < 0)
     for (auto& t : m.triangles) std::swap(t[1], t[2]);
+}
+
+std::vector<std::string> gltf_buffer_files(const std::string& path) {
+  const nlohmann::json j = parse_json(path, read_regular_file(path, UINT64_MAX, "the file"));
+  std::vector<std::string> files;
+  if (!j.contains("buffers") || !j.at("buffers").is_array()) return files;
+  for (const auto& b : j.at("buffers"))
+    if (b.is_object() && b.contains("uri") && b.at("uri").is_string()) {
+      const auto uri = b.at("uri").get<std::string>();
+      if (uri.rfind("data:", 0) != 0) files.push_back(buffer_file(path, uri));
+    }
+  return files;
 }
 
 GltfAsset read_gltf(const std::string& path) {

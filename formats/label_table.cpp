@@ -280,12 +280,9 @@ LabelTable parse_label_table(const std::string& bytes, const std::string& file_n
 LabelTable read_label_table(const std::string& path) {
   LabelTable t = parse_label_table(read_regular_file(path, kMaxTableBytes, "a label table"), path);
   if (t.format != "mricron") return t;
-  // MRIcron keeps colours in a .lut beside the names.
-  fs::path lut = fs::path(path).replace_extension(".lut");
-  std::error_code ec;
-  if (!fs::exists(lut, ec)) return t;
-  const LabelTable colours =
-      parse_label_table(read_regular_file(lut.string(), kMaxTableBytes, "a label table"), lut.string());
+  const std::string lut = mricron_colours_file(path);
+  if (lut.empty()) return t;
+  const LabelTable colours = parse_label_table(read_regular_file(lut, kMaxTableBytes, "a label table"), lut);
   for (auto& [value, e] : t.entries) {
     const auto it = colours.entries.find(value);
     if (it != colours.entries.end()) {
@@ -293,8 +290,15 @@ LabelTable read_label_table(const std::string& path) {
       e.has_color = true;
     }
   }
-  t.source += " + " + lut.string();
+  t.source += " + " + lut;
   return t;
+}
+
+std::string mricron_colours_file(const std::string& table_path) {
+  // MRIcron keeps colours in a .lut beside the names.
+  const fs::path lut = fs::path(table_path).replace_extension(".lut");
+  std::error_code ec;
+  return fs::exists(lut, ec) ? lut.string() : "";
 }
 
 std::string find_label_table(const std::string& volume_path) {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "formats/reader_helpers.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe {
 using namespace volume_detail;
@@ -126,14 +127,40 @@ void read_transform(const std::string& path, const Header& get, int ndims, GridT
   }
 }
 
-}  // namespace
+// The file that holds the data: `path` itself for ElementDataFile LOCAL, else the one file it
+// names beside the header.
+std::string data_file_of(const std::string& path, const std::string& edf) {
+  if (edf == "LOCAL" || edf == "Local" || edf == "local") return path;
+  if (edf.empty() || edf.rfind("LIST", 0) == 0 || edf.find('%') != std::string::npos)
+    fail(path, "MetaImage ElementDataFile \"" + edf + "\" is not supported (LOCAL or one file)");
+  return sibling_path(path, edf);
+}
 
-RawLayout metaimage_layout(const std::string& path, const VolumeReadOptions&) {
+// The header of the MetaImage at `path` and where its LOCAL data starts.
+std::map<std::string, std::string> read_header(const std::string& path, std::uint64_t& header_end) {
   regular_file_size(path);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(path, "cannot open");
+  return read_header(path, in, header_end);
+}
+
+}  // namespace
+
+namespace volume_detail {
+
+std::vector<std::string> metaimage_companions(const std::string& path) {
   std::uint64_t header_end = 0;
-  const std::map<std::string, std::string> h = read_header(path, in, header_end);
+  const std::map<std::string, std::string> h = read_header(path, header_end);
+  const std::string data_file = data_file_of(path, h.at("ElementDataFile"));
+  if (data_file == path) return {};
+  return {data_file};
+}
+
+}  // namespace volume_detail
+
+RawLayout metaimage_layout(const std::string& path, const VolumeReadOptions&) {
+  std::uint64_t header_end = 0;
+  const std::map<std::string, std::string> h = read_header(path, header_end);
   const Header get = [&h](const char* key) -> const std::string* {
     auto it = h.find(key);
     return it == h.end() ? nullptr : &it->second;
@@ -174,15 +201,8 @@ RawLayout metaimage_layout(const std::string& path, const VolumeReadOptions&) {
   grid.space = "LPS";
 
   // Data location.
-  const std::string edf = *get("ElementDataFile");
-  std::string data_file = path;
-  std::uint64_t offset = header_end;
-  if (edf != "LOCAL" && edf != "Local" && edf != "local") {
-    if (edf.empty() || edf.rfind("LIST", 0) == 0 || edf.find('%') != std::string::npos)
-      fail(path, "MetaImage ElementDataFile \"" + edf + "\" is not supported (LOCAL or one file)");
-    data_file = sibling_path(path, edf);
-    offset = 0;
-  }
+  const std::string data_file = data_file_of(path, *get("ElementDataFile"));
+  std::uint64_t offset = data_file == path ? header_end : 0;
   const std::uint64_t dsize = regular_file_size(data_file);
   const int esize = scalar_type_size(*type);
   const std::uint64_t bytes = checked_bytes(path, voxels, static_cast<std::uint64_t>(esize));

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "formats/reader_helpers.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe {
 using namespace volume_detail;
@@ -88,18 +89,26 @@ std::optional<ScalarType> nifti_type(int dt) {
 }
 
 // libnifti opens the image file of a .hdr/.img pair (and looks for one beside a .nii) while it
-// reads the header, so every such file present must be a regular file before it does.
-void check_image_files(const std::string& path) {
+// reads the header: the halves of a pair that exist beside `path`.
+std::vector<std::string> pair_files(const std::string& path) {
   std::string base = path;
   for (const char* ext : {".hdr.gz", ".img.gz", ".hdr", ".img", ".nii.gz", ".nii"})
     if (ends_with_ci(path, ext)) {
       base = path.substr(0, path.size() - std::strlen(ext));
       break;
     }
+  std::vector<std::string> files;
   for (const char* ext : {".img", ".img.gz", ".IMG", ".IMG.GZ", ".hdr", ".hdr.gz", ".HDR", ".HDR.GZ"}) {
     struct stat st {};
-    if (::stat((base + ext).c_str(), &st) == 0) regular_file_size(base + ext);
+    if (base + ext != path && ::stat((base + ext).c_str(), &st) == 0) files.push_back(base + ext);
   }
+  return files;
+}
+
+// Every half of a pair present must be a regular file before libnifti opens it.
+void check_image_files(const std::string& path) {
+  regular_file_size(path);
+  for (const std::string& f : pair_files(path)) regular_file_size(f);
 }
 
 // Checks the header ourselves before libnifti sees it, so that arbitrary files are refused with a
@@ -228,6 +237,12 @@ void read_transform(const std::string& path, const nifti_image* nim, ScalarGrid&
 }
 
 }  // namespace
+
+namespace volume_detail {
+
+std::vector<std::string> nifti_companions(const std::string& path) { return pair_files(path); }
+
+}  // namespace volume_detail
 
 RawLayout nifti_layout(const std::string& path, const VolumeReadOptions&) {
   const double vox_offset = checked_vox_offset(path);

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "formats/reader_helpers.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe {
 using namespace volume_detail;
@@ -125,8 +126,10 @@ std::vector<std::string> detached_files(const std::string& path, const std::stri
 // (found by fuzzing). Field lines of valid headers are short, so long ones are refused
 // here. Comments are never quoted by Teem and may be long. Detached data files are checked to
 // be regular files here too: Teem opens them while it parses the header, and a FIFO hung it.
-void check_header_lines(const std::string& path) {
+// Returns the detached data files (none for attached data).
+std::vector<std::string> check_header_lines(const std::string& path) {
   const std::string head = read_file_prefix(path, 1 << 20);
+  std::vector<std::string> data_files;
   std::size_t start = 0;
   int number = 0;
   while (start < head.size()) {
@@ -140,8 +143,11 @@ void check_header_lines(const std::string& path) {
     if (line.empty()) break;  // end of the header
     for (const char* key : {"data file: ", "datafile: "})
       if (line.rfind(key, 0) == 0)
-        for (const std::string& f : detached_files(path, line.substr(std::strlen(key)), head.substr(end + 1)))
+        for (const std::string& f :
+             detached_files(path, line.substr(std::strlen(key)), head.substr(end + 1))) {
           regular_file_size(f);
+          data_files.push_back(f);
+        }
     if (line[0] != '#' && line.find(":=") == std::string::npos && line.size() > 400)
       fail(path, fmt::format("bad NRRD header: line {} is {} bytes long (field lines are at most 400)",
                              number, line.size()));
@@ -161,6 +167,7 @@ void check_header_lines(const std::string& path) {
     }
     start = end + 1;
   }
+  return data_files;
 }
 
 // Compares the data the header promises with what the file holds before Teem allocates: Teem
@@ -352,6 +359,12 @@ NrrdHeader read_header(const std::string& path) {
 }
 
 }  // namespace
+
+namespace volume_detail {
+
+std::vector<std::string> nrrd_companions(const std::string& path) { return check_header_lines(path); }
+
+}  // namespace volume_detail
 
 std::optional<RawLayout> nrrd_layout(const std::string& path, const VolumeReadOptions&) {
   NrrdHeader h = read_header(path);

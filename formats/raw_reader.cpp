@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "formats/reader_helpers.h"
+#include "formats/volume_formats_detail.h"
 
 namespace mlfe {
 using namespace volume_detail;
@@ -68,6 +69,16 @@ std::array<double, N> number_array(const std::string& file, const nlohmann::json
 }
 
 }  // namespace
+
+namespace volume_detail {
+
+std::vector<std::string> raw_companions(const std::string& path) {
+  const std::string sidecar = find_sidecar(path);
+  if (sidecar.empty()) return {};
+  return {sidecar};
+}
+
+}  // namespace volume_detail
 
 RawLayout raw_layout(const std::string& path, const VolumeReadOptions& opts) {
   const std::uint64_t fsize = regular_file_size(path);

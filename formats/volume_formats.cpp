@@ -77,7 +77,8 @@ std::optional<RawLayout> always(const std::string& path, const VolumeReadOptions
 
 const std::vector<VolumeFormatRow>& volume_formats() {
   static const std::vector<VolumeFormatRow> rows = {
-      // name, read extensions, scan endings, write extensions, magic, reader, layout, writer
+      // name, read extensions, scan endings, write extensions, magic, reader, layout, writer,
+      // companions
       {"nrrd",
        {".nrrd", ".nhdr"},
        {".nrrd", ".nhdr"},
@@ -85,10 +86,11 @@ const std::vector<VolumeFormatRow>& volume_formats() {
        nrrd_magic,
        read_nrrd,
        nrrd_layout,
-       write_nrrd},
-      {"vdb", {".vdb"}, {".vdb"}, {".vdb"}, vdb_magic, read_vdb, nullptr, write_vdb},
-      {"png", {".png"}, {}, {}, png_magic, read_png, nullptr, nullptr},
-      {"pgm", {".pgm"}, {}, {}, pgm_magic, read_pgm, nullptr, nullptr},
+       write_nrrd,
+       nrrd_companions},
+      {"vdb", {".vdb"}, {".vdb"}, {".vdb"}, vdb_magic, read_vdb, nullptr, write_vdb, nullptr},
+      {"png", {".png"}, {}, {}, png_magic, read_png, nullptr, nullptr, nullptr},
+      {"pgm", {".pgm"}, {}, {}, pgm_magic, read_pgm, nullptr, nullptr, nullptr},
       {"nifti",
        {".nii", ".hdr", ".img"},
        {".nii.gz", ".nii"},
@@ -96,7 +98,8 @@ const std::vector<VolumeFormatRow>& volume_formats() {
        nifti_magic,
        read_nifti,
        always<nifti_layout>,
-       write_nifti},
+       write_nifti,
+       nifti_companions},
       {"metaimage",
        {".mha", ".mhd"},
        {".mha", ".mhd"},
@@ -104,12 +107,21 @@ const std::vector<VolumeFormatRow>& volume_formats() {
        metaimage_magic,
        read_metaimage,
        always<metaimage_layout>,
-       nullptr},
+       nullptr,
+       metaimage_companions},
       // Headerless: by extension, a "<file>.json" sidecar, or --raw-dims/--raw-type.
-      {"raw", {".raw", ".bin", ".dat"}, {}, {".raw"}, nullptr, read_raw, always<raw_layout>, write_raw},
+      {"raw",
+       {".raw", ".bin", ".dat"},
+       {},
+       {".raw"},
+       nullptr,
+       read_raw,
+       always<raw_layout>,
+       write_raw,
+       raw_companions},
       // A folder: recognised by its metadata files (is_zarr_store), not by magic bytes; read in
       // boxes by chunks (ZarrVolume), not by a layout.
-      {"zarr", {".zarr"}, {}, {}, nullptr, read_zarr, nullptr, nullptr},
+      {"zarr", {".zarr"}, {}, {}, nullptr, read_zarr, nullptr, nullptr, nullptr},
   };
   return rows;
 }

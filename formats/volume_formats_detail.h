@@ -33,6 +33,9 @@ struct VolumeFormatRow {
   /// file of this format is read so.
   std::optional<RawLayout> (*layout)(const std::string& path, const VolumeReadOptions& options);
   void (*write)(const std::string& path, const ScalarGrid& grid);  ///< nullptr: not written
+  /// The other files a read of `path` opens (input_files()), found as the reader finds them;
+  /// nullptr: none.
+  std::vector<std::string> (*companions)(const std::string& path);
 };
 
 /// Every volume format, in the order magic bytes are tried.
@@ -40,6 +43,14 @@ const std::vector<VolumeFormatRow>& volume_formats();
 
 /// The row named `name`, or nullptr.
 const VolumeFormatRow* volume_format(const std::string& name);
+
+// The companions of the table's rows, each beside its reader: a detached NRRD's data files
+// (checked as regular files), the other halves of a NIfTI/Analyze .hdr/.img pair present, a
+// MetaImage's ElementDataFile when not LOCAL, a raw volume's sidecar when there is one.
+std::vector<std::string> nrrd_companions(const std::string& path);
+std::vector<std::string> nifti_companions(const std::string& path);
+std::vector<std::string> metaimage_companions(const std::string& path);
+std::vector<std::string> raw_companions(const std::string& path);
 
 // The writers of the table's rows (formats/volume_writer.cpp; write_vdb: formats/vdb_module.h);
 // each writes atomically.

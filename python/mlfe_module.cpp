@@ -10,6 +10,7 @@
 #include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/label_table.h>
 #include <mlfe/formats/volume_formats.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
@@ -529,6 +530,14 @@ PyBuilt load_py(const py::object& path_like) {
   return out;
 }
 
+// Refuses, before `volume` (a file or an array) is read, an output that is a file its read
+// opens or the label table `table` (pipeline::check_distinct_files, as every command checks).
+void check_files(const py::object& volume, const std::string& table, const pipeline::NamedFiles& outputs) {
+  pipeline::check_distinct_files(
+      {{"volume", is_path(volume) ? fspath(volume) : ""}, {pipeline::option_ref("label_table"), table}},
+      outputs);
+}
+
 // The path of a .vtu/.msh tetrahedral mesh, or "" for anything else (arrays, volume files).
 std::string tet_mesh_path(const py::object& volume) {
   if (!is_path(volume)) return "";
@@ -584,6 +593,9 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   kw.get("max_offset", o.max_offset);
   kw.finish();
   const std::string out_path = fspath(out);
+  // The table read is the one named, else the one beside a volume file (find_label_table).
+  const std::string table = o.table.empty() && is_path(volume) ? find_label_table(fspath(volume)) : o.table;
+  check_files(volume, table, {{"output", out_path}, {"report", report.is_none() ? "" : fspath(report)}});
   check_output_path(out_path, kAssetExtensions);
   auto grid = grid_from(volume, spacing, origin, direction, space);
   // Warnings (absent labels) are collected without the GIL and raised as Python warnings.
@@ -621,6 +633,7 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   const std::string out_path = fspath(out);
   c.provenance["tool"] = std::string("mlfe ") + MLFE_VERSION + " (python)";
   // Checked before reading or copying the volume.
+  check_files(volume, "", {{"output", out_path}, {"hierarchy", c.hierarchy}, {"report", c.report}});
   check_output_path(out_path, kAssetExtensions);
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
     const ConvertResult r = with_progress(progress, [&](const Progress& p) {
@@ -662,7 +675,10 @@ PyBricks open_bricks_py(const py::object& input, const py::object& output, const
   pipeline::check_options(b.options.build);
   pipeline::check_options(b.options.asset);
   b.input = fspath(input);
-  if (!output.is_none()) check_output_path(fspath(output), kAssetExtensions);
+  if (!output.is_none()) {
+    pipeline::check_distinct_files({{"input", b.input}}, {{"output", fspath(output)}});
+    check_output_path(fspath(output), kAssetExtensions);
+  }
   py::gil_scoped_release release;
   std::optional<VolumeWindows> v = pipeline::open_in_bricks(b.input, b.options);
   if (!v)

@@ -44,7 +44,6 @@ void print_summary(const BuildState& s, const pipeline::BuildFileResult& r) {
 }
 
 void run_build(BuildState& s) {
-  check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--report", s.options.report}});
   s.options.build = build_options(s.params);
   s.options.progress = progress_display("mlfe build", s.params.quiet);
   const pipeline::BuildFileResult r = pipeline::build(s.input, s.output, s.options);

@@ -35,7 +35,6 @@ void run_compare(CompareArgs& a) {
   o.value_rms = a.value_rms;
   if (!a.count_tolerance.empty())
     o.count_tolerance_percent = pipeline::parse_percent(a.count_tolerance, "count_tolerance");
-  check_distinct_files({{"EXPECTED", a.expected}, {"ACTUAL", a.actual}}, {{"--report", a.report}});
   const CompareResult r = pipeline::compare(a.expected, a.actual, o, a.report);
   if (!a.quiet) {
     if (r.equal())

@@ -38,9 +38,6 @@ void print_written(const ConvertState& s, const pipeline::ConvertFileResult& r, 
 }
 
 void run_convert(const ConvertState& s, const char* command) {
-  check_distinct_files(
-      {{"input", s.input}, {"--volume", s.volume}},
-      {{"--output", s.output}, {"--hierarchy", s.hierarchy}, {"--report", s.report}, {"--render", s.render}});
   pipeline::ConvertFileOptions c;
   c.hierarchy = s.hierarchy;
   c.report = s.report;
@@ -64,7 +61,6 @@ void run_convert_labels(const ConvertState& s) {
   if (!s.hierarchy.empty()) {
     if (is_hierarchy_file(s.input))
       throw CLI::ValidationError("--hierarchy", s.input + " is a hierarchy already (no --hierarchy)");
-    check_distinct_files({{"input", s.input}}, {{"--output", s.output}, {"--hierarchy", s.hierarchy}});
     check_output_path(s.hierarchy, {".mlfeh"});
   }
   if (!s.report.empty()) check_output_path(s.report, {});

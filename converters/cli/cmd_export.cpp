@@ -22,10 +22,6 @@ struct ExportState {
 };
 
 void run_export(const ExportState& s) {
-  const std::string ext = lower_extension(s.output);
-  check_distinct_files(
-      {{"input", s.input}},
-      {{"--output", s.output}, {"--output's sidecar", ext == ".raw" ? s.output + ".json" : ""}});
   pipeline::ExportOptions o;
   o.level = s.level;
   o.progress = progress_display("mlfe export", false);

@@ -19,8 +19,6 @@ void run_iso(const ConvertState& s) {
     run_convert(s, "iso");
     return;
   }
-  check_distinct_files({{"input", s.input}, {"--volume", s.volume}},
-                       {{"--output", s.output}, {"--report", s.report}});
   pipeline::IsoOptions o;
   o.asset = asset_options(s.asset);
   o.build.max_memory = parse_memory_budget(s.params.max_memory, "max_memory");

@@ -9,6 +9,7 @@
 #include <mlfe/core/mesh/mesh_quality.h>
 #include <mlfe/formats/hierarchy_io.h>
 #include <mlfe/formats/vtu_writer.h>
+#include <mlfe/pipeline.h>
 
 #include <algorithm>
 #include <array>
@@ -30,6 +31,7 @@ constexpr int kMaxLevels = 24;
 
 struct RefineArgs {
   std::string dim, box, toward, at, normal, radius, levels, output, hierarchy;
+  std::string max_memory = "50%";
 };
 
 // "a,b,c" -> exactly n finite numbers; the option name goes into the message.
@@ -167,8 +169,26 @@ bool wanted(const Hierarchy<D>& h, ElemId e, const Goal& g) {
   return false;
 }
 
+// Refuses a round the memory budget cannot hold before it allocates (level 12 toward a plane
+// took 2.5 GB, then ran out of memory): each marked element gains 2^D red children and its
+// closure about 2 green ones, at the hierarchy's present bytes per element, and a growing array
+// holds twice its elements for a moment.
 template <int D>
-void run(const RefineArgs& a, const Goal& goal, const std::vector<double>& box, int levels) {
+void check_round_memory(const Hierarchy<D>& h, std::size_t marked, const MemoryBudget& budget, int round) {
+  const std::size_t limit = budget.bytes();
+  if (limit == 0) return;
+  const double per_element = double(h.memory_bytes()) / double(h.element_count());
+  const double after = 2.0 * per_element * double(h.element_count() + marked * ((1u << D) + 2));
+  if (after > double(limit))
+    throw Error(
+        fmt::format("refine: level {} would split {} elements and take about {:.0f} MB, more than "
+                    "--max-memory {} (fewer --levels)",
+                    round + 1, marked, after / 1048576.0, budget.text()));
+}
+
+template <int D>
+void run(const RefineArgs& a, const Goal& goal, const std::vector<double>& box, int levels,
+         const MemoryBudget& budget) {
   typename Hierarchy<D>::Point lo, hi;
   for (int i = 0; i < D; ++i) {
     lo[i] = box[i];
@@ -180,6 +200,7 @@ void run(const RefineArgs& a, const Goal& goal, const std::vector<double>& box, 
     for (ElemId e : h.leaves())
       if (wanted(h, e, goal)) marked.push_back(e);
     if (marked.empty()) break;
+    check_round_memory(h, marked.size(), budget, round);
     h.refine(std::move(marked));
   }
   const std::vector<ElemId> leaves = h.leaves();
@@ -244,12 +265,13 @@ void run_refine(const RefineArgs& a) {
     throw UsageError("--radius is only used with --toward sphere");
   }
   const int levels = parse_int("--levels", a.levels, 0, kMaxLevels);
+  const MemoryBudget budget = pipeline::parse_memory_budget(a.max_memory, "max_memory");
   if (!a.hierarchy.empty() && a.hierarchy == a.output)
     throw UsageError("-o and --hierarchy name the same file");
   if (dim == 2)
-    run<2>(a, goal, box, levels);
+    run<2>(a, goal, box, levels, budget);
   else
-    run<3>(a, goal, box, levels);
+    run<3>(a, goal, box, levels, budget);
 }
 
 void add_refine_command(CLI::App& app) {
@@ -267,6 +289,10 @@ void add_refine_command(CLI::App& app) {
   cmd->add_option("--levels", args->levels, fmt::format("refinement rounds, 0..{}", kMaxLevels))->required();
   cmd->add_option("-o,--output", args->output, "leaf mesh, VTK XML UnstructuredGrid (.vtu)")->required();
   cmd->add_option("--hierarchy", args->hierarchy, "also write the whole hierarchy (.mlfeh)");
+  cmd->add_option("--max-memory", args->max_memory,
+                  "memory budget: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; a level "
+                  "that would exceed it is refused before it is built")
+      ->capture_default_str();
   cmd->callback([args] { run_refine(*args); });
 }
 

@@ -41,8 +41,6 @@ struct RenderState {
 };
 
 void run_render(const RenderState& s) {
-  check_distinct_files({{"input", s.input}, {"--tf", s.render.tf}},
-                       {{"--output", s.output}, {"--png", s.render.png}});
   pipeline::RenderFileOptions o = s.render;
   o.build = build_options(s.build);
   o.read = s.read;

@@ -1,8 +1,5 @@
 #include "converters/cli/volume_options.h"
 
-#include <mlfe/formats/atomic_file.h>
-
-#include <filesystem>
 #include <vector>
 
 namespace mlfe::cli {
@@ -45,38 +42,6 @@ void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts) {
   cmd->add_option("--raw-offset", opts.raw_offset, "raw data: bytes to skip before the voxels");
   cmd->add_option("--zarr-level", opts.zarr_level,
                   "OME-Zarr: the resolution level to read (0: full resolution)");
-}
-
-namespace {
-
-bool same_file(const std::string& a, const std::string& b) {
-  namespace fs = std::filesystem;
-  // weakly_canonical keeps a relative path relative when nothing of it exists yet.
-  std::error_code ea, eb;
-  const fs::path ca = fs::weakly_canonical(fs::absolute(a, ea), ea);
-  const fs::path cb = fs::weakly_canonical(fs::absolute(b, eb), eb);
-  if (!ea && !eb && ca == cb) return true;
-  std::error_code ec;
-  return fs::equivalent(a, b, ec) && !ec;
-}
-
-}  // namespace
-
-void check_distinct_files(const NamedPaths& inputs, const NamedPaths& outputs) {
-  std::vector<std::pair<std::string, std::string>> written;  // option, target
-  for (const auto& [name, path] : outputs) {
-    if (path.empty()) continue;
-    const std::string target = output_target(path);
-    for (const auto& [in_name, in_path] : inputs)
-      if (!in_path.empty() && same_file(target, in_path))
-        throw CLI::ValidationError(name,
-                                   path + " is also an input (" + in_name + "); it would be overwritten");
-    for (const auto& [other, other_target] : written)
-      if (same_file(target, other_target))
-        throw CLI::ValidationError(name,
-                                   path + " is also the output " + other + " (two outputs on one path)");
-    written.emplace_back(name, target);
-  }
 }
 
 }  // namespace mlfe::cli

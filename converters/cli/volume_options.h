@@ -16,14 +16,6 @@ namespace mlfe::cli {
 /// shared_ptr captured by the callback).
 void add_volume_read_options(CLI::App* cmd, VolumeReadOptions& opts);
 
-/// (option name, path) of a command's files; empty paths are skipped.
-using NamedPaths = std::vector<std::pair<std::string, std::string>>;
-
-/// Refuses before any work (a usage error) an output that is one of the inputs (the input would
-/// be lost) and two outputs on one path. Files are compared as what a write would replace:
-/// symbolic links followed, existing files also by device and inode (hard links, other spellings).
-void check_distinct_files(const NamedPaths& inputs, const NamedPaths& outputs);
-
 }  // namespace mlfe::cli
 
 namespace mlfe {

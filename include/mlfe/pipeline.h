@@ -31,6 +31,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -536,6 +537,18 @@ class OptionInputError : public Error, public OptionMessage {
 
 /// The message of `e` as `s` spells options: OptionMessage's, else e.what().
 std::string message(const std::exception& e, Spelling s);
+
+/// (option, path) of a call's files: inputs named as messages name them ("input",
+/// option_ref("label_table")), outputs by their row in option_table(); empty paths are skipped.
+using NamedFiles = std::vector<std::pair<std::string, std::string>>;
+/// Refuses before any work, with an OptionError naming the output: an output that is a file one
+/// of `inputs` reads (input_files: the input itself, its sidecar, detached data, the other half
+/// of a pair, buffer files), which the call would replace, and two outputs on one path. Files are
+/// compared as a write would replace them: symbolic links followed, existing files also by
+/// device and inode (hard links, other spellings). Every file-level call (convert, iso, build,
+/// render, export_hierarchy, compare) checks its files so; Python's calls that read a volume by
+/// name do too.
+void check_distinct_files(const NamedFiles& inputs, const NamedFiles& outputs);
 
 /// Throws OptionError naming `name` unless `value` is finite and in its row's range.
 void check_option(const std::string& name, double value);

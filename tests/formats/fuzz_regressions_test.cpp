@@ -1,5 +1,7 @@
-// Inputs the fuzzers once crashed on (tests/data/fuzz_regressions/): each must now be
-// refused with mlfe::Error naming the file — never a crash or an abort inside a library.
+// Inputs the fuzzers once crashed on and the reader rows of the bad-input battery (issue 43:
+// tiny files claiming huge data, singular frames), in tests/data/fuzz_regressions/: each must
+// be refused with mlfe::Error naming the file — never a crash or an abort inside a library.
+// The fuzz stage replays them as seeds under ASan + UBSan.
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/draco_io.h>

@@ -191,6 +191,34 @@ class PythonModuleTest(unittest.TestCase):
             mlfe.convert(np.full((4, 4, 4), 2.5, np.float32), os.path.join(self.dir, "bad.glb"), labels=True)
         self.assertFalse(os.path.exists(os.path.join(self.dir, "bad.glb")))
 
+    def test_an_output_over_a_file_the_read_opens_is_refused(self):
+        """A report over a raw volume's sidecar or over the label table (named or beside the
+        volume) is refused before any work (pipeline::check_distinct_files, as every command
+        checks), and the file is kept."""
+        raw, table, beside = (os.path.join(self.dir, n) for n in ("v.raw", "t.txt", "v.txt"))
+        with open(raw, "wb") as f:
+            f.write(bytes([1] * 32 + [2] * 32))
+        with open(raw + ".json", "w") as f:
+            f.write('{"dims": [4, 4, 4], "dtype": "uint8"}')
+        for t in (table, beside):
+            with open(t, "w") as f:
+                f.write("1 one\n2 two\n")
+        out = os.path.join(self.dir, "o.glb")
+        cases = [
+            (lambda: mlfe.convert(raw, out, iso=[1.5], report=raw + ".json"), raw + ".json", r"\(volume .*v\.raw reads it\)"),
+            (lambda: mlfe.convert(raw, out, labels=True, label_table=table, report=table), table, r"\(label_table\)"),
+            (lambda: mlfe.convert(raw, out, labels=True, report=beside), beside, r"\(label_table\)"),
+        ]
+        for call, kept, reader in cases:
+            with self.subTest(kept=kept):
+                with open(kept, "rb") as f:
+                    before = f.read()
+                with self.assertRaisesRegex(mlfe.Error, "report: .* is also an input " + reader):
+                    call()
+                with open(kept, "rb") as f:
+                    self.assertEqual(f.read(), before)
+                self.assertFalse(os.path.exists(out))
+
     def test_bad_input_raises_with_the_message(self):
         out = os.path.join(self.dir, "bad.glb")
         cases = [

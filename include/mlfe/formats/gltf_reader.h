@@ -53,4 +53,9 @@ GltfAsset read_gltf(const std::string& path);
 void transform_mesh(TriangleMesh& mesh, const std::array<double, 9>& linear,
                     const std::array<double, 3>& translation = {0.0, 0.0, 0.0});
 
+/// The files next to the asset at `path` that its buffer URIs name (data: URIs and the GLB BIN
+/// chunk are not files), as read_gltf reads them. Throws mlfe::Error as read_gltf does for a
+/// file that is not glTF or a URI that leaves the asset's folder.
+std::vector<std::string> gltf_buffer_files(const std::string& path);
+
 }  // namespace mlfe

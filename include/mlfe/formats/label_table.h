@@ -54,6 +54,10 @@ LabelTable parse_label_table(const std::string& bytes, const std::string& file_n
 /// .lut of the same stem beside it. Throws mlfe::Error for unreadable or bad files.
 LabelTable read_label_table(const std::string& path);
 
+/// The .lut of the same stem beside the table at `table_path`, where an MRIcron table's colours
+/// are; "" when there is none.
+std::string mricron_colours_file(const std::string& table_path);
+
 /// The table beside a volume: the first existing file of the volume's stem (its name without a
 /// scan ending of scan_extensions(), ".nii.gz" whole, or else its last extension) with extension
 /// .json, .ctbl, .txt, .label or .lut; "" when none.
