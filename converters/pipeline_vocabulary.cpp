@@ -411,6 +411,7 @@ const std::vector<OptionSpec>& option_table() {
         {"quantization_share", "--quantization-share", 0, 1, false, true},
         {"hierarchy", "--hierarchy"},
         {"render", "--render"},
+        {"preview", "--preview"},
         {"volume", "--volume"},
         // VolumeReadOptions
         choice_option("space", "--space", &space_names),

@@ -491,7 +491,7 @@ def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine
 
 
 def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
-            hierarchy=None, report=None, progress=None, **options):
+            hierarchy=None, report=None, preview=None, progress=None, **options):
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
     the asset summary (triangles per surface, bytes). ``volume`` as in :func:`build`; build
     options as :func:`build`; asset options: tolerance, draco, quantize, lod, decimate,
@@ -500,10 +500,14 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     'hierarchy': marching tetrahedra on the hierarchy), bricks (extract and simplify in bricks of
     this many samples, a power of two; a raw or OME-Zarr file with no hierarchy= is then read
     brick by brick). ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
+    ``preview=``: also a self-contained HTML page showing the asset (a .glb/.gltf ``out``) in any
+    browser with WebGL, opened from disk: orbit controls, the structures with their colours and
+    visibility toggles, the report's figures.
     ``labels=True`` (or a list, or '3,7-9'): the volume is a label map; one closed, named
     surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
-    paths = {k: (None if v is None else os.fspath(v)) for k, v in (("hierarchy", hierarchy), ("report", report))}
+    paths = {k: (None if v is None else os.fspath(v))
+             for k, v in (("hierarchy", hierarchy), ("report", report), ("preview", preview))}
     return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), progress=progress, **frame, **paths,
                          **options)
 
