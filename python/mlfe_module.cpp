@@ -56,6 +56,16 @@ std::string fspath(const py::handle& p) { return py::str(py::module_::import("os
 
 py::object to_python(const nlohmann::json& j) { return py::module_::import("json").attr("loads")(j.dump()); }
 
+// "; did you mean 'x'?" for a misspelt keyword: the nearest of the option table's Python
+// spellings (difflib's ratio, as the command line suggests the nearest flag), or "".
+std::string did_you_mean(const std::string& name) {
+  std::vector<std::string> keywords;
+  for (const auto& spec : pipeline::option_table())
+    keywords.push_back(spec.spelled(pipeline::Spelling::kPython));
+  const auto close = py::module_::import("difflib").attr("get_close_matches")(name, keywords, 1, 0.7);
+  return py::len(close) ? "; did you mean '" + close[py::int_(0)].cast<std::string>() + "'?" : "";
+}
+
 // The keyword options of build/convert/extract, consumed as they are read so that unknown
 // names can be reported.
 class Options {
@@ -89,7 +99,8 @@ class Options {
     return fspath(o);
   }
   void finish() const {
-    if (!left_.empty()) throw Error("unknown option '" + left_.begin()->first + "'");
+    if (!left_.empty())
+      throw Error("unknown option '" + left_.begin()->first + "'" + did_you_mean(left_.begin()->first));
   }
 
  private:
