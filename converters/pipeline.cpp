@@ -950,12 +950,10 @@ ConvertResult convert_field(const Field& f, const FieldInput& input, const Scala
   if (report) asset.progress = report.share(0.65, 1).as_progress();
   result.asset = write_assets(out, b, asset, prov, grid);
   written.add(out);
-  if (!c.report.empty()) {
-    nlohmann::json r = build_report(input.source, grid, b);
-    r["asset"] = result.asset;
-    r["peak_rss_mb"] = peak_rss_mb();
-    write_json(c.report, r);
-  }
+  result.report = build_report(input.source, grid, b);
+  result.report["asset"] = result.asset;
+  result.report["peak_rss_mb"] = peak_rss_mb();
+  if (!c.report.empty()) write_json(c.report, result.report);
   written.release();
   return result;
 }

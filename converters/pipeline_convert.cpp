@@ -4,6 +4,7 @@
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/usage_error.h>
 #include <mlfe/pipeline.h>
+#include <mlfe/pipeline/preview.h>
 #include <mlfe/version.h>
 
 #include <algorithm>
@@ -24,11 +25,34 @@ VolumeReadOptions budgeted(VolumeReadOptions read, const BuildOptions& build) {
   return read;
 }
 
+// --png needs the image it converts; --preview a glTF asset to show.
+void check_image_and_preview(const std::string& output, const ConvertFileOptions& o) {
+  if (!o.png.empty()) {
+    if (o.render.empty())
+      throw OptionError(option_ref("png") + ": the PNG is of the " + option_ref("render") + " image; give " +
+                        option_ref("render") + " too");
+    check_output_path(o.png, {".png"});
+  }
+  if (!o.preview.empty()) check_preview_paths(o.preview, output);
+}
+
+// convert --preview: the page of the asset just written, with the report's figures and the
+// image (a PNG, or none), listed last.
+void add_preview(const std::string& input, const std::string& output, const ConvertFileOptions& o,
+                 const nlohmann::json& report, const std::string& image, ConvertFileResult& r,
+                 detail::OutputGuard& written) {
+  if (o.preview.empty()) return;
+  write_preview(o.preview, {output, report, image, std::filesystem::path(input).filename().string()});
+  r.written.push_back(o.preview);
+  written.add(o.preview);
+}
+
 void check_convert_outputs(const std::string& output, const ConvertFileOptions& o) {
   check_output_path(output, kAssetExtensions);
   if (!o.hierarchy.empty()) check_output_path(o.hierarchy, {".mlfeh"});
   if (!o.report.empty()) check_output_path(o.report, {});
   if (!o.render.empty()) check_output_path(o.render, {".exr"});
+  check_image_and_preview(output, o);
 }
 
 // Every file convert reads and writes, checked before any work.
@@ -36,8 +60,12 @@ void check_convert_files(const std::string& input, const std::string& output, co
   NamedFiles inputs = {{"input", input}};
   if (o.labels)
     inputs.emplace_back(option_ref("label_table"), detail::label_table_file(o.labels->table, input));
-  check_distinct_files(
-      inputs, {{"output", output}, {"hierarchy", o.hierarchy}, {"report", o.report}, {"render", o.render}});
+  check_distinct_files(inputs, {{"output", output},
+                                {"hierarchy", o.hierarchy},
+                                {"report", o.report},
+                                {"render", o.render},
+                                {"png", o.png},
+                                {"preview", o.preview}});
 }
 
 // convert with labels: a label map in, one surface per structure out.
@@ -57,6 +85,7 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
     check_output_path(o.hierarchy, {".mlfeh"});
   }
   if (!o.report.empty()) check_output_path(o.report, {});
+  check_image_and_preview(output, o);
   const detail::Reporter report(o.progress);
   report(0, "reading");
   ConvertFileResult r;
@@ -92,12 +121,13 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
     r.written.push_back(o.hierarchy);
     written.add(o.hierarchy);
   }
+  nlohmann::json rep = {{"input", input}, {"dims", grid.dims}, {"asset", r.asset}};
+  rep["peak_rss_mb"] = peak_rss_mb();
   if (!o.report.empty()) {
-    nlohmann::json rep = {{"input", input}, {"dims", grid.dims}, {"asset", r.asset}};
-    rep["peak_rss_mb"] = peak_rss_mb();
     write_json(o.report, rep);
     r.written.push_back(o.report);
   }
+  add_preview(input, output, o, rep, "", r, written);
   written.release();
   report.finish("writing");
   return r;
@@ -117,19 +147,20 @@ ConvertFileResult convert_in_bricks(const VolumeWindows& v, const std::string& i
   r.asset = write_assets(output, v, asset, prov);
   r.written.push_back(output);
   written.add(output);
+  const ScalarGrid& f = v.frame();
+  nlohmann::json rep = {{"input", input},
+                        {"dims", f.dims},
+                        {"spacing", f.transform.spacing},
+                        {"format", f.format},
+                        {"read_in_windows", v.streamed()},
+                        {"asset", r.asset}};
+  rep["peak_rss_mb"] = peak_rss_mb();
   if (!o.report.empty()) {
-    const ScalarGrid& f = v.frame();
-    nlohmann::json rep = {{"input", input},
-                          {"dims", f.dims},
-                          {"spacing", f.transform.spacing},
-                          {"format", f.format},
-                          {"read_in_windows", v.streamed()},
-                          {"asset", r.asset}};
-    rep["peak_rss_mb"] = peak_rss_mb();
     write_json(o.report, rep);
     r.written.push_back(o.report);
     written.add(o.report);
   }
+  add_preview(input, output, o, rep, "", r, written);
   written.release();
   return r;
 }
@@ -238,10 +269,15 @@ ConvertFileResult convert(const std::string& input, const std::string& output, c
   // convert --render: the image of the hierarchy just built, with render's defaults.
   if (!o.render.empty()) {
     RenderFileOptions ro;
+    ro.png = o.png;
     if (report) ro.progress = report.share(convert_end, 1).as_progress();
     r.render = render(r.built, o.render, ro, grid ? &*grid : nullptr, input);
-    for (const auto& f : r.render.written) r.written.push_back(f);
+    for (const auto& f : r.render.written) {
+      r.written.push_back(f);
+      written.add(f);
+    }
   }
+  add_preview(input, output, o, cr.report, o.png, r, written);
   written.release();
   report.finish("writing");
   return r;

@@ -413,6 +413,7 @@ const std::vector<OptionSpec>& option_table() {
         {"report", "--report"},
         {"hierarchy", "--hierarchy"},
         {"render", "--render"},
+        {"preview", "--preview"},
         {"volume", "--volume"},
         // VolumeReadOptions
         choice_option("space", "--space", &space_names),

@@ -123,15 +123,15 @@ std::string output_target(const std::string& path) {
   throw Error(path + ": too many levels of symbolic links");
 }
 
-std::uint64_t written_file_size(const std::string& path) {
+std::string written_file_path(const std::string& path) {
   const std::string target = output_target(path);
-  {
-    std::lock_guard<std::mutex> lock(state().mutex);
-    for (const auto& p : state().pending)
-      if (p.second == target) return fs::file_size(p.first);
-  }
-  return fs::file_size(target);
+  std::lock_guard<std::mutex> lock(state().mutex);
+  for (const auto& p : state().pending)
+    if (p.second == target) return p.first;
+  return target;
 }
+
+std::uint64_t written_file_size(const std::string& path) { return fs::file_size(written_file_path(path)); }
 
 std::string temporary_path_for(const std::string& path) {
   fs::path p(path);

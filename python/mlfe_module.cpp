@@ -14,6 +14,7 @@
 #include <mlfe/formats/volume_formats.h>
 #include <mlfe/pipeline.h>
 #include <mlfe/pipeline/compare.h>
+#include <mlfe/pipeline/preview.h>
 #include <mlfe/version.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -22,6 +23,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <optional>
@@ -58,6 +60,16 @@ std::string fspath(const py::handle& p) { return py::str(py::module_::import("os
 
 py::object to_python(const nlohmann::json& j) { return py::module_::import("json").attr("loads")(j.dump()); }
 
+// "; did you mean 'x'?" for a misspelt keyword: the nearest of the option table's Python
+// spellings (difflib's ratio, as the command line suggests the nearest flag), or "".
+std::string did_you_mean(const std::string& name) {
+  std::vector<std::string> keywords;
+  for (const auto& spec : pipeline::option_table())
+    keywords.push_back(spec.spelled(pipeline::Spelling::kPython));
+  const auto close = py::module_::import("difflib").attr("get_close_matches")(name, keywords, 1, 0.7);
+  return py::len(close) ? "; did you mean '" + close[py::int_(0)].cast<std::string>() + "'?" : "";
+}
+
 // The keyword options of build/convert/extract, consumed as they are read so that unknown
 // names can be reported.
 class Options {
@@ -91,7 +103,8 @@ class Options {
     return fspath(o);
   }
   void finish() const {
-    if (!left_.empty()) throw Error("unknown option '" + left_.begin()->first + "'");
+    if (!left_.empty())
+      throw Error("unknown option '" + left_.begin()->first + "'" + did_you_mean(left_.begin()->first));
   }
 
  private:
@@ -571,12 +584,21 @@ PyBuilt build_py(const py::object& volume, const py::object& iso, const py::obje
   return out;
 }
 
+// convert(preview=...): the page showing the asset just written (<mlfe/pipeline/preview.h>);
+// nothing without a page path.
+void write_convert_preview(const std::string& page, const std::string& asset, const nlohmann::json& report,
+                           const std::string& source) {
+  if (page.empty()) return;
+  py::gil_scoped_release release;
+  pipeline::write_preview(page, {asset, report, "", std::filesystem::path(source).filename().string()});
+}
+
 // convert(..., labels=True or [3, 7] or "3,7-9", label_table=..., min_component=...): a label map
 // in, one surface per structure out (convert_labels), as `mlfe convert --labels`.
 py::object convert_labels_py(const py::object& volume, const py::object& out, const py::object& iso,
                              const py::object& spacing, const py::object& origin, const py::object& direction,
                              const std::string& space, const py::object& hierarchy, const py::object& report,
-                             const py::object& picked, Options& kw) {
+                             const std::string& preview, const py::object& picked, Options& kw) {
   if (!iso.is_none()) throw Error("labels and iso exclude each other");
   if (!hierarchy.is_none()) throw Error("labels writes surfaces only (no hierarchy yet)");
   LabelOptions o;
@@ -597,6 +619,7 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   const std::string table = o.table.empty() && is_path(volume) ? find_label_table(fspath(volume)) : o.table;
   check_files(volume, table, {{"output", out_path}, {"report", report.is_none() ? "" : fspath(report)}});
   check_output_path(out_path, kAssetExtensions);
+  if (!preview.empty()) pipeline::check_preview_paths(preview, out_path);
   auto grid = grid_from(volume, spacing, origin, direction, space);
   // Warnings (absent labels) are collected without the GIL and raised as Python warnings.
   std::vector<std::string> warnings;
@@ -609,19 +632,21 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   }
   for (const auto& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
   if (!report.is_none()) write_json(fspath(report), {{"asset", summary}});
+  write_convert_preview(preview, out_path, {{"asset", summary}}, grid->source);
   return to_python(summary);
 }
 
 py::object convert_py(const py::object& volume, const py::object& out, const py::object& iso,
                       const py::object& spacing, const py::object& origin, const py::object& direction,
                       const std::string& space, const py::object& hierarchy, const py::object& report,
-                      const py::object& progress, const py::kwargs& kwargs) {
+                      const py::object& preview_path, const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
+  const std::string preview = preview_path.is_none() ? "" : fspath(preview_path);
   if (kw.has("labels")) {
     py::object picked = kw.take("labels");
     if (!(py::isinstance<py::bool_>(picked) && !picked.cast<bool>()))
-      return convert_labels_py(volume, out, iso, spacing, origin, direction, space, hierarchy, report, picked,
-                               kw);
+      return convert_labels_py(volume, out, iso, spacing, origin, direction, space, hierarchy, report,
+                               preview, picked, kw);
   }
   ConvertOptions c;
   c.build = build_options(kw);
@@ -635,11 +660,13 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
   // Checked before reading or copying the volume.
   check_files(volume, "", {{"output", out_path}, {"hierarchy", c.hierarchy}, {"report", c.report}});
   check_output_path(out_path, kAssetExtensions);
+  if (!preview.empty()) pipeline::check_preview_paths(preview, out_path);
   if (const std::string mesh = tet_mesh_path(volume); !mesh.empty()) {
     const ConvertResult r = with_progress(progress, [&](const Progress& p) {
       c.progress = p;
       return convert(mesh, out_path, c);
     });
+    write_convert_preview(preview, out_path, r.report, mesh);
     return to_python(r.asset);
   }
   auto grid = grid_from(volume, spacing, origin, direction, space);
@@ -647,6 +674,7 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
     c.progress = p;
     return convert(*grid, out_path, c);
   });
+  write_convert_preview(preview, out_path, r.report, grid->source);
   return to_python(r.asset);
 }
 
@@ -1136,7 +1164,7 @@ void bind_calls(py::module_& m) {
   m.def("convert", &convert_py, py::arg("volume"), py::arg("out"), py::kw_only(), py::arg("iso") = py::none(),
         py::arg("spacing") = py::none(), py::arg("origin") = py::none(), py::arg("direction") = py::none(),
         py::arg("space") = "", py::arg("hierarchy") = py::none(), py::arg("report") = py::none(),
-        py::arg("progress") = py::none());
+        py::arg("preview") = py::none(), py::arg("progress") = py::none());
 }
 
 }  // namespace

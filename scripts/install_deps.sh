@@ -20,6 +20,7 @@ PKGS=(
   python3-zarr         # tests: OME-Zarr stores written by zarr-python
   clang libclang-rt-14-dev clang-format
   python3-vtk9  # tests/converters/export_command_test.cpp reads .vtu with VTK's XML reader
+  chromium      # tests/python/test_preview.py opens the preview page (convert --preview) headless
 )
 # Node.js/npm only when the machine has none (a non-Debian node may already be there).
 if ! command -v npm >/dev/null 2>&1; then PKGS+=(nodejs npm); fi

@@ -27,13 +27,13 @@ void print_written(const ConvertState& s, const pipeline::ConvertFileResult& r, 
     status_line(fmt::format("mlfe {}: {} triangles, {} bytes -> {}", command,
                             r.asset["triangles"].get<std::size_t>(), r.asset["bytes"].get<std::size_t>(),
                             s.output));
-  // The image's lines come after the asset's, its files last.
-  for (const auto& f : r.written)
-    if (r.render.written.empty() || f != r.render.written.front()) {
-      std::printf("%s\n", f.c_str());
+  // The image's lines come after the asset's, then its files (and the preview page).
+  for (std::size_t i = 0; i < r.written.size(); ++i)
+    if (r.render.written.empty() || r.written[i] != r.render.written.front()) {
+      std::printf("%s\n", r.written[i].c_str());
     } else {
       print_render(r.render, s.params.quiet);
-      break;
+      i += r.render.written.size() - 1;
     }
 }
 
@@ -42,6 +42,8 @@ void run_convert(const ConvertState& s, const char* command) {
   c.hierarchy = s.hierarchy;
   c.report = s.report;
   c.render = s.render;
+  c.png = s.png;
+  c.preview = s.preview;
   c.read = s.read;
   c.asset = asset_options(s.asset);
   c.build = build_options(s.params);
@@ -64,7 +66,11 @@ void run_convert_labels(const ConvertState& s) {
     check_output_path(s.hierarchy, {".mlfeh"});
   }
   if (!s.report.empty()) check_output_path(s.report, {});
+  check_distinct_files({{"input", s.input}},
+                       {{"--output", s.output}, {"--report", s.report}, {"--preview", s.preview}});
   pipeline::ConvertFileOptions c;
+  c.preview = s.preview;
+  c.png = s.png;
   c.labels = label_options(s.labels, s.asset);
   c.hierarchy = s.hierarchy;
   c.report = s.report;
@@ -102,6 +108,11 @@ void add_convert_command(CLI::App& app) {
   cmd->add_option("--hierarchy", state->hierarchy, "also keep the hierarchy it built (.mlfeh)");
   cmd->add_option("--render", state->render,
                   "also a ray-cast image of the hierarchy (.exr; mlfe render's defaults)");
+  cmd->add_option("--png", state->png, "with --render: the image as an sRGB PNG too (shown by --preview)");
+  cmd->add_option(
+      "--preview", state->preview,
+      "also a self-contained HTML page showing the asset (.glb/.gltf output): open it from disk in "
+      "any browser with WebGL; structures, the report's figures and the --png image");
   add_convert_options(cmd, *state);
   add_label_options(cmd, state->labels);
   cmd->callback([state] {

@@ -16,8 +16,10 @@ struct ConvertState {
   BuildParams params;
   AssetParams asset;
   VolumeReadOptions read;
-  std::string render;  ///< convert --render: also a ray-cast image (.exr) with the default view
-  LabelParams labels;  ///< convert --labels: a label map, one surface per structure
+  std::string render;   ///< convert --render: also a ray-cast image (.exr) with the default view
+  std::string png;      ///< convert --png: --render's image as PNG too
+  std::string preview;  ///< convert --preview: the page showing the asset (.html)
+  LabelParams labels;   ///< convert --labels: a label map, one surface per structure
 };
 
 /// Adds -o, --report and the asset, build and volume reading options.

@@ -382,6 +382,7 @@ struct ConvertOptions {
 struct ConvertResult {
   Built built;
   nlohmann::json asset;               ///< write_assets' summary
+  nlohmann::json report;              ///< what ConvertOptions::report holds (written there or not)
   std::vector<std::string> warnings;  ///< e.g. the hierarchy written as version 1
 };
 
@@ -831,6 +832,11 @@ struct ConvertFileOptions {
   std::string report;      ///< also write the JSON report here; empty: no
   /// Also a ray-cast image (.exr) of the hierarchy built, with RenderFileOptions' defaults.
   std::string render;
+  /// With render: also the image as an sRGB PNG (RenderFileOptions::png).
+  std::string png;
+  /// Also the preview page of the asset (.html, <mlfe/pipeline/preview.h>): the output must be
+  /// glTF; the page shows the report's figures and the png when there is one.
+  std::string preview;
   /// Set: a label map in, one surface per structure out (convert_labels) instead of
   /// iso-surfaces; asset.iso must then be empty, hierarchy and render too.
   std::optional<LabelOptions> labels;
@@ -843,7 +849,7 @@ struct ConvertFileResult {
   Built built;                        ///< (labels: empty)
   nlohmann::json asset;               ///< write_assets' (or convert_labels') summary
   std::vector<std::string> warnings;  ///< label warnings, a version-1 hierarchy
-  std::vector<std::string> written;   ///< the asset, then hierarchy, report, images
+  std::vector<std::string> written;   ///< the asset, then hierarchy, report, images, preview
   RenderResult render;                ///< with ConvertFileOptions::render (its built is empty)
 };
 

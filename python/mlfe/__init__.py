@@ -581,12 +581,13 @@ def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine
     max_level, start_level, norm ('l2', 'h1'), preconditioner, surface_tolerance, check_u,
     max_memory ('50%', '6G', '512M' or bytes). With ``iso`` and no global target, refinement
     follows the surfaces. ``progress``: see the module documentation."""
+    _check_iso_dimensions(volume, iso)
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
     return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), progress=progress, **frame, **options))
 
 
 def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
-            hierarchy=None, report=None, progress=None, **options):
+            hierarchy=None, report=None, preview=None, progress=None, **options):
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
     the asset summary (triangles per surface, bytes). ``volume`` as in :func:`build`; build
     options as :func:`build`; asset options: tolerance, draco, quantize, lod, decimate,
@@ -595,10 +596,15 @@ def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None,
     'hierarchy': marching tetrahedra on the hierarchy), bricks (extract and simplify in bricks of
     this many samples, a power of two; a raw, NIfTI, NRRD, MetaImage or OME-Zarr file
     with no hierarchy= is then read brick by brick). ``hierarchy=``/``report=``: also write the .mlfeh and the JSON report.
+    ``preview=``: also a self-contained HTML page showing the asset (a .glb/.gltf ``out``) in any
+    browser with WebGL, opened from disk: orbit controls, the structures with their colours and
+    visibility toggles, the report's figures.
     ``labels=True`` (or a list, or '3,7-9'): the volume is a label map; one closed, named
     surface per structure, with label_table, min_component, smooth_iterations, max_offset."""
+    _check_iso_dimensions(volume, iso)
     values, frame = _volume_args(volume, spacing, origin, direction, affine, space)
-    paths = {k: (None if v is None else os.fspath(v)) for k, v in (("hierarchy", hierarchy), ("report", report))}
+    paths = {k: (None if v is None else os.fspath(v))
+             for k, v in (("hierarchy", hierarchy), ("report", report), ("preview", preview))}
     return _mlfe.convert(values, os.fspath(out), iso=_iso_values(iso), progress=progress, **frame, **paths,
                          **options)
 
@@ -718,6 +724,7 @@ def render(source, out=None, *, progress=None, **options):
     background take three numbers or 'x,y,z', size (w, h) or 'WxH'):
     """
     render_opts = {k: options.pop(k) for k in list(options) if k in _RENDER_OPTIONS}
+    _check_png_has_out(render_opts, out)
     if isinstance(source, Hierarchy):
         if options:
             raise Error("%s: not a render option (build options need a volume, not a hierarchy)" % sorted(options)[0])
@@ -739,6 +746,21 @@ def render(source, out=None, *, progress=None, **options):
         else:
             h = build(source, progress=progress, **options)
     return RenderResult(_mlfe.render(h._h, None if out is None else os.fspath(out), progress, **render_opts))
+
+
+def _check_png_has_out(render_opts, out):
+    """png= is written beside the EXR: without out= nothing would be written, so it is refused."""
+    if render_opts.get("png") is not None and out is None:
+        raise Error("png: the PNG is written with the EXR; give out= too (e.g. out='view.exr')")
+
+
+def _check_iso_dimensions(volume, iso):
+    """iso= on a 2D array would silently make a height field: refused."""
+    values = volume.values if isinstance(volume, Volume) else None
+    if values is None and _fspath(volume) is None and iso is not None:
+        values = np.asarray(volume)
+    if iso is not None and values is not None and values.ndim == 2:
+        raise Error("iso: a 2D array is a height field, which has no iso-surfaces (give a 3D volume, or no iso)")
 
 
 render.__doc__ += "".join("\n    - ``%s``: %s" % field for field in _RENDER_FIELDS) + "\n"

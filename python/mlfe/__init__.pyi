@@ -180,6 +180,7 @@ def convert(
     space: Optional[str] = ...,
     hierarchy: Optional[PathLike] = ...,
     report: Optional[PathLike] = ...,
+    preview: Optional[PathLike] = ...,
     progress: Optional[Progress] = ...,
     **options: Any,
 ) -> Dict[str, Any]: ...

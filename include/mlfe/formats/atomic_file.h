@@ -37,8 +37,11 @@ std::string temporary_path_for(const std::string& path);
 /// when that exists and is not a regular file.
 std::string output_target(const std::string& path);
 
-/// The size in bytes of the file just written to `path`: while a batch holds it back, the size of
-/// its temporary.
+/// Where the file just written to `path` is: while a batch holds it back, its temporary; else
+/// `path` with symbolic links followed.
+std::string written_file_path(const std::string& path);
+
+/// The size in bytes of the file just written to `path` (written_file_path's).
 std::uint64_t written_file_size(const std::string& path);
 
 /// Holds back the renames of every file written while it is alive (in any thread) until
