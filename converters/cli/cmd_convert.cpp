@@ -66,8 +66,6 @@ void run_convert_labels(const ConvertState& s) {
     check_output_path(s.hierarchy, {".mlfeh"});
   }
   if (!s.report.empty()) check_output_path(s.report, {});
-  check_distinct_files({{"input", s.input}},
-                       {{"--output", s.output}, {"--report", s.report}, {"--preview", s.preview}});
   pipeline::ConvertFileOptions c;
   c.preview = s.preview;
   c.png = s.png;
