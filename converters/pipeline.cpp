@@ -286,6 +286,7 @@ Built build(const Field& f, const FieldInput& input, const BuildOptions& p,
   o.surface_progress = p.surface_progress;
   if (p.fraction_progress) add_fraction_progress(p.fraction_progress, o, span);
   b.memory_budget_bytes = o.max_memory_bytes;
+  b.options = build_options_record(p, iso_values);
   const auto t0 = std::chrono::steady_clock::now();
   b.surface_driven = o.surface_driven;
   if (f.dim() == 2)
@@ -354,6 +355,7 @@ Built built_from_file(const std::string& path, int max_level) {
     set_lattice(hf, a);
     b.approximation = std::move(a);
   }
+  restore_build_record(path, hf.metadata, b);
   return b;
 }
 
@@ -364,6 +366,7 @@ std::string write_built(const std::string& path, const Built& b, const nlohmann:
   info.value_min = b.value_min;
   info.value_max = b.value_max;
   info.metadata = provenance;
+  info.metadata["build"] = build_record(b);
   // v3 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
   // writer verifies that the file rebuilds this hierarchy; if it ever did not, v1 (exact) is
   // written instead of a different hierarchy (v1 has no lattice: outputs of such a file are

@@ -102,6 +102,7 @@ HierarchyFileInfo file_info(const FileJob& job, const Built& b, const Approximat
   info.metadata = {{"input", job.input}, {"tool", std::string("mlfe ") + MLFE_VERSION}};
   info.metadata.update(job.input_metadata);
   if (b.surface_driven) info.metadata["refinement"] = "surface-driven";
+  info.metadata["build"] = build_record(b);
   // The error-bounded build interpolates: no norm.
   info.norm = job.split ? "" : enum_name(job.options.build.norm);
   info.rms_error = fig.errors.rms;

@@ -1,5 +1,6 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/msh_writer.h>
 
@@ -107,14 +108,8 @@ void write_msh(const std::string& path, const Hierarchy<D>& h, const std::vector
     const auto& c = h.cell(elems[i]);
     for (int k = 0; k <= D; ++k) t[k] = tag[c[k].value];
     if constexpr (D == 3) {
-      const auto& a = xyz[t[0] - 1];
-      std::array<std::array<double, 3>, 3> d{};
-      for (int k = 0; k < D; ++k)
-        for (int r = 0; r < 3; ++r) d[k][r] = xyz[t[k + 1] - 1][r] - a[r];
-      const double orient = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
-                            d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
-                            d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
-      if (orient < 0) std::swap(t[D - 1], t[D]);
+      if (signed_volume6(xyz[t[0] - 1], xyz[t[1] - 1], xyz[t[2] - 1], xyz[t[3] - 1]) < 0)
+        std::swap(t[2], t[3]);
     }  // a triangle in 3D space has no sign; keep the hierarchy's order
     return t;
   };

@@ -1,4 +1,5 @@
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/vtu_writer.h>
 
@@ -73,14 +74,12 @@ void write_vtu(const std::string& path, const Hierarchy<D>& h, const std::vector
     // red-green refinement keeps no orientation, so order each one in the written frame, as the
     // .msh writer does (a direction matrix with a negative determinant mirrors it, too).
     if constexpr (D == 3) {
-      const auto at = [&](int k) { return &points[3 * static_cast<std::size_t>(connectivity[first + k])]; };
-      double d[3][3];
-      for (int k = 0; k < 3; ++k)
-        for (int r = 0; r < 3; ++r) d[k][r] = at(k + 1)[r] - at(0)[r];
-      const double volume6 = d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) -
-                             d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0]) +
-                             d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]);
-      if (volume6 < 0) std::swap(connectivity[first + 2], connectivity[first + 3]);
+      const auto at = [&](int k) {
+        const double* p = &points[3 * static_cast<std::size_t>(connectivity[first + k])];
+        return Vec3{p[0], p[1], p[2]};
+      };
+      if (signed_volume6(at(0), at(1), at(2), at(3)) < 0)
+        std::swap(connectivity[first + 2], connectivity[first + 3]);
     }
     offsets.push_back(static_cast<std::int64_t>(connectivity.size()));
     types.push_back(D == 2 ? 5 : 10);

@@ -7,9 +7,11 @@
 // library works. Bad input raises mlfe.Error (a ValueError) carrying the library's message.
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/base/vec.h>
 #include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
+#include <mlfe/formats/input_files.h>
 #include <mlfe/formats/label_table.h>
 #include <mlfe/formats/volume_formats.h>
 #include <mlfe/pipeline.h>
@@ -19,6 +21,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cmath>
@@ -480,16 +483,32 @@ AssetFile compared_asset(const py::handle& side) {
   return side.cast<const PyMesh&>().asset;
 }
 
-// Leaf simplices of `b` as an (m, dim + 1) array of vertex indices.
+// A hierarchy point (local frame, 2 or 3 coordinates) in the physical frame (millimetres).
+template <class P>
+Vec3 physical_point(const GridTransform& t, const P& p) {
+  Vec3 local{0, 0, 0};
+  for (std::size_t c = 0; c < p.size(); ++c) local[c] = p[c];
+  return t.local_to_physical(local);
+}
+
+// Leaf simplices of `b` as an (m, dim + 1) array of vertex indices; tetrahedra positively
+// oriented in the physical frame (signed_volume6), as the .vtu and .msh writers order them.
 py::array_t<std::int64_t> leaf_cells(const Built& b) {
-  return b.visit([](const auto& a) {
+  return b.visit([&b](const auto& a) {
     constexpr int kCorners = std::tuple_size_v<typename std::decay_t<decltype(a.hierarchy)>::Cell>;
     const auto leaves = a.hierarchy.leaves();
+    std::vector<Vec3> at;
+    if constexpr (kCorners == 4)
+      for (const auto& p : a.hierarchy.points()) at.push_back(physical_point(b.transform, p));
     py::array_t<std::int64_t> out({py::ssize_t(leaves.size()), py::ssize_t(kCorners)});
     auto w = out.template mutable_unchecked<2>();
-    for (std::size_t e = 0; e < leaves.size(); ++e)
-      for (int c = 0; c < kCorners; ++c)
-        w(py::ssize_t(e), c) = std::int64_t(a.hierarchy.cell(leaves[e])[c].value);
+    for (std::size_t e = 0; e < leaves.size(); ++e) {
+      std::array<std::int64_t, kCorners> c;
+      for (int k = 0; k < kCorners; ++k) c[k] = std::int64_t(a.hierarchy.cell(leaves[e])[k].value);
+      if constexpr (kCorners == 4)
+        if (signed_volume6(at[c[0]], at[c[1]], at[c[2]], at[c[3]]) < 0) std::swap(c[2], c[3]);
+      for (int k = 0; k < kCorners; ++k) w(py::ssize_t(e), k) = c[k];
+    }
     return out;
   });
 }
@@ -501,9 +520,7 @@ py::array_t<double> physical_positions(const Built& b) {
     py::array_t<double> out({py::ssize_t(pts.size()), py::ssize_t(3)});
     auto w = out.template mutable_unchecked<2>();
     for (std::size_t v = 0; v < pts.size(); ++v) {
-      std::array<double, 3> local{0, 0, 0};
-      for (std::size_t c = 0; c < pts[v].size(); ++c) local[c] = pts[v][c];
-      const auto q = b.transform.local_to_physical(local);
+      const Vec3 q = physical_point(b.transform, pts[v]);
       for (int c = 0; c < 3; ++c) w(py::ssize_t(v), c) = q[c];
     }
     return out;
@@ -593,14 +610,20 @@ void write_convert_preview(const std::string& page, const std::string& asset, co
   pipeline::write_preview(page, {asset, report, "", std::filesystem::path(source).filename().string()});
 }
 
-// convert(..., labels=True or [3, 7] or "3,7-9", label_table=..., min_component=...): a label map
-// in, one surface per structure out (convert_labels), as `mlfe convert --labels`.
-py::object convert_labels_py(const py::object& volume, const py::object& out, const py::object& iso,
-                             const py::object& spacing, const py::object& origin, const py::object& direction,
-                             const std::string& space, const py::object& hierarchy, const py::object& report,
-                             const std::string& preview, const py::object& picked, Options& kw) {
-  if (!iso.is_none()) throw Error("labels and iso exclude each other");
-  if (!hierarchy.is_none()) throw Error("labels writes surfaces only (no hierarchy yet)");
+// The labels= of convert's keywords when it asks for a label conversion (True, a list or text;
+// not False), taken out of kw.
+std::optional<py::object> picked_labels(Options& kw) {
+  if (!kw.has("labels")) return std::nullopt;
+  py::object picked = kw.take("labels");
+  if (py::isinstance<py::bool_>(picked) && !picked.cast<bool>()) return std::nullopt;
+  return picked;
+}
+
+// A label conversion's options from `picked` (picked_labels) and the rest of convert's keywords
+// (all of them read: unknown ones raise); iso= and hierarchy= are refused.
+LabelOptions label_keywords(const py::object& picked, bool iso, bool hierarchy, Options& kw) {
+  if (iso) throw Error("labels and iso exclude each other");
+  if (hierarchy) throw Error("labels writes surfaces only (no hierarchy yet)");
   LabelOptions o;
   if (py::isinstance<py::str>(picked))
     o.labels = parse_label_list(picked.cast<std::string>());
@@ -614,6 +637,40 @@ py::object convert_labels_py(const py::object& volume, const py::object& out, co
   kw.get("smooth_iterations", o.smoothing_iterations);
   kw.get("max_offset", o.max_offset);
   kw.finish();
+  return o;
+}
+
+// An iso-surface conversion's options from convert's keywords (all of them read: unknown ones
+// raise) and iso.
+ConvertOptions convert_keywords(const py::object& iso, Options& kw) {
+  ConvertOptions c;
+  c.build = build_options(kw);
+  c.asset = asset_options(kw);
+  kw.finish();
+  if (!iso.is_none()) c.asset.iso = iso.cast<std::vector<double>>();
+  return c;
+}
+
+// mlfe.batch's check before any scan is sent: convert's keywords read and checked as convert
+// reads and checks them before it reads a volume (a misspelt keyword raises with the nearest).
+void check_convert_keywords(const py::object& iso, bool hierarchy, const py::kwargs& kwargs) {
+  Options kw(kwargs);
+  if (const auto picked = picked_labels(kw)) {
+    pipeline::check_options(label_keywords(*picked, !iso.is_none(), hierarchy, kw));
+    return;
+  }
+  const ConvertOptions c = convert_keywords(iso, kw);
+  pipeline::check_options(c.build);
+  pipeline::check_options(c.asset);
+}
+
+// convert(..., labels=True or [3, 7] or "3,7-9", label_table=..., min_component=...): a label map
+// in, one surface per structure out (convert_labels), as `mlfe convert --labels`.
+py::object convert_labels_py(const py::object& volume, const py::object& out, const py::object& iso,
+                             const py::object& spacing, const py::object& origin, const py::object& direction,
+                             const std::string& space, const py::object& hierarchy, const py::object& report,
+                             const std::string& preview, const py::object& picked, Options& kw) {
+  LabelOptions o = label_keywords(picked, !iso.is_none(), !hierarchy.is_none(), kw);
   const std::string out_path = fspath(out);
   // The table read is the one named, else the one beside a volume file (find_label_table).
   const std::string table = o.table.empty() && is_path(volume) ? find_label_table(fspath(volume)) : o.table;
@@ -642,17 +699,10 @@ py::object convert_py(const py::object& volume, const py::object& out, const py:
                       const py::object& preview_path, const py::object& progress, const py::kwargs& kwargs) {
   Options kw(kwargs);
   const std::string preview = preview_path.is_none() ? "" : fspath(preview_path);
-  if (kw.has("labels")) {
-    py::object picked = kw.take("labels");
-    if (!(py::isinstance<py::bool_>(picked) && !picked.cast<bool>()))
-      return convert_labels_py(volume, out, iso, spacing, origin, direction, space, hierarchy, report,
-                               preview, picked, kw);
-  }
-  ConvertOptions c;
-  c.build = build_options(kw);
-  c.asset = asset_options(kw);
-  kw.finish();
-  if (!iso.is_none()) c.asset.iso = iso.cast<std::vector<double>>();
+  if (const auto picked = picked_labels(kw))
+    return convert_labels_py(volume, out, iso, spacing, origin, direction, space, hierarchy, report, preview,
+                             *picked, kw);
+  ConvertOptions c = convert_keywords(iso, kw);
   if (!hierarchy.is_none()) c.hierarchy = fspath(hierarchy);
   if (!report.is_none()) c.report = fspath(report);
   const std::string out_path = fspath(out);
@@ -962,6 +1012,32 @@ void bind_mesh(py::module_& m) {
   m.def("join_meshes", &join_meshes);
 }
 
+// threads=: the library's worker threads while one call runs (0: every core), as the command
+// line's --threads; outputs do not depend on the count. A context manager: the limit holds from
+// __enter__ to __exit__ (TBB keeps the smallest of the limits alive, so nested calls keep it).
+struct ThreadLimit {
+  int threads = 0;
+  std::unique_ptr<tbb::global_control> control;
+};
+
+void bind_thread_limit(py::module_& m) {
+  py::class_<ThreadLimit>(m, "ThreadLimit")
+      .def("__enter__",
+           [](ThreadLimit& t) -> ThreadLimit& {
+             if (t.threads > 0)
+               t.control = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                                 std::size_t(t.threads));
+             return t;
+           })
+      .def("__exit__", [](ThreadLimit& t, const py::args&) { t.control.reset(); });
+  m.def("thread_limit", [](int threads) {
+    pipeline::check_option("threads", threads);
+    auto t = std::make_unique<ThreadLimit>();
+    t->threads = threads;
+    return t;
+  });
+}
+
 // mlfe._mlfe.Hierarchy: a built or loaded approximation.
 void bind_hierarchy(py::module_& m) {
   py::class_<PyBuilt>(m, "Hierarchy")
@@ -985,6 +1061,8 @@ void bind_hierarchy(py::module_& m) {
                              })
       .def_property_readonly("has_volume", [](const PyBuilt& b) { return bool(b.grid); })
       .def_property_readonly("file_info", [](const PyBuilt& b) { return to_python(b.file_info); })
+      .def_property_readonly("build_record",
+                             [](const PyBuilt& b) { return to_python(build_record(*b.built)); })
       .def_property_readonly("positions", [](const PyBuilt& b) { return physical_positions(*b.built); })
       .def_property_readonly("cells", [](const PyBuilt& b) { return leaf_cells(*b.built); })
       .def_property_readonly("vertex_levels", [](const PyBuilt& b) { return vertex_levels(*b.built); })
@@ -1204,6 +1282,10 @@ PYBIND11_MODULE(_mlfe, m) {
     return fields;
   });
   m.def("load", &load_py, py::arg("path"));
+  // mlfe.batch's record of a scan: the files its read opens.
+  m.def("input_files", [](const std::string& path) { return input_files(path); });
+  m.def("check_convert_keywords", &check_convert_keywords, py::arg("iso"), py::arg("hierarchy"));
+  bind_thread_limit(m);
   // mlfe.batch's scans in a folder: the endings of the table of volume formats.
   m.def("scan_extensions", [] { return scan_extensions(); });
 

@@ -92,37 +92,6 @@ std::string nearest(const std::string& word, const std::vector<std::string>& nam
   return best;
 }
 
-// CLI11 names what it did not understand but not what was meant: the nearest subcommand for
-// an unknown first word, the nearest long option of the command (or a global one) otherwise.
-void suggest(CLI::App& app, int argc, char** argv) {
-  std::vector<std::string> commands;
-  for (const CLI::App* cmd : app.get_subcommands([](CLI::App*) { return true; }))
-    commands.push_back(cmd->get_name());
-  const std::vector<CLI::App*> used = app.get_subcommands();
-  std::vector<std::string> options;
-  const auto add_options = [&](CLI::App* a) {
-    for (const CLI::Option* opt : a->get_options())
-      for (const auto& n : opt->get_lnames()) options.push_back("--" + n);
-  };
-  add_options(&app);
-  if (!used.empty()) add_options(used.front());
-  const bool command_seen = !used.empty();
-  for (int i = 1; i < argc; ++i) {
-    std::string word = argv[i];
-    if (word.rfind("--", 0) == 0) {
-      const std::string name = word.substr(0, word.find('='));
-      if (std::find(options.begin(), options.end(), name) != options.end()) continue;
-      const std::string s = nearest(name, options);
-      if (!s.empty()) std::fprintf(stderr, "mlfe: %s: did you mean %s?\n", name.c_str(), s.c_str());
-    } else if (!command_seen && !word.empty() && word[0] != '-') {
-      if (std::find(commands.begin(), commands.end(), word) != commands.end()) return;
-      const std::string s = nearest(word, commands);
-      if (!s.empty()) std::fprintf(stderr, "mlfe: %s: did you mean %s?\n", word.c_str(), s.c_str());
-      return;
-    }
-  }
-}
-
 // An error is one line of about 200 characters on stderr: a file name with a newline split it
 // over two lines, and a 10 kB number from a label table was echoed whole. Control characters
 // are written as escapes (\n, \t, \xHH); a long message keeps its start, which names the file,
@@ -156,6 +125,38 @@ std::string error_line(const std::string& message) {
   while (head > 0 && continuation(head)) --head;
   while (tail < message.size() && continuation(tail)) ++tail;
   return "mlfe: " + escaped(message.substr(0, head)) + " [...] " + escaped(message.substr(tail));
+}
+
+// CLI11 names what it did not understand but not what was meant: the nearest subcommand for
+// an unknown first word, the nearest long option of the command (or a global one) otherwise, as
+// the one line to print instead of CLI11's message; "" when nothing is near.
+std::string suggestion(CLI::App& app, int argc, char** argv) {
+  std::vector<std::string> commands;
+  for (const CLI::App* cmd : app.get_subcommands([](CLI::App*) { return true; }))
+    commands.push_back(cmd->get_name());
+  const std::vector<CLI::App*> used = app.get_subcommands();
+  std::vector<std::string> options;
+  const auto add_options = [&](CLI::App* a) {
+    for (const CLI::Option* opt : a->get_options())
+      for (const auto& n : opt->get_lnames()) options.push_back("--" + n);
+  };
+  add_options(&app);
+  if (!used.empty()) add_options(used.front());
+  const bool command_seen = !used.empty();
+  for (int i = 1; i < argc; ++i) {
+    std::string word = argv[i];
+    if (word.rfind("--", 0) == 0) {
+      const std::string name = word.substr(0, word.find('='));
+      if (std::find(options.begin(), options.end(), name) != options.end()) continue;
+      const std::string s = nearest(name, options);
+      if (!s.empty()) return "mlfe: " + escaped(name) + ": unknown option; did you mean " + s + "?";
+    } else if (!command_seen && !word.empty() && word[0] != '-') {
+      if (std::find(commands.begin(), commands.end(), word) != commands.end()) return "";
+      const std::string s = nearest(word, commands);
+      return s.empty() ? "" : "mlfe: " + escaped(word) + ": unknown command; did you mean " + s + "?";
+    }
+  }
+  return "";
 }
 
 }  // namespace
@@ -194,9 +195,13 @@ int main(int argc, char** argv) {
     // (105, 106, ...); the documented contract is 1 for every usage error, except for compare,
     // whose 1 means "different".
     const int usage_status = app.got_subcommand("compare") ? 2 : 1;
-    const int status = app.exit(e);
-    if (status == 0) return 0;
-    suggest(app, argc, argv);
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help, --version
+    // A misspelt word is the one line "mlfe: --simplfy: unknown option; did you mean --simplify?".
+    const std::string hint = suggestion(app, argc, argv);
+    if (hint.empty())
+      app.exit(e);
+    else
+      mlfe::cli::status_line(hint);
     return usage_status;
   } catch (const mlfe::pipeline::Cancelled&) {  // Ctrl-C (progress_display): nothing written
     mlfe::cli::status_line("mlfe: interrupted");

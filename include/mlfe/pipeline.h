@@ -139,6 +139,8 @@ struct Built {
   double target_rms = 0;
   double noise_sigma = 0;
   bool target_from_noise = false;
+  /// The options the build ran with (build_options_record), kept in the hierarchy file.
+  nlohmann::json options = nlohmann::json::object();
 
   int dim() const { return std::holds_alternative<Approximation<2>>(approximation) ? 2 : 3; }
   template <int D>
@@ -228,6 +230,25 @@ std::string write_built(const std::string& path, const Built& b, const nlohmann:
 /// The JSON report of a build (input, dims, voxels, vertices, elements, levels, iterations,
 /// errors, PSNR, value range, seconds, peak RSS, per-iteration rows).
 nlohmann::json build_report(const std::string& input, const ScalarGrid* grid, const Built& b);
+
+/// The options of a build as its record keeps them: the option table's keywords (rms as "0.5%"
+/// or a number in data units, norm and preconditioner by name, max_memory as given) and the
+/// iso-values. Depends on the options only, not on the machine.
+nlohmann::json build_options_record(const BuildOptions& options, const std::vector<double>& iso_values);
+
+/// What a build did, as a hierarchy file keeps it in its metadata under "build": stop_reason,
+/// surface_driven, memory_limited, rms_target, noise_sigma, target_from_noise, options, and the
+/// per_iteration and surface_passes rows of build_report without their times (a file's bytes
+/// depend on its input and options only, so `seconds` is not kept). Rows also hold l2_error
+/// and cg_residual.
+nlohmann::json build_record(const Built& b);
+
+/// Puts the record in `metadata` (a hierarchy file's, read from `path`) back into `b`: after it
+/// b's stop_reason(), iterations(), surface_passes(), memory_limited(), surface_driven, noise,
+/// target and options are the build's, and build_report(b) its report but for the times.
+/// Metadata without "build" leaves b as it is. Throws mlfe::Error naming `path` for a record of
+/// the wrong shape.
+void restore_build_record(const std::string& path, const nlohmann::json& metadata, Built& b);
 
 enum class VertexPlacement { kAuto, kInput, kOptimal };
 enum class Normals { kAuto, kGradient, kSurface };

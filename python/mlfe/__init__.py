@@ -30,9 +30,16 @@ fraction done in [0, 1] and the stage ("reading", "building", "extracting", "sim
 "rendering", "resampling", "writing"); returning ``False`` cancels the call, which then raises
 :class:`mlfe.Cancelled` (an ``mlfe.Error``) and leaves no output file. An exception raised in
 the callback, or Ctrl-C, cancels the same way and is raised as it is.
+
+Threads
+-------
+Every call that does work takes ``threads=n``: at most n of the library's worker threads while
+it runs (0 or None: every core), as the command line's ``--threads``. The results and files are
+the same, byte for byte, whatever the count.
 """
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -69,6 +76,30 @@ __all__ = [
 ]
 
 _SPACES = ("", "RAS", "LPS")
+
+
+# ---------------------------------------------------------------------------------------------
+def _thread_limit(threads):
+    """The checked limit of ``threads=`` (a context manager)."""
+    if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
+        raise Error("threads: expected a whole number of threads (0: every core), got %r" % (threads,))
+    return _mlfe.thread_limit(int(threads))
+
+
+def _threaded(function):
+    """Adds ``threads=``: at most that many of the library's worker threads while the call runs
+    (0 or None: every core), as the command line's ``--threads``; the output is the same, byte
+    for byte, whatever the count."""
+
+    @functools.wraps(function)
+    def call(*args, threads=None, **kwargs):
+        if threads is None:
+            return function(*args, **kwargs)
+        with _thread_limit(threads):
+            return function(*args, **kwargs)
+
+    call.__doc__ = (function.__doc__ or "") + "\n\n    ``threads``: see the module documentation.\n"
+    return call
 
 
 # ---------------------------------------------------------------------------------------------
@@ -369,6 +400,7 @@ class Mesh:
         """The same surfaces in the scan's millimetres (a copy; ``self`` when already there)."""
         return Mesh._wrap(self._m.to_scan_frame()) if self._m.gltf_frame else self
 
+    @_threaded
     def write(self, path, *, draco=True, quantize=False, tolerance=0.0):
         """Writes the surfaces by extension, as ``mlfe convert`` writes them: .glb/.gltf (one node
         per surface with its name, colour and label; Draco unless ``draco=False``, ``quantize``
@@ -392,6 +424,7 @@ class Mesh:
             ", frame='gltf' (metres)" if self._m.gltf_frame else "")
 
 
+@_threaded
 def read_mesh(path):
     """Reads every asset format mlfe writes (.glb/.gltf with or without Draco, .drc, .ply, .obj,
     .stl, .off; the kind from the file's contents) as one :class:`Mesh` holding all its surfaces
@@ -420,8 +453,10 @@ class Hierarchy:
     function u on its vertices. Made by :func:`build` or :func:`load` (``Hierarchy(path)`` loads
     a ``.mlfeh`` file too).
 
-    ``positions`` are the vertices in the physical frame (millimetres, float64 (n, 3)),
-    ``tetrahedra`` the leaf cells as vertex indices (int64 (m, 4); 2D: ``cells`` (m, 3)),
+    ``positions`` are the vertices in the physical frame (millimetres, float64 (n, 3); the
+    coarsest cube pads the scan, so some lie beyond it: see :attr:`positions`),
+    ``tetrahedra`` the leaf cells as vertex indices (int64 (m, 4), each positively oriented in
+    the physical frame, as the .vtu and .msh exports; 2D: ``cells`` (m, 3)),
     ``values`` u at every vertex, ``vertex_levels`` the level each vertex appeared on.
     """
 
@@ -444,12 +479,34 @@ class Hierarchy:
     stop_reason = property(lambda self: self._h.stop_reason, doc="why refinement stopped (builds)")
     surface_driven = property(lambda self: self._h.surface_driven)
     memory_limited = property(lambda self: self._h.memory_limited)
-    seconds = property(lambda self: self._h.seconds)
+    @property
+    def seconds(self):
+        """The build's time in seconds; None for a loaded hierarchy (a file does not keep times,
+        so that the same input and options give the same bytes)."""
+        return None if self._h.file_info is not None else self._h.seconds
+
+    @property
+    def build_record(self):
+        """What the build did, as the hierarchy file keeps it (metadata "build"): stop_reason,
+        surface_driven, memory_limited, rms_target, noise_sigma, target_from_noise, options,
+        per_iteration and surface_passes rows (without times). The same dict for a build and for
+        the file it saved; a file written before the record existed gives what it knows
+        (empty rows, stop_reason '')."""
+        return self._h.build_record
     source = property(lambda self: self._h.source, doc="the input file ('array' for arrays)")
 
     @property
     def positions(self):
-        """Vertex positions in the physical frame (millimetres), float64 (n, 3)."""
+        """Vertex positions in the physical frame (millimetres), float64 (n, 3).
+
+        They can lie outside the scan. A volume's hierarchy is built on the samples' lattice:
+        its coarsest mesh is a cube 2^L samples wide along every voxel axis, L the smallest
+        level with 2^L >= n - 1 for the longest axis (n samples), starting at the first sample.
+        Along voxel axis a (n_a samples, spacing s_a) vertices thus reach up to
+        (2^L - (n_a - 1)) * s_a millimetres beyond the last sample, never before the first: a
+        181 x 217 x 181 head at 1 mm lies in a 256 mm cube, so up to 76 mm beyond it along x and
+        z and 40 mm along y. That padding holds no sample and is not refined (a few large cells);
+        assets, exports and renders are clipped to the scan's box."""
         return self._h.positions
 
     @property
@@ -459,7 +516,8 @@ class Hierarchy:
 
     @property
     def tetrahedra(self):
-        """Leaf tetrahedra, int64 (m, 4) (3D hierarchies)."""
+        """Leaf tetrahedra, int64 (m, 4) (3D hierarchies), each positively oriented in the
+        physical frame: (p1 - p0) . ((p2 - p0) x (p3 - p0)) > 0, also for a mirrored frame."""
         if self.dim != 3:
             raise Error("tetrahedra: a 2D hierarchy has triangles (use cells)")
         return self._h.cells
@@ -482,11 +540,12 @@ class Hierarchy:
 
     @property
     def errors(self):
-        """The approximation's error against its data. Built here: rms, rms_percent (of the
-        value range), l2, psnr_db (empty when u was not solved: surface-driven builds without a
-        hierarchy output). Loaded: what the file records (norm, rms, max, psnr_db,
-        sample_error_bound; None where unknown)."""
-        if self._h.file_info is not None:
+        """The approximation's error against its data: rms, rms_percent (of the value range),
+        l2, psnr_db of the build's last iteration (empty when u was not solved: surface-driven
+        builds without a hierarchy output), built here or loaded from a file that keeps its
+        build record. A file without the record: what its header holds (norm, rms, max,
+        psnr_db, sample_error_bound; None where unknown); :func:`info` gives those for any file."""
+        if self._h.file_info is not None and "build" not in self.metadata:
             info = self._h.file_info
             return {k: info[k] for k in ("norm", "rms", "max", "psnr_db", "sample_error_bound")}
         return dict(self._h.errors)
@@ -502,6 +561,7 @@ class Hierarchy:
         info = self._h.file_info
         return {} if info is None else info.get("metadata", {})
 
+    @_threaded
     def extract(self, iso=None, *, progress=None, **options):
         """The iso-surfaces at ``iso`` (a number or a list) as a :class:`Mesh`, extracted as
         ``mlfe iso``/``mlfe convert`` do. Options (the command line's, as keywords): simplify,
@@ -512,6 +572,7 @@ class Hierarchy:
             raise Error("iso: required for 3D hierarchies (e.g. iso=80 or iso=[80, 150])")
         return Mesh._wrap(self._h.extract(isos or [], progress, **options))
 
+    @_threaded
     def write(self, path, *, iso=None, progress=None, **options):
         """Extracts and writes the surfaces to ``path`` by extension, as ``mlfe iso``; returns
         the asset summary. Options as :meth:`extract` plus tolerance, draco, quantize, lod."""
@@ -524,6 +585,7 @@ class Hierarchy:
         """Ray-casts u through the tetrahedral mesh, as ``mlfe render``; see :func:`render`."""
         return render(self, out, progress=progress, **options)
 
+    @_threaded
     def export(self, path, *, level=-1, progress=None):
         """Writes the approximation as ``mlfe export`` does: on the voxel grid it was built from
         (.nii.gz .nii .nrrd .raw .vdb) or as its leaf mesh with values and levels (.vtu .msh), in
@@ -542,6 +604,7 @@ class Hierarchy:
             if os.path.exists(tmp):
                 os.remove(tmp)
 
+    @_threaded
     def save(self, path):
         """Writes the hierarchy file (.mlfeh), as ``mlfe build -o``."""
         self._h.save(os.fspath(path))
@@ -553,6 +616,7 @@ class Hierarchy:
 
 
 # ---------------------------------------------------------------------------------------------
+@_threaded
 def read_volume(path, **options):
     """Reads a volume or height field (vdb, nrrd, nii[.gz], mha/mhd, raw + json, pgm, png) as a
     :class:`Volume` in the file's frame: values float32 indexed ``[i, j, k]`` (a view of the
@@ -566,12 +630,14 @@ def read_volume(path, **options):
                   info={k: info[k] for k in ("format", "source_type", "notes")})
 
 
+@_threaded
 def load(path):
     """Loads a hierarchy file (.mlfeh) written by ``mlfe build``/``convert --hierarchy`` or
     :meth:`Hierarchy.save`."""
     return Hierarchy(_mlfe.load(os.fspath(path)))
 
 
+@_threaded
 def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None, progress=None,
           **options):
     """Builds the adaptive approximation of ``volume`` as ``mlfe build`` does: a volume file, a
@@ -586,6 +652,7 @@ def build(volume, *, iso=None, spacing=None, origin=None, direction=None, affine
     return Hierarchy(_mlfe.build(values, iso=_iso_values(iso), progress=progress, **frame, **options))
 
 
+@_threaded
 def convert(volume, out, *, iso=None, spacing=None, origin=None, direction=None, affine=None, space=None,
             hierarchy=None, report=None, preview=None, progress=None, **options):
     """Volume in, asset out (.glb .gltf .drc .ply .obj .stl .off), as ``mlfe convert``; returns
@@ -643,6 +710,7 @@ class CompareResult:
             self.kind, len(self.differences), "; ".join("%s: %s" % d for d in self.differences[:3]))
 
 
+@_threaded
 def compare(expected, actual, **options):
     """Compares two outputs by content, as ``mlfe compare EXPECTED ACTUAL``: files (meshes,
     glTF, EXR/PNG images, volumes, hierarchies; the kind from their contents) or meshes, any mix
@@ -714,6 +782,7 @@ class RenderResult:
             f["width"], f["height"], len(self.frames), self.tetrahedra, self.written)
 
 
+@_threaded
 def render(source, out=None, *, progress=None, **options):
     """Ray-cast images, as ``mlfe render``: ``source`` a :class:`Hierarchy`, a ``.mlfeh`` file,
     a volume (file, :class:`Volume`, array with its frame keywords), built first with the
@@ -766,6 +835,7 @@ def _check_iso_dimensions(volume, iso):
 render.__doc__ += "".join("\n    - ``%s``: %s" % field for field in _RENDER_FIELDS) + "\n"
 
 
+@_threaded
 def export(hierarchy, out, *, level=-1, progress=None):
     """``mlfe export``: a hierarchy (file or :class:`Hierarchy`) on its voxel grid or as its
     leaf mesh; see :meth:`Hierarchy.export`."""

@@ -14,12 +14,20 @@ in, per scan the outputs ``mlfe convert`` writes, and a summary table (CSV and J
   ``mlfe convert in -o <stem>.glb --hierarchy <stem>.mlfeh --report <stem>.json`` writes with the
   same options (keywords as in :func:`mlfe.convert`). Scans found in sub-folders keep their
   relative folder under ``out_dir``.
-- Resumable: a scan whose outputs all exist is skipped (outputs appear atomically, so an
-  existing file is a finished one); ``overwrite=True`` converts it again.
+- Resumable: a scan is skipped when its outputs all exist (outputs appear atomically, so an
+  existing file is a finished one) and its record, ``<out_dir>/<stem>.mlfe-batch`` (written
+  after the outputs), holds the same options, iso-values and outputs, the same mlfe version, and
+  the same size and modification time of every file the scan's read opens. Anything else
+  converts it again, as does ``overwrite=True``.
+- Options are checked once, before any scan is sent: a misspelt keyword or a value out of
+  range raises :class:`mlfe.Error` at once (with the nearest keyword), as :func:`mlfe.convert`
+  would on every scan.
 - Failures: a scan that fails (unreadable file, bad values, a crashed worker) gets a ``failed``
   row with its message; the others go on.
 - Summary: ``<out_dir>/<summary>.csv`` and ``.json``: one row per scan (input, status
-  converted/skipped/failed, outputs, triangles, bytes, vertices, seconds, message).
+  converted/skipped/failed, outputs, asset_triangles, asset_vertices and asset_bytes of the
+  asset written, hierarchy_vertices of the hierarchy built (from the report; empty without
+  report or for label maps), seconds, message).
 
 Memory: each scan may use ``max_memory`` (half the RAM by default, as the command line); with
 several workers on one machine pass e.g. ``max_memory="20%"``.
@@ -39,7 +47,10 @@ __all__ = ["BatchResult", "convert", "find_scans", "VOLUME_SUFFIXES"]
 #: a scan by themselves and the tetrahedral meshes, from the library's table of formats.
 VOLUME_SUFFIXES = tuple(mlfe._mlfe.scan_extensions())
 
-_COLUMNS = ("input", "status", "outputs", "triangles", "bytes", "vertices", "seconds", "message")
+_COLUMNS = ("input", "status", "outputs", "asset_triangles", "asset_vertices", "asset_bytes", "hierarchy_vertices",
+            "seconds", "message")
+_FIGURES = ("asset_triangles", "asset_vertices", "asset_bytes", "hierarchy_vertices")
+_RECORD_SUFFIX = ".mlfe-batch"  # never a report's (.json) nor an asset's ending
 
 
 def find_scans(folder, recursive=True):
@@ -112,43 +123,99 @@ def _plan(inputs, out_dir, asset_ext, hierarchy, report):
     return plan
 
 
-def _row(path, status, outs, message="", summary=None, seconds=None):
-    summary = summary or {}
-    return {
-        "input": path,
-        "status": status,
-        "outputs": ";".join(outs.values()),
-        "triangles": summary.get("triangles"),
-        "bytes": summary.get("bytes"),
-        "vertices": summary.get("vertices"),
-        "seconds": None if seconds is None else round(seconds, 3),
-        "message": message,
-    }
+def _row(path, status, outs, message="", figures=None, seconds=None):
+    figures = figures or {}
+    row = {"input": path, "status": status, "outputs": ";".join(outs.values())}
+    row.update({k: figures.get(k) for k in _FIGURES})
+    row.update({"seconds": None if seconds is None else round(seconds, 3), "message": message})
+    return row
+
+
+def _asset_figures(summary):
+    """asset_triangles, asset_vertices, asset_bytes of convert's asset summary (iso-surfaces per
+    surface, label maps per structure)."""
+    parts = summary.get("surfaces") or summary.get("structures") or []
+    vertices = [p.get("vertices") for p in parts]
+    return {"asset_triangles": summary.get("triangles"), "asset_bytes": summary.get("bytes"),
+            "asset_vertices": sum(vertices) if vertices and None not in vertices else None}
 
 
 def _report_figures(outs):
-    """triangles, bytes, vertices from an existing report (a skipped scan), if any."""
+    """The figures of an existing report (a skipped scan), if any: the asset's, and the
+    hierarchy's vertices."""
     try:
         with open(outs["report"]) as f:
             r = json.load(f)
-        asset = r.get("asset", {})
-        return {"triangles": asset.get("triangles"), "bytes": asset.get("bytes"), "vertices": r.get("vertices")}
-    except (KeyError, OSError, ValueError):
+        return dict(_asset_figures(r.get("asset", {})), hierarchy_vertices=r.get("vertices"))
+    except (KeyError, OSError, ValueError, AttributeError):
         return {}
 
 
+def _record_path(outs):
+    return os.path.splitext(outs["asset"])[0] + _RECORD_SUFFIX
+
+
+def _jsonable(value):
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        return value.tolist()
+    return repr(value)
+
+
+def _record(path, outs, iso, options):
+    """What a scan's outputs were made from: the options, iso-values and outputs, the mlfe
+    version, and size and modification time of every file the scan's read opens; as JSON
+    reads it back (so that it compares equal to a stored one)."""
+    # threads= changes no output byte.
+    options = {k: v for k, v in options.items() if k != "threads"}
+    files = []
+    for f in mlfe._mlfe.input_files(path):
+        st = os.stat(f)
+        files.append([os.path.abspath(f), st.st_size, st.st_mtime_ns])
+    record = {"mlfe": mlfe.__version__, "input": files, "iso": iso, "options": options,
+              "outputs": sorted(os.path.basename(o) for o in outs.values())}
+    return json.loads(json.dumps(record, sort_keys=True, default=_jsonable))
+
+
+def _up_to_date(path, outs, iso, options):
+    """Whether a scan's outputs all exist and its record matches the scan and the options."""
+    if not all(os.path.exists(o) for o in outs.values()):
+        return False
+    try:
+        with open(_record_path(outs)) as f:
+            stored = json.load(f)
+        return stored == _record(path, outs, iso, options)
+    except (OSError, ValueError, mlfe.Error):
+        return False
+
+
 def _convert_one(path, outs, iso, options):
-    """One scan on a worker: mlfe.convert with the batch's options; never raises."""
+    """One scan on a worker: mlfe.convert with the batch's options, then the scan's record;
+    never raises."""
     start = time.perf_counter()
+    record_path = _record_path(outs)
     try:
         for o in outs.values():
             os.makedirs(os.path.dirname(o) or ".", exist_ok=True)
+        # An old record must not vouch for outputs this run may leave half replaced.
+        if os.path.exists(record_path):
+            os.remove(record_path)
+        try:  # before the read: what the outputs come from
+            record = _record(path, outs, iso, options)
+        except (OSError, mlfe.Error):  # no record; convert names what is wrong with the scan
+            record = None
         summary = mlfe.convert(path, outs["asset"], iso=iso, hierarchy=outs.get("hierarchy"),
                                report=outs.get("report"), **options)
-        figures = {"triangles": summary.get("triangles"), "bytes": summary.get("bytes")}
+        figures = _asset_figures(summary)
         if "report" in outs:
-            figures["vertices"] = _report_figures(outs).get("vertices")
-        return _row(path, "converted", outs, summary=figures, seconds=time.perf_counter() - start)
+            figures["hierarchy_vertices"] = _report_figures(outs).get("hierarchy_vertices")
+        if record is not None:
+            tmp = record_path + ".part"
+            with open(tmp, "w") as f:
+                json.dump(record, f, sort_keys=True, indent=1)
+            os.replace(tmp, record_path)
+        return _row(path, "converted", outs, figures=figures, seconds=time.perf_counter() - start)
     except Exception as e:  # every failure becomes the scan's row, whatever raised it
         message = str(e).splitlines()[0] if str(e) else type(e).__name__
         return _row(path, "failed", outs, message=message, seconds=time.perf_counter() - start)
@@ -196,10 +263,20 @@ def convert(inputs, out_dir, *, iso=None, asset_ext=".glb", hierarchy=False, rep
     See the module documentation for names, resuming and the summary."""
     if asset_ext.lower() not in mlfe._mlfe.asset_extensions:
         raise mlfe.Error("asset_ext: expected %s, got %r" % (" ".join(mlfe._mlfe.asset_extensions), asset_ext))
-    for key in ("hierarchy", "report", "out"):
+    for key in ("hierarchy", "report", "out", "preview"):
         if key in options:
             raise mlfe.Error("%s: the batch names each scan's outputs (see hierarchy=True, report=True)" % key)
+    for key in ("spacing", "origin", "direction", "affine", "space", "progress"):
+        if key in options:
+            raise mlfe.Error("%s: not a batch option (scan files bring their own frame; on_row reports progress)"
+                             % key)
     iso = mlfe._iso_values(iso)
+    # Once here, not on every scan of the cluster.
+    checked = dict(options)
+    if checked.get("threads") is not None:
+        mlfe._thread_limit(checked.pop("threads"))
+    checked.pop("threads", None)
+    mlfe._mlfe.check_convert_keywords(iso, bool(hierarchy), **checked)
     out_dir = os.fspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)
     plan = _plan(inputs, out_dir, asset_ext, hierarchy, report)
@@ -207,8 +284,8 @@ def convert(inputs, out_dir, *, iso=None, asset_ext=".glb", hierarchy=False, rep
     rows = {}
     todo = []
     for path, outs in plan:
-        if not overwrite and all(os.path.exists(o) for o in outs.values()):
-            rows[path] = _row(path, "skipped", outs, summary=_report_figures(outs) if report else None)
+        if not overwrite and _up_to_date(path, outs, iso, options):
+            rows[path] = _row(path, "skipped", outs, figures=_report_figures(outs) if report else None)
             if on_row:
                 on_row(rows[path])
         else:

@@ -3,6 +3,8 @@
 // throws mlfe::Error before any output is written.
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/formats/hierarchy_io.h>
+#include <mlfe/formats/volume_reader.h>
 #include <mlfe/pipeline.h>
 
 #include <cstdlib>
@@ -115,6 +117,31 @@ void expect_error(F&& f, const std::string& part) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
   }
+}
+
+// Issue 42: the hierarchy file keeps the build's record; a record of the wrong shape names the file.
+TEST(Pipeline, TheFileKeepsTheBuildRecord) {
+  const ScalarGrid skull = read_volume(kSkull);
+  BuildOptions o;
+  o.max_vertices = 3000;
+  const Built b = build(skull, o, {2.5});
+  const std::string path = scratch() + "/record.mlfeh";
+  write_built(path, b, {{"input", kSkull}});
+  const Built loaded = built_from_file(path);
+  EXPECT_FALSE(b.stop_reason().empty());
+  EXPECT_EQ(build_record(loaded), build_record(b));
+  EXPECT_EQ(loaded.stop_reason(), b.stop_reason());
+  ASSERT_EQ(loaded.iterations().size(), b.iterations().size());
+  EXPECT_EQ(loaded.iterations().back().l2_error, b.iterations().back().l2_error);
+  EXPECT_EQ(build_record(b)["options"]["max_vertices"], 3000);
+
+  HierarchyFileInfo info;
+  info.transform = b.transform;
+  info.value_min = b.value_min;
+  info.value_max = b.value_max;
+  info.metadata = {{"build", {{"stop_reason", 7}}}};
+  write_hierarchy(path, b.get<3>().hierarchy, b.values(), info);
+  expect_error([&] { built_from_file(path); }, "record.mlfeh: the build record in the metadata is malformed");
 }
 
 TEST(Pipeline, BadInputThrowsBeforeWriting) {

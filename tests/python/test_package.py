@@ -467,7 +467,17 @@ class BatchTest(unittest.TestCase):
         with open(result.csv_path) as f:
             rows = list(csv.DictReader(f))
         self.assertEqual([r["status"] for r in rows].count("failed"), 1)
-        self.assertTrue(all(int(r["triangles"]) > 0 for r in rows if r["status"] == "converted"))
+        for r in rows:
+            if r["status"] == "converted":
+                # The asset's figures, not the hierarchy's.
+                self.assertGreater(int(r["asset_triangles"]), 0)
+                self.assertGreater(int(r["asset_vertices"]), 0)
+                self.assertNotEqual(r["asset_vertices"], r["hierarchy_vertices"])
+        c_row = next(r for r in result.rows if r["input"].endswith("c.nrrd"))
+        with open(os.path.join(out, "site_b", "c.json")) as f:
+            c_report = json.load(f)
+        self.assertEqual(c_row["asset_vertices"], sum(s["vertices"] for s in c_report["asset"]["surfaces"]))
+        self.assertEqual(c_row["hierarchy_vertices"], c_report["vertices"])
         with open(result.json_path) as f:
             self.assertEqual(json.load(f)["converted"], 4)
 
@@ -483,7 +493,62 @@ class BatchTest(unittest.TestCase):
         self.assertEqual(again.count("skipped"), 3)
         self.assertEqual(os.path.getmtime(asset), mtime)
         skipped = next(r for r in again.rows if r["input"].endswith("c.nrrd"))
-        self.assertGreater(skipped["triangles"], 0)  # figures from the report already written
+        self.assertEqual(skipped["asset_triangles"], c_row["asset_triangles"])  # from the report written
+
+    def test_a_changed_option_or_input_remakes_the_outputs(self):
+        """Resuming skips a scan only when its record (options, iso, outputs, the input's size and
+        time) matches: another option, another iso-value or a touched input converts it again."""
+        import distributed
+        import mlfe.batch
+
+        study = os.path.join(self.dir, "study")
+        os.makedirs(study)
+        scan = os.path.join(study, "a.nrrd")
+        write_nrrd(scan, blob(16, seed=1), (1.0, 1.0, 1.2))
+        out = os.path.join(self.dir, "assets")
+        asset = os.path.join(out, "a.glb")
+        with distributed.Client(distributed.LocalCluster(n_workers=1, processes=False,
+                                                         dashboard_address=None)) as client:
+            def run(**options):
+                r = mlfe.batch.convert(study, out, scheduler=client, **dict({"iso": 40}, **options))
+                return r.rows[0]["status"]
+
+            self.assertEqual(run(), "converted")
+            first = open(asset, "rb").read()
+            self.assertEqual(run(), "skipped")
+            self.assertEqual(run(threads=1), "skipped")  # threads change no byte
+            self.assertEqual(run(tolerance=0.5), "converted")
+            self.assertNotEqual(open(asset, "rb").read(), first)
+            self.assertEqual(run(tolerance=0.5), "skipped")
+            self.assertEqual(run(), "converted")
+            self.assertEqual(open(asset, "rb").read(), first)
+            self.assertEqual(run(iso=45), "converted")
+            self.assertEqual(run(iso=45), "skipped")
+            stat = os.stat(scan)
+            os.utime(scan, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))
+            self.assertEqual(run(iso=45), "converted")
+            os.remove(os.path.join(out, "a.mlfe-batch"))  # outputs of an older mlfe: no record
+            self.assertEqual(run(iso=45), "converted")
+
+    def test_a_misspelt_keyword_raises_before_any_task(self):
+        """Options are checked once, before a cluster is asked for: a misspelt keyword or a value
+        out of range raises at once with the library's message (no scheduler listens here)."""
+        import mlfe.batch
+
+        study = os.path.join(self.dir, "study")
+        os.makedirs(study)
+        write_nrrd(os.path.join(study, "a.nrrd"), blob(16, seed=1), (1.0, 1.0, 1.2))
+        out = os.path.join(self.dir, "assets")
+        nowhere = "tcp://127.0.0.1:9"
+        with self.assertRaisesRegex(mlfe.Error, r"unknown option 'tolerence'; did you mean 'tolerance'\?"):
+            mlfe.batch.convert(study, out, iso=40, tolerence=0.1, scheduler=nowhere)
+        with self.assertRaisesRegex(mlfe.Error, "^max_level: "):
+            mlfe.batch.convert(study, out, iso=40, max_level=99, scheduler=nowhere)
+        with self.assertRaisesRegex(mlfe.Error, "^threads: "):
+            mlfe.batch.convert(study, out, iso=40, threads=-2, scheduler=nowhere)
+        with self.assertRaisesRegex(mlfe.Error, "labels and iso exclude each other"):
+            mlfe.batch.convert(study, out, iso=40, labels=True, scheduler=nowhere)
+        self.assertEqual(os.listdir(out), [])
 
 
 if __name__ == "__main__":

@@ -31,4 +31,14 @@ inline Vec3 normalized(const Vec3& a) {
   return {a[0] / n, a[1] / n, a[2] / n};
 }
 
+/// Six times the signed volume of the tetrahedron (a, b, c, d): positive when b − a, c − a and
+/// d − a are right-handed, the positive orientation of VTK's and Gmsh's tetrahedra. Red-green
+/// refinement keeps no orientation, so whoever hands tetrahedra out orders them by its sign
+/// (swapping c and d of a negative one), in the frame it hands out.
+inline double signed_volume6(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+  const Vec3 u = sub(b, a), v = sub(c, a), w = sub(d, a);
+  return u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0]) +
+         u[2] * (v[0] * w[1] - v[1] * w[0]);
+}
+
 }  // namespace mlfe
