@@ -57,13 +57,9 @@ std::vector<SimplifyOptions> simplify_stages(const SimplifierOptions& o, std::si
 TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o) {
   if (o.kind == Simplifier::kMeshopt) return simplify_fast(mesh, o.tolerance);
   const std::vector<SimplifyOptions> stages = simplify_stages(o, mesh.triangles.size());
-  // Runs walk one-rings in cost order, and run faster on vertices in spatial order: the second
-  // run 1.3x on the σ 3 head; the first run's blocks (cubes of space, one heap each) then find
-  // their vertices side by side instead of spread over the extraction's slices (σ 3 head: 17 %
-  // less CPU for that run, including the ordering, against its extraction order). A single run
-  // (small meshes) keeps the input's order, as it always did.
-  TriangleMesh out = stages.size() > 1 ? simplify_within(spatially_ordered(mesh), stages[0])
-                                       : simplify_within(mesh, stages[0]);
+  // The first stage keeps the extraction's vertex order (slices); the next walk one-rings in
+  // cost order, and run faster (σ 3 head: 1.3x) on vertices in spatial order.
+  TriangleMesh out = simplify_within(mesh, stages[0]);
   for (std::size_t s = 1; s < stages.size(); ++s) out = simplify_within(spatially_ordered(out), stages[s]);
   if (o.placement == Placement::kOptimal) {
     SurfaceFitOptions fo;

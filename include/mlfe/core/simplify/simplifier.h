@@ -49,8 +49,7 @@ TriangleMesh simplify(const TriangleMesh& mesh, const SimplifierOptions& o);
 /// The runs of simplify_within that simplify() makes, in order, for a surface of `triangles`
 /// triangles and `o.kind` (kMeshopt: none, it is not simplify_within): one for kFast and
 /// kBounded, kAuto's one or two by size (see simplify()); min_triangles is `o.ratio` of
-/// `triangles`. When there are two runs, simplify() orders the vertices spatially
-/// (spatially_ordered) before each.
+/// `triangles`. Between two runs simplify() orders the vertices spatially (spatially_ordered).
 std::vector<SimplifyOptions> simplify_stages(const SimplifierOptions& o, std::size_t triangles);
 
 /// Simplifies the interface complex `x` in place within `o.tolerance`, keeping its interfaces
