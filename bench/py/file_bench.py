@@ -27,9 +27,11 @@ Modes (--modes, default all three):
             (-d 0, effort 7) of one 2D mosaic of the z slices, SZ3 ABS 0 (its lossless path);
             each checked bit for bit. SPERR has no lossless mode.
 
-Peers: sz3 (SZ3 3.3.2), sperr3d (SPERR 0.8.5) and jpegls_slices (bench/cpp/peers/, CharLS) in
---peers (default build/bench-peers; scripts/build_bench_peers.sh builds jpegls_slices), cjxl/djxl
-(libjxl-tools) and zstd on PATH, python3-zfpy. A missing peer is skipped and named in the output.
+Peers in --peers (default build/bench-peers): jpegls_slices (bench/cpp/peers/, CharLS; built by
+scripts/build_bench_peers.sh), sz3 (SZ3 v3.3.2's tools/sz3) and sperr3d (SPERR v0.8.5), the last
+two built by hand from their release sources without OpenMP (this repository carries no recipe for
+them); cjxl/djxl (libjxl-tools) and zstd on PATH; python3-zfpy (scripts/install_bench_deps.sh). A
+missing peer is skipped and named in the output.
 
 Usage: /usr/bin/python3 bench/py/file_bench.py VOLUME [--mlfe PATH[=LABEL] ...] [--modes psnr,maxerror,lossless]
            [--methods mlfe-maxerr,mlfe-rms,sz3,sperr,zfp,jpegls,jxl,zstd] [--mlfe-args "..."] [--out DIR]

@@ -12,10 +12,10 @@
 // machines are shared). Errors: a message on stderr, exit 2.
 #include <charls/charls.h>
 
-#include <ctime>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <iterator>
 #include <stdexcept>
@@ -56,7 +56,8 @@ int encode(char** argv) {
   if (bits < 2 || bits > 16) throw std::runtime_error("BITS must be 2..16");
   const size_t sample = bits > 8 ? 2 : 1, slice = size_t{nx} * ny * sample;
   const std::vector<uint8_t> in = read_all(argv[2]);
-  if (in.size() != slice * nz) throw std::runtime_error(std::string(argv[2]) + ": size is not NX*NY*NZ samples");
+  if (in.size() != slice * nz)
+    throw std::runtime_error(std::string(argv[2]) + ": size is not NX*NY*NZ samples");
   std::vector<uint8_t> out = {'J', 'L', 'S', 'S'};
   put_u32(out, nz);
   const std::clock_t t = std::clock();
