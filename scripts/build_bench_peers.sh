@@ -4,6 +4,9 @@
 #
 #   meshopt_update  bench/cpp/peers/meshopt_update.cpp over meshoptimizer 1.2's src/*.cpp
 #                   (meshopt_simplifyWithUpdate, 1.0+; Debian's libmeshoptimizer is 0.18).
+#   jpegls_slices   bench/cpp/peers/jpegls_slices.cpp over Debian's CharLS 2.x (libcharls-dev,
+#                   scripts/install_bench_deps.sh): JPEG-LS per slice for bench/py/file_bench.py;
+#                   skipped with a warning when CharLS is not installed.
 #
 # Source: zeux/meshoptimizer at the pinned tag v1.2 (commit 9d9890c73011d75920af614485296d1e03e95448),
 # as the tarball GitHub serves at
@@ -79,3 +82,22 @@ if [ -z "$tris" ] || [ "$tris" -gt 80 ] || [ "$tris" -eq 0 ]; then
 fi
 rm -f "$ply" "$OUT/smoke_grid_out.ply"
 echo "ok: $OUT/meshopt_update (meshoptimizer $TAG)"
+
+if [ ! -f /usr/include/charls/charls.h ]; then
+  echo "warning: no CharLS (libcharls-dev); bench/py/file_bench.py runs without its JPEG-LS rows" >&2
+  exit 0
+fi
+echo "building $OUT/jpegls_slices against CharLS"
+"$CXX" -O2 -DNDEBUG -std=c++17 "$ROOT/bench/cpp/peers/jpegls_slices.cpp" -lcharls -o "$OUT/jpegls_slices"
+
+# Smoke test: a 64 x 48 x 3 ramp with noise, lossless bit for bit and NEAR 2 within 2.
+raw="$OUT/smoke_ramp.raw"
+python3 -c "import random,sys; random.seed(1); sys.stdout.buffer.write(bytes((x+y+z*7+random.randrange(9))%256 for z in range(3) for y in range(48) for x in range(64)))" >"$raw"
+for near in 0 2; do
+  "$OUT/jpegls_slices" encode "$raw" 64 48 3 8 "$near" "$raw.jlss" >/dev/null
+  "$OUT/jpegls_slices" decode "$raw.jlss" "$raw.out" >/dev/null
+  python3 -c "import sys; a=open(sys.argv[1],'rb').read(); b=open(sys.argv[2],'rb').read(); sys.exit(len(a)!=len(b) or max(abs(x-y) for x,y in zip(a,b))>int(sys.argv[3]))" \
+    "$raw" "$raw.out" "$near" || { echo "error: jpegls_slices NEAR $near round trip out of bound" >&2; exit 1; }
+done
+rm -f "$raw" "$raw.jlss" "$raw.out"
+echo "ok: $OUT/jpegls_slices (CharLS)"

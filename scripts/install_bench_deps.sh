@@ -7,13 +7,16 @@
 #   xvfb               X server for VTK's volume mappers, which need a render window (bench/py/render_bench.py)
 #   libzfp-dev         optional: ZFP compressed-array comparison (skipped if unavailable)
 #   python3-zfpy       ZFP fixed-accuracy rate-distortion beside the hierarchy file (bench/py/hierarchy_file_bench.py)
-#   zstd               zstd -19 of the raw input (bench/py/hierarchy_file_bench.py)
+#   zstd               zstd -19 of the raw input (bench/py/hierarchy_file_bench.py, file_bench.py)
+#   libcharls-dev      CharLS JPEG-LS, the lossless/near-lossless peer of bench/py/file_bench.py
+#                      (scripts/build_bench_peers.sh builds bench/cpp/peers/jpegls_slices.cpp on it)
+#   libjxl-tools       cjxl/djxl, JPEG XL lossless in bench/py/file_bench.py
 # and from npm: gltfpack 1.3 (bench/py/convert_bench.py's meshoptimizer 1.x peer).
 # Idempotent: checks every package with dpkg-query and runs apt-get update/install only when
 # something is missing. Build dependencies of mlfe itself: scripts/install_deps.sh.
 set -euo pipefail
 
-REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools xvfb python3-zfpy zstd)
+REQUIRED=(python3-vtk9 python3-numpy python3-scipy libopenvdb-tools xvfb python3-zfpy zstd libcharls-dev libjxl-tools)
 OPTIONAL=(libzfp-dev)
 
 is_installed() {

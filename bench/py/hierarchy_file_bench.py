@@ -24,6 +24,7 @@ import gzip
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -47,6 +48,13 @@ def read_voxels(path):
     return vtk_to_numpy(img.GetPointData().GetScalars()).copy(), img.GetDimensions()
 
 
+def child_cpu_s():
+    """CPU seconds (user + system) of the finished child processes so far: on a loaded machine a
+    single-threaded command's CPU time stays close to its unloaded wall time, which its wall does not."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def errors(a, b, peak):
     d = a.astype(np.float64) - b.astype(np.float64)
     rms = math.sqrt(float(np.mean(d * d)))
@@ -63,17 +71,23 @@ def lossless(raw_path, n):
     return rows
 
 
-def run_mlfe(mlfe, inp, opts, out_dir, tag, n):
+def run_mlfe(mlfe, inp, opts, out_dir, tag, n, global_opts=()):
+    """`mlfe [global_opts] build inp opts`, then `mlfe export` of the file: the report's figures, the
+    wall and CPU times and the decoded voxels (float32)."""
     h = os.path.join(out_dir, tag + ".mlfeh")
     rep = os.path.join(out_dir, tag + ".json")
+    cpu = child_cpu_s()
     t = time.perf_counter()
-    subprocess.run([mlfe, "build", inp, "-o", h, "--report", rep] + opts, check=True, capture_output=True)
+    subprocess.run([mlfe, *global_opts, "build", inp, "-o", h, "--report", rep] + opts, check=True, capture_output=True)
     build_s = time.perf_counter() - t
+    build_cpu_s = child_cpu_s() - cpu
     f = json.load(open(rep))["file"]
     x = os.path.join(out_dir, tag + "_decoded.raw")
+    cpu = child_cpu_s()
     t = time.perf_counter()
-    p = subprocess.run([mlfe, "export", h, "-o", x], check=True, capture_output=True, text=True)
+    p = subprocess.run([mlfe, *global_opts, "export", h, "-o", x], check=True, capture_output=True, text=True)
     decode_s = time.perf_counter() - t
+    decode_cpu_s = child_cpu_s() - cpu
     resample = float(p.stderr.split("resampled in ")[1].split(" s")[0])
     decoded = np.fromfile(x, dtype="<f4")
     os.remove(x)
@@ -81,17 +95,19 @@ def run_mlfe(mlfe, inp, opts, out_dir, tag, n):
     return {"coder": "mlfe " + (" ".join(opts) or "default"), "bytes": f["bytes"], "bpv": f["bits_per_voxel"],
             "psnr_db": f["psnr_db"], "rms": f["rms_error"], "max": f["max_error"], "bound": f["value_bound"],
             "encode_s": f["encode_seconds"], "build_s": build_s, "decode_s": decode_s,
+            "build_cpu_s": build_cpu_s, "decode_cpu_s": decode_cpu_s,
             "resample_s": resample, "decoded": decoded}
 
 
-def run_zfp(vox, dims, tol, peak):
+def run_zfp(vox, dims, tol, peak, clock=time.perf_counter):
+    """ZFP fixed-accuracy at `tol`; seconds by `clock` (time.process_time: CPU seconds)."""
     a = vox.astype(np.float32).reshape(dims[2], dims[1], dims[0])
-    t = time.perf_counter()
+    t = clock()
     c = zfpy.compress_numpy(a, tolerance=tol)
-    enc = time.perf_counter() - t
-    t = time.perf_counter()
+    enc = clock() - t
+    t = clock()
     d = zfpy.decompress_numpy(c)
-    dec = time.perf_counter() - t
+    dec = clock() - t
     e = errors(d.ravel(), vox, peak)
     return {"coder": f"ZFP accuracy {tol:g}", "bytes": len(c), "bpv": 8 * len(c) / vox.size, "psnr_db": e["psnr_db"],
             "rms": e["rms"], "max": e["max"], "encode_s": enc, "decode_s": dec}
