@@ -40,6 +40,8 @@ constexpr std::uint64_t kMaxSectionRatio = 32768;
 // Elements or vertices per file byte the reader reserves for at most before the counts are
 // verified (measured files hold about 11 elements per byte).
 constexpr std::uint64_t kMaxReserveFactor = 256;
+// v4: at most this many elements per file byte (plus the slack) in a file's HEAD.
+constexpr std::uint64_t kMaxElementsPerByte = 4096, kElementSlack = 1u << 20;
 
 using Bytes = std::vector<std::uint8_t>;
 
@@ -939,6 +941,11 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   if (head.nv >= VertexId::kInvalidValue) throw Error(path + ": vertex count too large");
   if (head.ne == 0 || head.ne >= ElemId::kInvalidValue) throw Error(path + ": element count out of range");
   if (head.levels > kMaxLevels) throw Error(path + ": more than 60 levels");
+  // A range-coded level describes its marks in as little as a bit per thousands of
+  // candidates, so a small v4 file could claim and rebuild a huge hierarchy: its counts are
+  // capped by its size (measured files hold under 40 elements per byte).
+  if (version == kVersion4 && head.ne > kMaxElementsPerByte * file_size + kElementSlack)
+    throw Error(path + ": element count implausible for the file size");
   if (head.coding > (version >= 3 ? kCodingInteger : kCodingExact))
     throw Error(path + ": unknown value coding " + std::to_string(head.coding));
   const bool bound_ok = head.coding == kCodingQuantized ? head.bound > 0 && std::isfinite(head.bound)
