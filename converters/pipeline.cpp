@@ -367,19 +367,19 @@ std::string write_built(const std::string& path, const Built& b, const nlohmann:
   info.value_max = b.value_max;
   info.metadata = provenance;
   info.metadata["build"] = build_record(b);
-  // v3 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
+  // v4 with exact values, so `iso` on the file extracts the surfaces convert extracted. The
   // writer verifies that the file rebuilds this hierarchy; if it ever did not, v1 (exact) is
   // written instead of a different hierarchy (v1 has no lattice: outputs of such a file are
   // not clipped to the data's box).
-  HierarchyWriteOptions v3;
-  v3.zstd_level = 19;
-  v3.version = 3;
+  HierarchyWriteOptions v4;
+  v4.zstd_level = 19;
+  v4.version = 4;
   std::string warning;
   b.visit([&](const auto& a) {
     HierarchyFileInfo li = info;
     set_lattice_info(a, li);
     try {
-      write_hierarchy(path, a.hierarchy, a.values, li, v3);
+      write_hierarchy(path, a.hierarchy, a.values, li, v4);
     } catch (const LevelRebuildError& e) {
       warning = std::string(e.what()) + "; writing format version 1";
       write_hierarchy(path, a.hierarchy, a.values, info);

@@ -144,7 +144,7 @@ HierarchyFileFigures write_file(const FileJob& job, const Built& b, Approximatio
         fig.errors.max, option_ref("max_error"), job.options.max_error, b.stop_reason()));
   // Step 3: the file.
   HierarchyWriteOptions wo;
-  wo.version = 3;
+  wo.version = fig.version;
   wo.max_error = fig.bound;
   wo.integer_values = fig.coding == "integer";
   wo.zstd_level = 19;

@@ -14,6 +14,9 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <optional>
+
+#include "lattice_values.h"
 
 namespace mlfe {
 
@@ -23,7 +26,7 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "hierarchy_io assumes a
 namespace {
 
 constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'H', 'I', 'E', 'R'};
-constexpr std::uint32_t kVersion = 1, kVersion2 = 2, kVersion3 = 3;
+constexpr std::uint32_t kVersion = 1, kVersion2 = 2, kVersion3 = 3, kVersion4 = 4;
 constexpr std::size_t kHeaderSize = 200;
 constexpr std::uint32_t kFlagZstd = 1u, kFlagValues = 2u;
 constexpr std::uint64_t kMaxSpace = 64;
@@ -37,6 +40,8 @@ constexpr std::uint64_t kMaxSectionRatio = 32768;
 // Elements or vertices per file byte the reader reserves for at most before the counts are
 // verified (measured files hold about 11 elements per byte).
 constexpr std::uint64_t kMaxReserveFactor = 256;
+// v4: at most this many elements per file byte (plus the slack) in a file's HEAD.
+constexpr std::uint64_t kMaxElementsPerByte = 4096, kElementSlack = 1u << 20;
 
 using Bytes = std::vector<std::uint8_t>;
 
@@ -192,6 +197,18 @@ constexpr int kMaxLevels = 60;
 
 std::uint32_t norm_code(const std::string& norm) { return norm == "l2" ? 1 : norm == "h1" ? 2 : 0; }
 
+template <int D>
+typename PredictedValues<D>::Coding predicted_coding(const HierarchyFileInfo& info, double bound,
+                                                     bool integer) {
+  typename PredictedValues<D>::Coding c;
+  c.integer = integer;
+  c.bound = bound;
+  c.on_lattice = info.on_lattice;
+  c.lattice_level = info.lattice_level;
+  c.spacing = info.transform.spacing;
+  return c;
+}
+
 // Integer coding (v3): a vertex's code goes to the stream of its context, the bit width of
 // |d_a − d_b| of its decoded parents (capped; 0 for T0): large surpluses come where the parents
 // differ, so each stream holds codes of one magnitude and zstd's entropy stage codes them
@@ -215,6 +232,18 @@ void put_varint(Bytes& out, std::int64_t q) {
     z >>= 7;
   }
   out.push_back(static_cast<std::uint8_t>(z));
+}
+
+// v4 level sections: form 0 holds range-coded marks and values (docs/mlfeh-v4.md), form 1 the
+// marks and values as v3 stores them.
+constexpr std::uint32_t kFormCoded = 0, kFormPacked = 1;
+
+// The marks of a level as bits, least significant first (v2, v3, v4 form 1).
+void put_mark_bits(Bytes& out, const std::vector<std::uint8_t>& marks) {
+  Bytes bits((marks.size() + 7) / 8, 0);
+  for (std::size_t i = 0; i < marks.size(); ++i)
+    if (marks[i]) bits[i / 8] |= static_cast<std::uint8_t>(1u << (i % 8));
+  put_array(out, bits);
 }
 
 // Appends one section (header + payload) to `file`.
@@ -263,7 +292,7 @@ std::string check_write(const std::string& path, const Hierarchy<D>& h, const st
     throw Error(path + ": the samples' lattice and a sample error bound need format version 3");
   if (options.version == 1 && options.integer_values)
     throw Error(path + ": integer values need format version 3");
-  if (options.version < 1 || options.version > 3)
+  if (options.version < 1 || options.version > 4)
     throw Error(path + ": cannot write hierarchy file version " + std::to_string(options.version));
   if (!values.empty() && values.size() != h.vertex_count())
     throw Error(path + ": " + std::to_string(values.size()) + " values for " +
@@ -278,7 +307,7 @@ std::string check_write(const std::string& path, const Hierarchy<D>& h, const st
   if (!(options.max_error >= 0) || !std::isfinite(options.max_error))
     throw Error(path + ": max error must be finite and >= 0");
   if (h.max_level() > kMaxLevels) throw Error(path + ": more than 60 levels");
-  const bool v3 = options.version == 3;
+  const bool v3 = options.version >= 3;
   if (options.integer_values &&
       (!v3 || options.max_error != std::floor(options.max_error) || options.max_error >= 2147483648.0))
     throw Error(path + ": integer values need format version 3 and an integer bound below 2^31");
@@ -293,7 +322,7 @@ template <int D>
 void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescription<D>& enc,
               const std::vector<double>& u, const HierarchyFileInfo& info, const std::string& meta,
               const HierarchyWriteOptions& options) {
-  const bool v3 = options.version == 3;
+  const bool v3 = options.version >= 3, v4 = options.version == 4;
 
   MLFE_CHECK(!enc.vertex_end.empty() && enc.vertex_end.back() == h.vertex_count() &&
              enc.coarse_cells.size() == h.coarse_count() && enc.marks.size() + 1 == enc.vertex_end.size());
@@ -304,10 +333,21 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
                                                         : kCodingExact;
   std::vector<std::int64_t> codes;
   std::vector<double> decoded;  // integer coding: the contexts come from the decoded parents
+  // v4: coding 1 and 3 also predicted on the lattice and range coded, one stream per step (the
+  // same codes and decoded values).
+  const bool predicted = v4 && (coding == kCodingQuantized || coding == kCodingInteger);
+  std::vector<Bytes> streams;
   try {
     if (coding == kCodingQuantized) quantize_hierarchical(h, u, options.max_error, &codes);
     if (coding == kCodingInteger)
       decoded = quantize_integer(h, u, static_cast<std::int64_t>(options.max_error), &codes);
+    if (predicted) {
+      PredictedValues<D> pv(predicted_coding<D>(info, options.max_error, coding == kCodingInteger));
+      std::vector<double> d(u.size());
+      for (std::size_t k = 0; k < enc.vertex_end.size(); ++k)
+        streams.push_back(
+            pv.encode(h, static_cast<int>(k), k == 0 ? 0 : enc.vertex_end[k - 1], enc.vertex_end[k], u, d));
+    }
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
@@ -327,7 +367,7 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
 
   Bytes file;
   put_bytes(file, kMagic, 8);
-  put(file, v3 ? kVersion3 : kVersion2);
+  put(file, v4 ? kVersion4 : v3 ? kVersion3 : kVersion2);
   put(file, static_cast<std::uint32_t>(D));
 
   // Step 2: HEAD.
@@ -365,7 +405,10 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
   put(mesh, static_cast<std::uint32_t>(enc.coarse_cells.size()));
   put_array(mesh, enc.coarse_points);
   put_array(mesh, enc.coarse_cells);
-  put_values(mesh, 0, enc.vertex_end[0]);
+  if (predicted)
+    put_array(mesh, streams[0]);
+  else
+    put_values(mesh, 0, enc.vertex_end[0]);
   put_section(path, file, kTagMesh, mesh, options.compress, options.zstd_level);
 
   // Step 4: one LEVL per refinement step.
@@ -375,12 +418,24 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
     put(level, static_cast<std::uint32_t>(k));
     put(level, static_cast<std::uint32_t>(marks.size()));
     put(level, static_cast<std::uint32_t>(enc.vertex_end[k] - enc.vertex_end[k - 1]));
-    Bytes bits((marks.size() + 7) / 8, 0);
-    for (std::size_t i = 0; i < marks.size(); ++i)
-      if (marks[i]) bits[i / 8] |= static_cast<std::uint8_t>(1u << (i % 8));
-    put_array(level, bits);
+    Bytes coded = level;  // v4 form 0: range-coded marks and values, stored raw
+    if (v4) put(level, kFormPacked);
+    put_mark_bits(level, marks);
     put_values(level, enc.vertex_end[k - 1], enc.vertex_end[k]);
-    put_section(path, file, kTagLevel, level, options.compress, options.zstd_level);
+    Bytes packed;
+    put_section(path, packed, kTagLevel, level, options.compress, options.zstd_level);
+    if (predicted) {
+      // The smaller form: range coding wins on scans, zstd on label maps' repeated patterns.
+      put(coded, kFormCoded);
+      const Bytes marks_stream = encode_marks(marks);
+      put(coded, static_cast<std::uint32_t>(marks_stream.size()));
+      put_array(coded, marks_stream);
+      put_array(coded, streams[k]);
+      Bytes section;
+      put_section(path, section, kTagLevel, coded, false, 0);
+      if (section.size() < packed.size()) packed.swap(section);
+    }
+    put_array(file, packed);
   }
   write_file_atomically(path, [&](std::ostream& out) {
     out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
@@ -655,9 +710,16 @@ std::int64_t get_varint(const std::string& path, Cursor& c, const char* what) {
 
 struct HeadV2 {
   std::uint64_t nv = 0, ne = 0;
-  std::uint32_t levels = 0, coding = 0;
+  std::uint32_t levels = 0, coding = 0, version = 2;
   double bound = 0;
+  /// v4 with coding 1 or 3: values predicted on the lattice and range coded.
+  bool predicted() const {
+    return version == kVersion4 && (coding == kCodingQuantized || coding == kCodingInteger);
+  }
 };
+
+// The rest of a section's payload: a v4 range-coded stream.
+Bytes rest_of(Cursor& c, const char* what) { return c.get_array<std::uint8_t>(c.left(), what); }
 
 // Decodes the values of vertices [from, to) of h: see docs/mlfeh-v2.md, "Values".
 template <int D>
@@ -704,6 +766,22 @@ void get_values(const std::string& path, Cursor& c, const Hierarchy<D>& h, const
   }
   for (const Cursor& sc : streams)
     if (sc.left() != 0) throw Error(path + ": trailing bytes in a value stream of " + std::string(what));
+}
+
+// The n marks of a level section: bits (v2, v3, v4 form 1) or a range-coded stream after its
+// length (v4 form 0, `coded`).
+std::vector<std::uint8_t> read_marks(const std::string& path, Cursor& c, bool coded, std::uint32_t n,
+                                     const std::string& name) {
+  if (coded) {
+    const auto bytes = c.get<std::uint32_t>(name.c_str());
+    const Bytes coded = c.get_array<std::uint8_t>(bytes, name.c_str());
+    return decode_marks(path, name.c_str(), n, coded.data(), coded.size());
+  }
+  const Bytes bits = c.get_array<std::uint8_t>((std::size_t(n) + 7) / 8, name.c_str());
+  if (n % 8 && (bits.back() >> (n % 8))) throw Error(path + ": " + name + " has marks past its candidates");
+  std::vector<std::uint8_t> marks(n);
+  for (std::size_t i = 0; i < n; ++i) marks[i] = (bits[i / 8] >> (i % 8)) & 1u;
+  return marks;
 }
 
 template <int D>
@@ -762,7 +840,15 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
     h.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(head.nv, cap)), 0, true);
   }
   check_lattice_box(path, h, f);
-  get_values(path, c, h, head, 0, nv0, f.values, "T0");
+  std::optional<PredictedValues<D>> pv;
+  if (head.predicted()) {
+    pv.emplace(predicted_coding<D>(f, head.bound, head.coding == kCodingInteger));
+    f.values.resize(nv0);
+    const Bytes stream = rest_of(c, "T0");
+    pv->decode(path, "T0", h, 0, 0, nv0, stream.data(), stream.size(), f.values);
+  } else {
+    get_values(path, c, h, head, 0, nv0, f.values, "T0");
+  }
   if (c.left() != 0) throw Error(path + ": trailing bytes in the T0 section");
 
   // Step 2: the levels, each rebuilt before its values are read (they need the parents).
@@ -781,15 +867,22 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
                   std::to_string(cand.size()) + " candidate elements");
     if (h.vertex_count() + std::uint64_t(m) > head.nv)
       throw Error(path + ": " + name + " exceeds the vertex count");
-    const Bytes bits = lc.get_array<std::uint8_t>((std::size_t(n) + 7) / 8, name.c_str());
-    if (n % 8 && (bits.back() >> (n % 8))) throw Error(path + ": " + name + " has marks past its candidates");
-    std::vector<std::uint8_t> marks(n);
-    for (std::size_t i = 0; i < n; ++i) marks[i] = (bits[i / 8] >> (i % 8)) & 1u;
+    const std::uint32_t form = head.version == kVersion4 ? lc.get<std::uint32_t>(name.c_str()) : kFormPacked;
+    if (form > kFormPacked || (form == kFormCoded && !pv))
+      throw Error(path + ": " + name + " has an unknown form " + std::to_string(form));
+    const std::vector<std::uint8_t> marks = read_marks(path, lc, form == kFormCoded, n, name);
     const std::size_t before = h.vertex_count();
     apply_refinement_marks(h, cand, marks);
     if (h.vertex_count() - before != m || h.element_count() > head.ne)
       throw Error(path + ": " + name + " does not rebuild the stored counts");
-    get_values(path, lc, h, head, before, h.vertex_count(), f.values, name.c_str());
+    if (form == kFormCoded) {
+      f.values.resize(h.vertex_count());
+      const Bytes stream = rest_of(lc, name.c_str());
+      pv->decode(path, name.c_str(), h, k, before, h.vertex_count(), stream.data(), stream.size(), f.values);
+    } else {
+      get_values(path, lc, h, head, before, h.vertex_count(), f.values, name.c_str());
+      if (pv) pv->observe(h, k, before, h.vertex_count(), f.values);
+    }
     if (lc.left() != 0) throw Error(path + ": trailing bytes in the " + name + " section");
   }
   if (max_level < 0 || max_level >= static_cast<int>(head.levels)) {
@@ -820,6 +913,7 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   head.levels = c.get<std::uint32_t>("header");
   head.coding = c.get<std::uint32_t>("header");
   head.bound = c.get<double>("header");
+  head.version = version;
   for (double& x : f.transform.spacing) x = c.get<double>("header");
   for (double& x : f.transform.origin) x = c.get<double>("header");
   for (double& x : f.transform.direction) x = c.get<double>("header");
@@ -829,7 +923,7 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   f.max_error = c.get<double>("header");
   f.psnr_db = c.get<double>("header");
   const auto norm = c.get<std::uint32_t>("header");
-  if (version == 3) {
+  if (version >= 3) {
     const auto lattice = c.get<std::uint32_t>("header");
     const auto level = c.get<std::uint32_t>("header");
     for (auto& n : f.data_dims)
@@ -847,7 +941,12 @@ HierarchyFile read_v2(const std::string& path, std::ifstream& in, std::uint64_t 
   if (head.nv >= VertexId::kInvalidValue) throw Error(path + ": vertex count too large");
   if (head.ne == 0 || head.ne >= ElemId::kInvalidValue) throw Error(path + ": element count out of range");
   if (head.levels > kMaxLevels) throw Error(path + ": more than 60 levels");
-  if (head.coding > (version == 3 ? kCodingInteger : kCodingExact))
+  // A range-coded level describes its marks in as little as a bit per thousands of
+  // candidates, so a small v4 file could claim and rebuild a huge hierarchy: its counts are
+  // capped by its size (measured files hold under 40 elements per byte).
+  if (version == kVersion4 && head.ne > kMaxElementsPerByte * file_size + kElementSlack)
+    throw Error(path + ": element count implausible for the file size");
+  if (head.coding > (version >= 3 ? kCodingInteger : kCodingExact))
     throw Error(path + ": unknown value coding " + std::to_string(head.coding));
   const bool bound_ok = head.coding == kCodingQuantized ? head.bound > 0 && std::isfinite(head.bound)
                         : head.coding == kCodingInteger ? head.bound >= 0 && head.bound < 2147483648.0 &&
@@ -921,14 +1020,14 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level) {
       throw Error(path + ": not an mlfe hierarchy file (bad magic)");
     if (file_size < 12) throw Error(path + ": truncated header");
     std::memcpy(&version, pre + 8, 4);
-    if (version == kVersion2 || version == kVersion3) {
+    if (version == kVersion2 || version == kVersion3 || version == kVersion4) {
       if (file_size < kPreambleSize) throw Error(path + ": truncated header");
       return read_v2(path, in, file_size, pre, max_level);
     }
   }
   if (version != kVersion)
     throw Error(path + ": unsupported hierarchy file version " + std::to_string(version) +
-                " (this mlfe reads 1, 2 and 3)");
+                " (this mlfe reads 1, 2, 3 and 4)");
   HierarchyFile f = read_v1(path);
   if (max_level >= 0 && max_level < f.file_levels) {
     if (f.dim == 2)

@@ -245,43 +245,63 @@ LevelDescription<D> renumber_canonically(Hierarchy<D>& h,
   return std::move(static_cast<LevelDescription<D>&>(enc));
 }
 
+double quantize_value(double u, double pred, double max_error, std::int64_t* code) {
+  const double step = 2 * max_error;
+  constexpr double kMaxCode = 4503599627370496.0;  // 2^52: q·step stays exact enough
+  const double x = std::nearbyint((u - pred) / step);
+  if (!(std::fabs(x) < kMaxCode))
+    throw Error("max error " + std::to_string(max_error) + " is too small for values of magnitude " +
+                std::to_string(std::fabs(u)));
+  auto q = static_cast<std::int64_t>(x);
+  double dv = pred + static_cast<double>(q) * step;
+  if (std::fabs(dv - u) > max_error) {
+    // Rounding of the product or the sum: the neighbouring code is within the bound.
+    const std::int64_t alt = dv > u ? q - 1 : q + 1;
+    const double da = pred + static_cast<double>(alt) * step;
+    // A value exactly between two codes (u = 0 under a prediction that is an odd multiple of
+    // E, common over a zero background) is E from both; rounding of the product can put
+    // either an ulp beyond E.
+    if (!(std::fabs(da - u) <= max_error) && std::fabs(dv - u) <= max_error * (1 + 1e-12)) {
+      *code = q;
+      return dv;
+    }
+    if (!(std::fabs(da - u) <= max_error * (1 + 1e-12)))
+      throw Error("max error " + std::to_string(max_error) +
+                  " is below the rounding of values of magnitude " + std::to_string(std::fabs(u)));
+    q = alt;
+    dv = da;
+  }
+  *code = q;
+  return dv;
+}
+
+std::int64_t quantize_integer_value(double u, std::int64_t pred, std::int64_t max_error, std::int64_t* code) {
+  constexpr double kMax = 4503599627370496.0;  // 2^52
+  if (!(std::fabs(u) < kMax) || u != std::nearbyint(u))
+    throw Error("value " + std::to_string(u) + " is not an integer of magnitude below 2^52");
+  const auto x = static_cast<std::int64_t>(u);
+  const std::int64_t step = 2 * max_error + 1;
+  // Floor division of r + E by the step (r + E may be negative).
+  const std::int64_t r = x - pred + max_error;
+  const std::int64_t q = r >= 0 ? r / step : -((-r + step - 1) / step);
+  const std::int64_t d = pred + q * step;
+  MLFE_CHECK(std::llabs(d - x) <= max_error);
+  *code = q;
+  return d;
+}
+
 template <int D>
 std::vector<double> quantize_hierarchical(const Hierarchy<D>& h, const std::vector<double>& u,
                                           double max_error, std::vector<std::int64_t>* codes) {
   MLFE_CHECK(u.size() == h.vertex_count());
   MLFE_CHECK(max_error > 0 && std::isfinite(max_error));
-  const double step = 2 * max_error;
-  constexpr double kMaxCode = 4503599627370496.0;  // 2^52: q·step stays exact enough
   std::vector<double> d(u.size());
   if (codes) codes->assign(u.size(), 0);
   for (std::size_t v = 0; v < u.size(); ++v) {
     const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
     const double pred = p[0].valid() ? 0.5 * (d[p[0].value] + d[p[1].value]) : 0.0;
-    const double x = std::nearbyint((u[v] - pred) / step);
-    if (!(std::fabs(x) < kMaxCode))
-      throw Error("max error " + std::to_string(max_error) + " is too small for values of magnitude " +
-                  std::to_string(std::fabs(u[v])));
-    auto q = static_cast<std::int64_t>(x);
-    double dv = pred + static_cast<double>(q) * step;
-    if (std::fabs(dv - u[v]) > max_error) {
-      // Rounding of the product or the sum: the neighbouring code is within the bound.
-      const std::int64_t alt = dv > u[v] ? q - 1 : q + 1;
-      const double da = pred + static_cast<double>(alt) * step;
-      // A value exactly between two codes (u = 0 under a prediction that is an odd multiple of
-      // E, common over a zero background) is E from both; rounding of the product can put
-      // either an ulp beyond E.
-      if (!(std::fabs(da - u[v]) <= max_error) && std::fabs(dv - u[v]) <= max_error * (1 + 1e-12)) {
-        d[v] = dv;
-        if (codes) (*codes)[v] = q;
-        continue;
-      }
-      if (!(std::fabs(da - u[v]) <= max_error * (1 + 1e-12)))
-        throw Error("max error " + std::to_string(max_error) +
-                    " is below the rounding of values of magnitude " + std::to_string(std::fabs(u[v])));
-      q = alt;
-      dv = da;
-    }
-    d[v] = dv;
+    std::int64_t q;
+    d[v] = quantize_value(u[v], pred, max_error, &q);
     if (codes) (*codes)[v] = q;
   }
   return d;
@@ -292,21 +312,13 @@ std::vector<double> quantize_integer(const Hierarchy<D>& h, const std::vector<do
                                      std::int64_t max_error, std::vector<std::int64_t>* codes) {
   MLFE_CHECK(u.size() == h.vertex_count());
   MLFE_CHECK(max_error >= 0 && max_error < (std::int64_t(1) << 31));
-  constexpr double kMax = 4503599627370496.0;  // 2^52
-  const std::int64_t step = 2 * max_error + 1;
   std::vector<std::int64_t> d(u.size());
   if (codes) codes->assign(u.size(), 0);
   for (std::size_t v = 0; v < u.size(); ++v) {
-    if (!(std::fabs(u[v]) < kMax) || u[v] != std::nearbyint(u[v]))
-      throw Error("value " + std::to_string(u[v]) + " is not an integer of magnitude below 2^52");
-    const auto x = static_cast<std::int64_t>(u[v]);
     const auto& p = h.vertex_parents(VertexId(static_cast<std::uint32_t>(v)));
     const std::int64_t pred = p[0].valid() ? integer_prediction(d[p[0].value], d[p[1].value]) : 0;
-    // Floor division of r + E by the step (r + E may be negative).
-    const std::int64_t r = x - pred + max_error;
-    const std::int64_t q = r >= 0 ? r / step : -((-r + step - 1) / step);
-    d[v] = pred + q * step;
-    MLFE_CHECK(std::llabs(d[v] - x) <= max_error);
+    std::int64_t q;
+    d[v] = quantize_integer_value(u[v], pred, max_error, &q);
     if (codes) (*codes)[v] = q;
   }
   return std::vector<double>(d.begin(), d.end());

@@ -745,7 +745,7 @@ struct HierarchyFileFigures {
   GridErrors errors;  ///< at the samples (voxels) or the mesh's points
   double bound = 0;   ///< every stored value within this (0: exact)
   double encode_seconds = 0;
-  int version = 3;
+  int version = 4;
   std::string coding;       ///< "quantized", "integer", "exact"
   double tolerance = 0;     ///< max_error: the interpolation's share
   std::uint64_t bytes = 0;  ///< the file's size

@@ -34,7 +34,7 @@ TEST(HierarchyFileCommand, BuildWritesAFileWithinTheBoundAndFarBelowTheInput) {
   const RunResult r = run("build " + kSkull + " -o " + h + " --report " + rep + " --psnr 50");
   ASSERT_EQ(r.status, 0) << r.err;
   const HierarchyFile f = read_hierarchy(h);
-  EXPECT_EQ(f.version, 3);
+  EXPECT_EQ(f.version, 4);
   EXPECT_TRUE(f.on_lattice);
   EXPECT_TRUE(std::isnan(f.sample_error_bound));  // a least-squares build promises no bound
   const auto report = nlohmann::json::parse(read_bytes(rep));
@@ -68,7 +68,7 @@ TEST(HierarchyFileCommand, InfoPrintsLevelsErrorsAndSections) {
   const RunResult r = run("info " + h + " --json");
   ASSERT_EQ(r.status, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
-  EXPECT_EQ(j["version"], 3);
+  EXPECT_EQ(j["version"], 4);
   EXPECT_EQ(j["values"], "quantized");
   EXPECT_EQ(j["on_lattice"], true);
   EXPECT_EQ(j["data_dims"], nlohmann::json::array({64, 64, 64}));

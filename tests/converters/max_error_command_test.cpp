@@ -75,7 +75,7 @@ double round_trip_max_error(const std::string& input, double e, const std::strin
   for (std::size_t i = 0; i < src.values.size(); ++i)
     worst = std::max(worst, std::fabs(double(got.values[i]) - double(src.values[i])));
   const HierarchyFile f = read_hierarchy(h);
-  EXPECT_EQ(f.version, 3);
+  EXPECT_EQ(f.version, 4);
   EXPECT_TRUE(f.on_lattice);
   EXPECT_EQ(f.data_dims, src.dims);
   EXPECT_DOUBLE_EQ(f.sample_error_bound, std::stod(std::to_string(e)));
@@ -159,7 +159,7 @@ TEST(MaxErrorCommand, ExportWritesTheDataGridNotTheLatticeCube) {
   const ScalarGrid src = read_volume(skull), got = read_volume(out);
   EXPECT_EQ(got.dims, src.dims);
   const HierarchyFile f = read_hierarchy(h);
-  EXPECT_EQ(f.version, 3);
+  EXPECT_EQ(f.version, 4);
   EXPECT_TRUE(f.on_lattice);
   EXPECT_EQ(f.lattice_level, 6);  // 63 sample steps: T0 is 64 wide
   // Reading it back gives the approximation on the lattice, which iso and render clip with.

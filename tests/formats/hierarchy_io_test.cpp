@@ -147,10 +147,10 @@ TEST(HierarchyFileRead, NamesAnUnsupportedVersion) {
   const fs::path p = temp_file("version.mlfeh");
   write_hierarchy<2>(p.string(), h, {}, sample_info());
   Bytes b = read_bytes(p);
-  b[8] = 4;
+  b[8] = 5;
   write_bytes(p, b);
   EXPECT_EQ(read_error(p),
-            p.string() + ": unsupported hierarchy file version 4 (this mlfe reads 1, 2 and 3)");
+            p.string() + ": unsupported hierarchy file version 5 (this mlfe reads 1, 2, 3 and 4)");
 }
 
 TEST(HierarchyFileRead, RejectsHugeCountsAgainstTheFileSizeBeforeAllocating) {

@@ -63,6 +63,13 @@
 // of an error-bounded build; and one more value coding, integer surpluses (lossless for
 // integer data at bound 0).
 //
+// ---- Format, version 4 (docs/mlfeh-v4.md) ----
+//
+// Version 3 with each level section in the smaller of two forms: v3's, or the marks and the
+// values range coded (formats/range_coder.h), the values' quantized surpluses coded against a
+// higher-order prediction on the samples' lattice (formats/lattice_values.h). The decoded
+// values are v3's.
+//
 #pragma once
 #include <mlfe/core/field/scalar_grid.h>
 #include <mlfe/core/mesh/hierarchy.h>
@@ -130,7 +137,7 @@ struct HierarchyWriteOptions {
   bool compress = true;  ///< zstd-compress the array section (v1) or the sections (v2)
   int zstd_level = 3;
   /// 1 keeps the ids and exact values; 2 is the compact progressive file; 3 adds the lattice
-  /// and the integer coding (docs/mlfeh-v3.md).
+  /// and the integer coding (docs/mlfeh-v3.md); 4 range codes levels (docs/mlfeh-v4.md).
   int version = 1;
   /// v2/v3: quantize values so every decoded vertex value is within this bound (data units) of
   /// the given one; 0 stores them exactly (f64, or integers with integer_values).
@@ -164,7 +171,7 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const Level
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
                      const HierarchyWriteOptions& options = {});
 
-/// Reads and fully validates a hierarchy file (v1, v2 or v3). Checks, in order: magic, version, the
+/// Reads and fully validates a hierarchy file (v1 to v4). Checks, in order: magic, version, the
 /// header fields, the section sizes against the file size (before allocating anything large),
 /// the CRCs, the decompressed sizes, every array (v1: Hierarchy::from_arrays; v2: T0, marks and
 /// counts as the rebuild proceeds) and the values (finite). Throws mlfe::Error with a one-line

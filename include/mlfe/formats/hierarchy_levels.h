@@ -102,6 +102,15 @@ template <int D>
 std::vector<double> quantize_integer(const Hierarchy<D>& h, const std::vector<double>& u,
                                      std::int64_t max_error, std::vector<std::int64_t>* codes = nullptr);
 
+/// One value of quantize_hierarchical: the code q of u under prediction `pred` (stored in
+/// *code) and the decoded value pred + q·2E, within max_error (> 0) of u; throws mlfe::Error as
+/// quantize_hierarchical does.
+double quantize_value(double u, double pred, double max_error, std::int64_t* code);
+
+/// One value of quantize_integer: u must be an integer of magnitude < 2^52 (else mlfe::Error);
+/// stores q = floor((u − pred + E) / (2E + 1)) in *code and returns pred + q·(2E + 1).
+std::int64_t quantize_integer_value(double u, std::int64_t pred, std::int64_t max_error, std::int64_t* code);
+
 /// The integer prediction of that coding: floor((a + b) / 2), exact for |a|, |b| < 2^62.
 inline std::int64_t integer_prediction(std::int64_t a, std::int64_t b) {
   return (a >> 1) + (b >> 1) + (a & b & 1);
