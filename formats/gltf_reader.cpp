@@ -428,10 +428,14 @@ TriangleMesh surface_mesh(const std::string& path, const nlohmann::json& j,
   }
   if (pieces.size() == 1) return std::move(pieces[0]);
   std::vector<const TriangleMesh*> parts;
-  for (const auto& piece : pieces) parts.push_back(&piece);
+  std::vector<std::size_t> piece_triangles;
+  for (const auto& piece : pieces) {
+    parts.push_back(&piece);
+    piece_triangles.push_back(piece.triangles.size());
+  }
   TriangleMesh joined = merge_meshes(parts);
   pieces.clear();
-  weld_open_borders(joined);
+  weld_piece_borders(joined, piece_triangles);
   return joined;
 }
 

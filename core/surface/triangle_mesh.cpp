@@ -54,9 +54,29 @@ TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts) {
 
 namespace {
 
-// The vertices on an open edge of `triangles` (1), others 0.
-std::vector<std::uint8_t> open_edge_vertices(const std::vector<std::array<std::uint32_t, 3>>& triangles,
-                                             std::size_t nv) {
+using PositionBits = std::array<std::uint32_t, 3>;
+
+// +0.0f turns -0 into 0, so equal coordinates give equal bits.
+PositionBits position_bits(const std::array<float, 3>& p) {
+  PositionBits b;
+  for (int c = 0; c < 3; ++c) {
+    const float v = p[c] + 0.0f;
+    std::memcpy(&b[c], &v, sizeof v);
+  }
+  return b;
+}
+
+struct EdgeKeyHash {
+  std::size_t operator()(const std::array<std::uint32_t, 6>& k) const {
+    std::uint64_t h = 0;
+    for (std::uint32_t bits : k) h = (h ^ bits) * 0x9E3779B97F4A7C15ull;
+    return std::size_t(h ^ (h >> 29));
+  }
+};
+
+// The directed edges no triangle traverses the other way, as (from, to) in triangle order.
+std::vector<std::array<std::uint32_t, 2>> open_edges(
+    const std::vector<std::array<std::uint32_t, 3>>& triangles, std::size_t nv) {
   std::vector<std::uint64_t> edges;
   edges.reserve(3 * triangles.size());
   for (const auto& t : triangles)
@@ -64,47 +84,67 @@ std::vector<std::uint8_t> open_edge_vertices(const std::vector<std::array<std::u
       if (t[k] >= nv) throw Error("welding borders: a triangle refers to a vertex beyond the positions");
       edges.push_back(std::uint64_t(t[k]) << 32 | t[(k + 1) % 3]);
     }
-  tbb::parallel_sort(edges.begin(), edges.end());
-  std::vector<std::uint8_t> open(nv, 0);
+  std::vector<std::uint64_t> sorted = edges;
+  tbb::parallel_sort(sorted.begin(), sorted.end());
+  std::vector<std::array<std::uint32_t, 2>> open;
   for (const std::uint64_t e : edges) {
     const auto a = std::uint32_t(e >> 32), b = std::uint32_t(e);
-    if (!std::binary_search(edges.begin(), edges.end(), std::uint64_t(b) << 32 | a)) open[a] = open[b] = 1;
+    if (!std::binary_search(sorted.begin(), sorted.end(), std::uint64_t(b) << 32 | a)) open.push_back({a, b});
   }
   return open;
 }
 
-struct PositionHash {
-  std::size_t operator()(const std::array<float, 3>& p) const {
-    std::uint64_t h = 0;
-    for (float c : p) {
-      std::uint32_t bits;
-      std::memcpy(&bits, &c, sizeof bits);
-      h = (h ^ bits) * 0x9E3779B97F4A7C15ull;
-    }
-    return std::size_t(h ^ (h >> 29));
-  }
-};
+std::uint32_t find_root(std::vector<std::uint32_t>& parent, std::uint32_t v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
 
 }  // namespace
 
-void weld_open_borders(TriangleMesh& mesh) {
+void weld_piece_borders(TriangleMesh& mesh, const std::vector<std::size_t>& piece_triangles) {
   const std::size_t nv = mesh.positions.size();
-  const std::vector<std::uint8_t> open = open_edge_vertices(mesh.triangles, nv);
+  std::size_t total = 0;
+  for (std::size_t n : piece_triangles) total += n;
+  MLFE_CHECK(total == mesh.triangles.size());
+  // Which piece each vertex is in: pieces own their vertices (merge_meshes).
+  std::vector<std::uint32_t> piece_of(nv, 0);
+  for (std::size_t p = 0, f = 0; p < piece_triangles.size(); ++p)
+    for (std::size_t end = f + piece_triangles[p]; f < end; ++f)
+      for (std::uint32_t v : mesh.triangles[f])
+        if (v < nv) piece_of[v] = std::uint32_t(p);
+  const std::vector<std::array<std::uint32_t, 2>> open = open_edges(mesh.triangles, nv);
+  // Match: an open edge a→b of one piece and an open edge b'→a' of another at the same
+  // positions are one edge of the surface cut in two; a→a', b→b' are welded. Only matched
+  // edges weld, so the surface's own boundary keeps distinct vertices that share a position.
+  std::unordered_map<std::array<std::uint32_t, 6>, std::array<std::uint32_t, 2>, EdgeKeyHash> by_key;
+  auto key = [&](std::uint32_t a, std::uint32_t b) {
+    const PositionBits pa = position_bits(mesh.positions[a]), pb = position_bits(mesh.positions[b]);
+    return std::array<std::uint32_t, 6>{pa[0], pa[1], pa[2], pb[0], pb[1], pb[2]};
+  };
+  for (const auto& e : open) by_key.emplace(key(e[0], e[1]), e);
+  std::vector<std::uint32_t> parent(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
+  auto unite = [&](std::uint32_t a, std::uint32_t b) {
+    a = find_root(parent, a);
+    b = find_root(parent, b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the first vertex stays
+  };
+  for (const auto& e : open) {
+    const auto it = by_key.find(key(e[1], e[0]));
+    if (it == by_key.end() || piece_of[it->second[0]] == piece_of[e[0]]) continue;
+    unite(e[0], it->second[1]);
+    unite(e[1], it->second[0]);
+  }
   const bool with_normals = mesh.normals.size() == nv;
-  // +0.0f turns -0 into 0, so equal coordinates give equal bits for the hash.
-  std::unordered_map<std::array<float, 3>, std::uint32_t, PositionHash> first_at;
   std::vector<std::uint32_t> to(nv);
   std::uint32_t kept = 0;
-  for (std::size_t v = 0; v < nv; ++v) {
-    if (open[v]) {
-      const auto& p = mesh.positions[v];
-      const auto [it, inserted] =
-          first_at.emplace(std::array<float, 3>{p[0] + 0.0f, p[1] + 0.0f, p[2] + 0.0f}, kept);
-      to[v] = it->second;
-      if (!inserted) continue;
-    } else {
-      to[v] = kept;
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const std::uint32_t root = find_root(parent, v);
+    if (root != v) {
+      to[v] = to[root];  // root < v: already placed
+      continue;
     }
+    to[v] = kept;
     mesh.positions[kept] = mesh.positions[v];
     if (with_normals) mesh.normals[kept] = mesh.normals[v];
     ++kept;

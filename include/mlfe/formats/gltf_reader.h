@@ -31,7 +31,7 @@ struct GltfAsset {
   /// one mesh that are equal but for their data (the same attribute names, material, extras and
   /// other extensions) are the pieces of one surface (write_gltf's Draco pieces of a big level,
   /// or an exporter's 16-bit index splits): they come as one, at the first one's place, merged
-  /// and welded by weld_open_borders (vertices on the pieces' open edges at identical decoded
+  /// and welded by weld_piece_borders (matching open edges of two pieces at identical decoded
   /// positions become one), so a surface reads the same however it was cut.
   std::vector<GltfPrimitive> primitives;
   /// The glTF JSON without what only encodes the data: buffers, bufferViews, accessors,

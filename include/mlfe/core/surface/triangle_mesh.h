@@ -29,13 +29,16 @@ void compute_area_weighted_normals(TriangleMesh& mesh);
 /// when the vertices do not fit 32-bit indices. (CHECKs that no part is null.)
 TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts);
 
-/// Welds the vertices on an open edge (an edge that no triangle traverses the other way) that
-/// share their exact position into the first of them; other vertices are kept, even at the same
-/// position. Vertices keep their order, less the welded ones; normals follow their vertices (the
-/// first's is kept). merge_meshes of the pieces of one surface cut along edges, then this,
-/// gives the surface back with its borders closed (read_gltf joins Draco pieces so). Throws
-/// mlfe::Error for triangle indices out of range.
-void weld_open_borders(TriangleMesh& mesh);
+/// Joins the pieces of one surface cut along its edges, given as merge_meshes of the pieces
+/// (`piece_triangles`: each piece's triangle count, in order; CHECKed to sum to the triangles).
+/// An open edge a→b of one piece (no triangle of the mesh traverses b→a) and an open edge
+/// b'→a' of another piece at the same exact positions are one edge cut in two: a' is welded
+/// into a and b' into b (into the earlier vertex). Nothing else is welded, so distinct vertices
+/// that share a position (on the surface's own boundary, or inside a piece) stay distinct.
+/// Vertices keep their order, less the welded ones; normals follow their vertices (the
+/// earlier's is kept). read_gltf joins Draco pieces so. Throws mlfe::Error for triangle indices
+/// out of range.
+void weld_piece_borders(TriangleMesh& mesh, const std::vector<std::size_t>& piece_triangles);
 
 /// The same surface with its vertices in Morton (Z-curve) order of their positions on a 1024³
 /// grid over the bounding box (ties in input order) and its triangles ordered by their first
