@@ -21,6 +21,15 @@ TriangleMesh merged_mesh(const std::vector<GltfSurface>& surfaces) {
 
 namespace {
 
+// merged_mesh(surfaces), the one surface of `owned` taken rather than copied (what merge_meshes
+// keeps of a single part: its arrays, normals only when every vertex has one).
+TriangleMesh merged_mesh(const std::vector<GltfSurface>& surfaces, std::vector<GltfSurface>* owned) {
+  if (!owned || owned->size() != 1) return merged_mesh(surfaces);
+  TriangleMesh mesh = std::move((*owned)[0].mesh);
+  if (mesh.normals.size() != mesh.positions.size()) mesh.normals.clear();
+  return mesh;
+}
+
 // write_asset's body; `owned`: the same surfaces when the caller gave them up.
 void write_asset_of(const std::vector<GltfSurface>& surfaces, std::vector<GltfSurface>* owned,
                     const std::string& path, const AssetWriteOptions& options) {
@@ -41,7 +50,7 @@ void write_asset_of(const std::vector<GltfSurface>& surfaces, std::vector<GltfSu
       write_gltf(path, surfaces, o);
     return;
   }
-  TriangleMesh merged = merged_mesh(surfaces);
+  TriangleMesh merged = merged_mesh(surfaces, owned);
   if (owned) std::vector<GltfSurface>().swap(*owned);
   if (ext == ".drc") {
     DracoOptions o;

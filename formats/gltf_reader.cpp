@@ -58,6 +58,47 @@ bool is_encoding_extension(const std::string& name) {
          std::end(kEncodingExtensions);
 }
 
+/// A primitive without what only encodes its data: attribute names stay (which data a primitive
+/// has), their accessor numbers, the indices and the compression extensions go.
+nlohmann::json stripped_primitive(nlohmann::json p) {
+  if (!p.is_object()) return p;
+  if (p.contains("attributes") && p["attributes"].is_object()) {
+    nlohmann::json names = nlohmann::json::array();
+    for (auto it = p["attributes"].begin(); it != p["attributes"].end(); ++it) names.push_back(it.key());
+    p["attributes"] = names;
+  }
+  p.erase("indices");
+  if (p.contains("extensions") && p["extensions"].is_object()) {
+    for (const char* e : kEncodingExtensions) p["extensions"].erase(e);
+    if (p["extensions"].empty()) p.erase("extensions");
+  }
+  return p;
+}
+
+bool is_triangles(const nlohmann::json& p) {
+  return p.is_object() && (!p.contains("mode") || p["mode"] == 4);
+}
+
+/// A mesh's primitives in groups, in order of their first primitive: triangle primitives that
+/// are equal once stripped (the same attributes, material, extras and other extensions) are the
+/// pieces of one surface, cut for an encoder's or an index type's sake (mlfe's Draco pieces,
+/// exporters' 65535-vertex splits); every other primitive is a group of its own.
+std::vector<std::vector<std::size_t>> surface_groups(const nlohmann::json& primitives) {
+  std::vector<std::vector<std::size_t>> groups;
+  std::vector<nlohmann::json> keys;
+  for (std::size_t p = 0; p < primitives.size(); ++p) {
+    const nlohmann::json key = stripped_primitive(primitives[p]);
+    std::size_t g = is_triangles(key) ? 0 : groups.size();
+    while (g < groups.size() && !(is_triangles(keys[g]) && keys[g] == key)) ++g;
+    if (g == groups.size()) {
+      groups.emplace_back();
+      keys.push_back(key);
+    }
+    groups[g].push_back(p);
+  }
+  return groups;
+}
+
 /// Removes the data-encoding parts described in GltfAsset::structure.
 nlohmann::json strip_encoding(nlohmann::json j) {
   for (const char* key : {"buffers", "bufferViews", "accessors"}) j.erase(key);
@@ -76,24 +117,15 @@ nlohmann::json strip_encoding(nlohmann::json j) {
     for (auto& n : j["nodes"])
       if (n.is_object())
         for (const char* key : {"matrix", "translation", "rotation", "scale"}) n.erase(key);
+  // The pieces of one surface (see surface_groups) are listed once.
   if (j.contains("meshes") && j["meshes"].is_array())
     for (auto& m : j["meshes"])
-      if (m.is_object() && m.contains("primitives") && m["primitives"].is_array())
-        for (auto& p : m["primitives"]) {
-          if (!p.is_object()) continue;
-          // Attribute names stay (which data a primitive has); their accessor numbers go.
-          if (p.contains("attributes") && p["attributes"].is_object()) {
-            nlohmann::json names = nlohmann::json::array();
-            for (auto it = p["attributes"].begin(); it != p["attributes"].end(); ++it)
-              names.push_back(it.key());
-            p["attributes"] = names;
-          }
-          p.erase("indices");
-          if (p.contains("extensions") && p["extensions"].is_object()) {
-            for (const char* e : kEncodingExtensions) p["extensions"].erase(e);
-            if (p["extensions"].empty()) p.erase("extensions");
-          }
-        }
+      if (m.is_object() && m.contains("primitives") && m["primitives"].is_array()) {
+        nlohmann::json kept = nlohmann::json::array();
+        for (const auto& group : surface_groups(m["primitives"]))
+          kept.push_back(stripped_primitive(m["primitives"][group[0]]));
+        m["primitives"] = kept;
+      }
   if (j.contains("images") && j["images"].is_array())
     for (auto& im : j["images"])
       if (im.is_object()) {
@@ -380,6 +412,33 @@ TriangleMesh primitive_mesh(const std::string& path, const nlohmann::json& j,
   return m;
 }
 
+/// The surface of one group of primitives (see surface_groups) in the mesh's own frame: one
+/// primitive as it is, pieces merged and welded along their borders (their shared vertices
+/// decode to one position on a shared Draco grid). `step` receives the largest Draco grid step.
+TriangleMesh surface_mesh(const std::string& path, const nlohmann::json& j,
+                          const std::vector<std::string>& buffers, const nlohmann::json& primitives,
+                          const std::vector<std::size_t>& group, const std::string& label, double& step) {
+  std::vector<TriangleMesh> pieces;
+  step = 0;
+  for (std::size_t p : group) {
+    DracoQuantization draco;
+    const std::string what = group.size() > 1 ? fmt::format("{} piece {}", label, p) : label;
+    pieces.push_back(primitive_mesh(path, j, buffers, primitives.at(p), what, draco));
+    step = std::max(step, draco.step());
+  }
+  if (pieces.size() == 1) return std::move(pieces[0]);
+  std::vector<const TriangleMesh*> parts;
+  std::vector<std::size_t> piece_triangles;
+  for (const auto& piece : pieces) {
+    parts.push_back(&piece);
+    piece_triangles.push_back(piece.triangles.size());
+  }
+  TriangleMesh joined = merge_meshes(parts);
+  pieces.clear();
+  weld_piece_borders(joined, piece_triangles);
+  return joined;
+}
+
 }  // namespace
 
 void transform_mesh(TriangleMesh& m, const std::array<double, 9>& linear_rows,
@@ -472,7 +531,8 @@ GltfAsset read_gltf(const std::string& path) {
         fail(path, fmt::format("node {}: mesh index out of range", i));
       const auto& mesh = j.at("meshes").at(std::size_t(mi));
       const auto& primitives = mesh.at("primitives");
-      for (std::size_t p = 0; p < primitives.size(); ++p) {
+      for (const auto& group : surface_groups(primitives)) {
+        const std::size_t p = group[0];
         if (primitives.at(p).value("mode", 4) != 4) continue;  // points and lines have no surface
         GltfPrimitive prim;
         prim.node = int(i);
@@ -480,14 +540,15 @@ GltfAsset read_gltf(const std::string& path) {
         prim.primitive = int(p);
         prim.label = fmt::format("node {} '{}' mesh '{}' primitive {}", i, node.value("name", std::string()),
                                  mesh.value("name", std::string()), p);
-        DracoQuantization draco;
-        prim.mesh_data = primitive_mesh(path, j, buffers, primitives.at(p), prim.label, draco);
+        if (group.size() > 1) prim.label += fmt::format(" (+{} joined)", group.size() - 1);
+        prim.mesh_data =
+            surface_mesh(path, j, buffers, primitives, group, prim.label, prim.quantization_step);
         std::array<double, 9> rows;
         for (int k = 0; k < 9; ++k) rows[std::size_t(k)] = world[i](k / 3, k % 3);
         transform_mesh(prim.mesh_data, rows, {world[i](0, 3), world[i](1, 3), world[i](2, 3)});
         // A grid step is a displacement: the largest stretch of the node's linear part bounds it.
         const Eigen::Matrix3d linear = world[i].topLeftCorner<3, 3>();
-        prim.quantization_step = draco.step() * Eigen::JacobiSVD<Eigen::Matrix3d>(linear).singularValues()(0);
+        prim.quantization_step *= Eigen::JacobiSVD<Eigen::Matrix3d>(linear).singularValues()(0);
         asset.primitives.push_back(std::move(prim));
       }
     }

@@ -10,6 +10,9 @@
 #include <mlfe/formats/atomic_file.h>
 #include <mlfe/formats/draco_io.h>
 #include <mlfe/formats/file_names.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -18,7 +21,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
-#include <optional>
+#include <utility>
 
 namespace mlfe {
 namespace {
@@ -67,58 +70,73 @@ struct Level {
   TriangleMesh* owned = nullptr;
 };
 
-// `in` converted to glTF metres with cleaned triangles and unit normals.
-TriangleMesh convert(const TriangleMesh& in, const std::array<double, 9>& m, const std::string& path) {
+// p (physical millimetres) in glTF's metres through the row-major matrix m.
+std::array<float, 3> to_gltf(const std::array<float, 3>& p, const std::array<double, 9>& m) {
+  std::array<float, 3> q;
+  for (int r = 0; r < 3; ++r) q[r] = float(m[3 * r] * p[0] + m[3 * r + 1] * p[1] + m[3 * r + 2] * p[2]);
+  return q;
+}
+
+// What convert refuses: normals that are not one per position, too many vertices, triangle
+// indices out of range (non-finite positions are found as they are converted).
+void check_level(const TriangleMesh& in, const std::string& path) {
   const std::size_t n = in.positions.size();
   if (!in.normals.empty() && in.normals.size() != n)
     throw Error(path + ": mesh has " + std::to_string(in.normals.size()) + " normals for " +
                 std::to_string(n) + " positions");
   if (n > std::numeric_limits<std::uint32_t>::max()) throw Error(path + ": mesh too large");
-  TriangleMesh out;
-  out.positions.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto& p = in.positions[i];
-    for (int r = 0; r < 3; ++r) {
-      const double v = m[3 * r] * p[0] + m[3 * r + 1] * p[1] + m[3 * r + 2] * p[2];
-      out.positions[i][r] = float(v);
-      if (!std::isfinite(out.positions[i][r])) throw Error(path + ": non-finite vertex position");
-    }
+}
+
+void check_triangle(const std::array<std::uint32_t, 3>& t, std::size_t n, const std::string& path) {
+  if (t[0] >= n || t[1] >= n || t[2] >= n) throw Error(path + ": triangle index out of range");
+}
+
+// `mesh` (consumed, converted in place so that a big surface is not held twice) in glTF metres
+// with cleaned triangles and unit normals.
+TriangleMesh convert(TriangleMesh mesh, const std::array<double, 9>& m, const std::string& path) {
+  check_level(mesh, path);
+  const std::size_t n = mesh.positions.size();
+  for (auto& p : mesh.positions) {
+    p = to_gltf(p, m);
+    for (float c : p)
+      if (!std::isfinite(c)) throw Error(path + ": non-finite vertex position");
   }
   // Degenerate triangles are invisible, and Draco drops them anyway; dropping them everywhere
   // keeps the three encodings describing the same triangles.
-  out.triangles.reserve(in.triangles.size());
-  for (const auto& t : in.triangles) {
-    if (t[0] >= n || t[1] >= n || t[2] >= n) throw Error(path + ": triangle index out of range");
-    const auto &a = out.positions[t[0]], &b = out.positions[t[1]], &c = out.positions[t[2]];
+  std::size_t kept = 0;
+  for (const auto& t : mesh.triangles) {
+    check_triangle(t, n, path);
+    const auto &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
     if (a == b || b == c || a == c) continue;
-    out.triangles.push_back(t);
+    mesh.triangles[kept++] = t;
   }
+  mesh.triangles.resize(kept);
 
   // The rotation part (1000*m) maps normals; it is orthonormal, so no inverse transpose needed.
-  // Missing or zero normals fall back to the area-weighted normals of the converted triangles.
-  std::optional<TriangleMesh> geometric;
-  out.normals.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    std::array<double, 3> v{0.0, 0.0, 0.0};
-    if (!in.normals.empty()) {
-      const auto& q = in.normals[i];
-      for (int r = 0; r < 3; ++r)
-        v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
-    }
+  // Missing or zero normals fall back to the area-weighted normals of the converted triangles
+  // (marked NaN until then).
+  std::vector<std::array<float, 3>> rotated = std::move(mesh.normals);
+  mesh.normals.clear();
+  bool all_rotated = rotated.size() == n;
+  for (auto& q : rotated) {
+    std::array<double, 3> v;
+    for (int r = 0; r < 3; ++r) v[r] = 1000.0 * (m[3 * r] * q[0] + m[3 * r + 1] * q[1] + m[3 * r + 2] * q[2]);
     const double len = norm(v);
     if (len > 1e-12 && std::isfinite(len)) {
-      for (int k = 0; k < 3; ++k) out.normals[i][k] = float(v[k] / len);
-      continue;
+      for (int k = 0; k < 3; ++k) q[k] = float(v[k] / len);
+    } else {
+      q[0] = std::numeric_limits<float>::quiet_NaN();
+      all_rotated = false;
     }
-    if (!geometric) {
-      geometric.emplace();
-      geometric->positions = out.positions;
-      geometric->triangles = out.triangles;
-      compute_area_weighted_normals(*geometric);
-    }
-    out.normals[i] = geometric->normals[i];
   }
-  return out;
+  if (all_rotated) {
+    mesh.normals = std::move(rotated);
+    return mesh;
+  }
+  compute_area_weighted_normals(mesh);
+  for (std::size_t i = 0; i < rotated.size(); ++i)
+    if (!std::isnan(rotated[i][0])) mesh.normals[i] = rotated[i];
+  return mesh;
 }
 
 // Appends bytes to buffer 0 at a 4-byte aligned offset and returns a new bufferView index.
@@ -168,23 +186,70 @@ int index_component_for(std::size_t vertex_count) {
                                : TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
 }
 
-int add_indices(tinygltf::Model& model, const TriangleMesh& mesh, bool with_view) {
+// The indices of an uncompressed primitive, in a view of their own.
+int add_indices(tinygltf::Model& model, const TriangleMesh& mesh) {
   const int component = index_component_for(mesh.positions.size());
   const std::size_t count = mesh.triangles.size() * 3;
   int view = -1;
-  if (with_view) {
-    if (component == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) {
-      std::vector<std::uint16_t> idx;
-      idx.reserve(count);
-      for (const auto& t : mesh.triangles)
-        for (auto v : t) idx.push_back(std::uint16_t(v));
-      view = add_buffer_view(model, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
-    } else {
-      view = add_buffer_view(model, mesh.triangles.data(), count * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
-    }
+  if (component == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) {
+    std::vector<std::uint16_t> idx;
+    idx.reserve(count);
+    for (const auto& t : mesh.triangles)
+      for (auto v : t) idx.push_back(std::uint16_t(v));
+    view = add_buffer_view(model, idx.data(), idx.size() * 2, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+  } else {
+    view = add_buffer_view(model, mesh.triangles.data(), count * 4, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
   }
   return add_accessor(model, view, component, TINYGLTF_TYPE_SCALAR, count, false);
 }
+
+// A verified Draco encoding reduced to what its glTF primitive needs.
+struct DracoPiece {
+  std::vector<char> bytes;
+  int position_id = -1, normal_id = -1;  // Draco attribute unique ids
+  std::size_t vertices = 0, triangles = 0;
+  std::vector<double> lo, hi;  // decoded positions' bounds
+};
+
+constexpr std::uint32_t kNoVertex = std::numeric_limits<std::uint32_t>::max();
+
+// A level's pieces: balanced runs of its triangles in triangle_spatial_order.
+struct PieceCutter {
+  const TriangleMesh& mesh;
+  std::size_t count;
+  std::vector<std::uint32_t> order;
+
+  PieceCutter(const TriangleMesh& m, std::size_t pieces)
+      : mesh(m), count(pieces), order(triangle_spatial_order(m)) {}
+
+  // Piece k of `count` with its own vertices (in order of first use); `local` maps the mesh's
+  // vertices to the piece's, all kNoVertex before and after.
+  TriangleMesh piece(std::size_t k, std::vector<std::uint32_t>& local) const {
+    const std::size_t total = order.size(), begin = total * k / count, end = total * (k + 1) / count;
+    TriangleMesh piece;
+    std::vector<std::uint32_t> global;  // piece vertex -> mesh vertex
+    piece.triangles.reserve(end - begin);
+    for (std::size_t i = begin; i < end; ++i) {
+      std::array<std::uint32_t, 3> t = mesh.triangles[order[i]];
+      for (auto& v : t) {
+        if (local[v] == kNoVertex) {
+          local[v] = std::uint32_t(global.size());
+          global.push_back(v);
+        }
+        v = local[v];
+      }
+      piece.triangles.push_back(t);
+    }
+    piece.positions.resize(global.size());
+    piece.normals.resize(global.size());
+    for (std::size_t v = 0; v < global.size(); ++v) {
+      piece.positions[v] = mesh.positions[global[v]];
+      piece.normals[v] = mesh.normals[global[v]];
+      local[global[v]] = kNoVertex;
+    }
+    return piece;
+  }
+};
 
 // Scene-wide quantization box in glTF metres (cube; see DracoOptions).
 struct SceneBox {
@@ -199,39 +264,93 @@ struct Writer {
   SceneBox box;
   tinygltf::Model model;
 
-  // `mesh`: `level` in glTF's frame (consumed by the Draco encoder).
-  int add_mesh(const Level& level, TriangleMesh&& mesh, int material) {
+  // `piece` (in glTF's frame, consumed) Draco-compressed on the scene's grid and verified,
+  // reduced to what its primitive needs. `what` names it in errors. Touches nothing shared, so
+  // pieces may be encoded on several threads.
+  DracoPiece encode_piece(const std::string& what, TriangleMesh&& piece) const {
+    DracoOptions d;
+    d.tolerance = options.tolerance_mm * 1e-3;
+    d.box_min = box.min;
+    d.box_range = box.range;
+    DracoPiece out;
+    try {
+      DracoEncoding enc = encode_draco_verified(std::move(piece), d);
+      out.bytes = std::move(enc.bytes);
+      out.position_id = enc.position_unique_id;
+      out.normal_id = enc.normal_unique_id;
+      out.vertices = enc.decoded.positions.size();
+      out.triangles = enc.decoded.triangles.size();
+      bounds(enc.decoded.positions, out.lo, out.hi);
+    } catch (const Error& e) {
+      throw Error(path + ": " + what + ": " + e.what());
+    }
+    return out;
+  }
+
+  // The primitive of an encoded piece, its accessors describing the decoded data.
+  tinygltf::Primitive draco_primitive(const DracoPiece& piece, int material) {
     tinygltf::Primitive prim;
     prim.material = material;
     prim.mode = TINYGLTF_MODE_TRIANGLES;
+    const int view = add_buffer_view(model, piece.bytes.data(), piece.bytes.size(), 0);
+    prim.attributes["POSITION"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
+                                               piece.vertices, false, piece.lo, piece.hi);
+    prim.attributes["NORMAL"] =
+        add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, piece.vertices, false);
+    prim.indices = add_accessor(model, -1, index_component_for(piece.vertices), TINYGLTF_TYPE_SCALAR,
+                                piece.triangles * 3, false);
+    tinygltf::Value::Object attributes;
+    attributes["POSITION"] = tinygltf::Value(piece.position_id);
+    attributes["NORMAL"] = tinygltf::Value(piece.normal_id);
+    tinygltf::Value::Object ext;
+    ext["bufferView"] = tinygltf::Value(view);
+    ext["attributes"] = tinygltf::Value(std::move(attributes));
+    prim.extensions["KHR_draco_mesh_compression"] = tinygltf::Value(std::move(ext));
+    return prim;
+  }
+
+  // `mesh` (consumed) as Draco primitives of `out`: one, or pieces of at most
+  // draco_piece_triangles (see GltfOptions). Pieces are cut and encoded in batches of one per
+  // thread, so that at most that many pieces' encoders are alive; the bytes are added in order.
+  void add_draco_primitives(tinygltf::Mesh& out, TriangleMesh&& mesh, int material) {
+    const std::size_t total = mesh.triangles.size(), limit = options.draco_piece_triangles;
+    if (total <= limit) {
+      out.primitives.push_back(draco_primitive(encode_piece(out.name, std::move(mesh)), material));
+      return;
+    }
+    const PieceCutter cutter(mesh, (total + limit - 1) / limit);
+    // The threads TBB may run (the CLI's --threads sets this limit).
+    const std::size_t batch = std::max<std::size_t>(
+        1,
+        std::min<std::size_t>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism),
+                              std::size_t(tbb::this_task_arena::max_concurrency())));
+    std::vector<std::uint32_t> local(mesh.positions.size(), kNoVertex);
+    for (std::size_t first = 0; first < cutter.count; first += batch) {
+      std::vector<TriangleMesh> pieces;
+      for (std::size_t k = first; k < std::min(first + batch, cutter.count); ++k)
+        pieces.push_back(cutter.piece(k, local));
+      std::vector<DracoPiece> encoded(pieces.size());
+      tbb::parallel_for(std::size_t(0), pieces.size(), [&](std::size_t i) {
+        encoded[i] = encode_piece(fmt::format("{} piece {} of {}", out.name, first + i + 1, cutter.count),
+                                  std::move(pieces[i]));
+      });
+      for (const DracoPiece& piece : encoded) out.primitives.push_back(draco_primitive(piece, material));
+    }
+  }
+
+  // `mesh`: `level` in glTF's frame (consumed by the Draco encoder).
+  int add_mesh(const Level& level, TriangleMesh&& mesh, int material) {
+    tinygltf::Mesh m;
+    m.name = level.mesh_name;
     if (encoding == Encoding::kDraco) {
-      DracoOptions d;
-      d.tolerance = options.tolerance_mm * 1e-3;
-      d.box_min = box.min;
-      d.box_range = box.range;
-      DracoEncoding enc;
-      try {
-        enc = encode_draco_verified(std::move(mesh), d);
-      } catch (const Error& e) {
-        throw Error(path + ": " + level.mesh_name + ": " + e.what());
-      }
-      const TriangleMesh& dec = enc.decoded;
-      const int view = add_buffer_view(model, enc.bytes.data(), enc.bytes.size(), 0);
-      std::vector<double> lo, hi;
-      bounds(dec.positions, lo, hi);
-      prim.attributes["POSITION"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
-                                                 dec.positions.size(), false, lo, hi);
-      prim.attributes["NORMAL"] = add_accessor(model, -1, TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3,
-                                               dec.positions.size(), false);
-      prim.indices = add_indices(model, dec, false);
-      tinygltf::Value::Object attributes;
-      attributes["POSITION"] = tinygltf::Value(enc.position_unique_id);
-      attributes["NORMAL"] = tinygltf::Value(enc.normal_unique_id);
-      tinygltf::Value::Object ext;
-      ext["bufferView"] = tinygltf::Value(view);
-      ext["attributes"] = tinygltf::Value(std::move(attributes));
-      prim.extensions["KHR_draco_mesh_compression"] = tinygltf::Value(std::move(ext));
-    } else if (encoding == Encoding::kQuantized) {
+      add_draco_primitives(m, std::move(mesh), material);
+      model.meshes.push_back(m);
+      return int(model.meshes.size() - 1);
+    }
+    tinygltf::Primitive prim;
+    prim.material = material;
+    prim.mode = TINYGLTF_MODE_TRIANGLES;
+    if (encoding == Encoding::kQuantized) {
       // Normalized SHORT positions relative to the scene box; the root node's translation and
       // uniform scale map them back to metres (uniform, so normals need no correction).
       const double half = 0.5 * double(box.range);
@@ -257,7 +376,7 @@ struct Writer {
                                                  TINYGLTF_TYPE_VEC3, mesh.positions.size(), true, lo, hi);
       prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_SHORT,
                                                TINYGLTF_TYPE_VEC3, mesh.positions.size(), true);
-      prim.indices = add_indices(model, mesh, true);
+      prim.indices = add_indices(model, mesh);
     } else {
       std::vector<double> lo, hi;
       bounds(mesh.positions, lo, hi);
@@ -269,10 +388,8 @@ struct Writer {
                                                  TINYGLTF_TYPE_VEC3, mesh.positions.size(), false, lo, hi);
       prim.attributes["NORMAL"] = add_accessor(model, nrm_view, TINYGLTF_COMPONENT_TYPE_FLOAT,
                                                TINYGLTF_TYPE_VEC3, mesh.normals.size(), false);
-      prim.indices = add_indices(model, mesh, true);
+      prim.indices = add_indices(model, mesh);
     }
-    tinygltf::Mesh m;
-    m.name = level.mesh_name;
     m.primitives.push_back(prim);
     model.meshes.push_back(m);
     return int(model.meshes.size() - 1);
@@ -304,23 +421,33 @@ std::vector<std::vector<Level>> name_levels(const std::vector<GltfSurface>& surf
 }
 
 // The box of every vertex of every level in glTF's frame, which quantized positions share. Each
-// level is converted and dropped in turn, which also checks every level before anything else.
+// level is checked and its positions converted on the fly (as convert would, without a copy of
+// the level), which also checks every level before anything else.
 void fit_shared_box(Writer& w, const std::vector<std::vector<Level>>& levels,
                     const std::array<double, 9>& m) {
   std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
   bool any = false;
   for (const auto& ls : levels)
     for (const auto& l : ls) {
-      const TriangleMesh mesh = convert(*l.source, m, w.path);
-      for (const auto& t : mesh.triangles)
-        for (auto v : t) {
-          const auto& p = mesh.positions[v];
+      const TriangleMesh& mesh = *l.source;
+      check_level(mesh, w.path);
+      for (const auto& p : mesh.positions)
+        for (float c : to_gltf(p, m))
+          if (!std::isfinite(c)) throw Error(w.path + ": non-finite vertex position");
+      for (const auto& t : mesh.triangles) {
+        check_triangle(t, mesh.positions.size(), w.path);
+        const std::array<std::array<float, 3>, 3> corners = {to_gltf(mesh.positions[t[0]], m),
+                                                             to_gltf(mesh.positions[t[1]], m),
+                                                             to_gltf(mesh.positions[t[2]], m)};
+        if (corners[0] == corners[1] || corners[1] == corners[2] || corners[0] == corners[2]) continue;
+        for (const auto& p : corners) {
           for (int k = 0; k < 3; ++k) {
             lo[k] = any ? std::min(lo[k], p[k]) : p[k];
             hi[k] = any ? std::max(hi[k], p[k]) : p[k];
           }
           any = true;
         }
+      }
     }
   float range = 0;
   for (int k = 0; k < 3; ++k) range = std::max(range, hi[k] - lo[k]);
@@ -364,8 +491,8 @@ int add_surface_nodes(Writer& w, const GltfSurface& surface, const std::vector<L
     else
       extras["iso_value"] = tinygltf::Value(surface.iso_value);
     extras["lod"] = tinygltf::Value(level.lod);
-    TriangleMesh mesh = convert(*level.source, m, w.path);
-    if (level.owned) *level.owned = TriangleMesh{};
+    TriangleMesh mesh =
+        convert(level.owned ? std::exchange(*level.owned, TriangleMesh{}) : *level.source, m, w.path);
     extras["triangles"] = tinygltf::Value(int(std::min<std::size_t>(mesh.triangles.size(), INT32_MAX)));
     node.extras = tinygltf::Value(std::move(extras));
     if (!mesh.triangles.empty()) node.mesh = w.add_mesh(level, std::move(mesh), material);
@@ -417,6 +544,8 @@ void write_gltf_of(const std::string& path, const std::vector<GltfSurface>& surf
                                                : Encoding::kFloat;
   if (encoding != Encoding::kFloat && !(options.tolerance_mm > 0 && std::isfinite(options.tolerance_mm)))
     throw Error(path + ": tolerance_mm must be positive for compressed or quantized glTF");
+  if (encoding == Encoding::kDraco && options.draco_piece_triangles == 0)
+    throw Error(path + ": draco_piece_triangles must be at least 1");
 
   const std::vector<std::vector<Level>> levels = name_levels(surfaces, owned);
 

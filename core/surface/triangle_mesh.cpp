@@ -1,5 +1,5 @@
-// Area-weighted vertex normals of an indexed triangle mesh, meshes merged into one, its spatial
-// (Morton) order, and its topology counted.
+// Area-weighted vertex normals of an indexed triangle mesh, meshes merged into one and welded
+// along their borders, its spatial (Morton) orders, and its topology counted.
 #include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/triangle_mesh.h>
@@ -12,10 +12,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <string>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 #include "base/morton.h"
@@ -50,46 +52,195 @@ TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts) {
   return all;
 }
 
-TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old) {
+namespace {
+
+using PositionBits = std::array<std::uint32_t, 3>;
+
+// +0.0f turns -0 into 0, so equal coordinates give equal bits.
+PositionBits position_bits(const std::array<float, 3>& p) {
+  PositionBits b;
+  for (int c = 0; c < 3; ++c) {
+    const float v = p[c] + 0.0f;
+    std::memcpy(&b[c], &v, sizeof v);
+  }
+  return b;
+}
+
+struct EdgeKeyHash {
+  std::size_t operator()(const std::array<std::uint32_t, 6>& k) const {
+    std::uint64_t h = 0;
+    for (std::uint32_t bits : k) h = (h ^ bits) * 0x9E3779B97F4A7C15ull;
+    return std::size_t(h ^ (h >> 29));
+  }
+};
+
+// The directed edges no triangle traverses the other way, as (from, to) in triangle order.
+std::vector<std::array<std::uint32_t, 2>> open_edges(
+    const std::vector<std::array<std::uint32_t, 3>>& triangles, std::size_t nv) {
+  std::vector<std::uint64_t> edges;
+  edges.reserve(3 * triangles.size());
+  for (const auto& t : triangles)
+    for (int k = 0; k < 3; ++k) {
+      if (t[k] >= nv) throw Error("welding borders: a triangle refers to a vertex beyond the positions");
+      edges.push_back(std::uint64_t(t[k]) << 32 | t[(k + 1) % 3]);
+    }
+  std::vector<std::uint64_t> sorted = edges;
+  tbb::parallel_sort(sorted.begin(), sorted.end());
+  std::vector<std::array<std::uint32_t, 2>> open;
+  for (const std::uint64_t e : edges) {
+    const auto a = std::uint32_t(e >> 32), b = std::uint32_t(e);
+    if (!std::binary_search(sorted.begin(), sorted.end(), std::uint64_t(b) << 32 | a)) open.push_back({a, b});
+  }
+  return open;
+}
+
+std::uint32_t find_root(std::vector<std::uint32_t>& parent, std::uint32_t v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
+
+}  // namespace
+
+void weld_piece_borders(TriangleMesh& mesh, const std::vector<std::size_t>& piece_triangles) {
+  const std::size_t nv = mesh.positions.size();
+  std::size_t total = 0;
+  for (std::size_t n : piece_triangles) total += n;
+  MLFE_CHECK(total == mesh.triangles.size());
+  // Which piece each vertex is in: pieces own their vertices (merge_meshes).
+  std::vector<std::uint32_t> piece_of(nv, 0);
+  for (std::size_t p = 0, f = 0; p < piece_triangles.size(); ++p)
+    for (std::size_t end = f + piece_triangles[p]; f < end; ++f)
+      for (std::uint32_t v : mesh.triangles[f])
+        if (v < nv) piece_of[v] = std::uint32_t(p);
+  const std::vector<std::array<std::uint32_t, 2>> open = open_edges(mesh.triangles, nv);
+  // Match: an open edge a→b of one piece and an open edge b'→a' of another at the same
+  // positions are one edge of the surface cut in two; a→a', b→b' are welded. Only matched
+  // edges weld, so the surface's own boundary keeps distinct vertices that share a position.
+  std::unordered_map<std::array<std::uint32_t, 6>, std::array<std::uint32_t, 2>, EdgeKeyHash> by_key;
+  auto key = [&](std::uint32_t a, std::uint32_t b) {
+    const PositionBits pa = position_bits(mesh.positions[a]), pb = position_bits(mesh.positions[b]);
+    return std::array<std::uint32_t, 6>{pa[0], pa[1], pa[2], pb[0], pb[1], pb[2]};
+  };
+  for (const auto& e : open) by_key.emplace(key(e[0], e[1]), e);
+  std::vector<std::uint32_t> parent(nv);
+  for (std::uint32_t v = 0; v < nv; ++v) parent[v] = v;
+  auto unite = [&](std::uint32_t a, std::uint32_t b) {
+    a = find_root(parent, a);
+    b = find_root(parent, b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the first vertex stays
+  };
+  for (const auto& e : open) {
+    const auto it = by_key.find(key(e[1], e[0]));
+    if (it == by_key.end() || piece_of[it->second[0]] == piece_of[e[0]]) continue;
+    unite(e[0], it->second[1]);
+    unite(e[1], it->second[0]);
+  }
+  const bool with_normals = mesh.normals.size() == nv;
+  std::vector<std::uint32_t> to(nv);
+  std::uint32_t kept = 0;
+  for (std::uint32_t v = 0; v < nv; ++v) {
+    const std::uint32_t root = find_root(parent, v);
+    if (root != v) {
+      to[v] = to[root];  // root < v: already placed
+      continue;
+    }
+    to[v] = kept;
+    mesh.positions[kept] = mesh.positions[v];
+    if (with_normals) mesh.normals[kept] = mesh.normals[v];
+    ++kept;
+  }
+  mesh.positions.resize(kept);
+  if (with_normals) mesh.normals.resize(kept);
+  for (auto& t : mesh.triangles)
+    for (auto& v : t) v = to[v];
+}
+
+namespace {
+
+// The finite positions' bounding box and the scale that maps its largest extent onto 0..1023.
+struct MortonGrid {
+  std::array<float, 3> lo{}, hi{};
+  double scale = 0;
+
+  explicit MortonGrid(const std::vector<std::array<float, 3>>& positions) {
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = std::numeric_limits<float>::infinity();
+      hi[c] = -std::numeric_limits<float>::infinity();
+    }
+    for (const auto& p : positions)
+      for (int c = 0; c < 3; ++c)
+        if (std::isfinite(p[c])) {
+          lo[c] = std::min(lo[c], p[c]);
+          hi[c] = std::max(hi[c], p[c]);
+        }
+    double extent = 0;
+    for (int c = 0; c < 3; ++c) extent = std::max(extent, double(hi[c]) - double(lo[c]));
+    scale = extent > 0 ? 1023.0 / extent : 0.0;
+  }
+
+  // The 30-bit Morton code of the cell holding p (non-finite coordinates in cell 0).
+  std::uint32_t code(const std::array<double, 3>& p) const {
+    std::uint32_t code = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double x = (p[c] - lo[c]) * scale;
+      const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
+      code |= detail::spread_bits(q) << c;
+    }
+    return code;
+  }
+};
+
+void check_spatial_order_input(const TriangleMesh& mesh) {
   const std::size_t nv = mesh.positions.size();
   for (const auto& t : mesh.triangles)
     if (t[0] >= nv || t[1] >= nv || t[2] >= nv)
       throw Error("spatial order: a triangle refers to a vertex beyond the " + std::to_string(nv) +
                   " positions");
-  std::array<float, 3> lo{}, hi{};
-  for (int c = 0; c < 3; ++c) {
-    lo[c] = std::numeric_limits<float>::infinity();
-    hi[c] = -std::numeric_limits<float>::infinity();
-  }
-  for (const auto& p : mesh.positions)
-    for (int c = 0; c < 3; ++c)
-      if (std::isfinite(p[c])) {
-        lo[c] = std::min(lo[c], p[c]);
-        hi[c] = std::max(hi[c], p[c]);
-      }
-  double extent = 0;
-  for (int c = 0; c < 3; ++c) extent = std::max(extent, double(hi[c]) - double(lo[c]));
-  const double scale = extent > 0 ? 1023.0 / extent : 0.0;
-  // Sorted as (code, index) pairs: unique keys, so the parallel sort gives the one order a
-  // stable sort by code would, whatever the thread count.
-  std::vector<std::uint64_t> key(nv);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 8192),
+}
+
+// The low 32 bits of `keys` (codes above, indices below) in the keys' order. The keys are unique,
+// so the parallel sort gives the one order a stable sort by code would, whatever the thread count.
+std::vector<std::uint32_t> sorted_indices(std::vector<std::uint64_t> keys) {
+  tbb::parallel_sort(keys.begin(), keys.end());
+  std::vector<std::uint32_t> order(keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i) order[i] = std::uint32_t(keys[i]);
+  return order;
+}
+
+}  // namespace
+
+std::vector<std::uint32_t> triangle_spatial_order(const TriangleMesh& mesh) {
+  const std::size_t nt = mesh.triangles.size();
+  if (nt > std::numeric_limits<std::uint32_t>::max()) throw Error("spatial order: more than 2^32 triangles");
+  check_spatial_order_input(mesh);
+  const MortonGrid grid(mesh.positions);
+  std::vector<std::uint64_t> key(nt);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 8192),
                     [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                        std::uint32_t code = 0;
-                        for (int c = 0; c < 3; ++c) {
-                          const double x = (double(mesh.positions[v][c]) - lo[c]) * scale;
-                          const auto q = std::uint32_t(std::isfinite(x) ? std::clamp(x, 0.0, 1023.0) : 0.0);
-                          code |= detail::spread_bits(q) << c;
-                        }
-                        key[v] = std::uint64_t(code) << 32 | v;
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                        std::array<double, 3> centroid{0.0, 0.0, 0.0};
+                        for (auto v : mesh.triangles[i])
+                          for (int c = 0; c < 3; ++c) centroid[c] += double(mesh.positions[v][c]) / 3.0;
+                        key[i] = std::uint64_t(grid.code(centroid)) << 32 | i;
                       }
                     });
-  tbb::parallel_sort(key.begin(), key.end());
-  std::vector<std::uint32_t> order(nv);  // new -> old
-  for (std::size_t i = 0; i < nv; ++i) order[i] = std::uint32_t(key[i]);
-  std::vector<std::uint64_t>().swap(key);
-  std::vector<std::uint32_t> index(nv);  // old -> new
+  return sorted_indices(std::move(key));
+}
+
+TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old) {
+  const std::size_t nv = mesh.positions.size();
+  check_spatial_order_input(mesh);
+  const MortonGrid grid(mesh.positions);
+  std::vector<std::uint64_t> key(nv);
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, nv, 8192), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+          const auto& p = mesh.positions[v];
+          key[v] = std::uint64_t(grid.code({double(p[0]), double(p[1]), double(p[2])})) << 32 | v;
+        }
+      });
+  const std::vector<std::uint32_t> order = sorted_indices(std::move(key));  // new -> old
+  std::vector<std::uint32_t> index(nv);                                     // old -> new
   for (std::size_t i = 0; i < nv; ++i) index[order[i]] = std::uint32_t(i);
   if (new_to_old) *new_to_old = order;
   TriangleMesh out;
@@ -160,42 +311,38 @@ void check_edges_and_fans(const std::vector<std::array<std::uint32_t, 3>>& tris,
   auto mark = [&](std::uint32_t v) {
     if (bad) (*bad)[v] = 1;
   };
-  // 1. Edges: every directed triangle edge, sorted by its undirected key.
-  struct HalfEdge {
-    std::uint32_t lo, hi;
-    std::uint32_t tri;
-    bool forward;  // lo -> hi in its triangle
-  };
-  std::vector<HalfEdge> edges;
-  edges.reserve(tris.size() * 3);
-  for (std::uint32_t i = 0; i < tris.size(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = tris[i][k], b = tris[i][(k + 1) % 3];
-      edges.push_back({std::min(a, b), std::max(a, b), i, a < b});
+  // 1. Edges: every directed triangle edge (a << 32 | b, 8 bytes: a big surface's edges are the
+  // largest array here), sorted; an undirected edge is its two directions' runs.
+  {
+    std::vector<std::uint64_t> edges;
+    edges.reserve(tris.size() * 3);
+    for (const auto& t : tris)
+      for (int k = 0; k < 3; ++k) edges.push_back(std::uint64_t(t[k]) << 32 | t[(k + 1) % 3]);
+    std::sort(edges.begin(), edges.end());
+    for (std::size_t i = 0; i < edges.size();) {
+      std::size_t j = i;
+      while (j < edges.size() && edges[j] == edges[i]) ++j;
+      const auto a = std::uint32_t(edges[i] >> 32), b = std::uint32_t(edges[i]);
+      const auto reverse = std::equal_range(edges.begin(), edges.end(), std::uint64_t(b) << 32 | a);
+      const std::size_t forward = j - i, backward = std::size_t(reverse.second - reverse.first);
+      i = j;
+      if (a > b && backward > 0) continue;  // counted from its lo -> hi direction
+      bool ok = true;
+      if (forward + backward == 1) {
+        ++r.boundary_edges;
+        if (!on_box(std::min(a, b), std::max(a, b))) ++r.boundary_edges_off_box;
+      } else if (forward + backward == 2) {
+        ok = forward == 1;
+        r.inconsistent_edges += !ok;
+      } else {
+        ok = false;
+        ++r.non_manifold_edges;
+      }
+      if (!ok) {
+        mark(a);
+        mark(b);
+      }
     }
-  std::sort(edges.begin(), edges.end(), [](const HalfEdge& x, const HalfEdge& y) {
-    return std::tie(x.lo, x.hi, x.tri) < std::tie(y.lo, y.hi, y.tri);
-  });
-  for (std::size_t i = 0; i < edges.size();) {
-    std::size_t j = i;
-    while (j < edges.size() && edges[j].lo == edges[i].lo && edges[j].hi == edges[i].hi) ++j;
-    const std::size_t n = j - i;
-    bool ok = true;
-    if (n == 1) {
-      ++r.boundary_edges;
-      if (!on_box(edges[i].lo, edges[i].hi)) ++r.boundary_edges_off_box;
-    } else if (n == 2) {
-      ok = edges[i].forward != edges[i + 1].forward;
-      r.inconsistent_edges += !ok;
-    } else {
-      ok = false;
-      ++r.non_manifold_edges;
-    }
-    if (!ok) {
-      mark(edges[i].lo);
-      mark(edges[i].hi);
-    }
-    i = j;
   }
 
   // 2. Vertices: the triangles around a vertex must form one fan, i.e. one component when

@@ -226,6 +226,23 @@ TEST(CompareGltf, DracoAndPlainEncodingsOfOneSceneAreEqual) {
   EXPECT_GT(r.report["primitives"][0]["hausdorff"].get<double>(), 0.0);  // Draco did quantize
 }
 
+TEST(CompareGltf, ASurfaceInDracoPiecesEqualsItInOnePrimitive) {
+  const TriangleMesh a = lumpy_sphere();
+  GltfOptions whole, cut;
+  whole.tolerance_mm = cut.tolerance_mm = 0.001;
+  cut.draco_piece_triangles = a.triangles.size() / 4;
+  const std::string g1 = tmp("whole.glb"), g2 = tmp("pieces.glb");
+  write_gltf(g1, {surface_of(a, 1.0)}, whole);
+  write_gltf(g2, {surface_of(a, 1.0)}, cut);
+  ASSERT_FALSE(test::read_bytes(g1) == test::read_bytes(g2));
+  CompareOptions o;
+  o.strict = true;
+  const CompareResult r = compare_files(g1, g2, o);
+  EXPECT_TRUE(r.equal()) << r.summary();
+  EXPECT_EQ(r.report["primitives"].size(), 1u);
+  EXPECT_LT(r.report["primitives"][0]["hausdorff"].get<double>(), 1e-12);  // the same grid points
+}
+
 /// lumpy_sphere with a sliver: vertex 0, a twin a few float steps from it (the same Draco grid
 /// point, so after decoding the two coincide) and a tip of its own outside the sphere. Draco
 /// makes such triangles out of an iso-surface's tiny ones; the tip lies on no other triangle.

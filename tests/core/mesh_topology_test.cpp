@@ -1,5 +1,5 @@
 // mesh_topology and non_manifold_vertices: each defect counted on a mesh that has it alone;
-// spatially_ordered keeps the surface; merge_meshes.
+// spatially_ordered keeps the surface; triangle_spatial_order; merge_meshes; weld_piece_borders.
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/surface/triangle_mesh.h>
@@ -156,6 +156,73 @@ TEST(MergeMeshes, DropsNormalsThatSomeVerticesLack) {
   const TriangleMesh m = merge_meshes({&a, &b});
   EXPECT_EQ(m.positions.size(), 8u);
   EXPECT_TRUE(m.normals.empty());
+}
+
+TEST(TriangleSpatialOrder, IsAPermutationWithNearTrianglesTogether) {
+  // Two tetrahedra far apart, their triangles interleaved: each comes out as one run.
+  const TriangleMesh a = tetrahedron(), b = tetrahedron(100);
+  TriangleMesh m = merge_meshes({&a, &b});
+  for (std::size_t f = 0; f < 4; ++f) std::swap(m.triangles[2 * f], m.triangles[f + 4]);
+  const std::vector<std::uint32_t> order = triangle_spatial_order(m);
+  ASSERT_EQ(order.size(), 8u);
+  EXPECT_EQ(std::set<std::uint32_t>(order.begin(), order.end()).size(), 8u);
+  auto near_first = [&](std::uint32_t f) { return m.positions[m.triangles[f][0]][0] < 50; };
+  for (std::size_t i = 0; i < 8; ++i) EXPECT_EQ(near_first(order[i]), i < 4) << i;
+  m.triangles.push_back({0, 1, 8});
+  EXPECT_THROW(triangle_spatial_order(m), Error);
+}
+
+TEST(WeldPieceBorders, ClosesACutSurfaceAndLeavesOtherTwinsAlone) {
+  // The tetrahedron cut in two pieces of two triangles, each with its own vertices.
+  TriangleMesh first = tetrahedron(), second = tetrahedron();
+  first.triangles.resize(2);
+  second.triangles.erase(second.triangles.begin(), second.triangles.begin() + 2);
+  compute_area_weighted_normals(first);
+  compute_area_weighted_normals(second);
+  // A closed part holding a vertex at a cut vertex's position, not on an open edge: kept.
+  TriangleMesh closed = tetrahedron(-1);  // its vertex 1 is at the cut's vertex 0
+  compute_area_weighted_normals(closed);
+  TriangleMesh m = merge_meshes({&first, &second, &closed});
+  ASSERT_EQ(m.positions.size(), 12u);
+  const std::array<float, 3> normal0 = m.normals[0];
+  weld_piece_borders(m, {2, 2, 4});
+  EXPECT_EQ(m.positions.size(), 8u);  // 4 of the second piece welded onto the first's
+  EXPECT_EQ(m.normals.size(), 8u);
+  EXPECT_EQ(m.normals[0], normal0);  // the first's normal kept
+  const MeshTopology t = mesh_topology(m);
+  EXPECT_EQ(t.boundary_edges, 0u);
+  EXPECT_EQ(t.duplicate_vertices, 1u);  // the closed part's twin of vertex 0
+  for (std::size_t f = 0; f < 4; ++f)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(m.positions[m.triangles[f][k]], tetrahedron().positions[tetrahedron().triangles[f][k]]);
+  m.triangles.push_back({0, 1, 8});
+  EXPECT_THROW(weld_piece_borders(m, {2, 2, 5}), Error);
+}
+
+TEST(WeldPieceBorders, KeepsTheSurfacesOwnBoundaryTwins) {
+  // An open strip of two triangles whose two boundary vertices 1 and 4 share a position (as
+  // Draco's quantization can make them), written as one piece and as two: neither welds them.
+  TriangleMesh strip;
+  strip.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {1, 0, 0}, {2, 0, 0}};
+  strip.triangles = {{0, 1, 2}, {2, 1, 3}, {3, 4, 5}};
+  TriangleMesh whole = strip;
+  weld_piece_borders(whole, {3});
+  EXPECT_EQ(whole.positions.size(), 6u);
+  // Cut between the first and second triangle (edge 1-2): the second piece has its own copies.
+  TriangleMesh a, b;
+  a.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  a.triangles = {{0, 1, 2}};
+  b.positions = {{1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {1, 0, 0}, {2, 0, 0}};
+  b.triangles = {{1, 0, 2}, {2, 3, 4}};
+  TriangleMesh m = merge_meshes({&a, &b});
+  weld_piece_borders(m, {1, 2});
+  EXPECT_EQ(m.positions.size(), 6u);  // the cut edge's 2 copies welded; the twins at (1,0,0) kept
+  ASSERT_EQ(m.triangles.size(), 3u);
+  for (std::size_t f = 0; f < 3; ++f)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(m.positions[m.triangles[f][k]], strip.positions[strip.triangles[f][k]]);
+  EXPECT_EQ(m.triangles[0][1], m.triangles[1][1]);  // the cut edge is one edge again
+  EXPECT_NE(m.triangles[0][1], m.triangles[2][1]);  // the boundary twins stay two vertices
 }
 
 }  // namespace

@@ -1,8 +1,12 @@
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
+#include <mlfe/core/surface/triangle_mesh.h>
+#include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/draco_io.h>
+#include <mlfe/formats/gltf_reader.h>
 #include <mlfe/formats/gltf_writer.h>
 #include <sys/wait.h>
+#include <tbb/global_control.h>
 
 #include <cmath>
 #include <cstdio>
@@ -364,6 +368,105 @@ TEST(GltfWriter, WritesAValidEmptySceneWithoutUnusedExtensions) {
   const json g = parse_glb(test::read_bytes(path)).gltf;
   EXPECT_FALSE(g.contains("extensionsRequired"));
   EXPECT_EQ(g["scenes"].size(), 1u);
+}
+
+// A level of 20480 triangles in pieces of at most 3000: the writing's own contract
+// (GltfOptions::draco_piece_triangles), lowered so that a small mesh is cut.
+struct Pieces {
+  std::vector<GltfSurface> scene;
+  GltfOptions whole = options_for(Mode::kDraco), cut = options_for(Mode::kDraco);
+  Pieces() {
+    GltfSurface s;
+    s.iso_value = 7;
+    s.mesh = icosphere(5, 60.0f, {10.0f, -20.0f, 130.0f});
+    scene = {s};
+    cut.draco_piece_triangles = 3000;
+  }
+  std::string write(const std::string& name, const GltfOptions& o, int threads) {
+    const std::string path = scratch_dir() + "/" + name;
+    const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    write_gltf(path, scene, o);
+    return path;
+  }
+};
+
+TEST(GltfDracoPieces, ABigLevelIsCutIntoValidPiecesWithTheSameBytesAtAnyThreadCount) {
+  Pieces p;
+  const std::string one = p.write("pieces_1.glb", p.cut, 1), two = p.write("pieces_2.glb", p.cut, 2);
+  EXPECT_TRUE(test::read_bytes(one) == test::read_bytes(two));
+  const ValidatorResult r = validate(one);
+  EXPECT_EQ(r.status, 0) << r.output;
+  const json g = parse_glb(test::read_bytes(one)).gltf;
+  ASSERT_EQ(g["meshes"].size(), 1u);
+  const json& prims = g["meshes"][0]["primitives"];
+  ASSERT_EQ(prims.size(), 7u);  // ceil(20480 / 3000)
+  std::size_t triangles = 0;
+  for (const json& prim : prims) {
+    const std::size_t n = g["accessors"][prim["indices"].get<int>()]["count"].get<std::size_t>() / 3;
+    EXPECT_LE(n, 3000u);
+    EXPECT_GE(n, 20480u / 7);  // balanced
+    triangles += n;
+    EXPECT_EQ(prim["material"], 0);
+  }
+  EXPECT_EQ(triangles, 20480u);
+  EXPECT_EQ(g["nodes"][0]["extras"]["triangles"], 20480);
+}
+
+TEST(GltfDracoPieces, ALevelOfAtMostOnePieceKeepsItsBytes) {
+  Pieces p;
+  GltfOptions exact = p.whole;
+  exact.draco_piece_triangles = 20480;
+  EXPECT_TRUE(test::read_bytes(p.write("one_piece.glb", exact, 2)) ==
+              test::read_bytes(p.write("whole.glb", p.whole, 2)));
+  exact.draco_piece_triangles = 0;
+  EXPECT_THROW(p.write("no_piece.glb", exact, 2), Error);
+}
+
+TEST(GltfDracoPieces, PiecesReadBackAsOneWeldedSurfaceWithinTheQuantization) {
+  Pieces p;
+  const GltfAsset whole = read_gltf(p.write("read_whole.glb", p.whole, 2));
+  const GltfAsset cut = read_gltf(p.write("read_cut.glb", p.cut, 2));
+  ASSERT_EQ(whole.primitives.size(), 1u);
+  ASSERT_EQ(cut.primitives.size(), 1u);
+  EXPECT_EQ(cut.primitives[0].label, "node 0 'iso 7' mesh 'iso 7' primitive 0 (+6 joined)");
+  EXPECT_EQ(cut.structure, whole.structure);  // the pieces are listed once
+  const TriangleMesh& joined = cut.primitives[0].mesh_data;
+  // Welded: the single encoding's vertex count (the sphere's own), closed, manifold.
+  EXPECT_EQ(joined.positions.size(), whole.primitives[0].mesh_data.positions.size());
+  EXPECT_EQ(joined.positions.size(), p.scene[0].mesh.positions.size());
+  EXPECT_EQ(joined.normals.size(), joined.positions.size());
+  const MeshTopology topo = mesh_topology(joined);
+  EXPECT_TRUE(topo.welded_manifold());
+  EXPECT_EQ(topo.boundary_edges, 0u);
+  EXPECT_EQ(cut.primitives[0].quantization_step, whole.primitives[0].quantization_step);
+  // Every triangle within the tolerance of the input's (metres).
+  TriangleMesh expected = p.scene[0].mesh;
+  const auto m = physical_to_gltf_matrix("RAS");
+  for (auto& q : expected.positions) {
+    const std::array<float, 3> x = q;
+    for (int r = 0; r < 3; ++r) q[r] = float(m[3 * r] * x[0] + m[3 * r + 1] * x[1] + m[3 * r + 2] * x[2]);
+  }
+  EXPECT_EQ(joined.triangles.size(), expected.triangles.size());
+  EXPECT_EQ(test::unmatched_triangles(expected, joined, p.cut.tolerance_mm * 1e-3 * 1.001 + 1e-7), 0u);
+  // read_asset (Python's read_mesh) sees the same one surface.
+  const AssetFile asset = read_asset(scratch_dir() + "/read_cut.glb");
+  ASSERT_EQ(asset.surfaces.size(), 1u);
+  EXPECT_EQ(asset.surfaces[0].mesh.positions.size(), joined.positions.size());
+}
+
+TEST(GltfReader, JoinsOnlyPrimitivesThatDifferInTheirDataAlone) {
+  // The fourth piece given a material of its own is a surface of its own.
+  Pieces p;
+  const std::string path = p.write("two_materials.gltf", p.cut, 2);
+  json g = json::parse(test::read_bytes(path));
+  g["materials"].push_back(g["materials"][0]);
+  g["meshes"][0]["primitives"][3]["material"] = 1;
+  test::write_bytes(path, g.dump());
+  const GltfAsset a = read_gltf(path);
+  ASSERT_EQ(a.primitives.size(), 2u);
+  EXPECT_EQ(a.primitives[1].primitive, 3);
+  EXPECT_EQ(a.primitives[0].mesh_data.triangles.size() + a.primitives[1].mesh_data.triangles.size(), 20480u);
+  EXPECT_EQ(a.structure["meshes"][0]["primitives"].size(), 2u);
 }
 
 }  // namespace

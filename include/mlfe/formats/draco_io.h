@@ -81,6 +81,8 @@ TriangleMesh decode_draco(const char* data, std::size_t size, const std::string&
                           DracoQuantization* quantization = nullptr);
 
 /// Writes encode_draco(mesh, options) to `path` atomically (no file is left on failure).
+/// A .drc file is one Draco mesh: the encoder's tables (about 5 times the mesh, beside Draco's
+/// own copy of it) cannot be cut down the way write_gltf cuts a big level into pieces.
 /// Errors are mlfe::Error prefixed with `path`.
 /// `mesh` is taken by value: a temporary is consumed rather than copied (as the && overload).
 void write_draco_file(const std::string& path, TriangleMesh mesh, const DracoOptions& options);

@@ -12,22 +12,31 @@
 
 namespace mlfe {
 
-/// One triangle primitive of one node, in world coordinates.
+/// One triangle surface of one node, in world coordinates: a triangle primitive, or the pieces of
+/// one surface joined (see GltfAsset::primitives).
 struct GltfPrimitive {
-  std::string label;  ///< "node <i> '<node name>' mesh '<mesh name>' primitive <p>"
-  int node = -1, mesh = -1, primitive = -1;
+  /// "node <i> '<node name>' mesh '<mesh name>' primitive <p>", " (+<k> joined)" added for pieces
+  std::string label;
+  int node = -1, mesh = -1;
+  int primitive = -1;      ///< the (first) primitive's index in its mesh
   TriangleMesh mesh_data;  ///< positions and normals transformed by the node's world matrix
   /// The grid step of Draco-quantized positions (DracoQuantization::step) in world units (times
-  /// the node's largest scale); 0 when the primitive is not Draco-compressed.
+  /// the node's largest scale), the largest of joined pieces'; 0 when not Draco-compressed.
   double quantization_step = 0.0;
 };
 
 struct GltfAsset {
   /// Every triangle primitive of every node that has a mesh, in node order then primitive
-  /// order (nodes outside the scene, such as MSFT_lod levels, included).
+  /// order (nodes outside the scene, such as MSFT_lod levels, included). Triangle primitives of
+  /// one mesh that are equal but for their data (the same attribute names, material, extras and
+  /// other extensions) are the pieces of one surface (write_gltf's Draco pieces of a big level,
+  /// or an exporter's 16-bit index splits): they come as one, at the first one's place, merged
+  /// and welded by weld_piece_borders (matching open edges of two pieces at identical decoded
+  /// positions become one), so a surface reads the same however it was cut.
   std::vector<GltfPrimitive> primitives;
   /// The glTF JSON without what only encodes the data: buffers, bufferViews, accessors,
-  /// images' and primitives' data references, node transforms (their effect is in the geometry)
+  /// images' and primitives' data references, node transforms (their effect is in the geometry),
+  /// the pieces of one surface but the first (see `primitives`)
   /// and the compression extensions KHR_draco_mesh_compression, KHR_mesh_quantization and
   /// EXT_meshopt_compression (in extensionsUsed/Required too). What remains is the scene graph,
   /// names, materials, other extensions and extras.

@@ -8,6 +8,7 @@
 #include <mlfe/core/surface/triangle_mesh.h>
 
 #include <array>
+#include <cstddef>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -33,6 +34,15 @@ struct GltfOptions {
   std::string space;           ///< "RAS", "LPS" or "" (unknown, treated as RAS) of the input positions
   nlohmann::json extras = nlohmann::json::object();  ///< provenance, copied into asset.extras
   std::string generator = "mlfe";                    ///< asset.generator
+  /// Draco only: the most triangles one primitive holds. Draco's encoder needs about 5 times the
+  /// mesh it encodes, so a bigger surface level is cut into ceil(T / draco_piece_triangles)
+  /// primitives of its mesh, balanced runs of triangle_spatial_order (compact pieces; a function
+  /// of the mesh, so the bytes do not depend on the thread count), encoded one at a time: the
+  /// writing costs the converted level plus one piece's encoding. All pieces share the scene's
+  /// quantization grid, so a vertex on a border between pieces decodes to the same position in
+  /// each, and read_gltf joins the pieces back into one welded surface. Levels of at most this
+  /// many triangles stay one primitive (their bytes are what they were before pieces). >= 1.
+  std::size_t draco_piece_triangles = std::size_t(1) << 20;
 };
 
 /// Writes one scene with one node, mesh and material per surface, to `path` (.glb binary or
@@ -45,12 +55,14 @@ struct GltfOptions {
 /// is a node "iso <v> lod <k>" referenced by MSFT_lod (optional extension) from the surface
 /// node and kept out of the scene, so viewers without LOD support show only the full surface.
 /// Draco: every primitive is compressed on one scene-wide quantization grid (crack-free between
-/// surfaces), verified by decoding; accessors describe the decoded data. quantize: positions
+/// surfaces and between the pieces of a big level, see draco_piece_triangles), verified by
+/// decoding; accessors describe the decoded data. quantize: positions
 /// and normals as normalized SHORT under a root node "mlfe dequantize" whose uniform scale and
 /// translation restore metres; throws if 16 bits cannot meet tolerance_mm.
 /// The file appears atomically; same inputs give byte-identical files.
 /// Throws mlfe::Error ("<path>: <problem>") for an unknown extension or space, non-finite
-/// or out-of-range mesh data, tolerance_mm <= 0 with compression, encoder failures and I/O errors.
+/// or out-of-range mesh data, tolerance_mm <= 0 with compression, draco_piece_triangles 0 with
+/// Draco, encoder failures and I/O errors.
 void write_gltf(const std::string& path, const std::vector<GltfSurface>& surfaces,
                 const GltfOptions& options);
 

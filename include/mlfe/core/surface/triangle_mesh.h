@@ -29,6 +29,17 @@ void compute_area_weighted_normals(TriangleMesh& mesh);
 /// when the vertices do not fit 32-bit indices. (CHECKs that no part is null.)
 TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts);
 
+/// Joins the pieces of one surface cut along its edges, given as merge_meshes of the pieces
+/// (`piece_triangles`: each piece's triangle count, in order; CHECKed to sum to the triangles).
+/// An open edge a→b of one piece (no triangle of the mesh traverses b→a) and an open edge
+/// b'→a' of another piece at the same exact positions are one edge cut in two: a' is welded
+/// into a and b' into b (into the earlier vertex). Nothing else is welded, so distinct vertices
+/// that share a position (on the surface's own boundary, or inside a piece) stay distinct.
+/// Vertices keep their order, less the welded ones; normals follow their vertices (the
+/// earlier's is kept). read_gltf joins Draco pieces so. Throws mlfe::Error for triangle indices
+/// out of range.
+void weld_piece_borders(TriangleMesh& mesh, const std::vector<std::size_t>& piece_triangles);
+
 /// The same surface with its vertices in Morton (Z-curve) order of their positions on a 1024³
 /// grid over the bounding box (ties in input order) and its triangles ordered by their first
 /// vertex in that order (ties in input order); each triangle keeps its corners' cyclic order,
@@ -37,6 +48,13 @@ TriangleMesh merge_meshes(const std::vector<const TriangleMesh*>& parts);
 /// simplification) run faster. A function of the mesh alone. Throws mlfe::Error for triangle
 /// indices out of range. `new_to_old` (may be null) receives, per output vertex, its input vertex.
 TriangleMesh spatially_ordered(const TriangleMesh& mesh, std::vector<std::uint32_t>* new_to_old = nullptr);
+
+/// The triangles' indices in Morton (Z-curve) order of their centroids on a 1024³ grid over the
+/// positions' bounding box, ties in index order: consecutive runs of it are compact pieces of the
+/// surface (how write_gltf cuts a big surface into Draco primitives). A function of the mesh
+/// alone, the same at any thread count. Throws mlfe::Error for triangle indices out of range or
+/// more than 2^32 triangles.
+std::vector<std::uint32_t> triangle_spatial_order(const TriangleMesh& mesh);
 
 /// What makes an indexed triangle mesh one welded, manifold surface, counted (for tests and
 /// reports). Vertices are first welded by exact position, since a writer or viewer sees a seam
