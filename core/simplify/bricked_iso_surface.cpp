@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <atomic>
@@ -559,6 +560,16 @@ BrickPart join_slabs(std::vector<BrickPart> pieces, const BrickLayout& layout, s
 
 namespace {
 
+// Runs `f` in a task context of its own: another brick's or join's exception cancels the tree's
+// tasks, but not a simplification under way, whose parallel parts cancelled midway would leave
+// it waiting for them.
+template <class F>
+void uncancelled(const F& f) {
+  tbb::task_group_context own(tbb::task_group_context::isolated);
+  tbb::task_group g(own);
+  g.run_and_wait(f);
+}
+
 void add(BrickStats& to, const BrickStats& s) {
   to.bricks += s.bricks;
   to.face_vertices += s.face_vertices;
@@ -591,6 +602,10 @@ Node join_node(const SlabSource& source, const BrickLayout& layout, std::size_t 
     Node a, b;
     tbb::parallel_invoke([&] { a = join_node(source, layout, first, split, surfaces, o); },
                          [&] { b = join_node(source, layout, split, end, surfaces, o); });
+    // A half is missing when the other's exception cancelled it (that exception is the one
+    // thrown from the tree).
+    if (a.pieces.size() != surfaces || b.pieces.size() != surfaces)
+      throw Error("bricks: a half was cancelled");
     in.resize(surfaces);
     for (std::size_t i = 0; i < surfaces; ++i) {
       in[i].push_back(std::move(a.pieces[i]));
@@ -602,7 +617,7 @@ Node join_node(const SlabSource& source, const BrickLayout& layout, std::size_t 
   if (in.size() != surfaces) throw Error("bricks: a slab's parts have the wrong number of surfaces");
   for (std::size_t i = 0; i < surfaces; ++i) {
     BrickStats st;
-    n.pieces.push_back(join_slabs(std::move(in[i]), layout, first, end, o, &st));
+    uncancelled([&] { n.pieces.push_back(join_slabs(std::move(in[i]), layout, first, end, o, &st)); });
     add(n.stats[i], st);
   }
   return n;
@@ -664,21 +679,26 @@ std::vector<TriangleMesh> bricked_iso_surfaces(const WindowReader& read,
   source.bricks = [&](std::size_t slab) {
     const std::size_t n = layout.slab_bricks(), first = slab * n;
     std::vector<std::vector<BrickPart>> parts(isos.size(), std::vector<BrickPart>(n));
+    std::atomic<std::size_t> passed{0};
     tbb::parallel_for(first, first + n, std::size_t(1), [&](std::size_t b) {
       if (stop) return;
       // Isolated: a thread waiting inside a brick's parallel parts takes no other brick, so no
       // more windows are held than threads run.
       tbb::this_task_arena::isolate([&] {
-        std::array<std::int64_t, 3> lo, hi;
-        layout.window(b, lo, hi);
-        const ScalarGrid window = read(lo, hi);
-        for (std::size_t i = 0; i < isos.size(); ++i)
-          parts[i][b - first] = brick_pass(window, layout, b, isos[i], o);
+        uncancelled([&] {
+          std::array<std::int64_t, 3> lo, hi;
+          layout.window(b, lo, hi);
+          const ScalarGrid window = read(lo, hi);
+          for (std::size_t i = 0; i < isos.size(); ++i)
+            parts[i][b - first] = brick_pass(window, layout, b, isos[i], o);
+        });
       });
+      ++passed;
       const std::size_t k = ++done;
       if (progress && !progress(k, layout.bricks())) stop = true;
     });
-    if (stop) throw Error("bricks: cancelled");
+    // Fewer passed: stopped, or cancelled by another brick's exception (which is the one thrown).
+    if (stop || passed != n) throw Error("bricks: cancelled");
     return parts;
   };
   return join_tree(source, layout, isos.size(), o, stats);
