@@ -22,12 +22,15 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <optional>
+#include <utility>
 
 #include "converters/progress_reporter.h"
 
@@ -825,31 +828,110 @@ std::string brick_parts(const VolumeWindows& v, const AssetOptions& o, std::size
   return encode_brick_parts(parts);
 }
 
+namespace {
+
+// Decoded brick parts and join pieces, by what they cover, for join_tree; the samples' range
+// over all of them.
+struct HeldParts {
+  std::map<std::size_t, std::vector<BrickPart>> bricks;
+  std::map<std::pair<std::size_t, std::size_t>, std::vector<BrickPart>> joined;
+  float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
+  std::atomic<std::size_t> taken{0};
+  std::size_t held = 0;
+};
+
+// `parts` decoded (each string released once decoded), checked against the layout and the
+// surfaces' count.
+void decode_parts(HeldParts& h, std::vector<std::string>& parts, const BrickLayout& layout, std::size_t n) {
+  for (std::string& bytes : parts) {
+    BrickParts d = decode_brick_parts(bytes);
+    std::string().swap(bytes);
+    const bool joined = d.end_slab > d.first_slab;
+    if (d.surfaces.size() != n || (joined ? d.end_slab > layout.slabs() : d.brick >= layout.bricks()))
+      throw Error(fmt::format(
+          "brick parts: parts of brick {} (slabs [{}, {})) with {} surfaces are not "
+          "those of {} bricks in {} slabs with {} surfaces",
+          d.brick, d.first_slab, d.end_slab, d.surfaces.size(), layout.bricks(), layout.slabs(), n));
+    h.lo = std::min(h.lo, d.lo);
+    h.hi = std::max(h.hi, d.hi);
+    const bool fresh =
+        joined ? h.joined.emplace(std::pair(d.first_slab, d.end_slab), std::move(d.surfaces)).second
+               : h.bricks.emplace(d.brick, std::move(d.surfaces)).second;
+    if (!fresh) throw Error("brick parts: the same brick or slabs given twice");
+    ++h.held;
+  }
+}
+
+// Where join_tree finds what `h` holds; a brick a slab needs and `h` has not is refused.
+SlabSource held_source(HeldParts& h, const BrickLayout& layout, std::size_t n) {
+  SlabSource s;
+  s.joined = [&h](std::size_t first, std::size_t end) {
+    const auto it = h.joined.find({first, end});
+    if (it == h.joined.end()) return std::vector<BrickPart>{};
+    ++h.taken;
+    return std::move(it->second);
+  };
+  s.bricks = [&h, &layout, n](std::size_t slab) {
+    std::vector<std::vector<BrickPart>> in(n);
+    for (std::size_t b = slab * layout.slab_bricks(); b < (slab + 1) * layout.slab_bricks(); ++b) {
+      const auto it = h.bricks.find(b);
+      if (it == h.bricks.end()) throw Error(fmt::format("brick parts: brick {}'s parts are missing", b));
+      ++h.taken;
+      for (std::size_t i = 0; i < n; ++i) in[i].push_back(std::move(it->second[i]));
+    }
+    return in;
+  };
+  return s;
+}
+
+}  // namespace
+
+std::string join_parts(const VolumeWindows& v, const AssetOptions& o, std::size_t first, std::size_t end,
+                       std::vector<std::string> parts) {
+  const BrickedSurfaces b = start_bricked_surfaces(v, o);
+  const std::size_t n = b.out.iso_values.size();
+  if (!(first < end && end <= b.layout.slabs()))
+    throw Error(fmt::format("{}: slabs [{}, {}) are not among its {} slabs", v.frame().source, first, end,
+                            b.layout.slabs()));
+  HeldParts h;
+  decode_parts(h, parts, b.layout, n);
+  // Only the node's own inputs: its bricks (a slab) or its halves' pieces.
+  SlabSource s = held_source(h, b.layout, n);
+  std::vector<std::vector<BrickPart>> in(n);
+  if (end == first + 1) {
+    in = s.bricks(first);
+  } else {
+    const std::size_t split = slab_split(first, end);
+    for (const auto& [a, z] : {std::pair(first, split), std::pair(split, end)}) {
+      std::vector<BrickPart> half = s.joined(a, z);
+      if (half.empty())
+        throw Error(fmt::format("brick parts: the pieces of slabs [{}, {}) are missing", a, z));
+      for (std::size_t i = 0; i < n; ++i) in[i].push_back(std::move(half[i]));
+    }
+  }
+  if (h.taken != h.held) throw Error("brick parts: parts that are not the join's");
+  BrickParts out;
+  out.first_slab = first;
+  out.end_slab = end;
+  out.lo = h.lo;
+  out.hi = h.hi;
+  for (std::size_t i = 0; i < n; ++i)
+    out.surfaces.push_back(join_slabs(std::move(in[i]), b.layout, first, end, b.options));
+  return encode_brick_parts(out);
+}
+
 nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
-                            const std::vector<std::string>& parts, const nlohmann::json& provenance) {
+                            std::vector<std::string> parts, const nlohmann::json& provenance) {
   const auto t0 = std::chrono::steady_clock::now();
   check_output_path(out, kAssetExtensions);
   BrickedSurfaces b = start_bricked_surfaces(v, o);
-  if (parts.size() != b.layout.bricks())
-    throw Error(
-        fmt::format("{}: {} bricks' parts for {} bricks", v.frame().source, parts.size(), b.layout.bricks()));
   const std::size_t n = b.out.iso_values.size();
-  std::vector<std::vector<BrickPart>> surfaces(n, std::vector<BrickPart>(parts.size()));
-  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-  for (std::size_t k = 0; k < parts.size(); ++k) {
-    BrickParts d = decode_brick_parts(parts[k]);
-    if (d.brick != k || d.surfaces.size() != n)
-      throw Error(fmt::format("brick parts: brick {}'s bytes hold brick {} with {} surfaces", k, d.brick,
-                              d.surfaces.size()));
-    lo = std::min(lo, d.lo);
-    hi = std::max(hi, d.hi);
-    for (std::size_t i = 0; i < n; ++i) surfaces[i][k] = std::move(d.surfaces[i]);
-  }
-  std::vector<TriangleMesh> meshes;
-  std::vector<BrickStats> stats(n);
-  for (std::size_t i = 0; i < n; ++i)
-    meshes.push_back(join_bricks(std::move(surfaces[i]), b.options, &stats[i]));
-  finish_bricked_surfaces(b, std::move(meshes), stats, lo, hi, v, o);
+  HeldParts h;
+  decode_parts(h, parts, b.layout, n);
+  std::vector<BrickStats> stats;
+  std::vector<TriangleMesh> meshes = join_tree(held_source(h, b.layout, n), b.layout, n, b.options, &stats);
+  if (h.taken != h.held) throw Error("brick parts: parts that the join tree does not use");
+  finish_bricked_surfaces(b, std::move(meshes), stats, h.lo, h.hi, v, o);
   b.out.extract_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return write_surfaces(out, std::move(b.out), o, provenance, 3, smallest_spacing(v.frame().transform, 3),
                         v.frame().space, t0);

@@ -10,7 +10,7 @@ namespace mlfe {
 
 namespace {
 
-constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'B', 'R', 'K', '2'};
+constexpr char kMagic[8] = {'M', 'L', 'F', 'E', 'B', 'R', 'K', '3'};
 
 // The arrays are copied with memcpy, as hierarchy_io.cpp's are; a big-endian host would swap.
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "brick_parts assumes a little-endian host");
@@ -56,6 +56,8 @@ std::string encode_brick_parts(const BrickParts& p) {
   Writer w;
   w.out.append(kMagic, sizeof kMagic);
   w.put(std::uint64_t(p.brick));
+  w.put(std::uint64_t(p.first_slab));
+  w.put(std::uint64_t(p.end_slab));
   w.put(p.lo);
   w.put(p.hi);
   w.put(std::uint32_t(p.surfaces.size()));
@@ -85,6 +87,11 @@ BrickParts decode_brick_parts(const std::string& bytes) {
   r.at = sizeof kMagic;
   BrickParts p;
   p.brick = std::size_t(r.get<std::uint64_t>());
+  p.first_slab = std::size_t(r.get<std::uint64_t>());
+  p.end_slab = std::size_t(r.get<std::uint64_t>());
+  if (p.end_slab < p.first_slab || (p.end_slab > p.first_slab && p.brick != 0) ||
+      (p.end_slab == p.first_slab && p.first_slab != 0))
+    throw Error("brick parts: a bad slab range");
   p.lo = r.get<float>();
   p.hi = r.get<float>();
   const std::uint32_t n = r.get<std::uint32_t>();

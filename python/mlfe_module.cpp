@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/vec.h>
+#include <mlfe/core/simplify/bricked_iso_surface.h>
 #include <mlfe/formats/asset_reader.h>
 #include <mlfe/formats/asset_writer.h>
 #include <mlfe/formats/image_reader.h>
@@ -735,7 +736,7 @@ struct PyBricks {
   std::string input;
   pipeline::ConvertFileOptions options;
   std::shared_ptr<const VolumeWindows> volume;
-  std::size_t count = 0;
+  std::size_t count = 0, slabs = 0, slab_bricks = 0;
 };
 
 // mlfe.convert's keywords, read options and iso for `input`; with `output`, that path is checked
@@ -765,8 +766,23 @@ PyBricks open_bricks_py(const py::object& input, const py::object& output, const
         " would be converted whole, not in bricks (auto bricks raw and OME-Zarr volumes over 2^27 "
         "samples; give bricks=N, without lod, level, min_component, simplify=0 or a global target)");
   b.count = brick_count(*v, b.options.asset);
+  const BrickLayout layout = brick_layout(v->frame().dims, b.options.asset.bricks);
+  b.slabs = layout.slabs();
+  b.slab_bricks = layout.slab_bricks();
   b.volume = std::make_shared<const VolumeWindows>(std::move(*v));
   return b;
+}
+
+// The bytes of `parts`, taken out (its items become None) so that they are held once, not
+// twice, while joined.
+std::vector<std::string> take_parts(py::list parts) {
+  std::vector<std::string> taken;
+  taken.reserve(parts.size());
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    taken.push_back(parts[k].cast<std::string>());
+    parts[k] = py::none();
+  }
+  return taken;
 }
 
 // mlfe._mlfe.Bricks: the pieces of mlfe.distributed.convert.
@@ -787,20 +803,31 @@ void bind_bricks(py::module_& m) {
              for (const std::string& p : parts) out.append(py::bytes(p));
              return out;
            })
-      // Takes the parts out of `parts` (its items become None) so that they are held once, not
-      // twice, while the seams are simplified.
+      .def_property_readonly("slabs", [](const PyBricks& b) { return b.slabs; })
+      .def_property_readonly("slab_bricks", [](const PyBricks& b) { return b.slab_bricks; })
+      .def("split",
+           [](const PyBricks& b, std::size_t first, std::size_t end) {
+             if (!(first + 1 < end && end <= b.slabs))
+               throw Error(fmt::format("bricks: slabs [{}, {}) of {} have no halves", first, end, b.slabs));
+             return slab_split(first, end);
+           })
+      .def("join",
+           [](const PyBricks& b, std::size_t first, std::size_t end, const py::list& parts) {
+             std::vector<std::string> in = take_parts(parts);
+             std::string out;
+             {
+               py::gil_scoped_release release;
+               out = join_parts(*b.volume, b.options.asset, first, end, std::move(in));
+             }
+             return py::bytes(out);
+           })
       .def("write", [](const PyBricks& b, const py::object& output, py::list parts) {
         const std::string path = fspath(output);
-        std::vector<std::string> taken;
-        taken.reserve(parts.size());
-        for (std::size_t k = 0; k < parts.size(); ++k) {
-          taken.push_back(parts[k].cast<std::string>());
-          parts[k] = py::none();
-        }
+        std::vector<std::string> taken = take_parts(parts);
         nlohmann::json summary;
         {
           py::gil_scoped_release release;
-          summary = write_bricks(path, *b.volume, b.options.asset, taken,
+          summary = write_bricks(path, *b.volume, b.options.asset, std::move(taken),
                                  bricks_provenance(b.input, b.options.asset));
         }
         return to_python(summary);

@@ -6,7 +6,9 @@
 #include <mlfe/core/simplify/surface_simplification.h>
 #include <mlfe/core/surface/surface_fitting.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <atomic>
@@ -160,13 +162,30 @@ bool on_shared_plane(const BrickLayout& l, const LatticePlace& p) {
   return false;
 }
 
-// The welded surface: the bricks' meshes joined at their face vertices, with the points and per
-// vertex whether it is a face vertex.
+// What a vertex of a join is: one brick's (or closed by an earlier join), a face vertex whose
+// bricks all lie in the join (its strips are simplified now), or one still shared with bricks
+// outside it (locked, kept with its place for a later join).
+enum : std::uint8_t { kInner = 0, kClosing = 1, kOpen = 2 };
+
+// A face vertex that stays shared with bricks outside the slabs [first, end): it lies on the
+// group's bottom or top sample plane, and those planes are shared with other slabs.
+bool open_in(const BrickLayout& l, const LatticePlace& p, std::size_t first, std::size_t end) {
+  if (p.axis == 2) return false;
+  const std::int64_t z = p.at[2];
+  return (first > 0 && z == std::int64_t(first) * l.edge) ||
+         (end < std::size_t(l.count[2]) && z == std::int64_t(end) * l.edge);
+}
+
+// The pieces of a join welded: per vertex what it is, the open vertices (ascending) with their
+// places, and the points.
 struct Welded {
   TriangleMesh mesh;
   std::vector<std::uint8_t> face;
+  std::vector<Id32> open;
+  std::vector<LatticePlace> open_place;
   std::vector<std::array<float, 3>> points;
   std::vector<Id32> point_face;
+  std::size_t extracted_triangles = 0;
 };
 
 struct PlaceKey {
@@ -186,15 +205,35 @@ struct PlaceHash {
   }
 };
 
-// Each part is released once appended, and the welded arrays are reserved at their final size
-// (at most), so the parts and the welded surface are not both held, nor grown by doubling.
-Welded weld(std::vector<BrickPart> parts) {
+// A piece's own consistency, before any of it is welded.
+void check_piece(const BrickPart& b) {
+  if (b.face_place.size() != b.face_vertex.size())
+    throw Error("bricks: a brick's face places are not one per face vertex");
+  for (std::size_t k = 0; k < b.face_vertex.size(); ++k)
+    if (b.face_vertex[k] >= b.mesh.positions.size() || (k > 0 && b.face_vertex[k] <= b.face_vertex[k - 1]))
+      throw Error("bricks: a brick's face vertices are not ascending vertices");
+  if (!b.mesh.normals.empty() && b.mesh.normals.size() != b.mesh.positions.size())
+    throw Error("bricks: a brick's normals are not one per vertex");
+  for (const auto& t : b.mesh.triangles)
+    for (Id32 v : t)
+      if (v >= b.mesh.positions.size()) throw Error("bricks: a brick's triangle index is out of range");
+  if (b.points.size() != b.point_face.size())
+    throw Error("bricks: a brick's points and their faces differ in number");
+  for (Id32 f : b.point_face)
+    if (f >= b.mesh.triangles.size()) throw Error("bricks: a brick's point is attached to no triangle");
+}
+
+// The pieces of the slabs [first, end) joined at their face vertices. Each piece is released once
+// appended, and the welded arrays are reserved at their final size (at most), so the pieces and
+// the welded surface are not both held, nor grown by doubling.
+Welded weld(std::vector<BrickPart> parts, const BrickLayout& l, std::size_t first, std::size_t end) {
   Welded w;
   std::size_t vertices = 0, triangles = 0, points = 0;
   for (const BrickPart& b : parts) {
     vertices += b.mesh.positions.size();
     triangles += b.mesh.triangles.size();
     points += b.points.size();
+    w.extracted_triangles += b.extracted_triangles;
   }
   w.mesh.positions.reserve(vertices);
   w.mesh.triangles.reserve(triangles);
@@ -202,28 +241,21 @@ Welded weld(std::vector<BrickPart> parts) {
   w.points.reserve(points);
   w.point_face.reserve(points);
   std::unordered_map<PlaceKey, Id32, PlaceHash> joined;
-  std::vector<Id32> uses;  // per welded face vertex, how many parts have it
-  uses.reserve(vertices);
+  std::unordered_map<Id32, Id32> uses;  // per closing vertex, how many pieces have it
   for (BrickPart& part : parts) {
     const BrickPart b = std::move(part);
-    if (b.face_place.size() != b.face_vertex.size())
-      throw Error("bricks: a brick's face places are not one per face vertex");
-    for (std::size_t k = 0; k < b.face_vertex.size(); ++k)
-      if (b.face_vertex[k] >= b.mesh.positions.size() || (k > 0 && b.face_vertex[k] <= b.face_vertex[k - 1]))
-        throw Error("bricks: a brick's face vertices are not ascending vertices");
+    check_piece(b);
     if (b.mesh.positions.empty()) continue;
     const bool normals = !b.mesh.normals.empty();
     if (normals != !w.mesh.normals.empty() && !w.mesh.positions.empty())
       throw Error("bricks: the bricks' parts disagree on normals");
-    if (normals && b.mesh.normals.size() != b.mesh.positions.size())
-      throw Error("bricks: a brick's normals are not one per vertex");
     if (normals && w.mesh.normals.capacity() == 0) w.mesh.normals.reserve(vertices);
     const Id32 base = Id32(w.mesh.triangles.size());
     std::vector<Id32> id(b.mesh.positions.size());
     std::size_t next_face = 0;  // into b.face_vertex
     for (std::size_t i = 0; i < id.size(); ++i) {
-      const bool on_face = next_face < b.face_vertex.size() && b.face_vertex[next_face] == i;
-      if (on_face) {
+      std::uint8_t kind = kInner;
+      if (next_face < b.face_vertex.size() && b.face_vertex[next_face] == i) {
         const LatticePlace& p = b.face_place[next_face++];
         const auto [it, fresh] =
             joined.try_emplace(PlaceKey{{p.at[0], p.at[1], p.at[2]}, p.axis}, Id32(w.mesh.positions.size()));
@@ -232,114 +264,159 @@ Welded weld(std::vector<BrickPart> parts) {
           if (w.mesh.positions[id[i]] != b.mesh.positions[i])
             throw Error(
                 "bricks: two bricks' parts place a shared vertex differently (parts of different volumes?)");
-          ++uses[id[i]];
+          if (w.face[id[i]] == kClosing) ++uses[id[i]];
           continue;
+        }
+        kind = open_in(l, p, first, end) ? kOpen : kClosing;
+        if (kind == kOpen) {
+          w.open.push_back(id[i]);
+          w.open_place.push_back(p);
+        } else {
+          uses[id[i]] = 1;
         }
       } else {
         id[i] = Id32(w.mesh.positions.size());
       }
       w.mesh.positions.push_back(b.mesh.positions[i]);
       if (normals) w.mesh.normals.push_back(b.mesh.normals[i]);
-      w.face.push_back(on_face);
-      uses.push_back(1);
+      w.face.push_back(kind);
     }
-    for (const auto& t : b.mesh.triangles) {
-      for (Id32 v : t)
-        if (v >= id.size()) throw Error("bricks: a brick's triangle index is out of range");
-      w.mesh.triangles.push_back({id[t[0]], id[t[1]], id[t[2]]});
-    }
-    if (b.points.size() != b.point_face.size())
-      throw Error("bricks: a brick's points and their faces differ in number");
+    for (const auto& t : b.mesh.triangles) w.mesh.triangles.push_back({id[t[0]], id[t[1]], id[t[2]]});
     w.points.insert(w.points.end(), b.points.begin(), b.points.end());
-    for (Id32 f : b.point_face) {
-      if (f >= b.mesh.triangles.size()) throw Error("bricks: a brick's point is attached to no triangle");
-      w.point_face.push_back(base + f);
-    }
+    for (Id32 f : b.point_face) w.point_face.push_back(base + f);
   }
-  for (std::size_t v = 0; v < w.face.size(); ++v)
-    if (w.face[v] && uses[v] < 2)
+  for (const auto& [v, n] : uses)
+    if (n < 2)
       throw Error(
           "bricks: a vertex on a shared face is in one brick's part only (parts of different volumes?)");
   return w;
 }
 
-// The seam pass: the strips simplified with their rim locked and the points attached to them,
-// under `opts` (the brick pass's last run) down to `budget` triangles of the whole surface.
-TriangleMesh seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, BrickStats& stats) {
-  std::vector<std::uint8_t> strip = strip_triangles(w.mesh, w.face);
-  std::vector<Id32> inside, outside;
-  for (Id32 t = 0; t < Id32(strip.size()); ++t) (strip[t] ? inside : outside).push_back(t);
-  std::vector<Id32> map(w.mesh.positions.size(), kNone);
-  Part part = cut_out(w.mesh, inside, map);
-  // The rim: strip vertices that a triangle outside the strips also uses.
-  std::vector<std::uint8_t> rim(w.mesh.positions.size(), 0);
-  for (Id32 t : outside)
-    for (Id32 v : w.mesh.triangles[t]) rim[v] = 1;
-  SimplifyCarry carry;
-  carry.locked.resize(part.vertex.size());
-  for (std::size_t i = 0; i < part.vertex.size(); ++i) carry.locked[i] = rim[part.vertex[i]];
-  if (opts.verify_bound) {
-    std::vector<Id32> strip_index(strip.size(), kNone);
-    for (Id32 i = 0; i < Id32(inside.size()); ++i) strip_index[inside[i]] = i;
-    for (std::size_t p = 0; p < w.points.size(); ++p)
-      if (strip[w.point_face[p]]) {
-        carry.points.push_back(w.points[p]);
-        carry.point_face.push_back(strip_index[w.point_face[p]]);
-      }
-  }
-  // What the strips' simplification does not need is released before it runs.
-  std::vector<std::uint8_t>().swap(rim);
-  std::vector<std::uint8_t>().swap(w.face);
-  std::vector<std::array<float, 3>>().swap(w.points);
-  std::vector<Id32>().swap(w.point_face);
-  std::vector<Id32>().swap(map);
-  std::vector<std::uint8_t>().swap(strip);
-  stats.seam_triangles = inside.size();
-  std::vector<Id32>().swap(inside);
-  opts.min_triangles = budget > outside.size() ? budget - outside.size() : 0;
-  const TriangleMesh seams =
-      stats.seam_triangles == 0 ? TriangleMesh{} : simplify_within(part.mesh, opts, nullptr, &carry);
-  stats.seam_output = seams.triangles.size();
-  part.mesh = TriangleMesh{};
-
-  // The strips' vertices take their simplified places (a moving survivor); the surface is the
-  // triangles outside, then the strips', with the vertices in use in welded order.
+// The join's piece: the triangles outside the strips, then the strips' simplified ones
+// (`seams`, whose vertex i is the welded vertex strip_vertex[carry.source[i]]), with the
+// vertices in use in welded order; the open vertices with their places; the points attached to
+// triangles within kSeamRings rings of an open vertex (the only triangles a later join takes
+// again): `kept_points` on the outside triangles `kept_face` (welded indices), then the seam
+// pass's.
+BrickPart compact(Welded w, const std::vector<Id32>& outside, const std::vector<Id32>& strip_vertex,
+                  const TriangleMesh& seams, const SimplifyCarry& carry,
+                  std::vector<std::array<float, 3>> kept_points, std::vector<Id32> kept_face) {
+  // The strips' vertices take their simplified places (a moving survivor).
   std::vector<Id32> seam_vertex(seams.positions.size());
   for (std::size_t i = 0; i < seams.positions.size(); ++i) {
-    seam_vertex[i] = part.vertex[carry.source[i]];
+    seam_vertex[i] = strip_vertex[carry.source[i]];
     w.mesh.positions[seam_vertex[i]] = seams.positions[i];
     if (!w.mesh.normals.empty()) w.mesh.normals[seam_vertex[i]] = seams.normals[i];
   }
+  {
+    std::vector<Id32> new_index(w.mesh.triangles.size(), kNone);
+    for (Id32 i = 0; i < Id32(outside.size()); ++i) new_index[outside[i]] = i;
+    for (Id32& f : kept_face) f = new_index[f];
+  }
+  for (std::size_t p = 0; p < carry.points.size(); ++p)
+    if (carry.point_face[p] != kNone) {
+      kept_points.push_back(carry.points[p]);
+      kept_face.push_back(Id32(outside.size()) + carry.point_face[p]);
+    }
   // Compacted in place (a vertex only moves down), so the surface is not held twice.
   std::vector<std::array<Id32, 3>> tris;
   tris.reserve(outside.size() + seams.triangles.size());
   for (Id32 t : outside) tris.push_back(w.mesh.triangles[t]);
   for (const auto& t : seams.triangles)
     tris.push_back({seam_vertex[t[0]], seam_vertex[t[1]], seam_vertex[t[2]]});
-  TriangleMesh out = std::move(w.mesh);
-  std::vector<std::array<Id32, 3>>().swap(out.triangles);
-  map.assign(out.positions.size(), kNone);
+  BrickPart out;
+  out.extracted_triangles = w.extracted_triangles;
+  out.mesh = std::move(w.mesh);
+  std::vector<std::array<Id32, 3>>().swap(out.mesh.triangles);
+  std::vector<Id32> map(out.mesh.positions.size(), kNone);
   for (const auto& t : tris)
     for (Id32 v : t) map[v] = 0;
-  Id32 kept = 0;
+  Id32 used = 0;
   for (Id32 v = 0; v < Id32(map.size()); ++v)
     if (map[v] != kNone) {
-      map[v] = kept;
-      out.positions[kept] = out.positions[v];
-      if (!out.normals.empty()) out.normals[kept] = out.normals[v];
-      ++kept;
+      map[v] = used;
+      out.mesh.positions[used] = out.mesh.positions[v];
+      if (!out.mesh.normals.empty()) out.mesh.normals[used] = out.mesh.normals[v];
+      ++used;
     }
-  out.positions.resize(kept);
-  out.positions.shrink_to_fit();
-  if (!out.normals.empty()) {
-    out.normals.resize(kept);
-    out.normals.shrink_to_fit();
-  }
+  out.mesh.positions.resize(used);
+  if (!out.mesh.normals.empty()) out.mesh.normals.resize(used);
   for (auto& t : tris) t = {map[t[0]], map[t[1]], map[t[2]]};
-  out.triangles = std::move(tris);
+  out.mesh.triangles = std::move(tris);
+  // An open vertex is locked, so it is still in use.
+  std::vector<std::uint8_t> open(used, 0);
+  for (Id32 v : w.open) {
+    MLFE_CHECK(map[v] != kNone);
+    out.face_vertex.push_back(map[v]);
+    open[map[v]] = 1;
+  }
+  out.face_place = std::move(w.open_place);
+  if (!out.face_vertex.empty()) {
+    const std::vector<std::uint8_t> near = strip_triangles(out.mesh, std::move(open));
+    for (std::size_t p = 0; p < kept_face.size(); ++p)
+      if (near[kept_face[p]]) {
+        out.points.push_back(kept_points[p]);
+        out.point_face.push_back(kept_face[p]);
+      }
+  }
+  for (auto* v : {&out.mesh.positions, &out.mesh.normals, &out.points}) v->shrink_to_fit();
+  out.point_face.shrink_to_fit();
   return out;
 }
 
+// The join's piece: the welded surface with the strips around its closing vertices simplified
+// (their rim and the open vertices locked, the points attached to them kept within the
+// tolerance) under `opts` (the brick pass's last run), down to `budget` triangles of the
+// join's surface; it keeps the open vertices' places and the points near them for later joins.
+BrickPart seam_pass(Welded w, SimplifyOptions opts, std::size_t budget, BrickStats& stats) {
+  std::vector<std::uint8_t> closing(w.face.size());
+  for (std::size_t v = 0; v < closing.size(); ++v) closing[v] = w.face[v] == kClosing;
+  std::vector<std::uint8_t> strip = strip_triangles(w.mesh, std::move(closing));
+  std::vector<Id32> inside, outside;
+  for (Id32 t = 0; t < Id32(strip.size()); ++t) (strip[t] ? inside : outside).push_back(t);
+  std::vector<Id32> map(w.mesh.positions.size(), kNone);
+  Part part = cut_out(w.mesh, inside, map);
+  // Locked: the rim (strip vertices that a triangle outside the strips also uses) and the
+  // vertices still shared with bricks outside the join.
+  std::vector<std::uint8_t> rim(w.mesh.positions.size(), 0);
+  for (Id32 t : outside)
+    for (Id32 v : w.mesh.triangles[t]) rim[v] = 1;
+  SimplifyCarry carry;
+  carry.locked.resize(part.vertex.size());
+  for (std::size_t i = 0; i < part.vertex.size(); ++i)
+    carry.locked[i] = rim[part.vertex[i]] || w.face[part.vertex[i]] == kOpen;
+  // The points: those on the strips go to the seam pass; the others stay on their triangle.
+  std::vector<Id32> new_index(strip.size(), kNone);
+  for (Id32 i = 0; i < Id32(inside.size()); ++i) new_index[inside[i]] = i;
+  std::vector<std::array<float, 3>> kept_points;
+  std::vector<Id32> kept_face;
+  if (opts.verify_bound)
+    for (std::size_t p = 0; p < w.points.size(); ++p) {
+      const Id32 f = w.point_face[p];
+      if (strip[f]) {
+        carry.points.push_back(w.points[p]);
+        carry.point_face.push_back(new_index[f]);
+      } else {
+        kept_points.push_back(w.points[p]);
+        kept_face.push_back(f);
+      }
+    }
+  // What the strips' simplification does not need is released before it runs.
+  std::vector<std::uint8_t>().swap(rim);
+  std::vector<std::array<float, 3>>().swap(w.points);
+  std::vector<Id32>().swap(w.point_face);
+  std::vector<Id32>().swap(map);
+  std::vector<std::uint8_t>().swap(strip);
+  std::vector<Id32>().swap(new_index);
+  stats.seam_triangles += inside.size();
+  std::vector<Id32>().swap(inside);
+  opts.min_triangles = budget > outside.size() ? budget - outside.size() : 0;
+  const bool simplify = !part.mesh.triangles.empty();
+  const TriangleMesh seams = simplify ? simplify_within(part.mesh, opts, nullptr, &carry) : TriangleMesh{};
+  stats.seam_output += seams.triangles.size();
+  part.mesh = TriangleMesh{};
+  return compact(std::move(w), outside, part.vertex, seams, carry, kept_points, kept_face);
+}
 // Connected parts of the triangles (joined through shared vertices).
 std::size_t count_parts(const TriangleMesh& m) {
   std::vector<Id32> up(m.positions.size());
@@ -453,20 +530,132 @@ BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::s
   return part;
 }
 
-TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickedIsoOptions& o, BrickStats* stats) {
+std::size_t slab_split(std::size_t first, std::size_t end) {
+  MLFE_CHECK(end > first + 1);
+  return first + (end - first) / 2;
+}
+
+BrickPart join_slabs(std::vector<BrickPart> pieces, const BrickLayout& layout, std::size_t first,
+                     std::size_t end, const BrickedIsoOptions& o, BrickStats* stats) {
+  if (!(first < end && end <= layout.slabs()))
+    throw Error("bricks: slabs [" + std::to_string(first) + ", " + std::to_string(end) +
+                ") are not the layout's");
+  const std::size_t expected = end == first + 1 ? layout.slab_bricks() : 2;
+  if (pieces.size() != expected)
+    throw Error("bricks: " + std::to_string(pieces.size()) + " pieces for slabs [" + std::to_string(first) +
+                ", " + std::to_string(end) + "), which join " + std::to_string(expected));
   BrickStats st;
-  for (const BrickPart& p : parts) {
-    st.bricks += !p.mesh.triangles.empty();
-    st.extracted_triangles += p.extracted_triangles;
-  }
-  Welded w = weld(std::move(parts));
-  for (std::uint8_t f : w.face) st.face_vertices += f;
-  st.welded_triangles = w.mesh.triangles.size();
-  const std::vector<SimplifyOptions> stages = brick_stages(o.simplifier, st.extracted_triangles);
-  TriangleMesh out = seam_pass(std::move(w), stages.back(), stages.back().min_triangles, st);
-  st.parts = count_parts(out);
+  if (end == first + 1)
+    for (const BrickPart& p : pieces) {
+      st.bricks += !p.mesh.triangles.empty();
+      st.welded_triangles += p.mesh.triangles.size();
+    }
+  Welded w = weld(std::move(pieces), layout, first, end);
+  for (std::uint8_t f : w.face) st.face_vertices += f == kClosing;
+  const std::vector<SimplifyOptions> stages = brick_stages(o.simplifier, w.extracted_triangles);
+  BrickPart out = seam_pass(std::move(w), stages.back(), stages.back().min_triangles, st);
   if (stats) *stats = st;
   return out;
+}
+
+namespace {
+
+// Runs `f` in a task context of its own: another brick's or join's exception cancels the tree's
+// tasks, but not a simplification under way, whose parallel parts cancelled midway would leave
+// it waiting for them.
+template <class F>
+void uncancelled(const F& f) {
+  tbb::task_group_context own(tbb::task_group_context::isolated);
+  tbb::task_group g(own);
+  g.run_and_wait(f);
+}
+
+void add(BrickStats& to, const BrickStats& s) {
+  to.bricks += s.bricks;
+  to.face_vertices += s.face_vertices;
+  to.seam_triangles += s.seam_triangles;
+  to.seam_output += s.seam_output;
+  to.welded_triangles += s.welded_triangles;
+}
+
+// The pieces (one per surface) of the tree's node [first, end), and the stats of the joins run
+// for it.
+struct Node {
+  std::vector<BrickPart> pieces;
+  std::vector<BrickStats> stats;
+};
+
+Node join_node(const SlabSource& source, const BrickLayout& layout, std::size_t first, std::size_t end,
+               std::size_t surfaces, const BrickedIsoOptions& o) {
+  Node n;
+  n.stats.resize(surfaces);
+  if (source.joined) n.pieces = source.joined(first, end);
+  if (!n.pieces.empty()) {
+    if (n.pieces.size() != surfaces) throw Error("bricks: a joined piece has the wrong number of surfaces");
+    return n;
+  }
+  std::vector<std::vector<BrickPart>> in;
+  if (end == first + 1) {
+    in = source.bricks(first);
+  } else {
+    const std::size_t split = slab_split(first, end);
+    Node a, b;
+    tbb::parallel_invoke([&] { a = join_node(source, layout, first, split, surfaces, o); },
+                         [&] { b = join_node(source, layout, split, end, surfaces, o); });
+    // A half is missing when the other's exception cancelled it (that exception is the one
+    // thrown from the tree).
+    if (a.pieces.size() != surfaces || b.pieces.size() != surfaces)
+      throw Error("bricks: a half was cancelled");
+    in.resize(surfaces);
+    for (std::size_t i = 0; i < surfaces; ++i) {
+      in[i].push_back(std::move(a.pieces[i]));
+      in[i].push_back(std::move(b.pieces[i]));
+      add(n.stats[i], a.stats[i]);
+      add(n.stats[i], b.stats[i]);
+    }
+  }
+  if (in.size() != surfaces) throw Error("bricks: a slab's parts have the wrong number of surfaces");
+  for (std::size_t i = 0; i < surfaces; ++i) {
+    BrickStats st;
+    uncancelled([&] { n.pieces.push_back(join_slabs(std::move(in[i]), layout, first, end, o, &st)); });
+    add(n.stats[i], st);
+  }
+  return n;
+}
+
+}  // namespace
+
+std::vector<TriangleMesh> join_tree(const SlabSource& source, const BrickLayout& layout, std::size_t surfaces,
+                                    const BrickedIsoOptions& o, std::vector<BrickStats>* stats) {
+  Node root = join_node(source, layout, 0, layout.slabs(), surfaces, o);
+  std::vector<TriangleMesh> out;
+  for (std::size_t i = 0; i < surfaces; ++i) {
+    BrickPart& p = root.pieces[i];
+    if (!p.face_vertex.empty()) throw Error("bricks: the whole surface still has shared face vertices");
+    root.stats[i].extracted_triangles = p.extracted_triangles;
+    root.stats[i].parts = count_parts(p.mesh);
+    out.push_back(std::move(p.mesh));
+  }
+  if (stats) *stats = std::move(root.stats);
+  return out;
+}
+
+TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickLayout& layout, const BrickedIsoOptions& o,
+                         BrickStats* stats) {
+  if (parts.size() != layout.bricks())
+    throw Error("bricks: " + std::to_string(parts.size()) + " parts for " + std::to_string(layout.bricks()) +
+                " bricks");
+  SlabSource source;
+  source.bricks = [&](std::size_t slab) {
+    const std::size_t n = layout.slab_bricks();
+    std::vector<std::vector<BrickPart>> in(1);
+    for (std::size_t b = slab * n; b < (slab + 1) * n; ++b) in[0].push_back(std::move(parts[b]));
+    return in;
+  };
+  std::vector<BrickStats> st;
+  std::vector<TriangleMesh> out = join_tree(source, layout, 1, o, &st);
+  if (stats) *stats = st[0];
+  return std::move(out[0]);
 }
 
 WindowReader grid_windows(const ScalarGrid& grid) {
@@ -482,32 +671,37 @@ std::vector<TriangleMesh> bricked_iso_surfaces(const WindowReader& read,
                                                std::vector<BrickStats>* stats,
                                                const BrickProgress& progress) {
   const BrickLayout layout = brick_layout(dims, edge);
-  // parts[b][i]: brick b's part of surface i.
-  std::vector<std::vector<BrickPart>> parts(layout.bricks());
   std::atomic<std::size_t> done{0};
   std::atomic<bool> stop{false};
-  tbb::parallel_for(std::size_t(0), parts.size(), std::size_t(1), [&](std::size_t b) {
-    if (stop) return;
-    // Isolated: a thread waiting inside a brick's parallel parts takes no other brick, so no
-    // more windows are held than threads run.
-    tbb::this_task_arena::isolate([&] {
-      std::array<std::int64_t, 3> lo, hi;
-      layout.window(b, lo, hi);
-      const ScalarGrid window = read(lo, hi);
-      for (double iso : isos) parts[b].push_back(brick_pass(window, layout, b, iso, o));
+  SlabSource source;
+  // A slab's bricks are passed when its join needs them, so the parts held are those of the
+  // slabs in work, beside the pieces joined so far.
+  source.bricks = [&](std::size_t slab) {
+    const std::size_t n = layout.slab_bricks(), first = slab * n;
+    std::vector<std::vector<BrickPart>> parts(isos.size(), std::vector<BrickPart>(n));
+    std::atomic<std::size_t> passed{0};
+    tbb::parallel_for(first, first + n, std::size_t(1), [&](std::size_t b) {
+      if (stop) return;
+      // Isolated: a thread waiting inside a brick's parallel parts takes no other brick, so no
+      // more windows are held than threads run.
+      tbb::this_task_arena::isolate([&] {
+        uncancelled([&] {
+          std::array<std::int64_t, 3> lo, hi;
+          layout.window(b, lo, hi);
+          const ScalarGrid window = read(lo, hi);
+          for (std::size_t i = 0; i < isos.size(); ++i)
+            parts[i][b - first] = brick_pass(window, layout, b, isos[i], o);
+        });
+      });
+      ++passed;
+      const std::size_t k = ++done;
+      if (progress && !progress(k, layout.bricks())) stop = true;
     });
-    const std::size_t n = ++done;
-    if (progress && !progress(n, parts.size())) stop = true;
-  });
-  if (stop) throw Error("bricks: cancelled");
-  std::vector<TriangleMesh> out;
-  if (stats) stats->assign(isos.size(), BrickStats{});
-  for (std::size_t i = 0; i < isos.size(); ++i) {
-    std::vector<BrickPart> surface(parts.size());
-    for (std::size_t b = 0; b < parts.size(); ++b) surface[b] = std::move(parts[b][i]);
-    out.push_back(join_bricks(std::move(surface), o, stats ? &(*stats)[i] : nullptr));
-  }
-  return out;
+    // Fewer passed: stopped, or cancelled by another brick's exception (which is the one thrown).
+    if (stop || passed != n) throw Error("bricks: cancelled");
+    return parts;
+  };
+  return join_tree(source, layout, isos.size(), o, stats);
 }
 
 }  // namespace mlfe

@@ -365,10 +365,17 @@ std::size_t brick_count(const VolumeWindows& v, const AssetOptions& o);
 /// Brick `brick`'s passes, one per iso-value of `o`, read from `v` and encoded
 /// (<mlfe/formats/brick_parts.h>). Throws mlfe::Error for a brick that is not one of `v`'s.
 std::string brick_parts(const VolumeWindows& v, const AssetOptions& o, std::size_t brick);
-/// The asset joined from every brick's brick_parts (in brick order) written to `out`, with
-/// write_assets' summary. Throws mlfe::Error for parts that are not those of `v`'s bricks.
+/// The join of the slabs [first, end) of `v`'s bricks for `o` (join_slabs), encoded: `parts` are
+/// the slab's bricks' brick_parts (end == first + 1) or the pieces of its halves (join_parts of
+/// [first, slab_split) and [slab_split, end)). Throws mlfe::Error for parts that are not those.
+std::string join_parts(const VolumeWindows& v, const AssetOptions& o, std::size_t first, std::size_t end,
+                       std::vector<std::string> parts);
+/// The asset joined from `parts` written to `out`, with write_assets' summary: `parts` are
+/// brick_parts and join_parts (any order, each string released once read) that together hold
+/// every node of the join tree, e.g. every brick's, or the two halves of the root. Throws
+/// mlfe::Error for parts that are not those of `v`'s bricks, or some the tree does not use.
 nlohmann::json write_bricks(const std::string& out, const VolumeWindows& v, const AssetOptions& o,
-                            const std::vector<std::string>& parts, const nlohmann::json& provenance);
+                            std::vector<std::string> parts, const nlohmann::json& provenance);
 
 /// auto's brick edge for a volume of `dims` samples read window by window: 128 above 2^27 samples
 /// (where the whole volume's surface and hierarchy would take gigabytes), else 0.

@@ -9,8 +9,10 @@ simplified on the workers, the seams and the writing on the client, the command 
 - What runs where: the client opens the volume (its header only, for the formats read box by box),
   resolves and checks the options as ``mlfe convert`` does (a bad keyword raises here, before
   any task) and sends groups of bricks to the workers; each task opens the volume itself, reads
-  and simplifies its bricks and returns their meshes as bytes; the client joins them in brick
-  order, simplifies the seams and writes the asset.
+  and simplifies its bricks and returns their meshes as bytes. The seams are joined on the
+  workers too, over the command line's tree of slabs (a slab: the bricks with the same z index;
+  a leaf task joins one slab's bricks, a node task its two halves); the client joins the root's
+  two halves and writes the asset.
 - Paths: every worker reads the input by the same path as the client (one machine, or a shared
   file system); only the client writes, so the output folder need only exist there. Workers
   need this package (the same version) importable.
@@ -52,11 +54,53 @@ def _parts(input, iso, options, first, last):
     return _mlfe.open_bricks(input, None, iso, **options).parts(first, last)
 
 
+def _join_slab(input, iso, options, slab, groups):
+    """On a worker: the encoded join of slab ``slab`` from ``groups``, (parts of bricks [first,
+    last), first, last) overlapping it."""
+    job = _mlfe.open_bricks(input, None, iso, **options)
+    lo, hi = slab * job.slab_bricks, (slab + 1) * job.slab_bricks
+    parts = []
+    for group, first, last in groups:
+        parts.extend(group[max(lo, first) - first:min(hi, last) - first])
+    return job.join(slab, slab + 1, parts)
+
+
+def _join_halves(input, iso, options, first, end, low, high):
+    """On a worker: the encoded join of slabs [first, end) from its halves' pieces."""
+    return _mlfe.open_bricks(input, None, iso, **options).join(first, end, [low, high])
+
+
 def _groups(count, tasks):
     """``tasks`` (at most ``count``) contiguous [first, last) ranges covering ``count`` bricks,
     their sizes differing by at most one."""
     tasks = max(1, min(count, tasks))
     return [(count * g // tasks, count * (g + 1) // tasks) for g in range(tasks)]
+
+
+def _brick_groups(job, tasks):
+    """About ``tasks`` groups of bricks: within slabs for a volume read brick by brick (a slab's
+    join then waits for its own bricks only), across them for one read whole by each task."""
+    if not job.streamed:
+        return _groups(job.count, tasks)
+    per_slab = -(-tasks // job.slabs)
+    return [(s * job.slab_bricks + first, s * job.slab_bricks + last)
+            for s in range(job.slabs) for first, last in _groups(job.slab_bricks, per_slab)]
+
+
+def _submit_tree(submit, job, groups):
+    """The futures of the root's halves (of the root itself for one slab): each node joined by a
+    task from its bricks' groups (a slab) or its halves, as the command line's tree."""
+    def node(first, end):
+        if end == first + 1:
+            lo, hi = first * job.slab_bricks, end * job.slab_bricks
+            return submit(_join_slab, first, [(f, a, b) for (a, b), f in groups if a < hi and b > lo])
+        split = job.split(first, end)
+        return submit(_join_halves, first, end, node(first, split), node(split, end))
+
+    if job.slabs == 1:
+        return [node(0, 1)]
+    split = job.split(0, job.slabs)
+    return [node(0, split), node(split, job.slabs)]
 
 
 def _report(progress, fraction, stage, final=False):
@@ -94,25 +138,34 @@ def convert(input, output, client=None, *, iso=None, progress=None, n_workers=No
     dask_client, close = _client(client, n_workers)
     try:
         threads = max(1, sum(dask_client.nthreads().values()))
-        groups = _groups(job.count, threads * (_TASKS_PER_THREAD if job.streamed else 1))
+        ranges = _brick_groups(job, threads * (_TASKS_PER_THREAD if job.streamed else 1))
         futures = {dask_client.submit(_parts, input, iso, options, first, last, pure=False): (first, last)
-                   for first, last in groups}
-        parts = [None] * job.count
+                   for first, last in ranges}
+
+        def submit(function, *args):
+            return dask_client.submit(function, input, iso, options, *args, pure=False)
+
+        # Only the root's halves and the pending groups are held here, so every other piece is
+        # released on its worker once its parent's task has it.
+        halves = _submit_tree(submit, job, [(futures[f], f) for f in futures])
         done = 0
         try:
             _report(progress, 0.0, "extracting")
             for future in distributed.as_completed(list(futures)):
                 first, last = futures.pop(future)
-                parts[first:last] = future.result()
+                if future.status == "error":
+                    future.result()  # raises the worker's error (a done group's parts stay there)
                 done += last - first
                 _report(progress, 0.9 * done / job.count, "extracting")
+            pieces = [h.result() for h in halves]
+            halves = []
         finally:
-            if futures:
-                dask_client.cancel(list(futures))
+            if futures or halves:
+                dask_client.cancel(list(futures) + halves)
     finally:
         for c in close:
             c.close()
     _report(progress, 0.9, "writing")
-    summary = job.write(output, parts)  # empties `parts`: the meshes are held once while joined
+    summary = job.write(output, pieces)  # empties `pieces`: the meshes are held once while joined
     _report(progress, 1.0, "writing", final=True)
     return summary

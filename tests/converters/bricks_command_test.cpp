@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -256,15 +257,34 @@ TEST(BricksCommand, PiecesRunApartWriteTheSameAsset) {
       }
   write_bricks(apart, v, o, parts, prov);
   EXPECT_EQ(test::read_bytes(apart), test::read_bytes(whole));
+  // The join tree's nodes joined apart (join_parts, as mlfe.distributed's tasks), then the root's
+  // halves written: the same bytes.
+  const std::size_t slabs = 5, per = n / slabs;  // 38 cubes along z
+  std::map<std::pair<std::size_t, std::size_t>, std::string> pieces;
+  for (std::size_t s = slabs; s-- > 0;)
+    pieces[{s, s + 1}] = join_parts(v, o, s, s + 1, {parts.begin() + s * per, parts.begin() + (s + 1) * per});
+  for (const auto& [first, end] : {std::pair<std::size_t, std::size_t>(0, 2), {3, 5}, {2, 5}}) {
+    const std::size_t split = slab_split(first, end);
+    pieces[{first, end}] = join_parts(v, o, first, end, {pieces.at({first, split}), pieces.at({split, end})});
+  }
+  const std::string halves = scratch() + "/pieces_halves.glb";
+  write_bricks(halves, v, o, {pieces.at({2, 5}), pieces.at({0, 2})}, prov);
+  EXPECT_EQ(test::read_bytes(halves), test::read_bytes(whole));
+  EXPECT_THROW(join_parts(v, o, 0, 2, {pieces.at({0, 1})}), Error);                       // a half missing
+  EXPECT_THROW(join_parts(v, o, 0, 1, {parts.begin(), parts.begin() + per - 1}), Error);  // a brick missing
 
   const std::string refused = scratch() + "/pieces_refused.glb";
-  std::swap(parts[3], parts[4]);
+  const std::string fourth = parts[4];
+  parts[4] = parts[3];  // brick 3 twice, brick 4 missing
   EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
-  std::swap(parts[3], parts[4]);
+  parts[4] = fourth;
   parts[3].pop_back();
   EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
   parts.pop_back();
   EXPECT_THROW(write_bricks(refused, v, o, parts, prov), Error);
+  // A part the tree does not use (a slab also given joined).
+  EXPECT_THROW(write_bricks(refused, v, o, {pieces.at({0, 2}), pieces.at({2, 5}), pieces.at({0, 1})}, prov),
+               Error);
   EXPECT_THROW(brick_parts(v, o, n), Error);
   EXPECT_FALSE(std::filesystem::exists(refused));
 }

@@ -190,6 +190,64 @@ TEST(BrickedIsoSurface, SameBytesForAnyThreadCount) {
   }
 }
 
+// The joins of disjoint slabs are independent: the tree's nodes joined apart, one by one in any
+// order (as Dask tasks are), give the one-call result to the bit, and so do the bricks' parts
+// handed to join_bricks.
+TEST(BrickedIsoSurface, SlabJoinsApartGiveTheSameSurface) {
+  const Extraction e = extract(torus(), 0.0);
+  BrickedIsoOptions bo;
+  bo.simplifier = options(Placement::kOptimal);
+  const TriangleMesh whole = in_bricks(e, bo.simplifier, 8);
+  const BrickLayout layout = brick_layout(e.grid.dims, 8);
+  ASSERT_EQ(layout.slabs(), 5u);  // 34 cubes along z: a tree of two levels of nodes
+  std::vector<BrickPart> parts(layout.bricks());
+  for (std::size_t b = layout.bricks(); b-- > 0;) {
+    std::array<std::int64_t, 3> lo, hi;
+    layout.window(b, lo, hi);
+    parts[b] = brick_pass(grid_windows(e.grid)(lo, hi), layout, b, 0.0, bo);
+  }
+  const TriangleMesh joined = join_bricks(parts, layout, bo);
+  EXPECT_EQ(joined.positions, whole.positions);
+  EXPECT_EQ(joined.triangles, whole.triangles);
+  // Slabs last to first, then the nodes, then the root's halves through join_tree.
+  std::map<std::pair<std::size_t, std::size_t>, BrickPart> pieces;
+  for (std::size_t s = layout.slabs(); s-- > 0;) {
+    const std::vector<BrickPart> slab(parts.begin() + s * layout.slab_bricks(),
+                                      parts.begin() + (s + 1) * layout.slab_bricks());
+    BrickStats st;
+    const BrickPart& piece = pieces[{s, s + 1}] = join_slabs(slab, layout, s, s + 1, bo, &st);
+    if (piece.mesh.triangles.empty()) continue;  // the torus is not in every slab
+    EXPECT_GT(st.face_vertices, 0u);             // its faces along x and y closed
+    EXPECT_FALSE(piece.face_vertex.empty());     // those on the planes shared with other slabs open
+  }
+  const std::size_t root = slab_split(0, 5);
+  EXPECT_EQ(root, 2u);
+  auto node = [&](std::size_t first, std::size_t end) {
+    const std::size_t split = slab_split(first, end);
+    pieces[{first, end}] =
+        join_slabs({pieces.at({first, split}), pieces.at({split, end})}, layout, first, end, bo);
+  };
+  node(3, 5);
+  node(0, 2);
+  node(2, 5);
+  EXPECT_THROW(join_slabs({pieces.at({0, 2})}, layout, 0, 2, bo), Error);  // one half
+  SlabSource source;
+  source.joined = [&](std::size_t first, std::size_t end) {
+    const bool half = (first == 0 && end == root) || (first == root && end == 5);
+    return half ? std::vector<BrickPart>{pieces.at({first, end})} : std::vector<BrickPart>{};
+  };
+  source.bricks = [](std::size_t) -> std::vector<std::vector<BrickPart>> {
+    ADD_FAILURE() << "a brick was asked for";
+    return {};
+  };
+  std::vector<BrickStats> stats;
+  const std::vector<TriangleMesh> apart = join_tree(source, layout, 1, bo, &stats);
+  EXPECT_EQ(apart[0].positions, whole.positions);
+  EXPECT_EQ(apart[0].normals, whole.normals);
+  EXPECT_EQ(apart[0].triangles, whole.triangles);
+  EXPECT_EQ(stats[0].parts, 1u);
+}
+
 // Each brick's part, extracted from its window alone, is the whole extraction's triangles in
 // that brick, to the bit: together the parts are the whole surface.
 TEST(BrickedIsoSurface, WindowsExtractTheWholeSurfaceToTheBit) {
@@ -232,7 +290,7 @@ TEST(BrickedIsoSurface, JoinRefusesPartsThatDoNotFit) {
     layout.window(b, lo, hi);
     parts[b] = brick_pass(grid_windows(b == 0 ? other.grid : e.grid)(lo, hi), layout, b, 0.0, bo);
   }
-  EXPECT_THROW(join_bricks(parts, bo), Error);
+  EXPECT_THROW(join_bricks(parts, layout, bo), Error);
   std::array<std::int64_t, 3> lo, hi;
   layout.window(1, lo, hi);
   EXPECT_THROW(brick_pass(grid_windows(e.grid)(lo, hi), layout, 0, 0.0, bo), Error);  // the wrong window

@@ -1,6 +1,6 @@
 // Iso-surfaces extracted and simplified in bricks of the samples' lattice (issue 39): the brick
 // pass, the weld and the seam pass behind `mlfe convert --bricks B`, and the pieces a
-// distributed run sends to workers (brick_pass) and joins on the client (join_bricks).
+// distributed run sends to workers (brick_pass, join_slabs) and joins on the client (join_tree).
 //
 // Bricks. The cubes of the samples' lattice are cut into bricks of B x B x B cubes (B a power of
 // two, the last brick along an axis shorter); neighbouring bricks share the sample plane
@@ -20,27 +20,43 @@
 // keep their shape for the seam pass. What the join needs is kept: the simplified mesh, the face
 // vertices' lattice places, and the bound's points attached to the strips.
 //
-// Weld. The parts are joined by the lattice place of each face vertex (LatticePlace: the edge
-// it lies on), not by comparing floats; every other vertex belongs to one brick.
+// Joins by slabs. The bricks with the same z index form a slab. The parts are joined over a
+// tree of slabs fixed by the layout alone: a leaf joins one slab's bricks, a node joins the
+// pieces of its two halves (slabs [first, split) and [split, end), slab_split). Each join welds
+// its pieces by the lattice place of each face vertex (LatticePlace: the edge it lies on), not by
+// comparing floats; every other vertex belongs to one piece. The face vertices whose bricks all
+// lie in the join are closed by it; those on the join's bottom or top sample plane, shared with
+// slabs outside, stay open: locked, and kept with their places for a later join. So a leaf closes
+// its slab's faces along x and y, a node the sample plane between its halves, and the root
+// (every slab) the rest: each shared face is closed by exactly one join. Joins of disjoint slabs
+// are independent, so threads (and Dask tasks) run them at once, and each simplifies only its own
+// strips; a join's piece is the joined surface with the open vertices, so what is held is the
+// slabs in work and the pieces joined so far (about the output), never every strip at once. The
+// bytes are a function of the tree, hence of the lattice and B, not of the thread or worker
+// count.
 //
-// Seam pass. Locked face vertices leave the surface dense along the brick faces. The strips
-// there (the triangles within kSeamRings rings of a face vertex; a brick's own strips are its
-// share of them, since only face vertices are in two bricks) are simplified once more, as one
-// surface with the face vertices free and the strips' rim locked, down to what is left of the
-// whole surface's budget (`ratio` of all extracted triangles), so the seams end as sparse as
-// the rest.
+// Seam pass (per join). Locked face vertices leave the surface dense along the brick faces. The
+// strips there (the triangles within kSeamRings rings of a closing vertex) are simplified once
+// more, as one surface with the closing vertices free and the strips' rim and the open vertices
+// locked, down to what is left of the join's budget (`ratio` of its extracted triangles), so the
+// seams end as sparse as the rest. A vertex the seam pass may move has all its triangles in the
+// strips, so nothing outside the join, and nothing of its surface outside the strips, changes.
 //
 // Why the bound holds across the seams. The verified bound (Klein et al., see
 // surface_simplification.h) keeps every point of the surface a run started from attached to a
 // face within the tolerance. A brick's last run reports where each of its points ended
-// (SimplifyCarry::point_face); the seam pass takes the points attached to the strips' faces,
-// with those faces, as its own points (SimplifyCarry::points) and keeps them within the same
-// tolerance by the same rules, while every face outside the strips stays as the brick pass left
-// it. So each point is measured against the surface its brick's last run started from, never
-// against an intermediate seam-pass input: one tolerance, not two. An estimated last run keeps
-// no points, and the seam pass estimates in the same way. The other direction (the output's
-// distance to the extraction) is refitted outside the strips; a vertex the seam pass moves stays
-// within the tolerance of the strips, so within twice it of the extraction.
+// (SimplifyCarry::point_face); a brick keeps the points attached to its strips (within
+// kSeamRings rings of any face vertex), and a join's piece the points attached to the triangles
+// within kSeamRings rings of its open vertices: that covers every triangle a later join can take
+// into its strips (a later strip's triangles in this piece lie within those rings, as every
+// vertex they touch in two pieces is open in both). Each join's seam pass takes the points
+// attached to its strips, with those faces, as its own points (SimplifyCarry::points) and keeps
+// them within the same tolerance by the same rules, while every face outside the strips stays as
+// it was. So each point is measured against the surface its brick's last run started from, never
+// against an intermediate join's input: one tolerance, not one per join. An estimated last run
+// keeps no points, and the seam passes estimate in the same way. The other direction (the
+// output's distance to the extraction) is refitted outside the strips; a vertex a seam pass
+// moves stays within the tolerance of the strips, so within twice it of the extraction.
 //
 // Brick size: 64 samples on a 1 mm head (181 x 217 x 181) gives 36 bricks of about 45 000
 // extracted triangles each, enough to balance two threads; 32 raised the worst distance at the
@@ -63,10 +79,10 @@ namespace mlfe {
 struct BrickStats {
   std::size_t bricks = 0;               ///< bricks with triangles
   std::size_t extracted_triangles = 0;  ///< the whole extraction's, summed over the bricks
-  std::size_t face_vertices = 0;        ///< welded vertices on the shared sample planes
-  std::size_t seam_triangles = 0;       ///< triangles of the strips the seam pass simplified
-  std::size_t seam_output = 0;          ///< what the seam pass left of them
-  std::size_t welded_triangles = 0;     ///< triangles after the weld, before the seam pass
+  std::size_t face_vertices = 0;        ///< welded vertices on the shared sample planes (closed)
+  std::size_t seam_triangles = 0;       ///< triangles of the strips the seam passes simplified
+  std::size_t seam_output = 0;          ///< what the seam passes left of them
+  std::size_t welded_triangles = 0;     ///< triangles the bricks' passes left
   std::size_t parts = 0;                ///< connected parts of the result (as extracted)
 };
 
@@ -79,6 +95,9 @@ struct BrickLayout {
   std::size_t bricks() const { return std::size_t(count[0] * count[1] * count[2]); }
   /// Brick `b`'s samples [lo, hi) (hi exclusive).
   void samples(std::size_t b, std::array<std::int64_t, 3>& lo, std::array<std::int64_t, 3>& hi) const;
+  /// Slabs: the bricks with the same z index, count[0] * count[1] consecutive bricks each.
+  std::size_t slabs() const { return std::size_t(count[2]); }
+  std::size_t slab_bricks() const { return std::size_t(count[0] * count[1]); }
   /// The samples [lo, hi) a brick's pass reads: its own and one more on every side the grid
   /// has (the extraction's gradients are central differences).
   void window(std::size_t b, std::array<std::int64_t, 3>& lo, std::array<std::int64_t, 3>& hi) const;
@@ -115,10 +134,42 @@ struct BrickedIsoOptions {
 BrickPart brick_pass(const ScalarGrid& window, const BrickLayout& layout, std::size_t b, double iso,
                      const BrickedIsoOptions& o);
 
-/// The weld and the seam pass over the bricks' parts, in brick order (empty parts allowed):
-/// one surface. Throws mlfe::Error when the parts do not fit together (a face vertex in one part
-/// and not in its neighbour: parts of different volumes or options).
-TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickedIsoOptions& o,
+/// The join tree's split of the slabs [first, end) (end > first + 1): its halves are [first,
+/// split) and [split, end).
+std::size_t slab_split(std::size_t first, std::size_t end);
+
+/// The join of the slabs [first, end) of `layout` (the header's "Joins by slabs"): `pieces` are
+/// slab `first`'s bricks' parts in brick order (empty parts allowed) when end == first + 1, else
+/// the pieces of its halves (slab_split). The result's face vertices are those shared with
+/// slabs outside [first, end); for every slab it is the whole surface. Deterministic; parallel
+/// inside. `stats` (may be null) receives this join's (bricks, face vertices closed, seams).
+/// Throws mlfe::Error for pieces that do not fit together (a closing face vertex in one piece
+/// only, a shared vertex placed differently: parts of different volumes or options) or are not
+/// the join's.
+BrickPart join_slabs(std::vector<BrickPart> pieces, const BrickLayout& layout, std::size_t first,
+                     std::size_t end, const BrickedIsoOptions& o, BrickStats* stats = nullptr);
+
+/// Where join_tree finds the pieces of a node.
+struct SlabSource {
+  /// May be empty. The pieces (one per surface) of the slabs [first, end) already joined, or
+  /// none (the node is then joined here).
+  std::function<std::vector<BrickPart>(std::size_t first, std::size_t end)> joined;
+  /// Per surface, the bricks' parts of one slab in brick order, for a slab `joined` has not;
+  /// called at most once per slab, from any thread.
+  std::function<std::vector<std::vector<BrickPart>>(std::size_t slab)> bricks;
+};
+
+/// The `surfaces` surfaces joined over the slab tree of `layout` from `source`, threads running
+/// disjoint subtrees at once; `stats` (may be null) receives per surface the sums over the joins
+/// run here, with the whole extraction's triangles and the result's connected parts. The
+/// result is join_slabs's at the root, whichever nodes `source` held. Throws as join_slabs does
+/// and what `source` throws.
+std::vector<TriangleMesh> join_tree(const SlabSource& source, const BrickLayout& layout, std::size_t surfaces,
+                                    const BrickedIsoOptions& o, std::vector<BrickStats>* stats = nullptr);
+
+/// join_tree over every brick's part of one surface, in brick order: one surface. Throws
+/// mlfe::Error as join_slabs does, and for a count that is not the layout's.
+TriangleMesh join_bricks(std::vector<BrickPart> parts, const BrickLayout& layout, const BrickedIsoOptions& o,
                          BrickStats* stats = nullptr);
 
 /// Reads the samples [lo, hi) of the whole grid as a grid with the whole grid's transform. May be
@@ -134,9 +185,10 @@ WindowReader grid_windows(const ScalarGrid& grid);
 using BrickProgress = std::function<bool(std::size_t done, std::size_t total)>;
 
 /// The iso-surfaces `isos` of a grid of `dims` samples, read brick by brick through `read` (one
-/// window per brick for every iso-value), simplified in bricks of `edge` cubes: brick_pass over
-/// every brick (threads over bricks, at most as many windows in memory as threads run), then
-/// join_bricks per iso-value; `stats` (may be null) receives one BrickStats per iso-value.
+/// window per brick for every iso-value), simplified in bricks of `edge` cubes: join_tree over
+/// the bricks' passes, a slab's bricks passed when its leaf is joined (threads over bricks and
+/// subtrees, at most as many windows in memory as threads run); `stats` (may be null) receives
+/// one BrickStats per iso-value.
 /// Vertex and triangle order are a function of the samples, `edge` and the options, not of the
 /// thread count. Throws mlfe::Error as brick_layout, brick_pass and join_bricks do, and what
 /// `read` or `progress` throws.
