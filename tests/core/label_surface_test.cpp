@@ -219,19 +219,25 @@ TEST(LabelSurface, SimplifyTakesTheComplexToItsDecimator) {
   }
 }
 
+// The atlas phantom, and an 8-label checkerboard larger than the decimator's blocks (every cube a
+// junction of eight labels, across block and half seams).
 TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
-  auto run = [](int threads) {
-    tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
-    const LabelGrid g = atlas_phantom();
-    LabelInterfaces x = complex_of(g);
-    smooth_label_interfaces(x, {});
-    decimate_interface_complex(x, 0.3);
-    return x;
-  };
-  const LabelInterfaces a = run(1), b = run(2);
-  EXPECT_EQ(a.positions, b.positions);
-  EXPECT_EQ(a.triangles, b.triangles);
-  EXPECT_EQ(a.labels, b.labels);
+  const LabelGrid checkerboard = phantom(17, [](int i, int j, int k) -> std::uint16_t {
+    return std::uint16_t(1 + i % 2 + 2 * (j % 2) + 4 * (k % 2));
+  });
+  for (const LabelGrid& g : {atlas_phantom(), checkerboard}) {
+    auto run = [&](int threads) {
+      tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+      LabelInterfaces x = complex_of(g);
+      smooth_label_interfaces(x, {});
+      decimate_interface_complex(x, 0.3);
+      return x;
+    };
+    const LabelInterfaces a = run(1), b = run(2);
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.triangles, b.triangles);
+    EXPECT_EQ(a.labels, b.labels);
+  }
 }
 
 // A closed 2-manifold: every edge in exactly two triangles, once each way (unmatched_edges
