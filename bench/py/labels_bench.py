@@ -23,9 +23,12 @@ larger one-sided mean, in voxels, vertices + 20 000 area samples per mesh.
 
 The >= 100-label volume: the colin27 brain (181 x 217 x 181, 1 mm) cut into 60 Voronoi parcels
 (seeds drawn with a fixed generator inside the brain mask) and two intensity classes (below and
-above the brain's median), 120 labels; written as a uint16 NRRD.
+above the brain's median), 120 labels; written as a uint16 NRRD. Issue #40's other two (--volumes
+atlas2mm,atlas05mm): 192 labels at 2 mm (91 x 109 x 91) and 709 at 0.5 mm, int16 (168 x 206 x 128,
+124 of them small balls); make_atlas_2mm and make_atlas_05mm say how.
 
   /usr/bin/python3 bench/py/labels_bench.py --build build --out /tmp/labels_bench
+  /usr/bin/python3 bench/py/labels_bench.py --build build --volumes parcels,atlas2mm,atlas05mm
   /usr/bin/python3 bench/py/labels_bench.py --build build --timing-rounds 5 --base-build ../base/build
 """
 import argparse
@@ -37,12 +40,15 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_paths import mlfe_binary  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 SHARED = os.path.join(HERE, "..", "..", "..", "shared", "data")
 
 
-def make_parcels(out_path, parcels=60, seed=24):
-    """colin27 -> 2 intensity classes x `parcels` Voronoi cells inside the brain mask."""
+def colin27():
+    """The colin27 brain as a (k, j, i) float array."""
     from vtkmodules.vtkIOImage import vtkNIFTIImageReader
     from vtkmodules.util.numpy_support import vtk_to_numpy
     r = vtkNIFTIImageReader()
@@ -50,26 +56,77 @@ def make_parcels(out_path, parcels=60, seed=24):
     r.Update()
     img = r.GetOutput()
     nx, ny, nz = img.GetDimensions()
-    a = vtk_to_numpy(img.GetPointData().GetScalars()).reshape(nz, ny, nx)
+    return vtk_to_numpy(img.GetPointData().GetScalars()).reshape(nz, ny, nx).astype(np.float32)
+
+
+def parcellate(a, parcels, seed, sigma=0):
+    """2 intensity classes (below and above the brain's median, of the image blurred by a Gaussian
+    of `sigma` voxels when sigma > 0, so the classes have smooth boundaries like an atlas's) x
+    `parcels` Voronoi cells (seeds drawn with a fixed generator inside the brain mask a > 0),
+    labels 1 .. 2 * parcels."""
     mask = a > 0
+    if sigma > 0:
+        from scipy.ndimage import gaussian_filter
+        a = gaussian_filter(a, sigma)
     idx = np.argwhere(mask)  # (k, j, i)
     rng = np.random.default_rng(seed)
     seeds = idx[rng.choice(len(idx), parcels, replace=False)].astype(np.float32)
     cell = np.empty(len(idx), np.int32)
-    for s in range(0, len(idx), 200000):
-        p = idx[s:s + 200000].astype(np.float32)
+    for s in range(0, len(idx), 100000):
+        p = idx[s:s + 100000].astype(np.float32)
         d = ((p[:, None, :] - seeds[None, :, :]) ** 2).sum(axis=2)
-        cell[s:s + 200000] = d.argmin(axis=1)
+        cell[s:s + 100000] = d.argmin(axis=1)
     bright = a[mask] > np.median(a[mask])
-    labels = np.zeros(a.shape, np.uint16)
-    labels[mask] = (1 + cell + parcels * bright).astype(np.uint16)
-    header = ("NRRD0004\ntype: uint16\ndimension: 3\nsizes: {} {} {}\nspace: RAS\n"
-              "space directions: (1,0,0) (0,1,0) (0,0,1)\nspace origin: (0,0,0)\nendian: little\n"
-              "encoding: raw\n\n").format(nx, ny, nz)
+    labels = np.zeros(a.shape, np.int32)
+    labels[mask] = 1 + cell + parcels * bright
+    return labels
+
+
+def write_nrrd(out_path, labels, spacing, dtype):
+    nz, ny, nx = labels.shape
+    header = ("NRRD0004\ntype: {}\ndimension: 3\nsizes: {} {} {}\nspace: RAS\n"
+              "space directions: ({s},0,0) (0,{s},0) (0,0,{s})\nspace origin: (0,0,0)\nendian: little\n"
+              "encoding: raw\n\n").format("uint16" if dtype == "<u2" else "int16", nx, ny, nz, s=spacing)
     with open(out_path, "wb") as f:
         f.write(header.encode("ascii"))
-        f.write(labels.astype("<u2").tobytes())
+        f.write(labels.astype(dtype).tobytes())
     return int(len(np.unique(labels)) - 1)
+
+
+def make_parcels(out_path, parcels=60, seed=24):
+    """colin27 (1 mm) -> 2 intensity classes x `parcels` Voronoi cells inside the brain mask."""
+    return write_nrrd(out_path, parcellate(colin27(), parcels, seed), 1, "<u2")
+
+
+def make_atlas_2mm(out_path, parcels=96, seed=40):
+    """colin27 parcels at 2 mm: 2 x `parcels` Voronoi cells made at 1 mm (classes of the image
+    blurred by 2 voxels), every other voxel kept (nearest neighbour, 91 x 109 x 91)."""
+    return write_nrrd(out_path, parcellate(colin27(), parcels, seed, 2)[::2, ::2, ::2], 2, "<u2")
+
+
+def make_atlas_05mm(out_path, parcels=300, blobs=124, seed=41):
+    """A 0.5 mm int16 atlas with many small labels: a central 84 x 103 x 64 mm box of colin27,
+    upsampled x2 (trilinear), cut into 2 x `parcels` Voronoi cells (classes of the image blurred by
+    3 voxels), plus `blobs` small balls
+    (radius 1-3 voxels, centres drawn inside the brain) each a label of its own: 168 x 206 x 128,
+    background on its faces."""
+    from scipy.ndimage import zoom
+    a = colin27()
+    a = zoom(a[60:124, 57:160, 48:132], 2, order=1)
+    labels = parcellate(a, parcels, seed, 3)
+    rng = np.random.default_rng(seed)
+    inside = np.argwhere(labels > 0)
+    kk, jj, ii = np.indices(labels.shape, sparse=True)
+    for b in range(blobs):
+        c = inside[rng.integers(len(inside))]
+        r = rng.uniform(1.0, 3.0)
+        ball = (kk - c[0]) ** 2 + (jj - c[1]) ** 2 + (ii - c[2]) ** 2 <= r * r
+        labels[ball] = 2 * parcels + 1 + b
+    # Background on the box's faces: the box cuts the brain, and a structure cut open there would
+    # be closed by mlfe and left open by the reference (flying edges does not pad).
+    for axis in range(3):
+        labels[(slice(None),) * axis + ([0, -1],)] = 0
+    return write_nrrd(out_path, labels, 0.5, "<i2")
 
 
 VTK_WORKER = r'''
@@ -81,8 +138,6 @@ from vtkmodules.vtkFiltersCore import vtkWindowedSincPolyDataFilter, vtkQuadricD
 from vtkmodules.vtkIOPLY import vtkPLYWriter
 from vtkmodules.util.numpy_support import vtk_to_numpy
 import numpy as np
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_paths import mlfe_binary  # noqa: E402
 path, out_dir = sys.argv[1], sys.argv[2]
 r = vtkNIFTIImageReader() if ".nii" in path else vtkNrrdReader()
 r.SetFileName(path)
@@ -219,7 +274,7 @@ def main():
     ap.add_argument("--build", default=os.path.join(HERE, "..", "..", "build"))
     ap.add_argument("--out", default="/tmp/labels_bench")
     ap.add_argument("--mlfe-args", default="", help="extra mlfe convert options")
-    ap.add_argument("--volumes", default="jhu,parcels", help="which volumes: jhu, parcels or both")
+    ap.add_argument("--volumes", default="jhu,parcels", help="which volumes, comma-separated: jhu, parcels (1 mm), atlas2mm, atlas05mm")
     ap.add_argument("--timing-rounds", type=int, default=0,
                     help="instead: this many interleaved timing rounds on the JHU atlas (no distances)")
     ap.add_argument("--base-build", default="", help="with --timing-rounds: a second build to time beside")
@@ -231,13 +286,16 @@ def main():
         timing_rounds(mlfe, base, os.path.join(SHARED, "atlas_jhu_wm_labels_1mm.nii.gz"), args.out,
                       args.timing_rounds)
         return
-    parcels = os.path.join(args.out, "colin27_parcels_120.nrrd")
     wanted = args.volumes.split(",")
     volumes = []
     if "jhu" in wanted:
         volumes.append(("jhu_atlas", os.path.join(SHARED, "atlas_jhu_wm_labels_1mm.nii.gz")))
-    if "parcels" in wanted:
-        volumes.append(("parcels_%d" % make_parcels(parcels), parcels))
+    makers = {"parcels": ("colin27_parcels_1mm", make_parcels), "atlas2mm": ("colin27_parcels_2mm", make_atlas_2mm),
+              "atlas05mm": ("colin27_parcels_05mm_int16", make_atlas_05mm)}
+    for key, (name, make) in makers.items():
+        if key in wanted:
+            path = os.path.join(args.out, name + ".nrrd")
+            volumes.append(("%s_%d" % (name, make(path)), path))
     results = {}
     for tag, vol in volumes:
         d = os.path.join(args.out, tag)
@@ -245,6 +303,7 @@ def main():
         vtk = run_vtk(vol, d)
         glb, m = run_mlfe(mlfe, vol, d, "mlfe", args.mlfe_args.split())
         dist = distances(args.build, vol, glb, d)
+        vtk.pop("labels")
         results[tag] = {"mlfe": m, "vtk": vtk | {"bytes": dist["vtk_glb_bytes"]},
                         "mlfe_distance": summary(dist["labels"], "mlfe"),
                         "vtk_distance": summary(dist["labels"], "vtk"), "per_label": dist["labels"]}

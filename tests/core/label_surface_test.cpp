@@ -1,6 +1,7 @@
 // Label phantoms with exact answers: every structure present, closed and oriented outward;
 // touching structures share every interface vertex; no phantom structure between two labels;
 // small islands kept; the same output whatever the thread count.
+#include <gtest/gtest-spi.h>
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/labels/label_surface.h>
@@ -8,8 +9,10 @@
 #include <mlfe/core/surface/mesh_distance.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
+#include <map>
 #include <set>
 
 namespace mlfe {
@@ -216,19 +219,118 @@ TEST(LabelSurface, SimplifyTakesTheComplexToItsDecimator) {
   }
 }
 
+// The atlas phantom, and an 8-label checkerboard larger than the decimator's blocks (every cube a
+// junction of eight labels, across block and half seams).
 TEST(LabelSurface, SameComplexWithOneAndTwoThreads) {
-  auto run = [](int threads) {
-    tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
-    const LabelGrid g = atlas_phantom();
-    LabelInterfaces x = complex_of(g);
+  const LabelGrid checkerboard = phantom(17, [](int i, int j, int k) -> std::uint16_t {
+    return std::uint16_t(1 + i % 2 + 2 * (j % 2) + 4 * (k % 2));
+  });
+  for (const LabelGrid& g : {atlas_phantom(), checkerboard}) {
+    auto run = [&](int threads) {
+      tbb::global_control c(tbb::global_control::max_allowed_parallelism, threads);
+      LabelInterfaces x = complex_of(g);
+      smooth_label_interfaces(x, {});
+      decimate_interface_complex(x, 0.3);
+      return x;
+    };
+    const LabelInterfaces a = run(1), b = run(2);
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.triangles, b.triangles);
+    EXPECT_EQ(a.labels, b.labels);
+  }
+}
+
+// A closed 2-manifold: every edge in exactly two triangles, once each way (unmatched_edges
+// counts a non-manifold edge's four uses as matched), and every vertex's triangles one fan (the
+// edges opposite it form a single cycle, so no two cones touch at a point).
+void expect_closed_manifold(const TriangleMesh& m, std::uint16_t label) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> link(m.positions.size());
+  for (const auto& t : m.triangles)
+    for (int c = 0; c < 3; ++c) {
+      ++uses[{t[c], t[(c + 1) % 3]}];
+      link[t[c]].emplace_back(t[(c + 1) % 3], t[(c + 2) % 3]);
+    }
+  for (const auto& [e, n] : uses) {
+    ASSERT_EQ(n, 1) << "label " << label << ": edge " << e.first << "-" << e.second << " used " << n
+                    << " times";
+    ASSERT_EQ(uses.count({e.second, e.first}), 1u) << "label " << label << ": edge without a twin";
+  }
+  for (std::size_t v = 0; v < link.size(); ++v) {
+    const auto& l = link[v];
+    if (l.empty()) continue;
+    std::size_t steps = 1;
+    for (std::uint32_t at = l[0].second; at != l[0].first; ++steps) {
+      const auto next = std::find_if(l.begin(), l.end(), [&](const auto& e) { return e.first == at; });
+      ASSERT_TRUE(next != l.end() && steps <= l.size()) << "label " << label << ": vertex " << v;
+      at = next->second;
+    }
+    ASSERT_EQ(steps, l.size()) << "label " << label << ": vertex " << v << " joins more than one fan";
+  }
+}
+
+// Two closed tetrahedra touching at one vertex (closed, every edge twice, but not a manifold):
+// the check above must catch it.
+TriangleMesh two_tetrahedra_at_a_point() {
+  TriangleMesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+  m.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {0, 4, 5}, {0, 6, 4}, {0, 5, 6}, {4, 6, 5}};
+  return m;
+}
+
+TEST(LabelSurface, ManifoldCheckCatchesTwoConesAtAPoint) {
+  EXPECT_FATAL_FAILURE(expect_closed_manifold(two_tetrahedra_at_a_point(), 1), "joins more than one fan");
+}
+
+// Every label of `g` has a closed, manifold surface with a positive volume, and every interface
+// triangle is in both of its labels' surfaces, reversed: extracted, then smoothed and simplified.
+void expect_partition_of_manifolds(const LabelGrid& g) {
+  LabelInterfaces x = complex_of(g);
+  std::vector<std::uint16_t> present;
+  for (const auto& [l, n] : label_counts(g))
+    if (l != 0) present.push_back(l);
+  for (int stage = 0; stage < 2; ++stage) {
+    SCOPED_TRACE(stage == 0 ? "extracted" : "smoothed and simplified");
+    EXPECT_EQ(labels_with_surfaces(x), present);
+    for (auto l : labels_with_surfaces(x)) {
+      const TriangleMesh m = label_surface(x, l, g.transform);
+      expect_closed_manifold(m, l);
+      EXPECT_GT(outward_volume(m), 0.0) << "label " << l;
+    }
+    std::set<std::pair<std::uint16_t, std::uint16_t>> interfaces;
+    for (const auto& l : x.labels)
+      if (l[0] != 0) interfaces.insert({l[0], l[1]});
+    for (const auto& [a, b] : interfaces) expect_shared_interface(x, a, b, g.transform);
     smooth_label_interfaces(x, {});
-    decimate_interface_complex(x, 0.3);
-    return x;
-  };
-  const LabelInterfaces a = run(1), b = run(2);
-  EXPECT_EQ(a.positions, b.positions);
-  EXPECT_EQ(a.triangles, b.triangles);
-  EXPECT_EQ(a.labels, b.labels);
+    decimate_interface_complex(x, 0.34);
+  }
+}
+
+// Four labels around one lattice edge: the four quadrants of the (i, j) plane, a column along k.
+TEST(LabelSurface, FourLabelsAroundOneEdgeGiveFourManifolds) {
+  expect_partition_of_manifolds(phantom(
+      6, [](int i, int j, int) -> std::uint16_t { return std::uint16_t(1 + (i >= 3) + 2 * (j >= 3)); }));
+}
+
+// Checkerboard corners: two labels alternating voxel by voxel (every face of every cube is
+// ambiguous for marching cubes), and eight labels by the parity of each coordinate (every cube
+// holds all eight), each voxel a structure of its own or touching its label only at corners.
+TEST(LabelSurface, CheckerboardsGiveManifoldsAndKeepEveryVoxel) {
+  {
+    SCOPED_TRACE("two labels");
+    expect_partition_of_manifolds(
+        phantom(5, [](int i, int j, int k) -> std::uint16_t { return std::uint16_t(1 + (i + j + k) % 2); }));
+  }
+  {
+    SCOPED_TRACE("eight labels");
+    expect_partition_of_manifolds(phantom(4, [](int i, int j, int k) -> std::uint16_t {
+      return std::uint16_t(1 + i % 2 + 2 * (j % 2) + 4 * (k % 2));
+    }));
+  }
+}
+
+TEST(LabelSurface, NestedSpheresTouchingBoxesAndAnIslandGiveManifolds) {
+  expect_partition_of_manifolds(atlas_phantom());
 }
 
 TEST(LabelSurface, MixedTetsAreExactlyThoseWithMoreThanOneLabel) {

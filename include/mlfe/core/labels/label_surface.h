@@ -17,6 +17,18 @@
 // so extraction takes the set of mixed one-voxel tetrahedra as its input: coarse elements
 // inside structures hold no interface.
 //
+// Non-manifold configurations (four labels around a lattice edge, checkerboard faces and
+// corners) do not arise: every two corners of a tetrahedron share one of its edges, so each
+// label's corners in a tetrahedron are connected and its piece there is one disc (a triangle,
+// a quad or a fan around the centroid). Where marching cubes would have to choose (a face or
+// a cube whose equal labels touch only diagonally), the Kuhn diagonal, the same in every cube,
+// has chosen: labels on it are connected, the others are cut off. Each label's surface is so,
+// tetrahedron by tetrahedron, the level set at 1/2 of its indicator made linear on the
+// tetrahedra (where one holds three or four labels, the fan has the same boundary on its faces
+// and is a disc as well), and no sample holds 1/2: a closed 2-manifold, each edge in two
+// triangles and each vertex one fan (tests/core/label_surface_test.cpp checks it on four
+// labels around an edge and on 3D checkerboards of 2 and 8 labels).
+//
 // Every interface triangle is stored once, tagged with its two labels, over one vertex set, so
 // two structures that touch have the same vertices and edges along their interface by
 // construction; smoothing and simplification act on that shared complex and keep it so. The
