@@ -57,7 +57,7 @@ TEST(Render, HierarchyToExrAndPngSameBytesWithOneAndTwoThreads) {
   EXPECT_NE(bytes(a), bytes(c));
 }
 
-// Bytes of a v2/v3 hierarchy file up to the end of its LEVL k section (docs/mlfeh-v3.md:
+// Bytes of a v2-v4 hierarchy file up to the end of its LEVL k section (docs/mlfeh-v3.md:
 // 16-byte preamble, then sections of a 28-byte header with the stored size at offset 8).
 std::string prefix_up_to_level(const std::string& file, int k) {
   std::size_t pos = 16;
@@ -71,7 +71,7 @@ std::string prefix_up_to_level(const std::string& file, int k) {
 }
 
 TEST(Render, LevelReadsOnlyTheFilesPrefix) {
-  // A v3 file, and a copy cut right after level 2 under the same name (the EXR records the
+  // A v4 file (v3's sections), and a copy cut right after level 2 under the same name (the EXR records the
   // file name): --level 2 renders both to the same bytes, with 1 and 2 threads, so it reads
   // nothing past level 2. The whole file cannot be read from the cut copy.
   const std::string full = scratch() + "/h.mlfeh";
@@ -79,7 +79,7 @@ TEST(Render, LevelReadsOnlyTheFilesPrefix) {
   fs::create_directories(scratch() + "/cut");
   const std::string cut = scratch() + "/cut/h.mlfeh";
   const std::string whole = bytes(full);
-  ASSERT_EQ(whole.substr(8, 1), "\x03");
+  ASSERT_EQ(whole.substr(8, 1), "\x04");
   const std::string head = prefix_up_to_level(whole, 2);
   ASSERT_LT(head.size(), whole.size());
   std::ofstream(cut, std::ios::binary) << head;
