@@ -15,6 +15,7 @@
 #include <random>
 #include <string>
 
+#include "tests/formats/lattice_hierarchies.h"
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -28,30 +29,10 @@ fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir(
 Bytes read_bytes(const fs::path& p) { return test::read_file_bytes(p); }
 void write_bytes(const fs::path& p, const Bytes& b) { test::write_file_bytes(p, b); }
 
-// T0 as the lattice's cube 2^L samples wide (spacing 0.5, 2, 1.25), refined at random so some
-// level-L vertices exist; data 5 x 3 x 7 samples (L = 3).
-Hierarchy<3> lattice_hierarchy(unsigned seed) {
-  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {8 * 0.5, 8 * 2.0, 8 * 1.25});
-  std::mt19937 rng(seed);
-  for (int r = 0; r < 3; ++r) {
-    std::vector<ElemId> marked;
-    for (ElemId e : h.leaves())
-      if (std::uniform_real_distribution<double>(0, 1)(rng) < 0.4) marked.push_back(e);
-    h.refine(marked);
-  }
-  return h;
-}
+// Data 5 x 3 x 7 samples on a level-3 lattice.
+Hierarchy<3> lattice_hierarchy(unsigned seed) { return test::random_lattice_hierarchy(3, 0.4, seed); }
 
-HierarchyFileInfo lattice_info() {
-  HierarchyFileInfo info;
-  info.transform.spacing = {0.5, 2.0, 1.25};
-  info.value_min = -300;
-  info.value_max = 300;
-  info.on_lattice = true;
-  info.lattice_level = 3;
-  info.data_dims = {5, 3, 7};
-  return info;
-}
+HierarchyFileInfo lattice_info() { return test::lattice_file_info(3, {5, 3, 7}); }
 
 std::vector<double> random_integers(std::size_t n, unsigned seed) {
   std::mt19937 rng(seed);

@@ -17,6 +17,7 @@
 #include <random>
 #include <string>
 
+#include "tests/formats/lattice_hierarchies.h"
 #include "tests/test_paths.h"
 
 namespace mlfe {
@@ -27,29 +28,10 @@ using Bytes = std::vector<std::uint8_t>;
 
 fs::path temp_file(const std::string& name) { return fs::path(test::scratch_dir("hierarchy_v4")) / name; }
 
-// T0 as the lattice's cube 16 samples wide (L = 4, data 13 x 16 x 9), refined at random.
-Hierarchy<3> lattice_hierarchy(unsigned seed) {
-  Hierarchy<3> h = Hierarchy<3>::box({0, 0, 0}, {16 * 0.5, 16 * 2.0, 16 * 1.25});
-  std::mt19937 rng(seed);
-  for (int r = 0; r < 4; ++r) {
-    std::vector<ElemId> marked;
-    for (ElemId e : h.leaves())
-      if (std::uniform_real_distribution<double>(0, 1)(rng) < 0.7) marked.push_back(e);
-    h.refine(marked);
-  }
-  return h;
-}
+// Data 13 x 16 x 9 samples on a level-4 lattice.
+Hierarchy<3> lattice_hierarchy(unsigned seed) { return test::random_lattice_hierarchy(4, 0.7, seed); }
 
-HierarchyFileInfo lattice_info() {
-  HierarchyFileInfo info;
-  info.transform.spacing = {0.5, 2.0, 1.25};
-  info.value_min = -300;
-  info.value_max = 300;
-  info.on_lattice = true;
-  info.lattice_level = 4;
-  info.data_dims = {13, 16, 9};
-  return info;
-}
+HierarchyFileInfo lattice_info() { return test::lattice_file_info(4, {13, 16, 9}); }
 
 // A smooth field plus noise of `noise` (integers when asked), so the lattice prediction helps.
 std::vector<double> field(const Hierarchy<3>& h, unsigned seed, double noise, bool integer) {
