@@ -118,7 +118,9 @@ TEST(HierarchyFileV4, DecodesVersion3sValuesWithinTheBound) {
       for (std::uint32_t v = 0; v < h.vertex_count(); ++v) {
         const double d = got.at(h.point(VertexId(v)));
         ASSERT_LE(std::fabs(d - u[v]), bound * (1 + 1e-12)) << "seed " << seed << " vertex " << v;
-        if (integer) ASSERT_EQ(d, std::nearbyint(d));
+        if (integer) {
+          ASSERT_EQ(d, std::nearbyint(d));
+        }
       }
       for (std::uint32_t form : level_forms(test::read_file_bytes(p4))) coded += form == 0;
     }
