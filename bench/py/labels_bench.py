@@ -10,6 +10,16 @@ Peers, in one run on the same files:
     (target reduction 0.9). Timed from reading the volume to the last decimated label, in its
     own process (peak RSS of that process: VmHWM of its own address space). Its meshes are written to PLY after the clock stops
     and packed into a Draco .glb at mlfe's tolerance by label_distance_bench, for the bytes.
+  - Surface Nets (issue #40 item 4): VTK 9.3's vtkSurfaceNets3D, one pass over all labels, 2
+    threads (vtkSMPTools), its defaults, with its built-in constrained smoothing on and off (rows
+    sn_smooth, sn_raw). VTK 9.1 has no such filter, so it runs as an out-of-repository tool
+    (`--surface-nets PATH`, default <build>/bench-peers/surface_nets_labels; the filter's source
+    is built against Debian's VTK 9.1 outside this repository; without the tool the rows are
+    skipped and the skip is printed). Interface: `TOOL VOLUME DIR PREFIX --smoothing on|off
+    --threads 2` times reading + label list + filter in its own clock (peak: its VmHWM then),
+    prints one JSON line (seconds, peak_rss_mb, triangles of the shared output, ...) and writes
+    each label's triangles (both sides of the shared mesh, oriented outward for that label) to
+    DIR/PREFIX_<label>.ply after the clock stops. Median of 3 runs per mode.
   - The reference per label: its voxel-boundary surface, vtkDiscreteFlyingEdges3D unsmoothed
     (the first stage of the VTK pipeline, written to PLY outside the timed part).
 Peak RSS: not getrusage's ru_maxrss of the process itself, nor of a child of this script: Linux
@@ -19,7 +29,11 @@ volume and the distance arrays) reports at least this script's own peak (the ear
 address space made by exec, so both measure the peer alone.
 
 Distances per label (label_distance_bench, core/surface/mesh_distance.h): symmetric Hausdorff and the
-larger one-sided mean, in voxels, vertices + 20 000 area samples per mesh.
+larger one-sided mean, in voxels, vertices + 20 000 area samples per mesh; the same tool counts each
+label mesh's topology (closed: no boundary edge; manifold: no edge in three or more triangles, every
+vertex one fan) for every method. Triangles: each method's per-label meshes summed (an interface
+counted once per side, as mlfe's .glb and the per-label VTK pipeline hold it); Surface Nets' shared
+output (each interface once) is given beside it.
 
 The >= 100-label volume: the colin27 brain (181 x 217 x 181, 1 mm) cut into 60 Voronoi parcels
 (seeds drawn with a fixed generator inside the brain mask) and two intensity classes (below and
@@ -30,6 +44,7 @@ atlas2mm,atlas05mm): 192 labels at 2 mm (91 x 109 x 91) and 709 at 0.5 mm, int16
   /usr/bin/python3 bench/py/labels_bench.py --build build --out /tmp/labels_bench
   /usr/bin/python3 bench/py/labels_bench.py --build build --volumes parcels,atlas2mm,atlas05mm
   /usr/bin/python3 bench/py/labels_bench.py --build build --timing-rounds 5 --base-build ../base/build
+  /usr/bin/python3 bench/py/labels_bench.py --build build --volumes parcels --surface-nets /path/to/surface_nets_labels
 """
 import argparse
 import json
@@ -220,6 +235,11 @@ def run_mlfe(mlfe, vol, out_dir, tag, extra):
                  "all_closed": all(s["closed"] for s in r["asset"]["structures"])}
 
 
+def load_average():
+    """The 1-minute load average now, as /proc/loadavg writes it."""
+    return open("/proc/loadavg").read().split()[0]
+
+
 def timed(cmd):
     """Runs cmd under /usr/bin/time; returns (process, wall seconds, user + sys seconds)."""
     p = subprocess.run(["/usr/bin/time", "-f", "TIME %e %U %S"] + cmd, capture_output=True, text=True, check=True)
@@ -239,7 +259,7 @@ def timing_rounds(mlfe, base_mlfe, vol, out_dir, rounds):
     rows = {"VTK pipeline": []}
     rows.update({name: [] for name, _, _ in peers})
     for i in range(rounds):
-        load = open("/proc/loadavg").read().split()[0]
+        load = load_average()
         p, _, cpu = timed([sys.executable, "-c", VTK_WORKER, vol, out_dir])
         rows["VTK pipeline"].append((json.loads(p.stdout.strip().splitlines()[-1])["seconds"], cpu))
         for name, binary, threads in peers:
@@ -255,18 +275,63 @@ def timing_rounds(mlfe, base_mlfe, vol, out_dir, rounds):
                statistics.median(wall) / vtk_wall, statistics.median(cpu) / vtk_cpu), flush=True)
 
 
-def distances(build, vol, glb, out_dir):
+SURFACE_NETS_MODES = (("sn_smooth", "on"), ("sn_raw", "off"))
+
+
+def surface_nets_tool(build, given):
+    """The Surface Nets tool's path, or "" (the skip printed) when it is not there."""
+    path = given or os.path.join(build, "bench-peers", "surface_nets_labels")
+    if os.access(path, os.X_OK):
+        return path
+    print("labels_bench: skipping Surface Nets (vtkSurfaceNets3D, VTK >= 9.3): no tool at %s" % path, flush=True)
+    return ""
+
+
+def run_surface_nets(tool, vol, out_dir, prefix, smoothing, rounds=3):
+    """The tool's report with the median seconds of `rounds` runs (its clock is ~0.1 s, a few
+    scheduler slices on a loaded machine); the meshes are the last run's (the output is
+    deterministic)."""
+    runs = [json.loads(subprocess.run([tool, vol, out_dir, prefix, "--smoothing", smoothing, "--threads", "2"],
+                                      check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1])
+            for _ in range(rounds)]
+    median = {k: float(np.median([r[k] for r in runs])) for k in ("seconds", "filter_seconds", "peak_rss_mb")}
+    return runs[-1] | median | {"seconds_runs": [r["seconds"] for r in runs]}
+
+
+def distances(build, vol, glb, out_dir, peers):
     tool = os.path.join(build, "bench", "label_distance_bench")
-    p = subprocess.run([tool, vol, glb, out_dir], check=True, capture_output=True, text=True)
+    p = subprocess.run([tool, vol, glb, out_dir] + peers, check=True, capture_output=True, text=True)
     return json.loads(p.stdout)
 
 
 def summary(rows, key):
     means = [r[key]["mean"] for r in rows]
     hd = [r[key]["hausdorff"] for r in rows]
+    big = [r[key]["mean"] for r in rows if r["voxels"] >= 100]
     return {"mean_max": max(means), "mean_median": float(np.median(means)), "hausdorff_max": max(hd),
-            "hausdorff_median": float(np.median(hd)),
-            "labels_mean_le_0.15": sum(m <= 0.15 for m in means), "labels_hausdorff_le_1.5": sum(h <= 1.5 for h in hd)}
+            "hausdorff_median": float(np.median(hd)), "mean_max_ge100_voxels": max(big, default=0.0),
+            "labels_mean_le_0.15": sum(m <= 0.15 for m in means), "labels_hausdorff_le_1.5": sum(h <= 1.5 for h in hd),
+            "triangles": sum(r[key]["triangles"] for r in rows),
+            "labels_closed": sum(r[key]["closed"] for r in rows),
+            "labels_manifold": sum(r[key]["manifold"] for r in rows),
+            "non_manifold_edges": sum(r[key].get("non_manifold_edges", 0) for r in rows),
+            "non_manifold_vertices": sum(r[key].get("non_manifold_vertices", 0) for r in rows),
+            "inconsistent_edges": sum(r[key].get("inconsistent_edges", 0) for r in rows)}
+
+
+def print_table(results):
+    """One Markdown row per atlas and method (time, peak, triangles, error, topology)."""
+    print("| atlas | method | load | s | peak MB | triangles (shared) | worst mean >= 100 vox (median) "
+          "| worst Hausdorff (median) | closed / manifold labels | non-manifold edges / vertices |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for tag, r in results.items():
+        for key in ["mlfe", "vtk"] + [k for k, _ in SURFACE_NETS_MODES if k in r]:
+            m, d, n = r[key], r[key + "_distance"], len(r["per_label"])
+            shared = " (%d)" % m["shared_triangles"] if "shared_triangles" in m else ""
+            print("| %s | %s | %s | %.2f | %.0f | %d%s | %.3f (%.3f) | %.2f (%.2f) | %d / %d of %d | %d / %d |" %
+                  (tag, key, m["load"], m["seconds"], m["peak_rss_mb"], d["triangles"], shared,
+                   d["mean_max_ge100_voxels"], d["mean_median"], d["hausdorff_max"], d["hausdorff_median"],
+                   d["labels_closed"], d["labels_manifold"], n, d["non_manifold_edges"], d["non_manifold_vertices"]))
 
 
 def main():
@@ -278,6 +343,8 @@ def main():
     ap.add_argument("--timing-rounds", type=int, default=0,
                     help="instead: this many interleaved timing rounds on the JHU atlas (no distances)")
     ap.add_argument("--base-build", default="", help="with --timing-rounds: a second build to time beside")
+    ap.add_argument("--surface-nets", default="",
+                    help="the vtkSurfaceNets3D tool (default <build>/bench-peers/surface_nets_labels; skipped if absent)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     mlfe = mlfe_binary(args.build)
@@ -296,19 +363,29 @@ def main():
         if key in wanted:
             path = os.path.join(args.out, name + ".nrrd")
             volumes.append(("%s_%d" % (name, make(path)), path))
+    sn_tool = surface_nets_tool(args.build, args.surface_nets)
     results = {}
     for tag, vol in volumes:
         d = os.path.join(args.out, tag)
         os.makedirs(d, exist_ok=True)
-        vtk = run_vtk(vol, d)
+        vtk = run_vtk(vol, d) | {"load": load_average()}
         glb, m = run_mlfe(mlfe, vol, d, "mlfe", args.mlfe_args.split())
-        dist = distances(args.build, vol, glb, d)
+        r = {"mlfe": m | {"load": load_average()}}
+        peers = []
+        for prefix, smoothing in SURFACE_NETS_MODES if sn_tool else ():
+            sn = run_surface_nets(sn_tool, vol, d, prefix, smoothing)
+            sn["shared_triangles"] = sn.pop("triangles")
+            r[prefix] = sn | {"load": load_average()}
+            peers.append(prefix)
+        dist = distances(args.build, vol, glb, d, peers)
         vtk.pop("labels")
-        results[tag] = {"mlfe": m, "vtk": vtk | {"bytes": dist["vtk_glb_bytes"]},
-                        "mlfe_distance": summary(dist["labels"], "mlfe"),
-                        "vtk_distance": summary(dist["labels"], "vtk"), "per_label": dist["labels"]}
+        r["vtk"] = vtk | {"bytes": dist["vtk_glb_bytes"]}
+        for key in ["mlfe", "vtk"] + peers:
+            r[key + "_distance"] = summary(dist["labels"], key)
+        results[tag] = r | {"per_label": dist["labels"]}
         print(json.dumps({tag: {k: v for k, v in results[tag].items() if k != "per_label"}}, indent=1), flush=True)
     json.dump(results, open(os.path.join(args.out, "results.json"), "w"), indent=1)
+    print_table(results)
 
 
 if __name__ == "__main__":
