@@ -169,7 +169,11 @@ TEST(MaxErrorCommand, IntegerDataWithinEveryBoundAndShare) {
         const double worst = round_trip_max_error(in, e, tag, std::string("--quantization-share ") + share);
         EXPECT_LE(worst, e) << tag;
         const double bytes = double(fs::file_size(scratch() + "/" + tag + ".mlfeh"));
-        EXPECT_LE(bytes, previous_bytes) << tag;
+        // (Share 0 stores the values losslessly whatever E: its files differ by the bound's
+        // digits in the metadata.)
+        if (std::string(share) != "0") {
+          EXPECT_LE(bytes, previous_bytes) << tag;
+        }
         if (std::string(share) == "1" && e == std::floor(e)) {
           EXPECT_EQ(worst, e) << tag;  // the bound is spent on the values
           EXPECT_LT(bytes, previous_bytes) << tag;
