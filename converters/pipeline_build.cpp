@@ -76,24 +76,25 @@ struct FileJob {
   nlohmann::json input_metadata;
 };
 
-// The values a reader decodes, quantized to the file's bound.
+// The values a reader decodes, quantized to the file's bound (wo: how the file is written).
 template <int D>
-std::vector<double> decoded_values(const FileJob& job, const Approximation<D>& a, HierarchyFileFigures& fig) {
-  const bool integer = job.split && job.split->integer;
-  fig.coding = integer ? "integer" : fig.bound > 0 ? "quantized" : "exact";
+std::vector<double> decoded_values(const FileJob& job, const Approximation<D>& a,
+                                   const LevelDescription<D>& levels, const HierarchyFileInfo& info,
+                                   const HierarchyWriteOptions& wo) {
   try {
-    return integer                 ? quantize_integer(a.hierarchy, a.values, std::int64_t(fig.bound))
-           : fig.coding == "exact" ? a.values
-                                   : quantize_hierarchical(a.hierarchy, a.values, fig.bound);
+    return wo.residual_quantization ? residual_quantized_values(a.hierarchy, levels, a.values, info, wo)
+           : wo.integer_values      ? quantize_integer(a.hierarchy, a.values, std::int64_t(wo.max_error))
+           : wo.max_error > 0       ? quantize_hierarchical(a.hierarchy, a.values, wo.max_error)
+                                    : a.values;
   } catch (const Error& e) {
     throw Error(job.output + ": " + e.what());
   }
 }
 
-// The file's header: frame, provenance, the error figures of the decoded values.
+// The file's header but for the error figures of the decoded values: frame, lattice,
+// provenance.
 template <int D>
-HierarchyFileInfo file_info(const FileJob& job, const Built& b, const Approximation<D>& a,
-                            const HierarchyFileFigures& fig) {
+HierarchyFileInfo file_info(const FileJob& job, const Built& b, const Approximation<D>& a) {
   HierarchyFileInfo info;
   info.transform = b.transform;
   info.space = b.space;
@@ -105,9 +106,6 @@ HierarchyFileInfo file_info(const FileJob& job, const Built& b, const Approximat
   info.metadata["build"] = build_record(b);
   // The error-bounded build interpolates: no norm.
   info.norm = job.split ? "" : enum_name(job.options.build.norm);
-  info.rms_error = fig.errors.rms;
-  info.max_error = fig.errors.max;
-  info.psnr_db = fig.errors.psnr;
   set_lattice_info(a, info);
   if (job.split) info.sample_error_bound = job.options.max_error;
   return info;
@@ -134,21 +132,30 @@ HierarchyFileFigures write_file(const FileJob& job, const Built& b, Approximatio
   } catch (const LevelRebuildError& e) {
     throw Error(job.output + ": " + e.what() + " (please report this)");
   }
-  // Step 2: the decoded values and their errors.
+  // Step 2: the decoded values and their errors. An error-bounded build quantizes each level
+  // against the prediction its coder chose (as SZ3 does): wide bounds then code most values
+  // as 0 where the data is smooth.
   fig.bound = job.split ? job.split->quantization : value_bound(job.options, last_rms, range);
-  fig.errors = measure(a.hierarchy, decoded_values(job, a, fig));
+  const bool integer = job.split && job.split->integer;
+  fig.coding = integer ? "integer" : fig.bound > 0 ? "quantized" : "exact";
+  HierarchyWriteOptions wo;
+  wo.version = fig.version;
+  wo.max_error = fig.bound;
+  wo.integer_values = integer;
+  wo.residual_quantization = job.split && fig.bound > 0;
+  wo.zstd_level = 19;
+  HierarchyFileInfo info = file_info(job, b, a);
+  fig.errors = measure(a.hierarchy, decoded_values(job, a, levels, info, wo));
   // The promise of max_error, checked on exactly what a reader decodes, before writing.
   if (job.split && !(fig.errors.max <= job.options.max_error))
     throw OptionInputError(fmt::format(
         "{}: the decoded samples are up to {:.6g} from the input, over {} {:.6g} ({})", job.output,
         fig.errors.max, option_ref("max_error"), job.options.max_error, b.stop_reason()));
   // Step 3: the file.
-  HierarchyWriteOptions wo;
-  wo.version = fig.version;
-  wo.max_error = fig.bound;
-  wo.integer_values = fig.coding == "integer";
-  wo.zstd_level = 19;
-  write_hierarchy(job.output, a.hierarchy, levels, a.values, file_info(job, b, a, fig), wo);
+  info.rms_error = fig.errors.rms;
+  info.max_error = fig.errors.max;
+  info.psnr_db = fig.errors.psnr;
+  write_hierarchy(job.output, a.hierarchy, levels, a.values, info, wo);
   fig.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   fig.bytes = written_file_size(job.output);
   return fig;

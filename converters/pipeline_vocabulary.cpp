@@ -408,7 +408,7 @@ const std::vector<OptionSpec>& option_table() {
         // BuildFileOptions, ConvertFileOptions, IsoOptions
         {"max_error", "--max-error", 0, kInf},
         {"psnr", "--psnr", 0, kInf},
-        {"quantization_share", "--quantization-share", 0, 1, false, true},
+        {"quantization_share", "--quantization-share", 0, 1},
         {"output", "--output", -kInf, kInf, false, false, "out"},
         {"report", "--report"},
         {"hierarchy", "--hierarchy"},

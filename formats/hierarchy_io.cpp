@@ -235,8 +235,31 @@ void put_varint(Bytes& out, std::int64_t q) {
 }
 
 // v4 level sections: form 0 holds range-coded marks and values (docs/mlfeh-v4.md), form 1 the
-// marks and values as v3 stores them.
-constexpr std::uint32_t kFormCoded = 0, kFormPacked = 1;
+// marks and values as v3 stores them, form 2 form 0's layout with the values quantized against
+// the chosen prediction.
+constexpr std::uint32_t kFormCoded = 0, kFormPacked = 1, kFormResidual = 2;
+
+// The v4 value streams of every step (T0 first) and the decoded values in d: levels quantized
+// against the chosen prediction with `residual`, T0 always against 0 (it has no prediction).
+template <int D>
+std::vector<Bytes> predicted_streams(const Hierarchy<D>& h, const std::vector<std::size_t>& vertex_end,
+                                     const std::vector<double>& u, const HierarchyFileInfo& info,
+                                     const HierarchyWriteOptions& options, bool residual,
+                                     std::vector<double>& d) {
+  PredictedValues<D> pv(predicted_coding<D>(info, options.max_error, options.integer_values));
+  d.assign(u.size(), 0.0);
+  std::vector<Bytes> streams;
+  for (std::size_t k = 0; k < vertex_end.size(); ++k)
+    streams.push_back(pv.encode(h, static_cast<int>(k), k == 0 ? 0 : vertex_end[k - 1], vertex_end[k], u, d,
+                                residual && k > 0));
+  return streams;
+}
+
+// Whether the writer stores the levels in form 2 (options.residual_quantization where it
+// applies: a v4 file of coding 1 or 3 with a bound).
+bool residual_levels(const HierarchyWriteOptions& options, bool predicted) {
+  return options.residual_quantization && predicted && options.max_error > 0;
+}
 
 // The marks of a level as bits, least significant first (v2, v3, v4 form 1).
 void put_mark_bits(Bytes& out, const std::vector<std::uint8_t>& marks) {
@@ -336,18 +359,15 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
   // v4: coding 1 and 3 also predicted on the lattice and range coded, one stream per step (the
   // same codes and decoded values).
   const bool predicted = v4 && (coding == kCodingQuantized || coding == kCodingInteger);
+  const bool residual = residual_levels(options, predicted);
   std::vector<Bytes> streams;
   try {
-    if (coding == kCodingQuantized) quantize_hierarchical(h, u, options.max_error, &codes);
-    if (coding == kCodingInteger)
+    // Form 2 has no v3 form to fall back to (its decoded values are not v3's).
+    if (coding == kCodingQuantized && !residual) quantize_hierarchical(h, u, options.max_error, &codes);
+    if (coding == kCodingInteger && !residual)
       decoded = quantize_integer(h, u, static_cast<std::int64_t>(options.max_error), &codes);
-    if (predicted) {
-      PredictedValues<D> pv(predicted_coding<D>(info, options.max_error, coding == kCodingInteger));
-      std::vector<double> d(u.size());
-      for (std::size_t k = 0; k < enc.vertex_end.size(); ++k)
-        streams.push_back(
-            pv.encode(h, static_cast<int>(k), k == 0 ? 0 : enc.vertex_end[k - 1], enc.vertex_end[k], u, d));
-    }
+    std::vector<double> d;
+    if (predicted) streams = predicted_streams(h, enc.vertex_end, u, info, options, residual, d);
   } catch (const Error& e) {
     throw Error(path + ": " + e.what());
   }
@@ -418,22 +438,24 @@ void write_v2(const std::string& path, const Hierarchy<D>& h, const LevelDescrip
     put(level, static_cast<std::uint32_t>(k));
     put(level, static_cast<std::uint32_t>(marks.size()));
     put(level, static_cast<std::uint32_t>(enc.vertex_end[k] - enc.vertex_end[k - 1]));
-    Bytes coded = level;  // v4 form 0: range-coded marks and values, stored raw
-    if (v4) put(level, kFormPacked);
-    put_mark_bits(level, marks);
-    put_values(level, enc.vertex_end[k - 1], enc.vertex_end[k]);
+    Bytes coded = level;  // v4 form 0 or 2: range-coded marks and values, stored raw
     Bytes packed;
-    put_section(path, packed, kTagLevel, level, options.compress, options.zstd_level);
+    if (!residual) {
+      if (v4) put(level, kFormPacked);
+      put_mark_bits(level, marks);
+      put_values(level, enc.vertex_end[k - 1], enc.vertex_end[k]);
+      put_section(path, packed, kTagLevel, level, options.compress, options.zstd_level);
+    }
     if (predicted) {
       // The smaller form: range coding wins on scans, zstd on label maps' repeated patterns.
-      put(coded, kFormCoded);
+      put(coded, residual ? kFormResidual : kFormCoded);
       const Bytes marks_stream = encode_marks(marks);
       put(coded, static_cast<std::uint32_t>(marks_stream.size()));
       put_array(coded, marks_stream);
       put_array(coded, streams[k]);
       Bytes section;
       put_section(path, section, kTagLevel, coded, false, 0);
-      if (section.size() < packed.size()) packed.swap(section);
+      if (residual || section.size() < packed.size()) packed.swap(section);
     }
     put_array(file, packed);
   }
@@ -523,6 +545,19 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const Level
   const std::string meta = check_write(path, h, values, info, options);
   MLFE_CHECK(options.version >= 2);
   write_v2(path, h, levels, values, info, meta, options);
+}
+
+template <int D>
+std::vector<double> residual_quantized_values(const Hierarchy<D>& h, const LevelDescription<D>& levels,
+                                              const std::vector<double>& values,
+                                              const HierarchyFileInfo& info,
+                                              const HierarchyWriteOptions& options) {
+  MLFE_CHECK(options.version == 4 && options.residual_quantization && options.max_error > 0 &&
+             values.size() == h.vertex_count() && !levels.vertex_end.empty() &&
+             levels.vertex_end.back() == h.vertex_count());
+  std::vector<double> d;
+  predicted_streams(h, levels.vertex_end, values, info, options, true, d);
+  return d;
 }
 
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
@@ -845,7 +880,7 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
     pv.emplace(predicted_coding<D>(f, head.bound, head.coding == kCodingInteger));
     f.values.resize(nv0);
     const Bytes stream = rest_of(c, "T0");
-    pv->decode(path, "T0", h, 0, 0, nv0, stream.data(), stream.size(), f.values);
+    pv->decode(path, "T0", h, 0, 0, nv0, stream.data(), stream.size(), f.values, false);
   } else {
     get_values(path, c, h, head, 0, nv0, f.values, "T0");
   }
@@ -868,17 +903,19 @@ void read_v2_body(const std::string& path, SectionReader& r, const HeadV2& head,
     if (h.vertex_count() + std::uint64_t(m) > head.nv)
       throw Error(path + ": " + name + " exceeds the vertex count");
     const std::uint32_t form = head.version == kVersion4 ? lc.get<std::uint32_t>(name.c_str()) : kFormPacked;
-    if (form > kFormPacked || (form == kFormCoded && !pv))
+    if (form > kFormResidual || (form != kFormPacked && !pv) || (form == kFormResidual && !(head.bound > 0)))
       throw Error(path + ": " + name + " has an unknown form " + std::to_string(form));
-    const std::vector<std::uint8_t> marks = read_marks(path, lc, form == kFormCoded, n, name);
+    const bool coded = form != kFormPacked;
+    const std::vector<std::uint8_t> marks = read_marks(path, lc, coded, n, name);
     const std::size_t before = h.vertex_count();
     apply_refinement_marks(h, cand, marks);
     if (h.vertex_count() - before != m || h.element_count() > head.ne)
       throw Error(path + ": " + name + " does not rebuild the stored counts");
-    if (form == kFormCoded) {
+    if (coded) {
       f.values.resize(h.vertex_count());
       const Bytes stream = rest_of(lc, name.c_str());
-      pv->decode(path, name.c_str(), h, k, before, h.vertex_count(), stream.data(), stream.size(), f.values);
+      pv->decode(path, name.c_str(), h, k, before, h.vertex_count(), stream.data(), stream.size(), f.values,
+                 form == kFormResidual);
     } else {
       get_values(path, lc, h, head, before, h.vertex_count(), f.values, name.c_str());
       if (pv) pv->observe(h, k, before, h.vertex_count(), f.values);
@@ -1038,6 +1075,14 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level) {
   return f;
 }
 
+template std::vector<double> residual_quantized_values<2>(const Hierarchy<2>&, const LevelDescription<2>&,
+                                                          const std::vector<double>&,
+                                                          const HierarchyFileInfo&,
+                                                          const HierarchyWriteOptions&);
+template std::vector<double> residual_quantized_values<3>(const Hierarchy<3>&, const LevelDescription<3>&,
+                                                          const std::vector<double>&,
+                                                          const HierarchyFileInfo&,
+                                                          const HierarchyWriteOptions&);
 template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const std::vector<double>&,
                                  const HierarchyFileInfo&, const HierarchyWriteOptions&);
 template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,

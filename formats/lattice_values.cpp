@@ -35,6 +35,12 @@ int log_bucket(std::uint64_t x, int cap) {
 // Floor division by a positive divisor.
 std::int64_t floor_div(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
+// The nearest code to x steps (real coding), within the codes' range ±2^52.
+std::int64_t code_of(double x) {
+  constexpr double kMaxCode = 4503599627370496.0;
+  return static_cast<std::int64_t>(std::clamp(std::nearbyint(x), -kMaxCode, kMaxCode));
+}
+
 }  // namespace
 
 LatticeIndex::LatticeIndex(int dim, int level) : dim_(dim), side_(0) {
@@ -181,16 +187,18 @@ typename PredictedValues<D>::Prediction PredictedValues<D>::predict(const Hierar
       sixteenths += cubic ? 9 * (y[1] + y[2]) - (y[0] + y[3]) : 8 * (y[1] + y[2]);
     }
   }
+  p.high_real = p.real;
+  p.high_integer = p.integer;
   if (terms == 0) {
     use(par[0].value);
     use(par[1].value);
   } else if (coding_.integer) {
     const std::int64_t den = 16 * terms * static_cast<std::int64_t>(2 * coding_.bound + 1);
     p.expected = floor_div(2 * (sixteenths - 16 * terms * p.integer) + den - 1, 2 * den);
+    p.high_integer = floor_div(2 * sixteenths + 16 * terms - 1, 32 * terms);
   } else {
-    constexpr double kMaxExpected = 4503599627370496.0;  // 2^52, the codes' range
-    const double e = std::nearbyint((real / terms - p.real) / (2 * coding_.bound));
-    p.expected = static_cast<std::int64_t>(std::clamp(e, -kMaxExpected, kMaxExpected));
+    p.high_real = real / terms;
+    p.expected = code_of((p.high_real - p.real) / (2 * coding_.bound));
   }
   const double step_width = coding_.integer ? 2 * coding_.bound + 1 : 2 * coding_.bound;
   const double spread = std::min((hi - lo) / step_width, 1e18);
@@ -203,31 +211,42 @@ typename PredictedValues<D>::Prediction PredictedValues<D>::predict(const Hierar
 }
 
 // Per context, the prediction whose codes were smaller so far: the higher-order one where the
-// data is smooth, the coding's own (expected 0) where it is not (label maps, edges).
+// data is smooth, the coding's own where it is not (label maps, edges).
 template <int D>
-std::int64_t PredictedValues<D>::chosen(const Prediction& p) const {
+bool PredictedValues<D>::higher_order(const Prediction& p) const {
   const auto& c = cost_[static_cast<std::size_t>(p.context)];
-  return c[1] <= c[0] ? p.expected : 0;
+  return c[1] <= c[0];
 }
 
-// What the coding of later vertices learns from v's decoded value: the code of both predictions
-// (for chosen()) and the magnitude of the coded difference (for the contexts). The code is
-// recomputed from the decoded value, so a level stored in the v3 form (observe()) teaches the
-// same as one range coded.
+// The code the chosen prediction expects against the linear one (form 0's offset).
 template <int D>
-void PredictedValues<D>::learn(std::uint32_t v, const Prediction& p, const std::vector<double>& d) {
+std::int64_t PredictedValues<D>::chosen(const Prediction& p) const {
+  return higher_order(p) ? p.expected : 0;
+}
+
+// What the coding of later vertices learns from v's decoded value: its code against both
+// predictions (for higher_order()) and the magnitude of the coded integer (for the contexts).
+// The codes are recomputed from the decoded value, so a level stored in the v3 form (observe())
+// teaches the same as one range coded. With `residual` (form 2) the decoded value is the chosen
+// prediction plus a multiple of the step, so its codes against the two are rounded.
+template <int D>
+void PredictedValues<D>::learn(std::uint32_t v, const Prediction& p, const std::vector<double>& d,
+                               bool residual) {
   constexpr std::uint64_t kCap = 1u << 16, kHalve = 1u << 24;
-  constexpr double kMaxCode = 4503599627370496.0;  // 2^52
-  const std::int64_t q =
-      coding_.integer
-          ? (static_cast<std::int64_t>(d[v]) - p.integer) / static_cast<std::int64_t>(2 * coding_.bound + 1)
-          : static_cast<std::int64_t>(
-                std::clamp(std::nearbyint((d[v] - p.real) / (2 * coding_.bound)), -kMaxCode, kMaxCode));
-  const std::int64_t r = q - chosen(p);
+  std::int64_t linear, high;
+  if (coding_.integer) {
+    const auto x = static_cast<std::int64_t>(d[v]), w = static_cast<std::int64_t>(2 * coding_.bound + 1);
+    linear = residual ? floor_div(2 * (x - p.integer) + w, 2 * w) : (x - p.integer) / w;
+    high = residual ? floor_div(2 * (x - p.high_integer) + w, 2 * w) : linear - p.expected;
+  } else {
+    linear = code_of((d[v] - p.real) / (2 * coding_.bound));
+    high = residual ? code_of((d[v] - p.high_real) / (2 * coding_.bound)) : linear - p.expected;
+  }
+  const std::int64_t r = higher_order(p) ? high : linear;
   magnitude_[v] = static_cast<std::uint32_t>(std::min<std::uint64_t>(std::llabs(r), kMaxMagnitude));
   auto& c = cost_[static_cast<std::size_t>(p.context)];
-  c[0] += std::min<std::uint64_t>(static_cast<std::uint64_t>(std::llabs(q)), kCap);
-  c[1] += std::min<std::uint64_t>(static_cast<std::uint64_t>(std::llabs(q - p.expected)), kCap);
+  c[0] += std::min<std::uint64_t>(static_cast<std::uint64_t>(std::llabs(linear)), kCap);
+  c[1] += std::min<std::uint64_t>(static_cast<std::uint64_t>(std::llabs(high)), kCap);
   if (c[0] > kHalve || c[1] > kHalve) c = {c[0] / 2, c[1] / 2};
 }
 
@@ -235,24 +254,26 @@ template <int D>
 void PredictedValues<D>::observe(const Hierarchy<D>& h, int step, std::size_t from, std::size_t to,
                                  const std::vector<double>& d) {
   MLFE_CHECK(d.size() >= to);
-  for (std::uint32_t v : order(h, step, from, to)) learn(v, predict(h, step, v, d), d);
+  for (std::uint32_t v : order(h, step, from, to)) learn(v, predict(h, step, v, d), d, false);
 }
 
 template <int D>
 std::vector<std::uint8_t> PredictedValues<D>::encode(const Hierarchy<D>& h, int step, std::size_t from,
                                                      std::size_t to, const std::vector<double>& u,
-                                                     std::vector<double>& d) {
+                                                     std::vector<double>& d, bool residual) {
   MLFE_CHECK(u.size() >= to && d.size() >= to);
   rc::Encoder e;
   models_ = rc::IntegerModels(kContexts);
   for (std::uint32_t v : order(h, step, from, to)) {
     const Prediction p = predict(h, step, v, d);
+    const bool high = residual && higher_order(p);
     std::int64_t q;
-    d[v] = coding_.integer ? static_cast<double>(quantize_integer_value(
-                                 u[v], p.integer, static_cast<std::int64_t>(coding_.bound), &q))
-                           : quantize_value(u[v], p.real, coding_.bound, &q);
-    models_.encode(e, p.context, q - chosen(p));
-    learn(v, p, d);
+    d[v] = coding_.integer
+               ? static_cast<double>(quantize_integer_value(u[v], high ? p.high_integer : p.integer,
+                                                            static_cast<std::int64_t>(coding_.bound), &q))
+               : quantize_value(u[v], high ? p.high_real : p.real, coding_.bound, &q);
+    models_.encode(e, p.context, residual ? q : q - chosen(p));
+    learn(v, p, d, residual);
   }
   return e.finish();
 }
@@ -260,28 +281,30 @@ std::vector<std::uint8_t> PredictedValues<D>::encode(const Hierarchy<D>& h, int 
 template <int D>
 void PredictedValues<D>::decode(const std::string& path, const char* what, const Hierarchy<D>& h, int step,
                                 std::size_t from, std::size_t to, const std::uint8_t* bytes, std::size_t n,
-                                std::vector<double>& d) {
+                                std::vector<double>& d, bool residual) {
   MLFE_CHECK(d.size() >= to);
   rc::Decoder dec(path, what, bytes, n);
   models_ = rc::IntegerModels(kContexts);
   constexpr std::int64_t kMax = std::int64_t(1) << 52;
   for (std::uint32_t v : order(h, step, from, to)) {
     const Prediction p = predict(h, step, v, d);
+    const bool high = residual && higher_order(p);
     const std::int64_t r = models_.decode(dec, p.context);
     // |r| < 2^62 and |expected| ≤ 2^53: the sum cannot overflow.
-    const std::int64_t q = r + chosen(p);
+    const std::int64_t q = residual ? r : r + chosen(p);
     if (coding_.integer) {
       // Decoded values stay integers below 2^52 in magnitude, so the f64 values are exact and
-      // the prediction's integer arithmetic cannot overflow.
+      // the prediction's integer arithmetic cannot overflow (the cubic's stays below 2^53).
       const auto width = static_cast<std::int64_t>(2 * coding_.bound + 1);
-      if (q > kMax / width || q < -kMax / width || std::llabs(p.integer + q * width) >= kMax)
+      const std::int64_t base = high ? p.high_integer : p.integer;
+      if (q > kMax / width || q < -kMax / width || std::llabs(base + q * width) >= kMax)
         throw Error(path + ": value of a vertex in " + what + " is out of range");
-      d[v] = static_cast<double>(p.integer + q * width);
+      d[v] = static_cast<double>(base + q * width);
     } else {
-      d[v] = p.real + static_cast<double>(q) * (2 * coding_.bound);
+      d[v] = (high ? p.high_real : p.real) + static_cast<double>(q) * (2 * coding_.bound);
       if (!std::isfinite(d[v])) throw Error(path + ": value of a vertex in " + what + " is not finite");
     }
-    learn(v, p, d);
+    learn(v, p, d, residual);
   }
   if (!dec.done()) throw Error(path + ": trailing bytes in the values of " + std::string(what));
 }

@@ -61,42 +61,49 @@ class PredictedValues {
 
  public:
   explicit PredictedValues(const Coding& coding);
-  /// Quantizes u at the vertices [from, to) of step `step` of h (its canonical numbering) as
-  /// quantize_hierarchical (quantize_integer) does, storing the decoded values in d (size ≥ to);
-  /// returns the step's range-coded stream. Throws mlfe::Error as those do.
+  /// Quantizes u at the vertices [from, to) of step `step` of h (its canonical numbering),
+  /// storing the decoded values in d (size ≥ to); returns the step's range-coded stream.
+  /// residual false: as quantize_hierarchical (quantize_integer) does, against the linear
+  /// prediction (v4 form 0); true: against the prediction the context chose (form 2), so the
+  /// coded integer is the quantized residual of that prediction, every value still within the
+  /// bound. Throws mlfe::Error as those do.
   std::vector<std::uint8_t> encode(const Hierarchy<D>& h, int step, std::size_t from, std::size_t to,
-                                   const std::vector<double>& u, std::vector<double>& d);
+                                   const std::vector<double>& u, std::vector<double>& d, bool residual);
   /// The inverse: decodes the values of [from, to) into d from the step's bytes. Throws
   /// mlfe::Error ("<path>: …" naming `what`) on truncated or trailing bytes and values out of range.
   void decode(const std::string& path, const char* what, const Hierarchy<D>& h, int step, std::size_t from,
-              std::size_t to, const std::uint8_t* p, std::size_t n, std::vector<double>& d);
+              std::size_t to, const std::uint8_t* p, std::size_t n, std::vector<double>& d, bool residual);
   /// The state encode() or decode() would leave for a step whose values d[from, to) were
   /// stored otherwise (a v3-form level section).
   void observe(const Hierarchy<D>& h, int step, std::size_t from, std::size_t to,
                const std::vector<double>& d);
 
  private:
-  // The linear prediction of the coding (v3's), the code the higher-order one expects, and the
-  // context.
+  // The linear prediction of the coding (v3's), the higher-order one (the linear one where it
+  // has no term; integers: rounded half down), the code the higher-order one expects against
+  // the linear one, and the context.
   struct Prediction {
     double real = 0;
     std::int64_t integer = 0;
+    double high_real = 0;
+    std::int64_t high_integer = 0;
     std::int64_t expected = 0;
     int context = 0;
   };
   std::vector<std::uint32_t> order(const Hierarchy<D>& h, int step, std::size_t from, std::size_t to);
   Prediction predict(const Hierarchy<D>& h, int step, std::uint32_t v, const std::vector<double>& d) const;
   std::array<std::int64_t, 3> lattice_point(const Hierarchy<D>& h, std::uint32_t v) const;
+  bool higher_order(const Prediction& p) const;
   std::int64_t chosen(const Prediction& p) const;
-  void learn(std::uint32_t v, const Prediction& p, const std::vector<double>& d);
+  void learn(std::uint32_t v, const Prediction& p, const std::vector<double>& d, bool residual);
 
   Coding coding_;
   LatticeIndex index_;
   rc::IntegerModels models_;
-  std::vector<std::uint32_t> magnitude_;  // min(|q|, 2^16) per decoded vertex
+  std::vector<std::uint32_t> magnitude_;  // min(|coded integer|, 2^16) per decoded vertex
   std::vector<std::uint8_t> class_;       // per vertex: odd axes at its step (0: T0 or off-lattice)
-  // Per context: the sums of |q| (linear prediction) and |q − expected| (higher order), halved
-  // now and then so they follow the data.
+  // Per context: the sums of the codes' magnitudes against the linear prediction and against
+  // the higher-order one, halved now and then so they follow the data.
   std::vector<std::array<std::uint64_t, 2>> cost_;
 };
 

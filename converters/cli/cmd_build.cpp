@@ -69,7 +69,7 @@ void add_build_command(CLI::App& app) {
       "its RMS error");
   cmd->add_option("--quantization-share", state->options.quantization_share,
                   "with --max-error: the share of it spent on quantizing values, the rest on interpolation "
-                  "(integer data: rounded down to an integer)")
+                  "(integer data: rounded down to an integer; 1: leaves refined until exact)")
       ->capture_default_str();
   cmd->add_option("--psnr", state->options.psnr,
                   "value quantization error alone at this PSNR (dB over the value range)");

@@ -735,8 +735,12 @@ struct BuildFileOptions {
   /// data: lossless), split between interpolation and quantization by quantization_share.
   /// < 0: the least-squares build of build.rms with values quantized to half its RMS error.
   double max_error = -1;
-  double quantization_share = 0.5;  ///< [0, 1)
-  double psnr = 0;                  ///< > 0: quantization error alone at this PSNR (dB over the range)
+  /// [0, 1]. 1 (all of max_error on the values; leaves refined until they interpolate the
+  /// samples exactly) gave the smallest files at equal maximum error and at equal PSNR on
+  /// integer and real scans (bench/RESULTS.md, issue 44); less trades values' precision for
+  /// coarser leaves.
+  double quantization_share = 1;
+  double psnr = 0;  ///< > 0: quantization error alone at this PSNR (dB over the range)
   /// A label map (segmentation, atlas): stored exactly (every decoded sample rounds to its
   /// label; refined where labels meet) with its label table in the file's metadata; excludes
   /// max_error and psnr.

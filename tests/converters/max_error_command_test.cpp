@@ -58,13 +58,14 @@ std::string write_volume(const std::string& name, const std::array<int, 3>& dims
   return raw;
 }
 
-// Builds with --max-error E, exports to a grid and returns the largest difference to the input
-// at any sample (also checking the dims and the file's recorded bound).
-double round_trip_max_error(const std::string& input, double e, const std::string& tag) {
+// Builds with --max-error E (and `options`), exports to a grid and returns the largest
+// difference to the input at any sample (also checking the dims and the file's recorded bound).
+double round_trip_max_error(const std::string& input, double e, const std::string& tag,
+                            const std::string& options = "") {
   const std::string h = scratch() + "/" + tag + ".mlfeh", out = scratch() + "/" + tag + "_out.raw",
                     rep = scratch() + "/" + tag + ".json";
-  const RunResult r =
-      run("build " + input + " -o " + h + " --quiet --report " + rep + " --max-error " + std::to_string(e));
+  const RunResult r = run("build " + input + " -o " + h + " --quiet --report " + rep + " --max-error " +
+                          std::to_string(e) + " " + options);
   EXPECT_EQ(r.status, 0) << r.err;
   const RunResult x = run("export " + h + " -o " + out);
   EXPECT_EQ(x.status, 0) << x.err;
@@ -138,8 +139,7 @@ TEST(MaxErrorCommand, EverySampleWithinTheBound) {
     }
     ++seed;
   }
-  // Integer data with an integer bound keeps integer values within it (at E = 1 the default
-  // share quantizes nothing, and on noise this strong the interpolation keeps every sample).
+  // Integer data with an integer bound keeps integer values within it.
   const std::string u8 =
       write_volume<std::uint8_t>("u8b", {13, 9, 7}, {0.7, 1.3, 2.1}, "uint8", 4, 40, 0, 255);
   for (double e : {1.0, 3.0}) {
@@ -149,6 +149,38 @@ TEST(MaxErrorCommand, EverySampleWithinTheBound) {
       EXPECT_GT(worst, 0);
     }
   }
+}
+
+// Property test on integer data: random uint8 and int16 volumes, integer and fractional bounds,
+// the quantization share at both ends of its range. Every sample stays within E; at share 1 the
+// values take the whole bound, so each integer E gives its own file (no staircase where E = 3
+// stored E = 2's), and a fractional E spends its fraction on interpolation.
+TEST(MaxErrorCommand, IntegerDataWithinEveryBoundAndShare) {
+  const std::string u8 =
+      write_volume<std::uint8_t>("u8s", {15, 11, 9}, {0.7, 1.3, 2.1}, "uint8", 7, 12, 0, 255);
+  const std::string i16 =
+      write_volume<std::int16_t>("i16s", {9, 13, 7}, {1.0, 0.45, 3.0}, "int16", 8, 60, -3000, 3000);
+  for (const auto& in : {u8, i16})
+    for (const char* share : {"0", "0.5", "1"}) {
+      double previous_bytes = INFINITY;
+      for (double e : {1.0, 2.0, 2.5, 3.0, 4.0, 7.75}) {
+        const std::string tag =
+            fs::path(in).stem().string() + "_" + share + "_" + std::to_string(int(e * 100));
+        const double worst = round_trip_max_error(in, e, tag, std::string("--quantization-share ") + share);
+        EXPECT_LE(worst, e) << tag;
+        const double bytes = double(fs::file_size(scratch() + "/" + tag + ".mlfeh"));
+        // (Share 0 stores the values losslessly whatever E: its files differ by the bound's
+        // digits in the metadata.)
+        if (std::string(share) != "0") {
+          EXPECT_LE(bytes, previous_bytes) << tag;
+        }
+        if (std::string(share) == "1" && e == std::floor(e)) {
+          EXPECT_EQ(worst, e) << tag;  // the bound is spent on the values
+          EXPECT_LT(bytes, previous_bytes) << tag;
+        }
+        previous_bytes = bytes;
+      }
+    }
 }
 
 TEST(MaxErrorCommand, ExportWritesTheDataGridNotTheLatticeCube) {

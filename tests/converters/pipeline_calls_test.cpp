@@ -125,7 +125,7 @@ TEST(PipelineCalls, OptionMessagesInEachFrontEndsSpelling) {
     EXPECT_EQ(&pipeline::option_spec(spec.name), &spec) << spec.name << " is named twice";
     EXPECT_EQ(std::string(spec.flag).rfind("--", 0), 0u) << spec.flag;
   }
-  EXPECT_EQ(pipeline::option_spec("quantization_share").values(), "a value in [0, 1)");
+  EXPECT_EQ(pipeline::option_spec("quantization_share").values(), "0..1");
   EXPECT_EQ(pipeline::option_spec("norm").values(), "one of l2, h1");
 }
 

@@ -3,7 +3,8 @@
 // hierarchies, values and bounds, with the range-coded form in use; every level prefix
 // decodes; the bytes do not depend on the thread count; and corrupt files whose checksums were
 // repaired (so the decoders themselves see the damage) give mlfe::Error or a valid read, never
-// a crash.
+// a crash. Form 2 (values quantized against the chosen prediction) keeps every value within the
+// bound and the same properties.
 #include <gtest/gtest.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/formats/hierarchy_io.h>
@@ -128,6 +129,51 @@ TEST(HierarchyFileV4, DecodesVersion3sValuesWithinTheBound) {
   EXPECT_GT(coded, 0);  // the range-coded form was exercised, not only v3's
 }
 
+// Form 2 (HierarchyWriteOptions::residual_quantization), property over random hierarchies,
+// values (real and integer) and bounds > 0: every level is stored in form 2, the reader decodes
+// exactly residual_quantized_values(), each within the bound (integers stay integers), every
+// level prefix decodes to the same values of its vertices, and the file is smaller than form 0's
+// on these smooth fields at wide bounds.
+TEST(HierarchyFileV4, ResidualFormDecodesItsValuesWithinTheBound) {
+  std::mt19937 rng(45);
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    for (bool integer : {true, false}) {
+      Hierarchy<3> h = lattice_hierarchy(seed + 20);
+      std::vector<double> u =
+          field(h, seed + 200, std::uniform_real_distribution<double>(0.5, 8)(rng), integer);
+      const LevelDescription<3> levels = renumber_canonically(h, {&u});
+      const double bound = integer ? double(std::uniform_int_distribution<int>(1, 9)(rng))
+                                   : std::uniform_real_distribution<double>(0.01, 9)(rng);
+      HierarchyWriteOptions o = options(4, bound, integer);
+      o.residual_quantization = true;
+      const std::vector<double> d = residual_quantized_values(h, levels, u, lattice_info(), o);
+      const auto p2 = temp_file("form2.mlfeh"), p0 = temp_file("form0.mlfeh");
+      write_hierarchy(p2.string(), h, levels, u, lattice_info(), o);
+      write_hierarchy(p0.string(), h, levels, u, lattice_info(), options(4, bound, integer));
+      const HierarchyFile f = read_hierarchy(p2.string());
+      const std::string what = "seed " + std::to_string(seed) + " integer " + std::to_string(integer) +
+                               " bound " + std::to_string(bound);
+      EXPECT_EQ(f.values, d) << what;
+      for (std::uint32_t v = 0; v < h.vertex_count(); ++v) {
+        ASSERT_LE(std::fabs(d[v] - u[v]), bound * (1 + 1e-12)) << what << " vertex " << v;
+        if (integer) {
+          ASSERT_EQ(d[v], std::nearbyint(d[v])) << what;
+        }
+      }
+      for (std::uint32_t form : level_forms(test::read_file_bytes(p2))) EXPECT_EQ(form, 2u) << what;
+      for (int k = 0; k < f.file_levels; ++k) {
+        const HierarchyFile fk = read_hierarchy(p2.string(), k);
+        ASSERT_LE(fk.values.size(), d.size());
+        for (std::size_t v = 0; v < fk.values.size(); ++v)
+          ASSERT_EQ(fk.values[v], d[v]) << what << " level " << k;
+      }
+      if (bound >= 4) {
+        EXPECT_LT(fs::file_size(p2), fs::file_size(p0)) << what;
+      }
+    }
+  }
+}
+
 TEST(HierarchyFileV4, EveryLevelPrefixDecodes) {
   const Hierarchy<3> h = lattice_hierarchy(7);
   const auto p = temp_file("prefix.mlfeh");
@@ -145,44 +191,52 @@ TEST(HierarchyFileV4, EveryLevelPrefixDecodes) {
 TEST(HierarchyFileV4, TheBytesDoNotDependOnTheThreads) {
   const Hierarchy<3> h = lattice_hierarchy(9);
   const std::vector<double> u = field(h, 10, 3, false);
-  Bytes one, two;
-  for (int threads : {1, 2}) {
-    const auto p = temp_file("threads.mlfeh");
-    tbb::task_arena(threads).execute(
-        [&] { write_hierarchy(p.string(), h, u, lattice_info(), options(4, 0.7, false)); });
-    (threads == 1 ? one : two) = test::read_file_bytes(p);
+  for (bool residual : {false, true}) {
+    HierarchyWriteOptions o = options(4, 0.7, false);
+    o.residual_quantization = residual;
+    Bytes one, two;
+    for (int threads : {1, 2}) {
+      const auto p = temp_file("threads.mlfeh");
+      tbb::task_arena(threads).execute([&] { write_hierarchy(p.string(), h, u, lattice_info(), o); });
+      (threads == 1 ? one : two) = test::read_file_bytes(p);
+    }
+    EXPECT_EQ(one, two) << residual;
   }
-  EXPECT_EQ(one, two);
 }
 
 // Truncations, bit flips and lying counts with the CRCs repaired: the range decoders, the marks
 // and the counts are checked themselves (under ASan in CI: no overflow, no unbounded allocation).
+// Forms 0 and 2.
 TEST(HierarchyFileV4, DamageBehindRepairedChecksumsIsRejectedOrReadsSafely) {
   const Hierarchy<3> h = lattice_hierarchy(11);
   const auto p = temp_file("good.mlfeh"), q = temp_file("bad.mlfeh");
-  write_hierarchy(p.string(), h, field(h, 12, 2, true), lattice_info(), options(4, 1, true));
-  const Bytes good = test::read_file_bytes(p);
-  for (std::size_t n = 16; n < good.size(); n += 1 + good.size() / 151) {
-    Bytes b(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
-    repair_crcs(b);
-    test::write_file_bytes(q, b);
-    EXPECT_THROW(read_hierarchy(q.string()), Error) << "cut at " << n;
-  }
-  int rejected = 0;
-  for (std::size_t i = 16; i < good.size(); i += 1 + good.size() / 397) {
-    for (std::uint8_t mask : {0x01, 0x40, 0xFF}) {
-      Bytes b = good;
-      b[i] ^= mask;
+  for (bool residual : {false, true}) {
+    HierarchyWriteOptions o = options(4, 1, true);
+    o.residual_quantization = residual;
+    write_hierarchy(p.string(), h, field(h, 12, 2, true), lattice_info(), o);
+    const Bytes good = test::read_file_bytes(p);
+    for (std::size_t n = 16; n < good.size(); n += 1 + good.size() / 151) {
+      Bytes b(good.begin(), good.begin() + static_cast<std::ptrdiff_t>(n));
       repair_crcs(b);
       test::write_file_bytes(q, b);
-      try {
-        read_hierarchy(q.string());
-      } catch (const Error&) {
-        ++rejected;
+      EXPECT_THROW(read_hierarchy(q.string()), Error) << "cut at " << n;
+    }
+    int rejected = 0;
+    for (std::size_t i = 16; i < good.size(); i += 1 + good.size() / 397) {
+      for (std::uint8_t mask : {0x01, 0x40, 0xFF}) {
+        Bytes b = good;
+        b[i] ^= mask;
+        repair_crcs(b);
+        test::write_file_bytes(q, b);
+        try {
+          read_hierarchy(q.string());
+        } catch (const Error&) {
+          ++rejected;
+        }
       }
     }
+    EXPECT_GT(rejected, 0);
   }
-  EXPECT_GT(rejected, 0);
 }
 
 // tests/data/small_lattice_v4.mlfeh (a seed of fuzz/run_fuzzers.sh) is small_lattice_v3.mlfeh
@@ -194,6 +248,21 @@ TEST(HierarchyFileV4, TheFuzzSeedReadsAsItsVersion3) {
   EXPECT_EQ(f4.version, 4);
   EXPECT_EQ(f4.values, f3.values);
   EXPECT_EQ(f4.data_dims, f3.data_dims);
+}
+
+// tests/data/small_lattice_v4_form2.mlfeh (a seed of fuzz/run_fuzzers.sh for the form-2 decoder)
+// is an error-bounded build (--max-error 3) of small_lattice_v3.mlfeh's 9 x 7 x 5 samples: it
+// reads, with its levels in form 2 and its bound.
+TEST(HierarchyFileV4, TheForm2FuzzSeedReads) {
+  const std::string path = std::string(MLFE_SOURCE_DIR) + "/tests/data/small_lattice_v4_form2.mlfeh";
+  const HierarchyFile f = read_hierarchy(path);
+  EXPECT_EQ(f.version, 4);
+  EXPECT_TRUE(f.integer_values);
+  EXPECT_EQ(f.sample_error_bound, 3);
+  EXPECT_EQ(f.data_dims, (std::array<std::int64_t, 3>{9, 7, 5}));
+  const std::vector<std::uint32_t> forms = level_forms(test::read_file_bytes(path));
+  ASSERT_FALSE(forms.empty());
+  for (std::uint32_t form : forms) EXPECT_EQ(form, 2u);
 }
 
 }  // namespace

@@ -145,6 +145,11 @@ struct HierarchyWriteOptions {
   /// v3: the values are integers (else mlfe::Error), stored as integer surpluses; max_error
   /// must then be an integer (0: lossless).
   bool integer_values = false;
+  /// v4 with max_error > 0 (coding 1 or 3): each level's values quantized against the
+  /// prediction its range coder chose rather than against the mean of the parents (level form 2,
+  /// docs/mlfeh-v4.md): other decoded values than v3's, each still within max_error, at fewer
+  /// bytes where the bound is wide. residual_quantized_values() gives them.
+  bool residual_quantization = false;
 };
 
 /// Version 2 throws LevelRebuildError (formats/hierarchy_levels.h) for a hierarchy its
@@ -167,6 +172,15 @@ void write_hierarchy(const std::string& path, const Hierarchy<D>& h, const Level
                      const std::vector<double>& values, const HierarchyFileInfo& info,
                      const HierarchyWriteOptions& options);
 
+/// The values a reader decodes from the file write_hierarchy(path, h, levels, values, info,
+/// options) writes with options.residual_quantization (version 4, max_error > 0): every one
+/// within options.max_error of `values`. Throws mlfe::Error as the writer does.
+template <int D>
+std::vector<double> residual_quantized_values(const Hierarchy<D>& h, const LevelDescription<D>& levels,
+                                              const std::vector<double>& values,
+                                              const HierarchyFileInfo& info,
+                                              const HierarchyWriteOptions& options);
+
 /// Writes a HierarchyFile (dispatches on the variant; `dim` must match it).
 void write_hierarchy(const std::string& path, const HierarchyFile& file,
                      const HierarchyWriteOptions& options = {});
@@ -187,6 +201,16 @@ HierarchyFile read_hierarchy(const std::string& path, int max_level = -1);
 /// unreadable or short file gives false).
 bool is_hierarchy_file(const std::string& path);
 
+extern template std::vector<double> residual_quantized_values<2>(const Hierarchy<2>&,
+                                                                 const LevelDescription<2>&,
+                                                                 const std::vector<double>&,
+                                                                 const HierarchyFileInfo&,
+                                                                 const HierarchyWriteOptions&);
+extern template std::vector<double> residual_quantized_values<3>(const Hierarchy<3>&,
+                                                                 const LevelDescription<3>&,
+                                                                 const std::vector<double>&,
+                                                                 const HierarchyFileInfo&,
+                                                                 const HierarchyWriteOptions&);
 extern template void write_hierarchy<2>(const std::string&, const Hierarchy<2>&, const std::vector<double>&,
                                         const HierarchyFileInfo&, const HierarchyWriteOptions&);
 extern template void write_hierarchy<3>(const std::string&, const Hierarchy<3>&, const std::vector<double>&,
