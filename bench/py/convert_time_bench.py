@@ -7,13 +7,26 @@ scripts/build_bench_peers.sh; its own simplify seconds, PLY read excluded), then
 --iso ISO -o X.glb` (defaults), CPU and wall seconds. One line per run with the 1-minute load average; quality
 figures are convert_bench.py's.
 Uses /usr/bin/python3 (python3-vtk9)."""
-import json, os, resource, subprocess, sys, time
+import os
+import resource
+import subprocess
+import sys
+import time
+
 import vtk
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import convert_bench as cb  # noqa: E402
+import iso_bench as ib  # noqa: E402
+
 mlfe, peers, reps = sys.argv[1], sys.argv[2], int(sys.argv[3])
-W = os.path.join(os.environ.get("TMPDIR", "/tmp"), "convert_time_bench")
-os.makedirs(W, exist_ok=True)
+WORK = os.path.join(os.environ.get("TMPDIR", "/tmp"), "convert_time_bench")
+os.makedirs(WORK, exist_ok=True)
 vtk.vtkSMPTools.Initialize(1)
+
+
+def W(name):
+    return os.path.join(WORK, name)
 
 
 def load():
@@ -37,22 +50,15 @@ def peer(vol, iso):
     fe.Update()
     mc_tris = fe.GetOutput().GetNumberOfPolys()  # FE and MC give the same triangles on the lattice
     c_fe, t_fe = time.process_time() - c0, time.perf_counter() - t0
-    w = vtk.vtkPLYWriter()
-    w.SetFileName(f"{W}/fe.ply")
-    w.SetInputData(fe.GetOutput())
-    w.Write()
-    k0, t1 = child_cpu(), time.perf_counter()
-    out = subprocess.run([f"{peers}/meshopt_update", f"{W}/fe.ply", str(mc_tris // 10), f"{W}/femu.ply"],
-                         stdout=subprocess.PIPE, text=True, check=True).stdout
-    j = json.loads(out.strip().splitlines()[-1])
-    return dict(cpu_fe=c_fe, wall_fe=t_fe, simplify=j["simplify_seconds"], tool_cpu=child_cpu() - k0,
-                tool_wall=time.perf_counter() - t1, tris=j["triangles"])
+    ib.write_ply(fe.GetOutput(), W("fe.ply"))
+    row = cb.meshopt_update_row(f"{peers}/meshopt_update", W, mc_tris, t_fe)
+    return dict(cpu_fe=c_fe, wall_fe=t_fe, simplify=row["seconds"] - t_fe, tris=row["triangles"])
 
 
 def mlfe_run(vol, iso, threads):
     k0, t0 = child_cpu(), time.perf_counter()
     subprocess.run([mlfe, "--threads", str(threads), "convert", vol, "--iso", str(iso), "-o",
-                    f"{W}/m{threads}.glb"], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                    W(f"m{threads}.glb")], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return dict(cpu=child_cpu() - k0, wall=time.perf_counter() - t0)
 
 
@@ -63,8 +69,8 @@ for case in sys.argv[4:]:
         l = load()
         p = peer(vol, iso)
         print(f"{os.path.basename(vol)} peer load {l:.1f}: FE cpu {p['cpu_fe']:.2f} wall {p['wall_fe']:.2f}; "
-              f"simplifyWithUpdate {p['simplify']:.2f} s (tool incl. PLY read: cpu {p['tool_cpu']:.2f} wall "
-              f"{p['tool_wall']:.2f}); {p['tris']} tris; core cpu {p['cpu_fe'] + p['simplify']:.2f}", flush=True)
+              f"simplifyWithUpdate {p['simplify']:.2f} s; {p['tris']} tris; core cpu "
+              f"{p['cpu_fe'] + p['simplify']:.2f}", flush=True)
         for th in (1, 2):
             l = load()
             m = mlfe_run(vol, iso, th)
