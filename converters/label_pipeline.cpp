@@ -172,6 +172,29 @@ Structures structure_surfaces(const LabelInterfaces& x, const std::vector<std::u
   return out;
 }
 
+// Peak bytes of a label conversion per triangle extraction makes: the complex (positions,
+// triangles, labels), smoothing's neighbour lists and the decimator's state, all of which
+// scale with the interfaces. Measured as peak RSS over extracted triangles on the atlases of
+// bench/py/labels_bench.py (bench/RESULTS.md, session 25), and rounded up.
+constexpr double kBytesPerInterfaceTriangle = 160;
+
+// Refuses, before any interface is built, a label map whose conversion would not fit the
+// budget: its interfaces scale with their area, not the volume's size, so the reader's budget
+// check does not bound them (a noisy 250 M-voxel map fits as a volume and has billions of
+// interface triangles).
+void check_label_memory(const ScalarGrid& grid, const LabelGrid& g, const LabelOptions& o) {
+  const std::size_t budget = o.max_memory.bytes();
+  if (budget == 0) return;
+  const InterfaceCount n = count_label_interfaces(g);
+  const double volume =
+      double(grid.values.size()) * sizeof(float) + double(g.labels.size()) * sizeof(std::uint16_t);
+  const double need = volume + double(n.triangles) * kBytesPerInterfaceTriangle;
+  if (need <= double(budget)) return;
+  throw pipeline::OptionInputError(
+      fmt::format("{}: its label interfaces ({} triangles) need about {:.0f} MiB, over {} {}", grid.source,
+                  n.triangles, need / 1048576.0, pipeline::option_ref("max_memory"), o.max_memory.text()));
+}
+
 }  // namespace
 
 nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, const LabelOptions& o,
@@ -198,6 +221,7 @@ nlohmann::json convert_labels(const ScalarGrid& grid, const std::string& out, co
   // Step 2: small pieces take their surroundings' label; voxel counts after that.
   const ComponentRemoval removed = remove_small_components(g, o.min_component);
   const auto counts = label_counts(g);
+  check_label_memory(grid, g, o);
   const double prepare_s = seconds_since(t0);
 
   // Step 3: the interface complex, smoothed and simplified as a whole.

@@ -90,6 +90,7 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
   report(0, "reading");
   ConvertFileResult r;
   LabelOptions lo = *o.labels;
+  lo.max_memory = o.build.max_memory;
   if (!lo.warn) lo.warn = [&r](const std::string& w) { r.warnings.push_back(w); };
   ScalarGrid grid;
   if (is_hierarchy_file(input)) {

@@ -381,45 +381,82 @@ ComponentRemoval remove_small_components(LabelGrid& g, std::size_t min_voxels) {
   return result;
 }
 
-std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
+namespace {
+
+// Visits every Kuhn tetrahedron of z layer k of cubes (-1 .. nz-1: the padded lattice) whose
+// corners carry more than one label, in lattice order, as visit(i, j, order, corner labels c[8]
+// of its cube, corner b at offset bits (b & 1, b >> 1 & 1, b >> 2 & 1)).
+template <class Visit>
+void scan_mixed_layer(const LabelGrid& g, std::int64_t k, Visit&& visit) {
   const std::int64_t nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];
-  // One list per z layer of cubes (from -1: the padding), concatenated in order.
-  std::vector<std::vector<KuhnTet>> layers(std::size_t(nz + 1));
-  tbb::parallel_for(std::int64_t(-1), nz, [&](std::int64_t k) {
-    auto& out = layers[std::size_t(k + 1)];
-    for (std::int64_t j = -1; j < ny; ++j) {
-      // The four rows of voxels along i around this row of cubes (r = dj + 2 dk; null outside
-      // the lattice), read a column (the four labels at one i) at a time.
-      const std::uint16_t* row[4];
-      for (int r = 0; r < 4; ++r) {
-        const std::int64_t jj = j + (r & 1), kk = k + (r >> 1);
-        row[r] = jj >= 0 && jj < ny && kk >= 0 && kk < nz
-                     ? g.labels.data() + static_cast<std::size_t>(nx * (jj + ny * kk))
-                     : nullptr;
+  for (std::int64_t j = -1; j < ny; ++j) {
+    // The four rows of voxels along i around this row of cubes (r = dj + 2 dk; null outside
+    // the lattice), read a column (the four labels at one i) at a time.
+    const std::uint16_t* row[4];
+    for (int r = 0; r < 4; ++r) {
+      const std::int64_t jj = j + (r & 1), kk = k + (r >> 1);
+      row[r] = jj >= 0 && jj < ny && kk >= 0 && kk < nz
+                   ? g.labels.data() + static_cast<std::size_t>(nx * (jj + ny * kk))
+                   : nullptr;
+    }
+    std::uint16_t column[2][4];
+    auto read_column = [&](std::int64_t i, std::uint16_t* c) {
+      for (int r = 0; r < 4; ++r) c[r] = row[r] && i >= 0 && i < nx ? row[r][i] : 0;
+    };
+    read_column(-1, column[1]);
+    for (std::int64_t i = -1; i < nx; ++i) {
+      std::copy(column[1], column[1] + 4, column[0]);
+      read_column(i + 1, column[1]);
+      std::uint16_t c[8];
+      bool uniform = true;
+      for (int b = 0; b < 8; ++b) {
+        c[b] = column[b & 1][b >> 1];
+        uniform &= c[b] == c[0];
       }
-      std::uint16_t column[2][4];
-      auto read_column = [&](std::int64_t i, std::uint16_t* c) {
-        for (int r = 0; r < 4; ++r) c[r] = row[r] && i >= 0 && i < nx ? row[r][i] : 0;
-      };
-      read_column(-1, column[1]);
-      for (std::int64_t i = -1; i < nx; ++i) {
-        std::copy(column[1], column[1] + 4, column[0]);
-        read_column(i + 1, column[1]);
-        // Corner b of the cube: offset bits (i, j, k) = (b & 1, b >> 1 & 1, b >> 2 & 1).
-        std::uint16_t c[8];
-        bool uniform = true;
-        for (int b = 0; b < 8; ++b) {
-          c[b] = column[b & 1][b >> 1];
-          uniform &= c[b] == c[0];
-        }
-        if (uniform) continue;
-        for (std::uint8_t o = 0; o < 6; ++o) {
-          const std::uint16_t l0 = c[kCorner[o][0]];
-          if (c[kCorner[o][1]] != l0 || c[kCorner[o][2]] != l0 || c[kCorner[o][3]] != l0)
-            out.push_back({std::int32_t(i), std::int32_t(j), std::int32_t(k), o});
-        }
+      if (uniform) continue;
+      for (std::uint8_t o = 0; o < 6; ++o) {
+        const std::uint16_t l0 = c[kCorner[o][0]];
+        if (c[kCorner[o][1]] != l0 || c[kCorner[o][2]] != l0 || c[kCorner[o][3]] != l0) visit(i, j, o, c);
       }
     }
+  }
+}
+
+// The triangles Extractor::tet emits for a tetrahedron with these corner labels.
+std::size_t tet_triangles(const std::uint16_t l[4]) {
+  int distinct = 1;
+  for (int s = 1; s < 4; ++s) {
+    bool seen = false;
+    for (int r = 0; r < s; ++r) seen |= l[r] == l[s];
+    distinct += !seen;
+  }
+  if (distinct == 1) return 0;
+  if (distinct == 2) {
+    int same = 0;
+    for (int s = 0; s < 4; ++s) same += l[s] == l[0];
+    return same == 2 ? 2 : 1;
+  }
+  std::size_t n = 0;
+  for (int omit = 0; omit < 4; ++omit) {
+    int f[3], m = 0;
+    for (int s = 0; s < 4; ++s)
+      if (s != omit) f[m++] = s;
+    const int mixed = (l[f[0]] != l[f[1]]) + (l[f[0]] != l[f[2]]) + (l[f[1]] != l[f[2]]);
+    n += mixed == 2 ? 1 : mixed == 3 ? 3 : 0;
+  }
+  return n;
+}
+
+}  // namespace
+
+std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
+  // One list per z layer of cubes (from -1: the padding), concatenated in order.
+  std::vector<std::vector<KuhnTet>> layers(std::size_t(g.dims[2] + 1));
+  tbb::parallel_for(std::int64_t(-1), g.dims[2], [&](std::int64_t k) {
+    auto& out = layers[std::size_t(k + 1)];
+    scan_mixed_layer(g, k, [&](std::int64_t i, std::int64_t j, std::uint8_t o, const std::uint16_t*) {
+      out.push_back({std::int32_t(i), std::int32_t(j), std::int32_t(k), o});
+    });
   });
   std::size_t total = 0;
   for (const auto& l : layers) total += l.size();
@@ -427,6 +464,21 @@ std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g) {
   all.reserve(total);
   for (const auto& l : layers) all.insert(all.end(), l.begin(), l.end());
   return all;
+}
+
+InterfaceCount count_label_interfaces(const LabelGrid& g) {
+  std::vector<InterfaceCount> layers(std::size_t(g.dims[2] + 1));
+  tbb::parallel_for(std::int64_t(-1), g.dims[2], [&](std::int64_t k) {
+    auto& out = layers[std::size_t(k + 1)];
+    scan_mixed_layer(g, k, [&](std::int64_t, std::int64_t, std::uint8_t o, const std::uint16_t* c) {
+      const std::uint16_t l[4] = {c[kCorner[o][0]], c[kCorner[o][1]], c[kCorner[o][2]], c[kCorner[o][3]]};
+      ++out.tetrahedra;
+      out.triangles += tet_triangles(l);
+    });
+  });
+  InterfaceCount total;
+  for (const auto& l : layers) total.tetrahedra += l.tetrahedra, total.triangles += l.triangles;
+  return total;
 }
 
 LabelInterfaces extract_label_interfaces(const LabelGrid& g, const std::vector<KuhnTet>& tets) {

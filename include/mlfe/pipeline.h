@@ -452,6 +452,10 @@ struct LabelOptions {
   bool draco = true;
   bool quantize = false;
   double tolerance = 0;  ///< mm for Draco/quantization; 0: a tenth of the smallest voxel spacing
+  /// What the conversion may use: the interfaces are counted before they are built, and a label
+  /// map whose estimated peak (volume, labels and interfaces) is over the budget is refused with
+  /// pipeline::OptionInputError instead of running out of memory. convert() passes its build's.
+  MemoryBudget max_memory;
   /// Called with each warning (table labels absent from the volume, picked labels absent).
   std::function<void(const std::string&)> warn;
 };

@@ -13,6 +13,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <set>
 
 #include "tests/test_paths.h"
@@ -216,6 +217,29 @@ TEST(LabelsCommand, BadLabelsAndTablesAreExit2WithoutOutput) {
   EXPECT_NE(r.err.find("line 2"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(scratch() + "/t.glb"));
   EXPECT_EQ(run_mlfe("convert " + in + " --labels 3-x -o " + scratch() + "/t.glb").status, 2);
+}
+
+// Interfaces scale with their area, not the volume's size: a noisy label map that reads well
+// within the budget would need far more for its interfaces, and is refused before they are built.
+TEST(LabelsCommand, InterfacesOverTheMemoryBudgetAreExit2WithoutOutput) {
+  ScalarGrid g;
+  const int n = 48;
+  g.dims = {n, n, n};
+  g.values.resize(std::size_t(n) * n * n);
+  std::mt19937 rng(40);
+  for (auto& v : g.values) v = float(rng() % 8);
+  const std::string noise = scratch() + "/noise.nrrd", out = scratch() + "/noise.glb";
+  write_volume(noise, g);
+  const auto r = run_mlfe("convert " + noise + " --labels --max-memory 64M -o " + out);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_NE(r.err.find(noise + ": its label interfaces"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--max-memory 64M"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
+  // The phantom's interfaces fit the same budget.
+  EXPECT_EQ(run_mlfe("convert " + write_phantom("budget") + " --labels --max-memory 64M -o " + out).status,
+            0);
+  EXPECT_TRUE(fs::exists(out));
 }
 
 TEST(LabelsCommand, InfoListsLabelsWithVoxelsAndVolumes) {

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <random>
 #include <set>
 
 namespace mlfe {
@@ -356,6 +357,27 @@ TEST(LabelSurface, MixedTetsAreExactlyThoseWithMoreThanOneLabel) {
   EXPECT_EQ(got, expected);
   // Not every cube: the cube at (2, 0, 2) is all 9s.
   EXPECT_LT(got.size(), std::size_t(5 * 5 * 5 * 6));
+}
+
+// The count that lets convert refuse a label map before building its interfaces is exactly
+// what extraction builds: two-label tetrahedra cut one or two triangles, three- and four-label
+// ones fans of several; an all-one-label lattice has none.
+TEST(LabelSurface, InterfaceCountIsWhatExtractionMakes) {
+  std::mt19937 rng(25);
+  const std::vector<LabelGrid> grids = {
+      atlas_phantom(),
+      phantom(4,
+              [](int i, int j, int k) -> std::uint16_t {
+                return std::uint16_t(1 + i % 2 + 2 * (j % 2) + 4 * (k % 2));
+              }),
+      phantom(6, [&](int, int, int) -> std::uint16_t { return std::uint16_t(rng() % 5); }),
+      phantom(3, [](int, int, int) -> std::uint16_t { return 0; })};
+  for (const auto& g : grids) {
+    const InterfaceCount n = count_label_interfaces(g);
+    EXPECT_EQ(n.tetrahedra, mixed_kuhn_tets(g).size());
+    EXPECT_EQ(n.triangles, complex_of(g).triangles.size());
+  }
+  EXPECT_GT(count_label_interfaces(grids[2]).triangles, count_label_interfaces(grids[2]).tetrahedra);
 }
 
 TEST(LabelSurface, SmallComponentsAreRelabelledToTheirSurroundings) {

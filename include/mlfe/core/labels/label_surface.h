@@ -98,6 +98,16 @@ struct KuhnTet {
 /// lattice order (z slowest). Parallel; the same list for any thread count.
 std::vector<KuhnTet> mixed_kuhn_tets(const LabelGrid& g);
 
+/// What extraction would make of a label lattice, counted without making it: the mixed
+/// tetrahedra (mixed_kuhn_tets(g).size()) and the triangles extract_label_interfaces gives for
+/// them. One pass over the labels, no allocation per tetrahedron, so a caller can refuse a
+/// label map whose interfaces would not fit before building them.
+struct InterfaceCount {
+  std::size_t tetrahedra = 0;
+  std::size_t triangles = 0;
+};
+InterfaceCount count_label_interfaces(const LabelGrid& g);
+
 /// The interface complex: triangles between label regions over one shared vertex set (the
 /// regions are the labels, InterfaceComplex::labels). Positions are in index coordinates
 /// (voxels) of the lattice, so core/simplify's tolerances on it (simplify(), or
