@@ -76,6 +76,10 @@ ConvertFileResult convert_label_map(const std::string& input, const std::string&
     throw OptionError(labels + ": " + labels + " and " + option_ref("iso") + " exclude each other");
   if (!o.render.empty())
     throw OptionError(labels + ": " + labels + " writes no image (no " + option_ref("render") + ")");
+  // The label path converts the whole map at once: an explicit brick size would be ignored.
+  if (o.asset.bricks > 0)
+    throw OptionError(option_ref("bricks") + ": " + labels + " converts the whole label map at once (no " +
+                      option_ref("bricks") + ")");
   check_options(*o.labels);
   check_output_path(output, kAssetExtensions);
   if (!o.hierarchy.empty()) {

@@ -107,8 +107,13 @@ class Options {
     return fspath(o);
   }
   void finish() const {
-    if (!left_.empty())
-      throw Error("unknown option '" + left_.begin()->first + "'" + did_you_mean(left_.begin()->first));
+    if (left_.empty()) return;
+    const std::string& name = left_.begin()->first;
+    // A real option this call does not take (bricks with labels) is not a misspelling of itself.
+    for (const auto& spec : pipeline::option_table())
+      if (spec.spelled(pipeline::Spelling::kPython) == name)
+        throw Error("option '" + name + "' does not apply to this call");
+    throw Error("unknown option '" + name + "'" + did_you_mean(name));
   }
 
  private:

@@ -59,6 +59,8 @@ void run_convert(const ConvertState& s, const char* command) {
 void run_convert_labels(const ConvertState& s) {
   if (!s.asset.iso.empty()) throw CLI::ValidationError("--labels", "--labels and --iso exclude each other");
   if (!s.render.empty()) throw CLI::ValidationError("--labels", "--labels writes no image (no --render)");
+  if (s.asset.bricks > 0)
+    throw CLI::ValidationError("--bricks", "--labels converts the whole label map at once (no --bricks)");
   check_output_path(s.output, kAssetExtensions);
   if (!s.hierarchy.empty()) {
     if (is_hierarchy_file(s.input))

@@ -217,6 +217,11 @@ TEST(LabelsCommand, BadLabelsAndTablesAreExit2WithoutOutput) {
   EXPECT_NE(r.err.find("line 2"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(scratch() + "/t.glb"));
   EXPECT_EQ(run_mlfe("convert " + in + " --labels 3-x -o " + scratch() + "/t.glb").status, 2);
+  // An explicit brick size is refused rather than ignored (usage: exit 1).
+  const auto b = run_mlfe("convert " + in + " --labels --bricks 16 -o " + scratch() + "/t.glb");
+  EXPECT_EQ(b.status, 1);
+  EXPECT_NE(b.err.find("--bricks"), std::string::npos) << b.err;
+  EXPECT_FALSE(fs::exists(scratch() + "/t.glb"));
 }
 
 // Interfaces scale with their area, not the volume's size: a noisy label map that reads well

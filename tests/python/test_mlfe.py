@@ -190,6 +190,10 @@ class PythonModuleTest(unittest.TestCase):
         with self.assertRaises(mlfe.Error):
             mlfe.convert(np.full((4, 4, 4), 2.5, np.float32), os.path.join(self.dir, "bad.glb"), labels=True)
         self.assertFalse(os.path.exists(os.path.join(self.dir, "bad.glb")))
+        # An option of other conversions, not of this one, is named as such (not "did you mean" itself).
+        with self.assertRaisesRegex(mlfe.Error, "option 'bricks' does not apply"):
+            mlfe.convert(atlas, os.path.join(self.dir, "b.glb"), labels=True, bricks=16)
+        self.assertFalse(os.path.exists(os.path.join(self.dir, "b.glb")))
 
     def test_an_output_over_a_file_the_read_opens_is_refused(self):
         """A report over a raw volume's sidecar or over the label table (named or beside the
