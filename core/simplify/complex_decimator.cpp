@@ -43,6 +43,102 @@ std::uint32_t number_kept(std::size_t n, Kept kept, std::vector<std::uint32_t>& 
   return offset[chunks];
 }
 
+// Per vertex the triangles at it, in one pool: each vertex starts with a slot sized for its
+// triangles then (the slot numbered as the vertex); a merge chains the gone vertex's slots after
+// the survivor's, and those hold every triangle the survivor gains (each comes from the gone
+// one's list); packing a list (dropping its dead triangles) fills its first slots and unchains
+// the rest. 12 bytes per vertex and 4 per corner, where a vector per vertex took 56 bytes.
+class TriangleLists {
+ public:
+  static constexpr std::uint32_t kNoSlot = ~0u;
+
+  class Iterator {
+   public:
+    Iterator(const TriangleLists* l, std::uint32_t slot) : l_(l), slot_(slot) { skip_full(); }
+    std::uint32_t operator*() const { return l_->pool_[l_->start_[slot_] + i_]; }
+    Iterator& operator++() {
+      ++i_;
+      skip_full();
+      return *this;
+    }
+    bool operator!=(const Iterator& o) const { return slot_ != o.slot_ || i_ != o.i_; }
+
+   private:
+    void skip_full() {
+      while (slot_ != kNoSlot && i_ == l_->size_[slot_]) slot_ = l_->next_[slot_], i_ = 0;
+    }
+    const TriangleLists* l_;
+    std::uint32_t slot_, i_ = 0;
+  };
+  struct Range {
+    Iterator b, e;
+    Iterator begin() const { return b; }
+    Iterator end() const { return e; }
+  };
+
+  /// Vertex v's triangles, in list order.
+  Range of(std::uint32_t v) const { return {Iterator(this, v), Iterator(this, kNoSlot)}; }
+
+  /// Per vertex of `triangles` (nv of them) its triangles, in triangle order.
+  void build(std::size_t nv, const std::vector<std::array<std::uint32_t, 3>>& triangles) {
+    std::vector<std::uint32_t> count(nv, 0);
+    for (const auto& t : triangles)
+      for (auto v : t) ++count[v];
+    allocate(count);
+    std::vector<std::uint32_t> at(start_.begin(), start_.end() - 1);
+    for (std::uint32_t t = 0; t < triangles.size(); ++t)
+      for (auto v : triangles[t]) pool_[at[v]++] = t;
+  }
+
+  /// `sizes[v]` triangles per vertex, written by fill(v, out) (in parallel over the vertices).
+  template <class Fill>
+  void assign(const std::vector<std::uint32_t>& sizes, Fill fill) {
+    allocate(sizes);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sizes.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t v = r.begin(); v != r.end(); ++v) fill(v, pool_.data() + start_[v]);
+                      });
+  }
+
+  /// Chains u's list after v's (u is gone into v).
+  void append(std::uint32_t v, std::uint32_t u) {
+    std::uint32_t s = v;
+    while (next_[s] != kNoSlot) s = next_[s];
+    next_[s] = u;
+  }
+
+  /// Keeps the triangles of v's list for which keep(t) holds, in their order.
+  template <class Keep>
+  void pack(std::uint32_t v, Keep keep) {
+    // Writing never overtakes reading: a slot is written only after every earlier one is full.
+    std::uint32_t to = v, at = 0;
+    for (std::uint32_t s = v; s != kNoSlot; s = next_[s]) {
+      const std::uint32_t n = size_[s];
+      for (std::uint32_t i = 0; i < n; ++i) {
+        const std::uint32_t t = pool_[start_[s] + i];
+        if (!keep(t)) continue;
+        while (at == start_[to + 1] - start_[to]) size_[to] = at, to = next_[to], at = 0;
+        pool_[start_[to] + at++] = t;
+      }
+    }
+    size_[to] = at, next_[to] = kNoSlot;
+  }
+
+ private:
+  void allocate(const std::vector<std::uint32_t>& sizes) {
+    const std::size_t n = sizes.size();
+    std::vector<std::uint32_t>().swap(pool_);
+    start_.assign(n + 1, 0);
+    std::partial_sum(sizes.begin(), sizes.end(), start_.begin() + 1);
+    size_ = sizes;
+    next_.assign(n, kNoSlot);
+    pool_.resize(start_[n]);
+  }
+
+  // Per slot its first place in the pool (and the end), its triangles, the next slot in its chain.
+  std::vector<std::uint32_t> start_, size_, next_, pool_;
+};
+
 // Garland & Heckbert's quadric edge collapse (SIGGRAPH 1997) over the whole interface complex
 // at once, with the optimal placement of the merged vertex, constrained so the complex stays a
 // partition: a vertex inside one interface merges with a neighbour inside the same interface
@@ -91,12 +187,24 @@ class ComplexDecimator {
       for (int i = 0; i < 3; ++i) b[i] += q.b[i];
       c += q.c, w += q.w;
     }
-    double eval(const Vec3& p) const {
-      const double ap0 = a[0] * p[0] + a[1] * p[1] + a[2] * p[2],
-                   ap1 = a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
-                   ap2 = a[2] * p[0] + a[4] * p[1] + a[5] * p[2];
-      return p[0] * ap0 + p[1] * ap1 + p[2] * ap2 - 2 * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) + c;
+    Vec3 times(const Vec3& p) const {
+      return {a[0] * p[0] + a[1] * p[1] + a[2] * p[2], a[1] * p[0] + a[3] * p[1] + a[4] * p[2],
+              a[2] * p[0] + a[4] * p[1] + a[5] * p[2]};
     }
+    double eval(const Vec3& p) const {
+      return dot(p, times(p)) - 2 * (b[0] * p[0] + b[1] * p[1] + b[2] * p[2]) + c;
+    }
+    // The same quadric about an origin moved by d (p - d in place of p).
+    void move_origin(const Vec3& d) {
+      const Vec3 ad = times(d);
+      c += dot(d, ad) - 2 * (b[0] * d[0] + b[1] * d[1] + b[2] * d[2]);
+      for (int i = 0; i < 3; ++i) b[i] -= ad[i];
+    }
+  };
+  // A vertex's quadric as kept: in float, about the vertex's position, where the distances that
+  // matter (a fraction of a voxel) keep their digits; 44 bytes instead of 88.
+  struct StoredQuadric {
+    float a[6], b[3], c, w;
   };
   // A queued edge. Every change to an end queues its edges again, so an entry whose edge now
   // plans into another bucket (or not at all) is stale and skipped: the fresh entry is elsewhere.
@@ -135,19 +243,10 @@ class ComplexDecimator {
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
 
-  // Per vertex its triangles in triangle order, each list reserved at its final size.
+  // Per vertex its triangles in triangle order.
   void vertex_triangles() {
     const std::size_t nv = x_.positions.size();
-    std::vector<std::uint32_t> count(nv, 0);
-    for (const auto& t : x_.triangles)
-      for (auto v : t) ++count[v];
-    tris_of_.resize(nv);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v) tris_of_[v].reserve(count[v]);
-                      });
-    for (std::uint32_t t = 0; t < x_.triangles.size(); ++t)
-      for (auto v : x_.triangles[t]) tris_of_[v].push_back(t);
+    tris_of_.build(nv, x_.triangles);
     tri_alive_.assign(x_.triangles.size(), 1);
     alive_.assign(nv, 1);
   }
@@ -168,7 +267,7 @@ class ComplexDecimator {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t v = r.begin(); v != r.end(); ++v)
-                          witness_[v] = tris_of_[v].empty() ? ~0u : tris_of_[v][0];
+                          witness_[v] = first_triangle(std::uint32_t(v));
                       });
     // The input is represented by its vertices: a new triangle's sample within reach_ of the input
     // surface may be up to about half an edge from the nearest one.
@@ -177,6 +276,12 @@ class ComplexDecimator {
       for (int k = 0; k < 3; ++k) sum += distance(x_.positions[t[k]], x_.positions[t[(k + 1) % 3]]);
     const double mean_edge = x_.triangles.empty() ? 0.0 : sum / (3.0 * double(x_.triangles.size()));
     reach_out_ = reach_ + kOutSlack * mean_edge;
+  }
+
+  // v's first triangle (~0u: none).
+  std::uint32_t first_triangle(std::uint32_t v) const {
+    const auto r = tris_of_.of(v);
+    return r.begin() != r.end() ? *r.begin() : ~0u;
   }
 
   // Kinds: interior (no junction edge), curve (two junction edges), fixed (other counts, or a
@@ -191,7 +296,7 @@ class ComplexDecimator {
           std::vector<std::pair<std::uint32_t, std::uint32_t>> around, link;
           for (std::size_t v = r.begin(); v != r.end(); ++v) {
             around.clear();
-            for (auto t : tris_of_[v])
+            for (auto t : tris_of_.of(v))
               for (auto w : x_.triangles[t])
                 if (w != v) around.emplace_back(w, std::uint32_t(x_.labels[t][0]) << 16 | x_.labels[t][1]);
             std::sort(around.begin(), around.end());
@@ -213,7 +318,7 @@ class ComplexDecimator {
   // form one cycle.
   bool one_fan(std::uint32_t v, std::vector<std::pair<std::uint32_t, std::uint32_t>>& link) const {
     link.clear();
-    for (auto t : tris_of_[v]) {
+    for (auto t : tris_of_.of(v)) {
       const auto& tri = x_.triangles[t];
       const int c = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
       link.emplace_back(tri[(c + 1) % 3], tri[(c + 2) % 3]);
@@ -232,13 +337,15 @@ class ComplexDecimator {
     return steps + 1 == link.size();
   }
 
-  // Per vertex the sum of its triangles' area-weighted plane quadrics, in triangle order.
+  // Per vertex the sum of its triangles' area-weighted plane quadrics, in triangle order, about
+  // the vertex.
   void init_quadrics() {
-    q_.assign(x_.positions.size(), Quadric{});
+    q_.resize(x_.positions.size());
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, q_.size(), 4096), [&](const tbb::blocked_range<std::size_t>& r) {
-          for (std::size_t v = r.begin(); v != r.end(); ++v)
-            for (auto t : tris_of_[v]) {
+          for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            Quadric sum;
+            for (auto t : tris_of_.of(std::uint32_t(v))) {
               const auto& tri = x_.triangles[t];
               const Vec3 &p0 = x_.positions[tri[0]], &p1 = x_.positions[tri[1]], &p2 = x_.positions[tri[2]];
               Vec3 n = cross(sub(p1, p0), sub(p2, p0));
@@ -246,7 +353,7 @@ class ComplexDecimator {
               if (!(len > 0)) continue;
               const double area = len / 2;
               for (auto& c : n) c /= len;
-              const double d = -dot(n, p0);
+              const double d = -dot(n, sub(p0, x_.positions[v]));
               // area * (n.p + d)^2
               Quadric q;
               q.a[0] = area * n[0] * n[0], q.a[1] = area * n[0] * n[1], q.a[2] = area * n[0] * n[2];
@@ -254,9 +361,30 @@ class ComplexDecimator {
               for (int c = 0; c < 3; ++c) q.b[c] = -area * d * n[c];
               q.c = area * d * d;
               q.w = area;
-              q_[v].add(q);
+              sum.add(q);
             }
+            store_quadric(std::uint32_t(v), sum);
+          }
         });
+  }
+
+  // v's quadric about `origin`.
+  Quadric quadric_about(std::uint32_t v, const Vec3& origin) const {
+    const StoredQuadric& s = q_[v];
+    Quadric q;
+    for (int i = 0; i < 6; ++i) q.a[i] = s.a[i];
+    for (int i = 0; i < 3; ++i) q.b[i] = s.b[i];
+    q.c = s.c, q.w = s.w;
+    q.move_origin(sub(origin, x_.positions[v]));
+    return q;
+  }
+
+  // Keeps q (about v's position) as v's quadric.
+  void store_quadric(std::uint32_t v, const Quadric& q) {
+    StoredQuadric& s = q_[v];
+    for (int i = 0; i < 6; ++i) s.a[i] = float(q.a[i]);
+    for (int i = 0; i < 3; ++i) s.b[i] = float(q.b[i]);
+    s.c = float(q.c), s.w = float(q.w);
   }
 
   // Each block's inside alone, the cheap merges only: most merges of the complex, where the
@@ -294,7 +422,7 @@ class ComplexDecimator {
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t v = r.begin(); v != r.end(); ++v) {
                           bool inside = alive_[v];
-                          for (auto t : tris_of_[v])
+                          for (auto t : tris_of_.of(v))
                             if (tri_alive_[t])
                               for (auto w : x_.triangles[t]) inside &= cell[w] == cell[v];
                           if (inside) scope_[v] = 0;
@@ -437,7 +565,7 @@ class ComplexDecimator {
     int n = 0;
     std::uint32_t pair = 0;
     bool same = true;
-    for (auto t : tris_of_[a]) {
+    for (auto t : tris_of_.of(a)) {
       if (!tri_alive_[t]) continue;
       const auto& tri = x_.triangles[t];
       if (tri[0] != b && tri[1] != b && tri[2] != b) continue;
@@ -488,26 +616,31 @@ class ComplexDecimator {
     constexpr double kNever = std::numeric_limits<double>::infinity();
     const Kind ka = kind_[a], kb = kind_[b];
     if (ka == kFixed && kb == kFixed) return kNever;
-    Quadric q = q_[a];
-    q.add(q_[b]);
+    // About a's position: the edge runs from 0 to ab.
+    const Vec3& origin = x_.positions[a];
+    Quadric q = quadric_about(a, origin);
+    q.add(quadric_about(b, origin));
+    const Vec3 zero{}, ab = sub(x_.positions[b], origin);
+    Vec3 at{};
     if (ka == kInterior && kb == kInterior) {
-      p = best_point(q, x_.positions[a], x_.positions[b]);
+      at = best_point(q, zero, ab);
       from = std::max(a, b), to = std::min(a, b);
     } else if (ka == kInterior || kb == kInterior) {
       from = ka == kInterior ? a : b, to = ka == kInterior ? b : a;
-      p = x_.positions[to];
+      at = to == a ? zero : ab;
     } else {
       // Both on curves (or one where curves meet): only along a junction curve.
       if (!junction_edge(a, b)) return kNever;
       if (ka == kCurve && kb == kCurve) {
-        p = best_on_segment(q, x_.positions[a], x_.positions[b]);
+        at = best_on_segment(q, zero, ab);
         from = std::max(a, b), to = std::min(a, b);
       } else {
         from = ka == kCurve ? a : b, to = ka == kCurve ? b : a;
-        p = x_.positions[to];
+        at = to == a ? zero : ab;
       }
     }
-    return q.w > 0 ? std::max(0.0, q.eval(p)) / q.w : 0.0;
+    p = at == zero ? origin : at == ab ? x_.positions[b] : add(origin, at);
+    return q.w > 0 ? std::max(0.0, q.eval(at)) / q.w : 0.0;
   }
 
   // Queues the collapse of edge {a, b} when it is allowed and within the tolerance.
@@ -528,15 +661,12 @@ class ComplexDecimator {
   // The live neighbours of v, ascending; drops v's dead triangles from its list on the way.
   void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) {
     out.clear();
-    auto& tv = tris_of_[v];
-    std::size_t kept = 0;
-    for (auto t : tv)
-      if (tri_alive_[t]) {
-        tv[kept++] = t;
-        for (auto w : x_.triangles[t])
-          if (w != v) out.push_back(w);
-      }
-    tv.resize(kept);
+    tris_of_.pack(v, [&](std::uint32_t t) {
+      if (!tri_alive_[t]) return false;
+      for (auto w : x_.triangles[t])
+        if (w != v) out.push_back(w);
+      return true;
+    });
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
   }
@@ -551,7 +681,7 @@ class ComplexDecimator {
     q.common.clear();
     std::set_intersection(q.nu.begin(), q.nu.end(), q.nv.begin(), q.nv.end(), std::back_inserter(q.common));
     q.apex.clear();
-    for (auto t : tris_of_[u]) {
+    for (auto t : tris_of_.of(u)) {
       const auto& tri = x_.triangles[t];
       if (tri[0] != v && tri[1] != v && tri[2] != v) continue;
       for (auto w : tri)
@@ -612,7 +742,7 @@ class ComplexDecimator {
     const bool v_moves = p != x_.positions[v];
     q.fan.clear(), q.fan_ids.clear(), q.fan_tri.clear(), q.moved.clear();
     for (std::uint32_t w : {u, v})
-      for (auto t : tris_of_[w]) {
+      for (auto t : tris_of_.of(w)) {
         if (!tri_alive_[t]) continue;
         const auto& tri = x_.triangles[t];
         const bool has_u = tri[0] == u || tri[1] == u || tri[2] == u,
@@ -634,7 +764,7 @@ class ComplexDecimator {
   // without the two on the edge, in the queue's ring fan.
   void ring_fan(std::uint32_t w, std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
     q.ring_fan.clear(), q.ring_fan_tri.clear();
-    for (auto t : tris_of_[w]) {
+    for (auto t : tris_of_.of(w)) {
       if (!tri_alive_[t]) continue;
       const auto& tri = x_.triangles[t];
       const bool has_u = tri[0] == u || tri[1] == u || tri[2] == u,
@@ -735,7 +865,7 @@ class ComplexDecimator {
   // Whether moving `v` to `p` (with `other` merged into it) flips or flattens a triangle of v
   // that survives.
   bool flips(std::uint32_t v, std::uint32_t other, const Vec3& p) const {
-    for (auto t : tris_of_[v]) {
+    for (auto t : tris_of_.of(v)) {
       if (!tri_alive_[t]) continue;
       const auto& tri = x_.triangles[t];
       if (tri[0] == other || tri[1] == other || tri[2] == other) continue;
@@ -754,7 +884,7 @@ class ComplexDecimator {
 
   // Merges u into v at p and queues v's edges within `scope` again.
   void collapse(std::uint32_t u, std::uint32_t v, const Vec3& p, std::uint32_t scope, Queue& q) {
-    for (auto t : tris_of_[u]) {
+    for (auto t : tris_of_.of(u)) {
       if (!tri_alive_[t]) continue;
       auto& tri = x_.triangles[t];
       if (tri[0] == v || tri[1] == v || tri[2] == v) {
@@ -763,13 +893,13 @@ class ComplexDecimator {
       }
       for (auto& w : tri)
         if (w == u) w = v;
-      tris_of_[v].push_back(t);
     }
-    tris_of_[u].clear();
-    tris_of_[u].shrink_to_fit();
+    tris_of_.append(v, u);
     alive_[u] = 0;
+    Quadric merged = quadric_about(v, p);
+    merged.add(quadric_about(u, p));
     x_.positions[v] = p;
-    q_[v].add(q_[u]);
+    store_quadric(v, merged);
     std::swap(next_input_[head_[u]], next_input_[head_[v]]);  // one cycle of both lists
     for (const auto& [i, t] : q.staged) witness_[i] = t;
     neighbours(v, q.nv);
@@ -803,7 +933,6 @@ class ComplexDecimator {
     auto copy = [](auto& to, auto& from) { to = from; };
     keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
     keep(head_, copy);
-    keep(tris_of_, copy);  // fresh lists, each part's next to each other
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
@@ -828,16 +957,23 @@ class ComplexDecimator {
                         for (std::size_t i = r.begin(); i != r.end(); ++i)
                           if (witness_[i] != ~0u) witness_[i] = tmap[witness_[i]];
                       });
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096),
+    // Fresh lists, each part's next to each other.
+    std::vector<std::uint32_t> sizes(n, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                          auto& tv = tris_of_[v];
-                          std::size_t kept = 0;
-                          for (auto t : tv)
-                            if (tri_alive_[t]) tv[kept++] = tmap[t];
-                          tv.resize(kept);
-                        }
+                        for (std::size_t o = r.begin(); o != r.end(); ++o)
+                          if (rank[o] != ~0u)
+                            for (auto t : tris_of_.of(at[o])) sizes[rank[o]] += tri_alive_[t];
                       });
+    std::vector<std::uint32_t> old_of(n);
+    for (std::size_t o = 0; o < nv; ++o)
+      if (rank[o] != ~0u) old_of[rank[o]] = at[o];
+    TriangleLists fresh;
+    fresh.assign(sizes, [&](std::size_t v, std::uint32_t* out) {
+      for (auto t : tris_of_.of(old_of[v]))
+        if (tri_alive_[t]) *out++ = tmap[t];
+    });
+    tris_of_ = std::move(fresh);
     tri_alive_.assign(m, 1);
   }
 
@@ -879,8 +1015,8 @@ class ComplexDecimator {
   double reach_out_;
   std::vector<Kind> kind_;
   std::vector<char> alive_, tri_alive_;
-  std::vector<std::vector<std::uint32_t>> tris_of_;
-  std::vector<Quadric> q_;
+  TriangleLists tris_of_;
+  std::vector<StoredQuadric> q_;
   std::vector<std::uint32_t> scope_;
   std::vector<std::uint64_t> cell_;
   std::vector<std::uint32_t> original_;
