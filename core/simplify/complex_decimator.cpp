@@ -2,6 +2,7 @@
 // metrics", SIGGRAPH 1997) over a whole interface complex at once, with the merged vertex at the
 // quadric's least point, constrained so the complex stays a partition. See complex_decimator.h
 // for the contract.
+#include <mlfe/core/base/check.h>
 #include <mlfe/core/base/error.h>
 #include <mlfe/core/base/vec.h>
 #include <mlfe/core/simplify/complex_decimator.h>
@@ -217,6 +218,12 @@ class ComplexDecimator {
     std::uint32_t t;
     std::array<std::uint32_t, 3> corners;
   };
+  // An input vertex's place after a collapse: its owner's list, or (marked kTriangle) a
+  // triangle's, with the owner's corner there.
+  struct Staged {
+    std::uint32_t i, to;
+    std::uint8_t corner;
+  };
   // Cheapest first, by buckets of the cost (a bucket queue: a heap of the few million
   // candidates, most of them stale, costs more than the collapses). Within a bucket the last
   // pushed goes first. Also the scratch lists of one pass.
@@ -225,16 +232,23 @@ class ComplexDecimator {
     std::size_t lowest = kBuckets;
     double limit2 = 0;  // the pass's largest cost
     std::vector<std::uint32_t> nu, nv, common, apex;
-    // A collapse's check (stays_near): the merged vertex's triangles after it (corners, corner
-    // ids with the merged one as `to`, triangle ids), the triangles it moves or removes, a ring
-    // vertex's triangles after it, the input vertex nearest p, and the new witnesses.
-    std::vector<std::array<Vec3, 3>> fan, ring_fan;
+    // A collapse's check (stays_near): the merged vertex and whether it moves, its triangles
+    // after the collapse (corners, corner ids, triangle ids), its neighbours then, the triangles
+    // the collapse moves or removes, the input vertices it places again (and their positions) and
+    // the one nearest p.
+    std::uint32_t merged = 0;
+    bool v_moves = false;
+    std::vector<std::array<Vec3, 3>> fan;
     std::vector<std::array<std::uint32_t, 3>> fan_ids;
-    std::vector<std::uint32_t> fan_tri, ring_fan_tri, ring, w_moved, spokes;
+    std::vector<std::uint32_t> fan_tri, spokes;
     std::vector<Moved> moved;
+    std::vector<Staged> staged;
+    std::vector<Vec3> staged_at;
     Vec3 nearest{};
     double nearest2 = 0;
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> staged;  // input vertex, witness
+    // Whether w is an end of the edge (u: the corners of the moved triangles name it).
+    bool moved_end(std::uint32_t w) const { return w == merged || w == gone; }
+    std::uint32_t gone = 0, scope = 0;
   };
   // Blocks of kBlock³ voxels; a pass's scope is a part's number or the whole complex. The
   // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
@@ -242,6 +256,8 @@ class ComplexDecimator {
   // pass over the whole gives (bench/RESULTS.md); more makes the blocks' seams show.
   static constexpr double kBlock = 16, kBlockShare = 0.2;
   static constexpr std::uint32_t kEverywhere = ~0u, kBorder = ~0u - 1;
+  // The end of an input list; the mark of a triangle's number among places (Staged).
+  static constexpr std::uint32_t kNone = ~0u, kTriangle = 1u << 31;
 
   // Per vertex its triangles in triangle order.
   void vertex_triangles() {
@@ -251,24 +267,19 @@ class ComplexDecimator {
     alive_.assign(nv, 1);
   }
 
-  // Every input vertex absorbed by itself alone (numbered as after order_by_block), in float:
-  // the bound is a fraction of a voxel, and the lists cost 20 bytes per input vertex; and the
-  // output check's reach.
+  // Every input vertex in its own list (numbered as after order_by_block), in float: the bound
+  // is a fraction of a voxel; and the output check's reach.
   void absorbed_lists() {
     const std::size_t nv = x_.positions.size();
+    MLFE_CHECK(nv < kTriangle && x_.triangles.size() < kTriangle);
     input_.resize(nv);
     for (std::size_t v = 0; v < nv; ++v)
       for (int c = 0; c < 3; ++c) input_[v][c] = float(x_.positions[v][c]);
-    next_input_.resize(nv);
-    std::iota(next_input_.begin(), next_input_.end(), 0u);
-    head_ = next_input_;
-    // Each input vertex is a corner of its own triangles.
-    witness_.resize(nv);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v != r.end(); ++v)
-                          witness_[v] = first_triangle(std::uint32_t(v));
-                      });
+    next_input_.assign(nv, kNone);
+    corner_.assign(nv, 0);
+    vertex_list_.resize(nv);
+    std::iota(vertex_list_.begin(), vertex_list_.end(), 0u);
+    triangle_list_.assign(x_.triangles.size(), kNone);
     // The input is represented by its vertices: a new triangle's sample within reach_ of the input
     // surface may be up to about half an edge from the nearest one.
     double sum = 0;
@@ -276,12 +287,6 @@ class ComplexDecimator {
       for (int k = 0; k < 3; ++k) sum += distance(x_.positions[t[k]], x_.positions[t[(k + 1) % 3]]);
     const double mean_edge = x_.triangles.empty() ? 0.0 : sum / (3.0 * double(x_.triangles.size()));
     reach_out_ = reach_ + kOutSlack * mean_edge;
-  }
-
-  // v's first triangle (~0u: none).
-  std::uint32_t first_triangle(std::uint32_t v) const {
-    const auto r = tris_of_.of(v);
-    return r.begin() != r.end() ? *r.begin() : ~0u;
   }
 
   // Kinds: interior (no junction edge), curve (two junction edges), fixed (other counts, or a
@@ -375,7 +380,7 @@ class ComplexDecimator {
     for (int i = 0; i < 6; ++i) q.a[i] = s.a[i];
     for (int i = 0; i < 3; ++i) q.b[i] = s.b[i];
     q.c = s.c, q.w = s.w;
-    q.move_origin(sub(origin, x_.positions[v]));
+    if (origin != x_.positions[v]) q.move_origin(sub(origin, x_.positions[v]));
     return q;
   }
 
@@ -555,7 +560,7 @@ class ComplexDecimator {
       Vec3 p{};
       const double cost = plan(c.a, c.b, from, to, p);
       if (!(cost <= q.limit2) || bucket_of(cost, q) != q.lowest) continue;
-      if (collapsible(from, to, p, q)) collapse(from, to, p, scope, q);
+      if (collapsible(from, to, p, scope, q)) collapse(from, to, p, scope, q);
     }
   }
 
@@ -674,7 +679,7 @@ class ComplexDecimator {
   // Topology (the link condition: the common neighbours of the two ends are exactly the apexes
   // of the triangles on the edge; no closed piece below a tetrahedron; a junction curve keeps at
   // least three vertices per loop) and geometry (no triangle flips or degenerates).
-  bool collapsible(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) {
+  bool collapsible(std::uint32_t u, std::uint32_t v, const Vec3& p, std::uint32_t scope, Queue& q) {
     neighbours(u, q.nu);
     neighbours(v, q.nv);
     if (q.nu.size() <= 3 && q.nv.size() <= 3) return false;
@@ -696,58 +701,56 @@ class ComplexDecimator {
       for (auto w : q.common)
         if (kind_[w] != kInterior && junction_edge(u, w) && junction_edge(v, w)) return false;
     }
-    return !flips(u, v, p) && !flips(v, u, p) && stays_near(u, v, p, q);
+    return !flips(u, v, p) && !flips(v, u, p) && stays_near(u, v, p, scope, q);
   }
 
   // Whether the collapse keeps the result near its input both ways.
   //
-  // Input -> output: every input vertex stays within reach_ of a triangle of the live vertex that
-  // absorbed it. The quadric is a mean over infinite planes, so a tip, a thin sheet's rim or a
-  // junction corner can be cut off at a small mean cost while the input points there end voxels
-  // away. Each input vertex keeps a witness, a triangle of its vertex within reach_; a collapse
-  // moves or removes only the triangles of u (and of v when v moves), so only the input vertices
-  // witnessed by one of those are looked at again: those of u and v, and those of the one-ring
-  // whose triangles move with p (without the ring, 2 mm atlas: Hausdorff 1.23 instead of 1.06
-  // voxels). The new witnesses wait in the queue until the collapse is made.
+  // Input -> output: every input vertex stays within reach_ of a triangle of the live vertex
+  // that absorbed it (its owner). The quadric is a mean over infinite planes, so a tip, a thin
+  // sheet's rim or a junction corner can be cut off at a small mean cost while the input points
+  // there end voxels away. Each input vertex is kept in one list that says why it is near: its
+  // owner's (within reach_ of the owner's position, so of all its triangles) or a triangle's
+  // (within reach_ of that triangle, owned by one of its corners). A collapse moves u, the
+  // triangles of u, and v and its triangles when v moves, so only those lists are looked at
+  // again: the input vertices of u and v, and those of the one-ring kept by a triangle that moves
+  // (their triangles move with p: without re-checking them, 2 mm atlas: Hausdorff 1.23 instead
+  // of 1.06 voxels). A ring vertex's input vertex goes to its owner's list or to one of the
+  // owner's triangles at p: the lists a part's collapses write are then those of its own
+  // vertices and of the triangles at them, never another part's. The new places wait in the
+  // queue until the collapse is made.
   //
   // Output -> input: each new triangle's corners, edge midpoints and centroid lie within
-  // reach_out_ of an input vertex that one of its corners absorbed: a new triangle may run across
-  // a fold away from every input point. Only what the collapse moves is checked: p, the midpoints
-  // of the edges at p and the centroids of the triangles at p; an edge opposite p keeps its
-  // midpoint and its ends, whose absorbed vertices only grow, since it was last checked.
-  bool stays_near(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
-    q.staged.clear();
+  // reach_out_ of an input vertex that one of its corners absorbed: a new triangle may run
+  // across a fold away from every input point. Only what the collapse moves is checked: p, the
+  // midpoints of the edges at p and the centroids of the triangles at p; an edge opposite p
+  // keeps its midpoint and its ends, whose absorbed vertices only grow, since it was last checked.
+  bool stays_near(std::uint32_t u, std::uint32_t v, const Vec3& p, std::uint32_t scope, Queue& q) const {
     merged_fan(u, v, p, q);
+    q.scope = scope;
     if (q.fan.empty()) return false;
+    q.staged.clear(), q.staged_at.clear();
     q.nearest2 = std::numeric_limits<double>::infinity();
-    if (!points_stay(u, p, u, v, p, nullptr, q) || !points_stay(v, p, u, v, p, nullptr, q) ||
-        !fan_near_input(u, v, p, q))
-      return false;
-    q.ring.clear();
-    std::set_union(q.nu.begin(), q.nu.end(), q.nv.begin(), q.nv.end(), std::back_inserter(q.ring));
-    for (auto w : q.ring) {
-      if (w == u || w == v) continue;
-      q.w_moved.clear();
-      for (const auto& m : q.moved)
-        if (m.corners[0] == w || m.corners[1] == w || m.corners[2] == w) q.w_moved.push_back(m.t);
-      if (!q.w_moved.empty() && !points_stay(w, x_.positions[w], u, v, p, &q.w_moved, q)) return false;
-    }
-    return true;
+    if (!placed_again(vertex_list_[u], nullptr, p, q)) return false;
+    if (q.v_moves && !placed_again(vertex_list_[v], nullptr, p, q)) return false;
+    for (const auto& m : q.moved)
+      if (!placed_again(triangle_list_[m.t], &m.corners, p, q)) return false;
+    return fan_near_input(u, v, p, q);
   }
 
-  // The merged vertex's triangles once u merges into v at p (corners, ids with v for u, triangle
-  // ids) in the queue's fan, and the triangles the collapse moves or removes (u's, and v's when
-  // v moves) in its `moved`.
+  // The merged vertex's triangles once u merges into v at p (corners, corner ids with v for u,
+  // triangle ids) in the queue's fan, its neighbours then in `spokes`, and the triangles the
+  // collapse moves or removes (u's, and v's when v moves) with their corners before in `moved`.
   void merged_fan(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
-    const bool v_moves = p != x_.positions[v];
-    q.fan.clear(), q.fan_ids.clear(), q.fan_tri.clear(), q.moved.clear();
+    q.v_moves = p != x_.positions[v], q.merged = v, q.gone = u;
+    q.fan.clear(), q.fan_ids.clear(), q.fan_tri.clear(), q.moved.clear(), q.spokes.clear();
     for (std::uint32_t w : {u, v})
       for (auto t : tris_of_.of(w)) {
         if (!tri_alive_[t]) continue;
         const auto& tri = x_.triangles[t];
         const bool has_u = tri[0] == u || tri[1] == u || tri[2] == u,
                    has_v = tri[0] == v || tri[1] == v || tri[2] == v;
-        if (w == u || (v_moves && !has_u)) q.moved.push_back({t, tri});
+        if (w == u || (q.v_moves && !has_u)) q.moved.push_back({t, tri});
         if (has_u && (w == v || has_v)) continue;  // seen from u, or on the edge (removed)
         std::array<Vec3, 3> corners;
         std::array<std::uint32_t, 3> ids;
@@ -755,64 +758,68 @@ class ComplexDecimator {
           const bool moved = tri[k] == u || tri[k] == v;
           corners[k] = moved ? p : x_.positions[tri[k]];
           ids[k] = moved ? v : tri[k];
+          if (!moved && std::find(q.spokes.begin(), q.spokes.end(), tri[k]) == q.spokes.end())
+            q.spokes.push_back(tri[k]);
         }
         q.fan.push_back(corners), q.fan_ids.push_back(ids), q.fan_tri.push_back(t);
       }
   }
 
-  // The live triangles of ring vertex w once u merges into v at p (corners and triangle ids),
-  // without the two on the edge, in the queue's ring fan.
-  void ring_fan(std::uint32_t w, std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
-    q.ring_fan.clear(), q.ring_fan_tri.clear();
+  // Whether every input vertex of a list (first `i`: an owner's when `corners` is null, else a
+  // moved triangle's with its corners before) has a place once the collapse is made, staged in
+  // the queue; keeps the one nearest p.
+  bool placed_again(std::uint32_t i, const std::array<std::uint32_t, 3>* corners, const Vec3& p,
+                    Queue& q) const {
+    const double reach2 = reach_ * reach_;
+    std::array<double, 3> bary{};
+    for (; i != kNone; i = next_input_[i]) {
+      const Vec3 x = to_vec3(input_[i]);
+      const double to_p = distance2(p, x);
+      if (to_p < q.nearest2) q.nearest2 = to_p, q.nearest = x;
+      // The owner after the collapse (u's and v's are the merged vertex).
+      std::uint32_t owner = corners ? (*corners)[corner_[i]] : q.merged;
+      if (corners && q.moved_end(owner)) owner = q.merged;
+      Staged s{i, kNone, 0};
+      if (owner == q.merged ? to_p <= reach2 : distance2(x_.positions[owner], x) <= reach2) {
+        s.to = owner;
+      } else {
+        for (std::size_t f = 0; f < q.fan.size() && s.to == kNone; ++f) {
+          const auto& ids = q.fan_ids[f];
+          const int k = ids[0] == owner ? 0 : ids[1] == owner ? 1 : ids[2] == owner ? 2 : 3;
+          if (k == 3) continue;
+          const auto& c = q.fan[f];
+          if (distance2(closest_point_on_triangle(x, c[0], c[1], c[2], bary), x) <= reach2)
+            s.to = q.fan_tri[f] | kTriangle, s.corner = std::uint8_t(k);
+        }
+        if (s.to == kNone && owner != q.merged) s = placed_by_ring_triangle(i, x, owner, q);
+        if (s.to == kNone) return false;
+      }
+      q.staged.push_back(s), q.staged_at.push_back(x);
+    }
+    return true;
+  }
+
+  // Input vertex i at x, owned by ring vertex w, placed in one of w's triangles away from p
+  // (kNone: none within reach_) whose corners are w and vertices inside the pass's part: another
+  // part's collapses never write such a triangle's list.
+  Staged placed_by_ring_triangle(std::uint32_t i, const Vec3& x, std::uint32_t w, const Queue& q) const {
+    const double reach2 = reach_ * reach_;
+    std::array<double, 3> bary{};
     for (auto t : tris_of_.of(w)) {
       if (!tri_alive_[t]) continue;
       const auto& tri = x_.triangles[t];
-      const bool has_u = tri[0] == u || tri[1] == u || tri[2] == u,
-                 has_v = tri[0] == v || tri[1] == v || tri[2] == v;
-      if (has_u && has_v) continue;
-      std::array<Vec3, 3> corners;
-      for (int k = 0; k < 3; ++k) corners[k] = tri[k] == u || tri[k] == v ? p : x_.positions[tri[k]];
-      q.ring_fan.push_back(corners), q.ring_fan_tri.push_back(t);
+      int k = 3;
+      bool ours = true;
+      for (int c = 0; c < 3; ++c) {
+        if (tri[c] == w) k = c;
+        ours &= tri[c] == w || (!q.moved_end(tri[c]) && in_scope(tri[c], q.scope));
+      }
+      if (!ours) continue;
+      const Vec3 &a = x_.positions[tri[0]], &b = x_.positions[tri[1]], &c = x_.positions[tri[2]];
+      if (distance2(closest_point_on_triangle(x, a, b, c, bary), x) <= reach2)
+        return {i, t | kTriangle, std::uint8_t(k)};
     }
-  }
-
-  // Whether the input vertices absorbed by w whose witness the collapse moves (`moved`; all of
-  // them for an end of the edge, `moved` null) lie within reach_ of w's triangles after it (the
-  // queue's fan for an end, its ring fan, made on first need, for a ring vertex), staging their
-  // new witnesses. Two corners, w's position `at` and p, are tried first: most points are that
-  // near. For the ends, the input vertex nearest p is kept for the output check.
-  bool points_stay(std::uint32_t w, const Vec3& at, std::uint32_t u, std::uint32_t v, const Vec3& p,
-                   const std::vector<std::uint32_t>* moved, Queue& q) const {
-    const double reach2 = reach_ * reach_;
-    const auto& fan = moved ? q.ring_fan : q.fan;
-    const auto& fan_tri = moved ? q.ring_fan_tri : q.fan_tri;
-    bool made = !moved;
-    std::array<double, 3> bary{};
-    const std::uint32_t h = head_[w];
-    std::uint32_t i = h;
-    do {
-      const std::uint32_t at_i = i;
-      i = next_input_[i];
-      if (moved && std::find(moved->begin(), moved->end(), witness_[at_i]) == moved->end()) continue;
-      if (!made) ring_fan(w, u, v, p, q), made = true;
-      const Vec3 x = to_vec3(input_[at_i]);
-      const double to_p = distance2(p, x);
-      if (!moved && to_p < q.nearest2) q.nearest2 = to_p, q.nearest = x;
-      std::uint32_t found = ~0u;
-      for (std::size_t f = 0; f < fan.size() && found == ~0u; ++f) {
-        const auto& c = fan[f];
-        // Every triangle has w at `at`; p is a corner of those the collapse moves.
-        const bool has_p = c[0] == p || c[1] == p || c[2] == p;
-        if ((f == 0 && distance2(at, x) <= reach2) || (has_p && to_p <= reach2)) found = fan_tri[f];
-      }
-      for (std::size_t f = 0; f < fan.size() && found == ~0u; ++f) {
-        const auto& c = fan[f];
-        if (distance2(closest_point_on_triangle(x, c[0], c[1], c[2], bary), x) <= reach2) found = fan_tri[f];
-      }
-      if (found == ~0u) return false;
-      q.staged.push_back({at_i, found});
-    } while (i != h);
-    return true;
+    return {i, kNone, 0};
   }
 
   static double distance2(const Vec3& a, const Vec3& b) {
@@ -821,43 +828,41 @@ class ComplexDecimator {
   }
 
   // Whether what the collapse moves of the merged vertex's triangles (the queue's fan) lies near
-  // the input: p, the midpoints of the edges at p and the centroids, each within reach_out_ of
-  // the input vertex nearest p or of one absorbed by u, v or the triangle's other corners.
+  // the input: p, the midpoints of the edges at p and the centroids (near_input).
   bool fan_near_input(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
-    if (!near_input(p, {u, v, ~0u, ~0u}, q)) return false;
-    q.spokes.clear();
+    if (!near_input(p, {v, kNone, kNone}, u, q)) return false;
+    for (auto a : q.spokes)
+      if (!near_input(scale(add(p, x_.positions[a]), 0.5), {v, a, kNone}, u, q)) return false;
     for (std::size_t f = 0; f < q.fan.size(); ++f) {
       const auto& c = q.fan[f];
-      std::array<std::uint32_t, 4> owners{u, v, ~0u, ~0u};
-      int n = 2;
-      for (int k = 0; k < 3; ++k) {
-        const std::uint32_t a = q.fan_ids[f][k];
-        if (a == v) continue;
-        owners[n++] = a;
-        if (std::find(q.spokes.begin(), q.spokes.end(), a) != q.spokes.end()) continue;
-        q.spokes.push_back(a);
-        if (!near_input(scale(add(p, c[k]), 0.5), {u, v, a, ~0u}, q)) return false;
-      }
+      const auto& ids = q.fan_ids[f];
       const Vec3 centroid{(c[0][0] + c[1][0] + c[2][0]) / 3, (c[0][1] + c[1][1] + c[2][1]) / 3,
                           (c[0][2] + c[1][2] + c[2][2]) / 3};
-      if (!near_input(centroid, owners, q)) return false;
+      if (!near_input(centroid, ids, u, q)) return false;
     }
     return true;
   }
 
-  // Whether s lies within reach_out_ of the input vertex nearest p or of one absorbed by
-  // `owners` (~0u: none).
-  bool near_input(const Vec3& s, const std::array<std::uint32_t, 4>& owners, const Queue& q) const {
+  // Whether s lies within reach_out_ of an input vertex that one of `owners` (kNone: none; the
+  // merged vertex stands for u too) absorbed: the one nearest p and those the collapse placed
+  // again first, then the owners' lists and their triangles' that it does not move.
+  bool near_input(const Vec3& s, const std::array<std::uint32_t, 3>& owners, std::uint32_t u,
+                  const Queue& q) const {
     const double reach2 = reach_out_ * reach_out_;
     if (distance2(s, q.nearest) <= reach2) return true;
+    for (const auto& x : q.staged_at)
+      if (distance2(s, x) <= reach2) return true;
     for (auto w : owners) {
-      if (w == ~0u) continue;
-      const std::uint32_t h = head_[w];
-      std::uint32_t i = h;
-      do {
+      if (w == kNone || (w == q.merged && q.v_moves)) continue;  // all placed again
+      for (std::uint32_t i = vertex_list_[w]; i != kNone; i = next_input_[i])
         if (distance2(s, to_vec3(input_[i])) <= reach2) return true;
-        i = next_input_[i];
-      } while (i != h);
+      for (auto t : tris_of_.of(w)) {
+        const auto& tri = x_.triangles[t];
+        if (!tri_alive_[t] || tri[0] == u || tri[1] == u || tri[2] == u) continue;
+        if (q.v_moves && (tri[0] == q.merged || tri[1] == q.merged || tri[2] == q.merged)) continue;
+        for (std::uint32_t i = triangle_list_[t]; i != kNone; i = next_input_[i])
+          if (tri[corner_[i]] == w && distance2(s, to_vec3(input_[i])) <= reach2) return true;
+      }
     }
     return false;
   }
@@ -895,13 +900,19 @@ class ComplexDecimator {
         if (w == u) w = v;
     }
     tris_of_.append(v, u);
+    // The input vertices placed again, in their new lists.
+    vertex_list_[u] = kNone;
+    if (q.v_moves) vertex_list_[v] = kNone;
+    for (const auto& m : q.moved) triangle_list_[m.t] = kNone;
+    for (const auto& st : q.staged) {
+      std::uint32_t& head = st.to & kTriangle ? triangle_list_[st.to & ~kTriangle] : vertex_list_[st.to];
+      next_input_[st.i] = head, head = st.i, corner_[st.i] = st.corner;
+    }
     alive_[u] = 0;
     Quadric merged = quadric_about(v, p);
     merged.add(quadric_about(u, p));
     x_.positions[v] = p;
     store_quadric(v, merged);
-    std::swap(next_input_[head_[u]], next_input_[head_[v]]);  // one cycle of both lists
-    for (const auto& [i, t] : q.staged) witness_[i] = t;
     neighbours(v, q.nv);
     for (auto w : q.nv)
       if (in_scope(w, scope)) push(v, w, q);
@@ -932,7 +943,7 @@ class ComplexDecimator {
     };
     auto copy = [](auto& to, auto& from) { to = from; };
     keep(x_.positions, copy), keep(q_, copy), keep(kind_, copy);
-    keep(head_, copy);
+    keep(vertex_list_, copy);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t o = r.begin(); o != r.end(); ++o) vmap[at[o]] = rank[o];
@@ -952,11 +963,10 @@ class ComplexDecimator {
                         }
                       });
     x_.triangles.swap(triangles), x_.labels.swap(labels);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, witness_.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t i = r.begin(); i != r.end(); ++i)
-                          if (witness_[i] != ~0u) witness_[i] = tmap[witness_[i]];
-                      });
+    std::vector<std::uint32_t> lists(m);
+    for (std::size_t t = 0; t < nt; ++t)
+      if (tmap[t] != ~0u) lists[tmap[t]] = triangle_list_[t];
+    triangle_list_.swap(lists);
     // Fresh lists, each part's next to each other.
     std::vector<std::uint32_t> sizes(n, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096),
@@ -1020,13 +1030,12 @@ class ComplexDecimator {
   std::vector<std::uint32_t> scope_;
   std::vector<std::uint64_t> cell_;
   std::vector<std::uint32_t> original_;
-  // Per input vertex its position and the next input vertex absorbed by the same live vertex,
-  // in a cycle (a merge splices two cycles by swapping two links); per live vertex one input
-  // vertex of its cycle.
+  // Per input vertex its position, the next input vertex in its list and its owner's corner in
+  // its triangle (triangle lists); per live vertex and per triangle the first input vertex of its
+  // list (stays_near).
   std::vector<std::array<float, 3>> input_;
-  std::vector<std::uint32_t> next_input_, head_;
-  // Per input vertex its witness: a live triangle of its live vertex within reach_ of it.
-  std::vector<std::uint32_t> witness_;
+  std::vector<std::uint32_t> next_input_, vertex_list_, triangle_list_;
+  std::vector<std::uint8_t> corner_;
   // Per thread the pass's queue, kept for the next pass (its buckets' storage).
   tbb::enumerable_thread_specific<Queue> queues_;
 };
