@@ -112,13 +112,13 @@ class TriangleLists {
   template <class Keep>
   void pack(std::uint32_t v, Keep keep) {
     // Writing never overtakes reading: a slot is written only after every earlier one is full.
-    std::uint32_t to = v, at = 0;
+    std::uint32_t to = v, at = 0, room = start_[v + 1] - start_[v];
     for (std::uint32_t s = v; s != kNoSlot; s = next_[s]) {
-      const std::uint32_t n = size_[s];
-      for (std::uint32_t i = 0; i < n; ++i) {
-        const std::uint32_t t = pool_[start_[s] + i];
+      const std::uint32_t* from = pool_.data() + start_[s];
+      for (std::uint32_t i = 0, n = size_[s]; i < n; ++i) {
+        const std::uint32_t t = from[i];
         if (!keep(t)) continue;
-        while (at == start_[to + 1] - start_[to]) size_[to] = at, to = next_[to], at = 0;
+        while (at == room) size_[to] = at, to = next_[to], at = 0, room = start_[to + 1] - start_[to];
         pool_[start_[to] + at++] = t;
       }
     }
@@ -232,11 +232,12 @@ class ComplexDecimator {
     std::size_t lowest = kBuckets;
     double limit2 = 0;  // the pass's largest cost
     std::vector<std::uint32_t> nu, nv, common, apex;
-    // A collapse's check (stays_near): the merged vertex and whether it moves, its triangles
-    // after the collapse (corners, corner ids, triangle ids), its neighbours then, the triangles
-    // the collapse moves or removes, the input vertices it places again (and their positions) and
-    // the one nearest p.
-    std::uint32_t merged = 0;
+    // A collapse's check (stays_near): its ends (the merged vertex v, the gone one u), whether v
+    // moves, the pass's scope; v's triangles after the collapse (corners, corner ids, triangle
+    // ids), its neighbours then, the triangles the collapse moves or removes, the input vertices
+    // it places again (and their positions), the one nearest p and the last one the output check
+    // found near a sample.
+    std::uint32_t merged = 0, gone = 0, scope = 0;
     bool v_moves = false;
     std::vector<std::array<Vec3, 3>> fan;
     std::vector<std::array<std::uint32_t, 3>> fan_ids;
@@ -244,11 +245,9 @@ class ComplexDecimator {
     std::vector<Moved> moved;
     std::vector<Staged> staged;
     std::vector<Vec3> staged_at;
-    Vec3 nearest{};
+    Vec3 nearest{}, hit{};
     double nearest2 = 0;
-    // Whether w is an end of the edge (u: the corners of the moved triangles name it).
     bool moved_end(std::uint32_t w) const { return w == merged || w == gone; }
-    std::uint32_t gone = 0, scope = 0;
   };
   // Blocks of kBlock³ voxels; a pass's scope is a part's number or the whole complex. The
   // blocks merge up to kBlockShare of the tolerance: 55 % of the JHU atlas's merges at 0.1,
@@ -721,10 +720,10 @@ class ComplexDecimator {
   // queue until the collapse is made.
   //
   // Output -> input: each new triangle's corners, edge midpoints and centroid lie within
-  // reach_out_ of an input vertex that one of its corners absorbed: a new triangle may run
-  // across a fold away from every input point. Only what the collapse moves is checked: p, the
-  // midpoints of the edges at p and the centroids of the triangles at p; an edge opposite p
-  // keeps its midpoint and its ends, whose absorbed vertices only grow, since it was last checked.
+  // reach_out_ of an input vertex, looked for among those of the merged vertex and its
+  // neighbours: a new triangle may run across a fold away from every input point. Only what the
+  // collapse moves is checked: p, the midpoints of the edges at p and the centroids of the
+  // triangles at p; an edge opposite p keeps its midpoint since it was last checked.
   bool stays_near(std::uint32_t u, std::uint32_t v, const Vec3& p, std::uint32_t scope, Queue& q) const {
     merged_fan(u, v, p, q);
     q.scope = scope;
@@ -830,6 +829,7 @@ class ComplexDecimator {
   // Whether what the collapse moves of the merged vertex's triangles (the queue's fan) lies near
   // the input: p, the midpoints of the edges at p and the centroids (near_input).
   bool fan_near_input(std::uint32_t u, std::uint32_t v, const Vec3& p, Queue& q) const {
+    q.hit = q.nearest;
     if (!near_input(p, {v, kNone, kNone}, u, q)) return false;
     for (auto a : q.spokes)
       if (!near_input(scale(add(p, x_.positions[a]), 0.5), {v, a, kNone}, u, q)) return false;
@@ -843,25 +843,27 @@ class ComplexDecimator {
     return true;
   }
 
-  // Whether s lies within reach_out_ of an input vertex that one of `owners` (kNone: none; the
-  // merged vertex stands for u too) absorbed: the one nearest p and those the collapse placed
-  // again first, then the owners' lists and their triangles' that it does not move.
+  // Whether s lies within reach_out_ of an input vertex: the last one found near a sample (at
+  // first the one nearest p) and those the collapse places again, then those that `owners`
+  // (kNone: none; the merged vertex stands for u too) absorbed, in their lists the collapse does
+  // not move.
   bool near_input(const Vec3& s, const std::array<std::uint32_t, 3>& owners, std::uint32_t u,
-                  const Queue& q) const {
+                  Queue& q) const {
     const double reach2 = reach_out_ * reach_out_;
-    if (distance2(s, q.nearest) <= reach2) return true;
+    auto hit = [&](const Vec3& x) { return distance2(s, x) <= reach2 && (q.hit = x, true); };
+    if (hit(q.hit)) return true;
     for (const auto& x : q.staged_at)
-      if (distance2(s, x) <= reach2) return true;
+      if (hit(x)) return true;
     for (auto w : owners) {
       if (w == kNone || (w == q.merged && q.v_moves)) continue;  // all placed again
       for (std::uint32_t i = vertex_list_[w]; i != kNone; i = next_input_[i])
-        if (distance2(s, to_vec3(input_[i])) <= reach2) return true;
+        if (hit(to_vec3(input_[i]))) return true;
       for (auto t : tris_of_.of(w)) {
         const auto& tri = x_.triangles[t];
         if (!tri_alive_[t] || tri[0] == u || tri[1] == u || tri[2] == u) continue;
         if (q.v_moves && (tri[0] == q.merged || tri[1] == q.merged || tri[2] == q.merged)) continue;
         for (std::uint32_t i = triangle_list_[t]; i != kNone; i = next_input_[i])
-          if (tri[corner_[i]] == w && distance2(s, to_vec3(input_[i])) <= reach2) return true;
+          if (tri[corner_[i]] == w && hit(to_vec3(input_[i]))) return true;
       }
     }
     return false;

@@ -28,10 +28,11 @@ struct InterfaceComplex {
 /// quadrics (area-weighted planes of the triangles it absorbed) are least. A merge is made only
 /// when that RMS distance to the absorbed planes stays within `tolerance` (position units) and
 /// the result stays near its input both ways: every input vertex lies within 1.5 `tolerance` of
-/// the triangles of the vertex that absorbed it (checked for the merged vertex and its
-/// neighbours, whose triangles move with it, so this holds for the result), and each new
-/// triangle's corners, edge midpoints and centroid lie within 1.5 `tolerance` + a fifth of the
-/// input's mean edge length of an input vertex that one of its corners absorbed. A mean over planes lets a
+/// the triangles of the vertex that absorbed it (re-checked for every input vertex whose reason
+/// to be near a merge moves: the merged vertex's and its neighbours', so this holds for the
+/// result), and each new triangle's corners, edge midpoints and centroid lie within 1.5
+/// `tolerance` + a fifth of the input's mean edge length of an input vertex (one absorbed by the
+/// merged vertex or its neighbours, so of the input surface there). A mean over planes lets a
 /// vertex slide along a crease or a thin rim, or a triangle cut across a fold, at no cost, voxels away from
 /// the input. Constraints keep the complex a partition: a vertex inside one interface merges with a neighbour
 /// in the same interface or moves onto a junction-curve neighbour; a vertex on a junction curve (where three
