@@ -53,9 +53,8 @@ void add_build_options(CLI::App* cmd, BuildParams& p) {
   cmd->add_option(
          "--max-memory", p.max_memory,
          "memory budget of the build: a percentage of RAM (\"50%\"), bytes with K/M/G, or 0 for none; "
-         "refinement stops there with a message (with --labels: a label map whose interfaces would not fit "
-         "is "
-         "refused before they are built)")
+         "refinement stops there with a message (with --labels: a label map whose interfaces would not "
+         "fit is refused before they are built)")
       ->capture_default_str();
   cmd->add_flag("--quiet", p.quiet, "no progress on stderr");
 }

@@ -121,6 +121,18 @@ class PointIds {
   std::size_t size_ = 0;
 };
 
+// How many labels a tetrahedron's four corners carry: its case in the extraction (and in the
+// count of what extraction makes).
+int distinct_labels(const std::uint16_t l[4]) {
+  int distinct = 1;
+  for (int s = 1; s < 4; ++s) {
+    bool seen = false;
+    for (int r = 0; r < s; ++r) seen |= l[r] == l[s];
+    distinct += !seen;
+  }
+  return distinct;
+}
+
 // Builds the interface complex tetrahedron by tetrahedron. Interface vertices are keyed by the
 // lattice element they lie in (edge: lower corner and offset bits; face: lowest corner and the
 // bits of the other two), so neighbouring tetrahedra find the same vertex.
@@ -138,12 +150,7 @@ class Extractor {
       key_[s] = std::uint64_t((t.i + (b & 1) + 1) +
                               sx_ * ((t.j + ((b >> 1) & 1) + 1) + sy_ * (t.k + ((b >> 2) & 1) + 1)));
     }
-    int distinct = 1;
-    for (int s = 1; s < 4; ++s) {
-      bool seen = false;
-      for (int r = 0; r < s; ++r) seen |= label_[r] == label_[s];
-      distinct += !seen;
-    }
+    const int distinct = distinct_labels(label_);
     if (distinct == 1) return;
     // Step 2: two labels: the dual cells of each label merge into one planar piece, a triangle
     // cutting off one corner or a quad between two pairs (plain marching tetrahedra).
@@ -424,12 +431,7 @@ void scan_mixed_layer(const LabelGrid& g, std::int64_t k, Visit&& visit) {
 
 // The triangles Extractor::tet emits for a tetrahedron with these corner labels.
 std::size_t tet_triangles(const std::uint16_t l[4]) {
-  int distinct = 1;
-  for (int s = 1; s < 4; ++s) {
-    bool seen = false;
-    for (int r = 0; r < s; ++r) seen |= l[r] == l[s];
-    distinct += !seen;
-  }
+  const int distinct = distinct_labels(l);
   if (distinct == 1) return 0;
   if (distinct == 2) {
     int same = 0;
